@@ -1,0 +1,301 @@
+/* piezo_controller.c - adaptive compound controller. See piezo_controller.h. */
+#include <math.h>
+#include <string.h>
+#include "piezo_controller.h"
+
+/* Projection bounds (DESIGN.md section 2): b1 stays positive, the zero of B
+ * stays inside the unit circle so that MV, which inverts B, stays stable. */
+#define B1_FLOOR_FRACTION 1e-3  /* b1 >= 1e-3 * nominal b1 */
+#define ZERO_RADIUS_MAX 0.999   /* |b2 / b1| <= 0.999 */
+
+void piezo_controller_default_params(piezo_controller_params *p)
+{
+    if (!p) return;
+    memset(p, 0, sizeof *p);
+    p->pi.m = 9;
+    p->pi.v_max = 20.0;
+    p->pi.w0 = 0.3344;
+    p->pi.w[0] = 0.0714;
+    p->pi.w[1] = 0.0322;
+    p->pi.w[2] = 0.0072;
+    p->tf_a1 = -1.3767;
+    p->tf_a2 = 0.3816;
+    p->tf_b1 = 0.5954;
+    p->tf_b2 = -0.5907;
+    p->creep_k_c = 1.0463;
+    p->creep_alpha = 0.0002;
+    p->creep_exact = 0;
+    p->h = 0.0005;
+    p->mv_delay = 0;
+    p->mv_lambda_u = 0.0;
+    p->rls_enabled = 1;
+    p->rls_forgetting = 0.995;
+    p->rls_p0 = 1e-2;
+    p->rls_trace_max = 10.0;
+    p->sat_enabled = 0;
+    p->sat_v_min = -100.0;
+    p->sat_v_max = 100.0;
+}
+
+/* 1 = A E + z^-d Gd: e_0 = 1, e_n = -a1 e_{n-1} - a2 e_{n-2} (n < d),
+ * Gd = -(a1 e_{d-1} + a2 e_{d-2}) - a2 e_{d-1} z^-1. */
+piezo_status piezo_diophantine(double a1, double a2, int d, double *e, double *g)
+{
+    int n;
+    double e_dm1, e_dm2;
+    if (!e || !g) return PIEZO_ERR_NULL;
+    if (d < 1 || d > PIEZO_MV_MAX_D) return PIEZO_ERR_PARAM;
+    for (n = 0; n < d; ++n) {
+        double e1 = n >= 1 ? e[n - 1] : 0.0;
+        double e2 = n >= 2 ? e[n - 2] : 0.0;
+        e[n] = (n == 0 ? 1.0 : 0.0) - a1 * e1 - a2 * e2;
+    }
+    e_dm1 = e[d - 1];
+    e_dm2 = d >= 2 ? e[d - 2] : 0.0;
+    g[0] = -(a1 * e_dm1 + a2 * e_dm2);
+    g[1] = -a2 * e_dm1;
+    return PIEZO_OK;
+}
+
+piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_params *p, piezo_diag *diag)
+{
+    piezo_pi_params pi_params;
+    piezo_tf tf_check;
+    piezo_tf_params tf_params;
+    piezo_status st;
+    if (!c || !p) return PIEZO_ERR_NULL;
+    if (!(isfinite(p->h) && p->h > 0.0)) return piezo_refuse(diag, "h", "(0, inf) s", p->h);
+    if (!(isfinite(p->creep_k_c) && p->creep_k_c > 0.0))
+        return piezo_refuse(diag, "creep.k_c", "(0, inf)", p->creep_k_c);
+    if (!(isfinite(p->creep_alpha) && p->creep_alpha >= -1.0 && p->creep_alpha <= 1.0))
+        return piezo_refuse(diag, "creep.alpha", "[-1, 1]", p->creep_alpha);
+    /* the nominal G must be a valid plant model (stable A) ... */
+    tf_params.a1 = p->tf_a1;
+    tf_params.a2 = p->tf_a2;
+    tf_params.b1 = p->tf_b1;
+    tf_params.b2 = p->tf_b2;
+    tf_params.delay = 0;
+    st = piezo_tf_init(&tf_check, &tf_params, diag);
+    if (st != PIEZO_OK) return st;
+    /* ... and invertible by MV: positive gain, zero inside the projection radius */
+    if (!(p->tf_b1 > 0.0)) return piezo_refuse(diag, "tf.b1", "(0, inf) (MV divides by b1)", p->tf_b1);
+    if (!(fabs(p->tf_b2) <= ZERO_RADIUS_MAX * p->tf_b1))
+        return piezo_refuse(diag, "tf.b2", "|tf.b2| <= 0.999 tf.b1 (zero of B inside the unit circle)", p->tf_b2);
+    if (p->mv_delay < 0 || p->mv_delay > PIEZO_MV_MAX_EXTRA_DELAY)
+        return piezo_refuse(diag, "mv.delay", "0..8 samples", (double)p->mv_delay);
+    if (!(isfinite(p->mv_lambda_u) && p->mv_lambda_u >= 0.0))
+        return piezo_refuse(diag, "mv.lambda_u", "[0, inf)", p->mv_lambda_u);
+    if (!(isfinite(p->rls_forgetting) && p->rls_forgetting > 0.0 && p->rls_forgetting <= 1.0))
+        return piezo_refuse(diag, "rls.forgetting", "(0, 1]", p->rls_forgetting);
+    if (!(isfinite(p->rls_p0) && p->rls_p0 > 0.0))
+        return piezo_refuse(diag, "rls.p0", "(0, inf)", p->rls_p0);
+    if (!(isfinite(p->rls_trace_max) && p->rls_trace_max >= 4.0 * p->rls_p0))
+        return piezo_refuse(diag, "rls.trace_max", "[4 rls.p0, inf) (trace of the initial covariance)", p->rls_trace_max);
+    if (p->sat_enabled) {
+        if (!isfinite(p->sat_v_min)) return piezo_refuse(diag, "sat.v_min", "finite, < sat.v_max", p->sat_v_min);
+        if (!(isfinite(p->sat_v_max) && p->sat_v_max > p->sat_v_min))
+            return piezo_refuse(diag, "sat.v_max", "finite, > sat.v_min", p->sat_v_max);
+    }
+
+    memset(c, 0, sizeof *c);
+    pi_params = p->pi;
+    st = piezo_pi_init(&c->fwd_pi, &pi_params, diag);
+    if (st != PIEZO_OK) return st;
+    /* eq 29: inverse creep = G-L of order -alpha, gain h^alpha / k_c */
+    st = piezo_gl_init(&c->inv_creep, -p->creep_alpha, pow(p->h, p->creep_alpha) / p->creep_k_c,
+                       p->creep_exact, diag);
+    if (st != PIEZO_OK) return st;
+    c->d = 1 + p->mv_delay;
+    c->lambda_u = p->mv_lambda_u;
+    c->rls_enabled = p->rls_enabled ? 1 : 0;
+    c->forgetting = p->rls_forgetting;
+    c->p0 = p->rls_p0;
+    c->trace_max = p->rls_trace_max;
+    c->sat_enabled = p->sat_enabled ? 1 : 0;
+    c->sat_v_min = p->sat_v_min;
+    c->sat_v_max = p->sat_v_max;
+    c->theta_nominal[0] = p->tf_a1;
+    c->theta_nominal[1] = p->tf_a2;
+    c->theta_nominal[2] = p->tf_b1;
+    c->theta_nominal[3] = p->tf_b2;
+    piezo_controller_reset(c);
+    return PIEZO_OK;
+}
+
+void piezo_controller_reset(piezo_controller *c)
+{
+    int i;
+    if (!c) return;
+    piezo_pi_reset(&c->fwd_pi);
+    piezo_pi_inverse_init(&c->inv_pi, &c->fwd_pi);   /* consistent with zero states */
+    piezo_gl_reset(&c->inv_creep);
+    memcpy(c->theta, c->theta_nominal, sizeof c->theta);
+    memset(c->P, 0, sizeof c->P);
+    for (i = 0; i < 4; ++i) c->P[5 * i] = c->p0;
+    c->y_prev[0] = c->y_prev[1] = 0.0;
+    memset(c->q_ring, 0, sizeof c->q_ring);
+    c->head = 0;
+    c->sat_hold = 0;
+    c->k = 0;
+    memset(&c->out, 0, sizeof c->out);
+    memcpy(c->out.theta, c->theta, sizeof c->theta);
+}
+
+size_t piezo_controller_history_needed(const piezo_controller *c)
+{
+    return c ? piezo_gl_history_needed(&c->inv_creep) : 0;
+}
+
+/* q(k-i), i >= 1 */
+static double q_past(const piezo_controller *c, int i)
+{
+    return c->q_ring[(c->head + i - 1) % PIEZO_MV_Q_RING];
+}
+
+static void project(piezo_controller *c)
+{
+    double b1_floor = B1_FLOOR_FRACTION * c->theta_nominal[2];
+    double *th = c->theta;
+    if (th[2] < b1_floor) th[2] = b1_floor;
+    if (fabs(th[3]) > ZERO_RADIUS_MAX * th[2]) th[3] = copysign(ZERO_RADIUS_MAX * th[2], th[3]);
+}
+
+/*
+ * RLS with forgetting on y(k) = phi^T theta, phi = [-y(k-1), -y(k-2), q(k-d), q(k-d-1)]:
+ *   e = y(k) - phi^T theta,  K = P phi / (lambda + phi^T P phi),
+ *   theta += K e,  P = (P - K phi^T P) / lambda,  trace(P) <= trace_max.
+ * Returns the a-priori prediction error.
+ */
+static double rls_update(piezo_controller *c, double y)
+{
+    double phi[4], Pphi[4], denom, e, trace = 0.0, P_new[16];
+    int i, j;
+    phi[0] = -c->y_prev[0];
+    phi[1] = -c->y_prev[1];
+    phi[2] = q_past(c, c->d);
+    phi[3] = q_past(c, c->d + 1);
+    e = y;
+    for (i = 0; i < 4; ++i) e -= phi[i] * c->theta[i];
+    if (!c->rls_enabled || c->sat_hold > 0) return e;
+
+    denom = c->forgetting;
+    for (i = 0; i < 4; ++i) {
+        Pphi[i] = 0.0;
+        for (j = 0; j < 4; ++j) Pphi[i] += c->P[4 * i + j] * phi[j];
+        denom += phi[i] * Pphi[i];
+    }
+    for (i = 0; i < 4; ++i) c->theta[i] += Pphi[i] / denom * e;
+    /* P is symmetric, so phi^T P = (P phi)^T; keep it exactly symmetric */
+    for (i = 0; i < 4; ++i)
+        for (j = 0; j < 4; ++j)
+            P_new[4 * i + j] = (c->P[4 * i + j] - Pphi[i] * Pphi[j] / denom) / c->forgetting;
+    for (i = 0; i < 4; ++i) {
+        for (j = 0; j < i; ++j) P_new[4 * i + j] = P_new[4 * j + i] = 0.5 * (P_new[4 * i + j] + P_new[4 * j + i]);
+        trace += P_new[5 * i];
+    }
+    if (trace > c->trace_max) {
+        double scale = c->trace_max / trace;
+        for (i = 0; i < 16; ++i) P_new[i] *= scale;
+    }
+    memcpy(c->P, P_new, sizeof P_new);
+    project(c);
+    return e;
+}
+
+/* Commit one sample on *c (the caller guarantees the inputs are finite). */
+static piezo_status controller_advance(piezo_controller *c, double y_ref, double y_meas,
+                                       double *history, size_t capacity)
+{
+    double e[PIEZO_MV_MAX_D], g[2], f[PIEZO_MV_MAX_D + 1];
+    double pred_error, numerator, q, r, v;
+    piezo_pi_inverse inv_before;
+    piezo_gl creep_before;
+    piezo_status st;
+    int i, d = c->d, saturated = 0;
+
+    pred_error = rls_update(c, y_meas);
+
+    /* Diophantine with the current estimate; F = B E: f_n = b1 e_n + b2 e_{n-1} */
+    piezo_diophantine(c->theta[0], c->theta[1], d, e, g);
+    for (i = 0; i <= d; ++i)
+        f[i] = c->theta[2] * (i < d ? e[i] : 0.0) + c->theta[3] * (i >= 1 ? e[i - 1] : 0.0);
+
+    /* MV: y(k+d) = Gd y(k) + F q(k) := y_ref, weighted by lambda_u */
+    numerator = y_ref - g[0] * y_meas - g[1] * c->y_prev[0];
+    for (i = 1; i <= d; ++i) numerator -= f[i] * q_past(c, i);
+    q = f[0] * numerator / (f[0] * f[0] + c->lambda_u);
+
+    /* feedforward: inverse creep, then inverse PI */
+    creep_before = c->inv_creep;
+    inv_before = c->inv_pi;
+    st = piezo_gl_step(&c->inv_creep, q, history, capacity, &r);
+    if (st != PIEZO_OK) return st;
+    st = piezo_pi_inverse_step(&c->inv_pi, r, &v);
+    if (st != PIEZO_OK) return st;
+
+    if (c->sat_enabled && (v > c->sat_v_max || v < c->sat_v_min)) {
+        /* Back-calculate what the plant model really receives at the clipped
+         * voltage, so the operator memories and the MV past stay consistent:
+         * r_eff = P[v_sat], q_eff from r_eff = gain (q_eff + memory). */
+        double r_eff, memory;
+        piezo_gl probe;
+        saturated = 1;
+        v = v > c->sat_v_max ? c->sat_v_max : c->sat_v_min;
+        piezo_pi_step(&c->fwd_pi, v, &r_eff);
+        c->inv_pi = inv_before;
+        piezo_pi_inverse_step(&c->inv_pi, r_eff, &r);   /* re-sync the inverse states */
+        probe = creep_before;
+        piezo_gl_step(&probe, 0.0, history, capacity, &memory);
+        q = (r_eff - memory) / creep_before.gain;
+        c->inv_creep = creep_before;
+        piezo_gl_step(&c->inv_creep, q, history, capacity, &r);
+        c->sat_hold = d + 1;   /* no adaptation until the clipped sample leaves the regressor */
+    } else {
+        piezo_pi_step(&c->fwd_pi, v, &r);
+        if (c->sat_hold > 0) c->sat_hold -= 1;
+    }
+
+    /* shift the pasts */
+    c->head = (c->head + PIEZO_MV_Q_RING - 1) % PIEZO_MV_Q_RING;
+    c->q_ring[c->head] = q;
+    c->y_prev[1] = c->y_prev[0];
+    c->y_prev[0] = y_meas;
+    c->k += 1;
+    c->out.v = v;
+    c->out.q = q;
+    memcpy(c->out.theta, c->theta, sizeof c->theta);
+    c->out.pred_error = pred_error;
+    c->out.saturated = saturated;
+    return PIEZO_OK;
+}
+
+piezo_status piezo_controller_step(piezo_controller *c, double y_ref, double y_meas,
+                                   double *history, size_t capacity, piezo_controller_output *out)
+{
+    piezo_controller scratch;
+    piezo_status st;
+    if (!c) return PIEZO_ERR_NULL;
+    if (!(isfinite(y_ref) && isfinite(y_meas))) return PIEZO_ERR_NONFINITE;
+    if (c->inv_creep.exact) {
+        if (!history) return PIEZO_ERR_NULL;
+        if (capacity < piezo_controller_history_needed(c)) return PIEZO_ERR_CAPACITY;
+    }
+    scratch = *c;
+    st = controller_advance(&scratch, y_ref, y_meas, history, capacity);
+    if (st == PIEZO_OK && !(isfinite(scratch.out.v) && isfinite(scratch.out.q))) st = PIEZO_ERR_NONFINITE;
+    if (st != PIEZO_OK) return st;
+    *c = scratch;
+    if (out) *out = c->out;
+    return PIEZO_OK;
+}
+
+piezo_status piezo_controller_peek(const piezo_controller *c, double y_ref, double y_meas,
+                                   double *history, size_t capacity, piezo_controller_output *out)
+{
+    piezo_controller scratch;
+    piezo_status st;
+    if (!c || !out) return PIEZO_ERR_NULL;
+    scratch = *c;
+    st = piezo_controller_step(&scratch, y_ref, y_meas, history, capacity, out);
+    return st;
+}

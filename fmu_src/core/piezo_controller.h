@@ -1,0 +1,98 @@
+/*
+ * piezo_controller.h - adaptive compound controller (DESIGN.md section 2):
+ *
+ *     y_meas(k) -> RLS update -> MV law -> q(k) -> inverse creep -> r(k)
+ *               -> inverse PI -> v(k) [-> saturation]
+ *
+ * Loop model seen from q: y(k) = -a1 y(k-1) - a2 y(k-2) + b1 q(k-d) + b2 q(k-d-1),
+ * d = 1 + mv_delay, i.e. A(z^-1) y = z^-d B(z^-1) q.
+ * Diophantine: 1 = A E + z^-d Gd, deg E = d-1, deg Gd = 1, F = B E (deg d).
+ * Predictor: y(k+d) = Gd y(k) + F q(k). MV (with control weighting lambda_u):
+ *     q(k) = f0 (y_ref - Gd y(k) - sum_{i=1..d} f_i q(k-i)) / (f0^2 + lambda_u)
+ * where y_ref = y_d(k+d) (reference preview).
+ */
+#ifndef PIEZO_CONTROLLER_H
+#define PIEZO_CONTROLLER_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include "piezo_status.h"
+#include "piezo_hysteresis.h"
+#include "piezo_tf.h"
+#include "piezo_creep.h"
+
+#define PIEZO_MV_MAX_EXTRA_DELAY 8
+#define PIEZO_MV_MAX_D 9          /* 1 + PIEZO_MV_MAX_EXTRA_DELAY */
+#define PIEZO_MV_Q_RING 10        /* PIEZO_MV_MAX_D + 1 */
+
+typedef struct {
+    piezo_pi_params pi;          /* nominal hysteresis model */
+    double tf_a1, tf_a2, tf_b1, tf_b2;  /* nominal G (eq 21) */
+    double creep_k_c;            /* > 0 */
+    double creep_alpha;          /* [-1, 1] */
+    int creep_exact;             /* 1: full-memory inverse creep */
+    double h;                    /* [s], > 0 */
+    int mv_delay;                /* extra loop delay, 0..8; d = 1 + mv_delay */
+    double mv_lambda_u;          /* control weighting, >= 0 */
+    int rls_enabled;
+    double rls_forgetting;       /* (0, 1] */
+    double rls_p0;               /* initial covariance P = p0 I, > 0 */
+    double rls_trace_max;        /* bound on trace(P), >= 4 p0 */
+    int sat_enabled;
+    double sat_v_min, sat_v_max; /* [V], v_min < v_max when enabled */
+} piezo_controller_params;
+
+typedef struct {
+    double v;                    /* control voltage v(k) [V] */
+    double q;                    /* virtual input q(k) [um] (after saturation back-calculation) */
+    double theta[4];             /* estimates a1, a2, b1, b2 used for q(k) */
+    double pred_error;           /* RLS one-step prediction error at k [um] */
+    int saturated;               /* 1 if v(k) was clipped */
+} piezo_controller_output;
+
+typedef struct {
+    piezo_pi fwd_pi;             /* nominal forward PI: tracks the plant's hysteresis state */
+    piezo_pi_inverse inv_pi;
+    piezo_gl inv_creep;          /* order -alpha, gain h^alpha / k_c */
+    int d;
+    double lambda_u;
+    int rls_enabled;
+    double forgetting, p0, trace_max;
+    int sat_enabled;
+    double sat_v_min, sat_v_max;
+    double theta_nominal[4];
+    double theta[4];             /* a1, a2, b1, b2 */
+    double P[16];                /* RLS covariance, row-major 4x4 */
+    double y_prev[2];            /* y(k-1), y(k-2) */
+    double q_ring[PIEZO_MV_Q_RING];  /* q(k-1)..q(k-10), q_ring[head] newest */
+    int head;
+    int sat_hold;                /* samples until a clipped q leaves the regressor (no RLS meanwhile) */
+    uint64_t k;
+    piezo_controller_output out; /* result of the last committed sample */
+} piezo_controller;
+
+/* DESIGN.md section 5 defaults (nominal plant model). */
+void piezo_controller_default_params(piezo_controller_params *params);
+piezo_status piezo_controller_init(piezo_controller *ctrl, const piezo_controller_params *params,
+                                   piezo_diag *diag);
+void piezo_controller_reset(piezo_controller *ctrl);
+/*
+ * Compute the control of sample k from y_ref = y_d(k+d) and y_meas(k) and
+ * commit it (RLS update, operator states, k -> k+1). Exact mode writes
+ * history[k] (capacity >= k+1). Non-finite inputs refused, state unchanged.
+ */
+piezo_status piezo_controller_step(piezo_controller *ctrl, double y_ref, double y_meas,
+                                   double *history, size_t history_capacity,
+                                   piezo_controller_output *out);
+/* Same result as piezo_controller_step without committing anything
+ * (exact mode may write the unused slot history[k]). */
+piezo_status piezo_controller_peek(const piezo_controller *ctrl, double y_ref, double y_meas,
+                                   double *history, size_t history_capacity,
+                                   piezo_controller_output *out);
+size_t piezo_controller_history_needed(const piezo_controller *ctrl);
+
+/* Diophantine 1 = A E + z^-d Gd for A = 1 + a1 z^-1 + a2 z^-2, 1 <= d <= 9:
+ * e[0..d-1] (e[0] = 1), g[0..1]. */
+piezo_status piezo_diophantine(double a1, double a2, int d, double *e, double *g);
+
+#endif

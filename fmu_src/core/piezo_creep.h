@@ -1,0 +1,63 @@
+/*
+ * piezo_creep.h - Grunwald-Letnikov fractional operator (paper eqs 13-17, 29;
+ * DESIGN.md section 1 "Cost of the creep sum").
+ *
+ *     y(k) = gain * sum_{j=0..k} w_j x(k-j),
+ *     w_0 = 1,  w_j = (1 - (alpha+1)/j) w_{j-1}     (eq 14)
+ *
+ * The plant's creep is order alpha with gain k_c h^-alpha (eq 17); the
+ * controller's inverse creep is order -alpha with gain h^alpha / k_c.
+ * Memory starts at k = 0 (t0).
+ *
+ * Two modes:
+ *  - exact: the full sum, O(k) per step. The caller owns the history buffer
+ *    (x(0..k), one double per sample) and passes it to every step, so the
+ *    struct itself stays flat and copyable.
+ *  - sum of exponentials (SOE, default): the first PIEZO_GL_HEAD+1 weights
+ *    w_0..w_L0 exactly; for j > L0
+ *        w_j = -(sin(pi alpha)/pi) int_0^inf e^{-s j} e^{alpha s} (1-e^{-s})^alpha ds
+ *    discretised by the trapezoid rule in u = ln s, so w_j ~ sum_i c_i e^{-s_i j}
+ *    and each term is a first-order recursion on x(k-L0-1). O(1) per step.
+ */
+#ifndef PIEZO_CREEP_H
+#define PIEZO_CREEP_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include "piezo_status.h"
+
+#define PIEZO_GL_HEAD 16        /* L0: weights w_0..w_L0 kept exactly */
+#define PIEZO_GL_HEAD_LEN 17    /* PIEZO_GL_HEAD + 1 */
+#define PIEZO_GL_MAX_TERMS 64   /* SOE terms */
+
+typedef struct {
+    double alpha;               /* order, [-1, 1] */
+    double gain;                /* output gain */
+    int exact;                  /* 1: full memory, 0: SOE */
+    uint64_t k;                 /* samples consumed so far */
+    double w_head[PIEZO_GL_HEAD_LEN];   /* w_0..w_L0 */
+    double x_ring[PIEZO_GL_HEAD_LEN];   /* x(k-1)..x(k-1-L0), ring, x_ring[head] newest */
+    int head;
+    int n_terms;                         /* SOE terms in use */
+    double soe_c[PIEZO_GL_MAX_TERMS];      /* c_i */
+    double soe_decay[PIEZO_GL_MAX_TERMS];  /* e^{-s_i} */
+    double soe_inject[PIEZO_GL_MAX_TERMS]; /* e^{-s_i (L0+1)} */
+    double soe_state[PIEZO_GL_MAX_TERMS];  /* S_i(k) = sum_{j>L0} e^{-s_i j} x(k-j) */
+} piezo_gl;
+
+/* Closed-form-free weights by the recursion of eq 14: w[0..n-1]. */
+void piezo_gl_weights(double alpha, double *w, size_t n);
+
+/* Validate alpha in [-1, 1] and finite gain, derive weights and SOE nodes, reset. */
+piezo_status piezo_gl_init(piezo_gl *gl, double alpha, double gain, int exact, piezo_diag *diag);
+void piezo_gl_reset(piezo_gl *gl);
+/*
+ * Consume x(k), return y(k). In exact mode history must hold at least k+1
+ * doubles (history_capacity); history[k] is written. In SOE mode history may
+ * be NULL. Non-finite x or a too-small history is refused, state unchanged.
+ */
+piezo_status piezo_gl_step(piezo_gl *gl, double x, double *history, size_t history_capacity, double *y);
+/* Samples of history an exact-mode step needs next (k+1); 0 in SOE mode. */
+size_t piezo_gl_history_needed(const piezo_gl *gl);
+
+#endif

@@ -1,0 +1,112 @@
+/* piezo_hysteresis.c - PI model and its inverse. See piezo_hysteresis.h. */
+#include <math.h>
+#include <string.h>
+#include "piezo_hysteresis.h"
+
+/* eq 3: z_r(k) = max(v(k) - r, min(v(k) + r, z_r(k-1))) */
+double piezo_play(double v, double r, double z_prev)
+{
+    double upper = v + r;
+    double lower = v - r;
+    double z = z_prev < upper ? z_prev : upper;
+    return z > lower ? z : lower;
+}
+
+/* Names of the weights as FMU variables, for diagnostics. */
+static const char *const weight_names[PIEZO_PI_MAX_OPERATORS] = {
+    "pi.w[1]", "pi.w[2]", "pi.w[3]", "pi.w[4]", "pi.w[5]", "pi.w[6]", "pi.w[7]", "pi.w[8]",
+    "pi.w[9]", "pi.w[10]", "pi.w[11]", "pi.w[12]", "pi.w[13]", "pi.w[14]", "pi.w[15]", "pi.w[16]"};
+
+piezo_status piezo_pi_init(piezo_pi *pi, const piezo_pi_params *params, piezo_diag *diag)
+{
+    int j;
+    if (!pi || !params) return PIEZO_ERR_NULL;
+    if (params->m < 1 || params->m > PIEZO_PI_MAX_OPERATORS)
+        return piezo_refuse(diag, "pi.m", "1..16", (double)params->m);
+    if (!(isfinite(params->v_max) && params->v_max > 0.0))
+        return piezo_refuse(diag, "pi.v_max", "(0, inf) V", params->v_max);
+    if (!(isfinite(params->w0) && params->w0 > 0.0))
+        return piezo_refuse(diag, "pi.w0", "(0, inf)", params->w0);
+    /* Weights beyond m are ignored, but must still be valid numbers of the
+     * parameter set (a user reducing pi.m should not hide a typo). */
+    for (j = 0; j < PIEZO_PI_MAX_OPERATORS; ++j)
+        if (!(isfinite(params->w[j]) && params->w[j] >= 0.0))
+            return piezo_refuse(diag, weight_names[j], "[0, inf)", params->w[j]);
+
+    memset(pi, 0, sizeof *pi);
+    pi->m = params->m;
+    pi->w0 = params->w0;
+    for (j = 0; j < params->m; ++j) {
+        pi->w[j] = params->w[j];
+        /* eq 5 with j counted from 1: r_j = (j-1)/m * v_max */
+        pi->r[j] = (double)j / (double)params->m * params->v_max;
+    }
+    return PIEZO_OK;
+}
+
+void piezo_pi_reset(piezo_pi *pi)
+{
+    if (pi) memset(pi->z, 0, sizeof pi->z);
+}
+
+/* eq 18: u(k) = w0 v(k) + sum_j w_j z_{r_j}(k) */
+piezo_status piezo_pi_step(piezo_pi *pi, double v, double *u)
+{
+    int j;
+    double sum;
+    if (!pi || !u) return PIEZO_ERR_NULL;
+    if (!isfinite(v)) return PIEZO_ERR_NONFINITE;
+    sum = pi->w0 * v;
+    for (j = 0; j < pi->m; ++j) {
+        pi->z[j] = piezo_play(v, pi->r[j], pi->z[j]);
+        sum += pi->w[j] * pi->z[j];
+    }
+    *u = sum;
+    return PIEZO_OK;
+}
+
+piezo_status piezo_pi_inverse_init(piezo_pi_inverse *inv, const piezo_pi *pi)
+{
+    int i, j;
+    if (!inv || !pi) return PIEZO_ERR_NULL;
+    if (pi->m < 1 || pi->m > PIEZO_PI_MAX_OPERATORS || !(pi->w0 > 0.0)) return PIEZO_ERR_PARAM;
+    memset(inv, 0, sizeof *inv);
+    inv->m = pi->m;
+    /* eq 26: w'_0 = 1/w0 */
+    inv->w0 = 1.0 / pi->w0;
+    for (i = 0; i < pi->m; ++i) {
+        /* slope of the loading curve after / before threshold r_i is crossed */
+        double slope_after = pi->w0, slope_before = pi->w0, r_prime = pi->w0 * pi->r[i];
+        double z_prime;
+        for (j = 0; j <= i; ++j) {
+            slope_after += pi->w[j];
+            if (j < i) slope_before += pi->w[j];
+            /* eq 25 (corrected): r'_i = w0 r_i + sum_{j<=i} w_j (r_i - r_j) */
+            r_prime += pi->w[j] * (pi->r[i] - pi->r[j]);
+        }
+        inv->r[i] = r_prime;
+        /* eq 27 (corrected sign): w'_i = -w_i / ((w0 + sum_{j<=i} w_j)(w0 + sum_{j<i} w_j)) */
+        inv->w[i] = -pi->w[i] / (slope_after * slope_before);
+        /* eq 28 (corrected): z'_i(0) = (w0 + sum_{j<=i} w_j) z_i(0) + sum_{j>i} w_j z_j(0) */
+        z_prime = slope_after * pi->z[i];
+        for (j = i + 1; j < pi->m; ++j) z_prime += pi->w[j] * pi->z[j];
+        inv->z[i] = z_prime;
+    }
+    return PIEZO_OK;
+}
+
+/* eq 24: v(k) = w'_0 u(k) + sum_i w'_i z'_{r'_i}(k) */
+piezo_status piezo_pi_inverse_step(piezo_pi_inverse *inv, double u, double *v)
+{
+    int i;
+    double sum;
+    if (!inv || !v) return PIEZO_ERR_NULL;
+    if (!isfinite(u)) return PIEZO_ERR_NONFINITE;
+    sum = inv->w0 * u;
+    for (i = 0; i < inv->m; ++i) {
+        inv->z[i] = piezo_play(u, inv->r[i], inv->z[i]);
+        sum += inv->w[i] * inv->z[i];
+    }
+    *v = sum;
+    return PIEZO_OK;
+}

@@ -1,0 +1,182 @@
+/* piezo_plant.c - coupled hysteresis-dynamics-creep plant with sensor.
+ * See piezo_plant.h. */
+#include <math.h>
+#include <string.h>
+#include "piezo_plant.h"
+
+#define PI_D 3.14159265358979323846
+
+void piezo_plant_default_params(piezo_plant_params *p)
+{
+    if (!p) return;
+    memset(p, 0, sizeof *p);
+    /* PI model identified at 1 Hz (paper section 3.1, DESIGN.md section 1) */
+    p->pi.m = 9;
+    p->pi.v_max = 20.0;
+    p->pi.w0 = 0.3344;
+    p->pi.w[0] = 0.0714;
+    p->pi.w[1] = 0.0322;
+    p->pi.w[2] = 0.0072;
+    /* eq 21 */
+    p->tf.a1 = -1.3767;
+    p->tf.a2 = 0.3816;
+    p->tf.b1 = 0.5954;
+    p->tf.b2 = -0.5907;
+    p->tf.delay = 0;
+    /* Table 1, 1 Hz row */
+    p->creep_enabled = 1;
+    p->creep_k_c = 1.0463;
+    p->creep_alpha = 0.0002;
+    p->creep_exact = 0;
+    p->sensor_resolution = 0.0;
+    p->sensor_noise_rms = 0.0;
+    p->sensor_seed = 1;
+    p->h = 0.0005;
+}
+
+/* ---- sensor generator: xoshiro256** seeded by splitmix64 ---------------- */
+
+static uint64_t splitmix64(uint64_t *x)
+{
+    uint64_t z = (*x += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+static uint64_t rotl(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
+
+void piezo_rng_seed(piezo_rng *rng, uint64_t seed)
+{
+    int i;
+    if (!rng) return;
+    for (i = 0; i < 4; ++i) rng->s[i] = splitmix64(&seed);
+}
+
+static uint64_t rng_next(piezo_rng *rng)
+{
+    uint64_t *s = rng->s;
+    uint64_t result = rotl(s[1] * 5, 7) * 9;
+    uint64_t t = s[1] << 17;
+    s[2] ^= s[0];
+    s[3] ^= s[1];
+    s[1] ^= s[2];
+    s[0] ^= s[3];
+    s[2] ^= t;
+    s[3] = rotl(s[3], 45);
+    return result;
+}
+
+/* Top 53 bits, shifted by half an ulp so the result is never 0 or 1. */
+double piezo_rng_uniform(piezo_rng *rng)
+{
+    return ((double)(rng_next(rng) >> 11) + 0.5) * (1.0 / 9007199254740992.0);
+}
+
+/* Box-Muller; the second variate is dropped so the state stays one generator. */
+double piezo_rng_normal(piezo_rng *rng)
+{
+    double u1 = piezo_rng_uniform(rng);
+    double u2 = piezo_rng_uniform(rng);
+    return sqrt(-2.0 * log(u1)) * cos(2.0 * PI_D * u2);
+}
+
+/* ---- plant --------------------------------------------------------------- */
+
+piezo_status piezo_plant_init(piezo_plant *plant, const piezo_plant_params *p, piezo_diag *diag)
+{
+    piezo_status st;
+    double gain;
+    if (!plant || !p) return PIEZO_ERR_NULL;
+    if (!(isfinite(p->h) && p->h > 0.0)) return piezo_refuse(diag, "h", "(0, inf) s", p->h);
+    if (!(isfinite(p->creep_k_c) && p->creep_k_c > 0.0))
+        return piezo_refuse(diag, "creep.k_c", "(0, inf)", p->creep_k_c);
+    if (!(isfinite(p->creep_alpha) && p->creep_alpha >= -1.0 && p->creep_alpha <= 1.0))
+        return piezo_refuse(diag, "creep.alpha", "[-1, 1]", p->creep_alpha);
+    if (!(isfinite(p->sensor_resolution) && p->sensor_resolution >= 0.0))
+        return piezo_refuse(diag, "sensor.resolution", "[0, inf) um", p->sensor_resolution);
+    if (!(isfinite(p->sensor_noise_rms) && p->sensor_noise_rms >= 0.0))
+        return piezo_refuse(diag, "sensor.noise_rms", "[0, inf) um", p->sensor_noise_rms);
+
+    memset(plant, 0, sizeof *plant);
+    st = piezo_pi_init(&plant->pi, &p->pi, diag);
+    if (st != PIEZO_OK) return st;
+    st = piezo_tf_init(&plant->tf, &p->tf, diag);
+    if (st != PIEZO_OK) return st;
+    /* eq 17: y(k) = k_c h^-alpha sum_j w_j x(k-j) */
+    gain = p->creep_k_c * pow(p->h, -p->creep_alpha);
+    st = piezo_gl_init(&plant->creep, p->creep_alpha, gain, p->creep_exact, diag);
+    if (st != PIEZO_OK) return st;
+    plant->creep_enabled = p->creep_enabled ? 1 : 0;
+    plant->sensor_resolution = p->sensor_resolution;
+    plant->sensor_noise_rms = p->sensor_noise_rms;
+    plant->sensor_seed = p->sensor_seed;
+    piezo_plant_reset(plant);
+    return PIEZO_OK;
+}
+
+/* y_meas = quantize(y + noise), quantize(a) = res * round(a / res) */
+static double sense(piezo_plant *plant, double y)
+{
+    double reading = y;
+    if (plant->sensor_noise_rms > 0.0) reading += plant->sensor_noise_rms * piezo_rng_normal(&plant->rng);
+    if (plant->sensor_resolution > 0.0)
+        reading = plant->sensor_resolution * floor(reading / plant->sensor_resolution + 0.5);
+    return reading;
+}
+
+void piezo_plant_reset(piezo_plant *plant)
+{
+    if (!plant) return;
+    piezo_pi_reset(&plant->pi);
+    piezo_tf_reset(&plant->tf);
+    piezo_gl_reset(&plant->creep);
+    /* the seed is an FMU Integer: any value, reinterpreted bit for bit */
+    piezo_rng_seed(&plant->rng, (uint64_t)(uint32_t)plant->sensor_seed);
+    plant->k = 0;
+    /* sample 0: at rest */
+    plant->out.u = 0.0;
+    plant->out.x = 0.0;
+    plant->out.y = 0.0;
+    plant->out.y_meas = sense(plant, 0.0);
+}
+
+size_t piezo_plant_history_needed(const piezo_plant *plant)
+{
+    if (!plant || !plant->creep_enabled) return 0;
+    /* the creep consumes x(k+1) at the next step */
+    return piezo_gl_history_needed(&plant->creep);
+}
+
+piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_history,
+                              size_t history_capacity, piezo_plant_output *out)
+{
+    piezo_plant scratch;
+    piezo_status st;
+    double u, x, y;
+    if (!plant) return PIEZO_ERR_NULL;
+    if (!isfinite(v)) return PIEZO_ERR_NONFINITE;
+    if (plant->creep_enabled && plant->creep.exact) {
+        if (!creep_history) return PIEZO_ERR_NULL;
+        if (history_capacity < piezo_plant_history_needed(plant)) return PIEZO_ERR_CAPACITY;
+    }
+    /* Work on a copy so that any refusal leaves *plant untouched. */
+    scratch = *plant;
+    st = piezo_pi_step(&scratch.pi, v, &u);          /* u(k) = P[v](k)        */
+    if (st == PIEZO_OK) st = piezo_tf_step(&scratch.tf, u, &x);   /* x(k+1)    */
+    if (st == PIEZO_OK && scratch.creep_enabled)
+        st = piezo_gl_step(&scratch.creep, x, creep_history, history_capacity, &y); /* y(k+1) */
+    else
+        y = x;
+    /* non-finite intermediate values (e.g. an exploding input) are refused too */
+    if (st == PIEZO_OK && !(isfinite(u) && isfinite(x) && isfinite(y))) st = PIEZO_ERR_NONFINITE;
+    if (st != PIEZO_OK) return st;
+    scratch.k += 1;
+    scratch.out.u = u;
+    scratch.out.x = x;
+    scratch.out.y = y;
+    scratch.out.y_meas = sense(&scratch, y);
+    *plant = scratch;
+    if (out) *out = plant->out;
+    return PIEZO_OK;
+}

@@ -1,0 +1,84 @@
+/*
+ * piezo_plant.h - the coupled piezo stage model (DESIGN.md section 1):
+ *
+ *     v --PI--> u --G(z)--> x --creep--> y,   y_meas = quantize(y + noise)
+ *
+ * Sample k: the outputs u(k-1), x(k), y(k), y_meas(k) are known before v(k)
+ * is applied (no direct feedthrough from v). piezo_plant_step consumes v(k)
+ * and advances to k+1: u(k) = P[v](k), x(k+1) = G..., y(k+1) = creep(x)(k+1).
+ * Outputs live in the struct (`out`), so the FMU reads them without work.
+ *
+ * Sensor: quantize(a) = resolution * round(a / resolution) (off when 0);
+ * noise ~ N(0, noise_rms^2) from the core's own xoshiro256** generator seeded
+ * by splitmix64(seed): reproducible, independent of the C library.
+ */
+#ifndef PIEZO_PLANT_H
+#define PIEZO_PLANT_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include "piezo_status.h"
+#include "piezo_hysteresis.h"
+#include "piezo_tf.h"
+#include "piezo_creep.h"
+
+typedef struct {
+    piezo_pi_params pi;
+    piezo_tf_params tf;
+    int creep_enabled;          /* 0: Hammerstein model, y = x */
+    double creep_k_c;           /* > 0 */
+    double creep_alpha;         /* [-1, 1] */
+    int creep_exact;            /* 1: full-memory G-L, 0: SOE */
+    double sensor_resolution;   /* [um], >= 0, 0 = off */
+    double sensor_noise_rms;    /* [um], >= 0 */
+    int sensor_seed;            /* any integer */
+    double h;                   /* sample period [s], > 0 */
+} piezo_plant_params;
+
+typedef struct {
+    double u;                   /* PI output of the last applied voltage, u(k-1) [um] */
+    double x;                   /* Hammerstein output x(k) [um] */
+    double y;                   /* true displacement y(k) [um] */
+    double y_meas;              /* sensor reading [um] */
+} piezo_plant_output;
+
+typedef struct {
+    uint64_t s[4];
+} piezo_rng;
+
+typedef struct {
+    piezo_pi pi;
+    piezo_tf tf;
+    piezo_gl creep;
+    int creep_enabled;
+    double sensor_resolution;
+    double sensor_noise_rms;
+    int sensor_seed;
+    piezo_rng rng;
+    uint64_t k;                 /* current sample index */
+    piezo_plant_output out;     /* outputs at sample k */
+} piezo_plant;
+
+/* DESIGN.md section 5 defaults. */
+void piezo_plant_default_params(piezo_plant_params *params);
+/* Validate every parameter (diag names the first bad one), derive, reset. */
+piezo_status piezo_plant_init(piezo_plant *plant, const piezo_plant_params *params, piezo_diag *diag);
+/* Back to k = 0, rest, generator reseeded; outputs of sample 0 computed. */
+void piezo_plant_reset(piezo_plant *plant);
+/*
+ * Apply v(k), advance to k+1. creep_history/capacity: exact-mode buffer of
+ * the creep input (see piezo_gl_step); may be NULL in SOE mode or when creep
+ * is disabled. Refused steps (non-finite v, small buffer) leave the state as it was.
+ * `out` may be NULL; the outputs are also in plant->out.
+ */
+piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_history,
+                              size_t history_capacity, piezo_plant_output *out);
+/* History doubles the next step needs (0 unless exact creep is on). */
+size_t piezo_plant_history_needed(const piezo_plant *plant);
+
+/* The sensor's generator, exposed for tests. */
+void piezo_rng_seed(piezo_rng *rng, uint64_t seed);
+double piezo_rng_uniform(piezo_rng *rng);   /* (0, 1) */
+double piezo_rng_normal(piezo_rng *rng);    /* N(0, 1), Box-Muller */
+
+#endif

@@ -1,0 +1,33 @@
+/*
+ * piezo_status.h - status codes and parameter diagnostics shared by the core.
+ *
+ * The core never prints: a failing init reports which parameter is wrong
+ * through a piezo_diag (FMU variable name, offending value, valid range) and
+ * the FMI layer turns that into a log message.
+ *
+ * Header rules (the cffi binding in harness/ parses these headers): only
+ * size_t, uint64_t, int, double and const char * types, and integer-literal
+ * #defines; no static inline functions, no expressions in array sizes.
+ */
+#ifndef PIEZO_STATUS_H
+#define PIEZO_STATUS_H
+
+typedef enum {
+    PIEZO_OK = 0,            /* success */
+    PIEZO_ERR_NULL = 1,      /* a required pointer argument was NULL */
+    PIEZO_ERR_PARAM = 2,     /* a parameter is out of range: see piezo_diag */
+    PIEZO_ERR_NONFINITE = 3, /* NaN or Inf input refused; state unchanged */
+    PIEZO_ERR_CAPACITY = 4   /* exact-mode history buffer too small; state unchanged */
+} piezo_status;
+
+/* Which parameter an init refused, and why. Strings are static literals. */
+typedef struct {
+    const char *parameter;   /* FMU variable name, e.g. "creep.alpha" */
+    const char *valid_range; /* e.g. "[-1, 1]" */
+    double value;            /* the offending value */
+} piezo_diag;
+
+/* Fill *diag (may be NULL) and return PIEZO_ERR_PARAM: the one way inits refuse. */
+piezo_status piezo_refuse(piezo_diag *diag, const char *parameter, const char *valid_range, double value);
+
+#endif

@@ -1,0 +1,55 @@
+/* piezo_tf.c - second-order discrete transfer function. See piezo_tf.h. */
+#include <math.h>
+#include <string.h>
+#include "piezo_tf.h"
+
+piezo_status piezo_tf_init(piezo_tf *tf, const piezo_tf_params *params, piezo_diag *diag)
+{
+    if (!tf || !params) return PIEZO_ERR_NULL;
+    if (!isfinite(params->b1)) return piezo_refuse(diag, "tf.b1", "finite", params->b1);
+    if (!isfinite(params->b2)) return piezo_refuse(diag, "tf.b2", "finite", params->b2);
+    /* Jury test for z^2 + a1 z + a2: both poles strictly inside the unit circle. */
+    if (!(isfinite(params->a2) && fabs(params->a2) < 1.0))
+        return piezo_refuse(diag, "tf.a2", "|tf.a2| < 1 (stable A)", params->a2);
+    if (!(isfinite(params->a1) && fabs(params->a1) < 1.0 + params->a2))
+        return piezo_refuse(diag, "tf.a1", "|tf.a1| < 1 + tf.a2 (stable A)", params->a1);
+    if (params->delay < 0 || params->delay > PIEZO_TF_MAX_DELAY)
+        return piezo_refuse(diag, "tf.delay", "0..32 samples", (double)params->delay);
+
+    memset(tf, 0, sizeof *tf);
+    tf->a1 = params->a1;
+    tf->a2 = params->a2;
+    tf->b1 = params->b1;
+    tf->b2 = params->b2;
+    tf->delay = params->delay;
+    return PIEZO_OK;
+}
+
+void piezo_tf_reset(piezo_tf *tf)
+{
+    if (!tf) return;
+    tf->x1 = tf->x2 = 0.0;
+    memset(tf->u_ring, 0, sizeof tf->u_ring);
+    tf->head = 0;
+}
+
+piezo_status piezo_tf_step(piezo_tf *tf, double u, double *x_next)
+{
+    double u_d0, u_d1, x;
+    int i0, i1;
+    if (!tf || !x_next) return PIEZO_ERR_NULL;
+    if (!isfinite(u)) return PIEZO_ERR_NONFINITE;
+    /* push u(k): u_ring[head] = u(k), u_ring[head+i] = u(k-i) */
+    tf->head = (tf->head + PIEZO_TF_INPUT_RING - 1) % PIEZO_TF_INPUT_RING;
+    tf->u_ring[tf->head] = u;
+    i0 = (tf->head + tf->delay) % PIEZO_TF_INPUT_RING;
+    i1 = (tf->head + tf->delay + 1) % PIEZO_TF_INPUT_RING;
+    u_d0 = tf->u_ring[i0];  /* u(k-delay)   */
+    u_d1 = tf->u_ring[i1];  /* u(k-1-delay) */
+    /* x(k+1) = -a1 x(k) - a2 x(k-1) + b1 u(k-delay) + b2 u(k-1-delay) */
+    x = -tf->a1 * tf->x1 - tf->a2 * tf->x2 + tf->b1 * u_d0 + tf->b2 * u_d1;
+    tf->x2 = tf->x1;
+    tf->x1 = x;
+    *x_next = x;
+    return PIEZO_OK;
+}

@@ -1,0 +1,39 @@
+/*
+ * piezo_tf.h - second-order discrete transfer function with optional extra
+ * input delay (paper eqs 7-10, 21; DESIGN.md section 1).
+ *
+ *     G(z) = (b1 z^-1 + b2 z^-2) / (1 + a1 z^-1 + a2 z^-2) * z^-delay
+ *     x(k) = -a1 x(k-1) - a2 x(k-2) + b1 u(k-1-delay) + b2 u(k-2-delay)
+ *
+ * One sample of delay (no direct feedthrough): piezo_tf_step takes u(k) and
+ * returns x(k+1). Stability (both poles strictly inside the unit circle, Jury):
+ *     |a2| < 1  and  |a1| < 1 + a2.
+ */
+#ifndef PIEZO_TF_H
+#define PIEZO_TF_H
+
+#include "piezo_status.h"
+
+#define PIEZO_TF_MAX_DELAY 32
+#define PIEZO_TF_INPUT_RING 34  /* PIEZO_TF_MAX_DELAY + 2 */
+
+typedef struct {
+    double a1, a2, b1, b2;
+    int delay;                    /* extra input delay in samples, 0..32 */
+} piezo_tf_params;
+
+typedef struct {
+    double a1, a2, b1, b2;
+    int delay;
+    double x1, x2;                /* x(k), x(k-1) */
+    double u_ring[PIEZO_TF_INPUT_RING]; /* past inputs, u_ring[head] is the newest */
+    int head;
+} piezo_tf;
+
+/* Validate (finite coefficients, stable A, 0 <= delay <= 32), zero the state. */
+piezo_status piezo_tf_init(piezo_tf *tf, const piezo_tf_params *params, piezo_diag *diag);
+void piezo_tf_reset(piezo_tf *tf);
+/* Consume u(k), return x(k+1) through *x_next. Non-finite u refused. */
+piezo_status piezo_tf_step(piezo_tf *tf, double u, double *x_next);
+
+#endif
