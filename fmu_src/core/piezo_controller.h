@@ -79,13 +79,13 @@ void piezo_controller_reset(piezo_controller *ctrl);
 /*
  * Compute the control of sample k from y_ref = y_d(k+d) and y_meas(k) and
  * commit it (RLS update, operator states, k -> k+1). Exact mode writes
- * history[k] (capacity >= k+1). Non-finite inputs refused, state unchanged.
+ * history[2k], history[2k+1] (capacity >= piezo_controller_history_needed). Non-finite inputs refused, state unchanged.
  */
 piezo_status piezo_controller_step(piezo_controller *ctrl, double y_ref, double y_meas,
                                    double *history, size_t history_capacity,
                                    piezo_controller_output *out);
 /* Same result as piezo_controller_step without committing anything
- * (exact mode may write the unused slot history[k]). */
+ * (exact mode may write the unused slots history[2k], history[2k+1]). */
 piezo_status piezo_controller_peek(const piezo_controller *ctrl, double y_ref, double y_meas,
                                    double *history, size_t history_capacity,
                                    piezo_controller_output *out);

@@ -106,20 +106,24 @@ void piezo_gl_reset(piezo_gl *gl)
 size_t piezo_gl_history_needed(const piezo_gl *gl)
 {
     if (!gl || !gl->exact) return 0;
-    return (size_t)gl->k + 1;
+    return 2 * ((size_t)gl->k + 1);
 }
 
-/* Exact: y(k) = gain * sum_{j=0..k} w_j x(k-j), weights by eq 14 on the fly. */
-static double gl_exact_sum(const piezo_gl *gl, const double *history, size_t k)
+/* Exact: y(k) = gain * sum_{j=0..k} w_j x(k-j). history[2j] = x(j) and
+ * history[2j+1] = w_j (eq 14, stored once when sample j arrives), so the sum
+ * is a plain dot product; four partial sums let the CPU overlap the adds. */
+static double gl_exact_sum(const double *history, size_t k)
 {
-    const double a1 = gl->alpha + 1.0;
-    double w = 1.0, sum = history[k];
-    size_t j;
-    for (j = 1; j <= k; ++j) {
-        w *= 1.0 - a1 / (double)j;
-        sum += w * history[k - j];
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    size_t j = 0;
+    for (; j + 3 <= k; j += 4) {
+        s0 += history[2 * j + 1] * history[2 * (k - j)];
+        s1 += history[2 * j + 3] * history[2 * (k - j - 1)];
+        s2 += history[2 * j + 5] * history[2 * (k - j - 2)];
+        s3 += history[2 * j + 7] * history[2 * (k - j - 3)];
     }
-    return sum;
+    for (; j <= k; ++j) s0 += history[2 * j + 1] * history[2 * (k - j)];
+    return (s0 + s1) + (s2 + s3);
 }
 
 /* SOE: y(k) = gain * (sum_{j=0..L0} w_j x(k-j) + sum_i c_i S_i(k)),
@@ -150,9 +154,12 @@ piezo_status piezo_gl_step(piezo_gl *gl, double x, double *history, size_t histo
     if (!isfinite(x)) return PIEZO_ERR_NONFINITE;
     if (gl->exact) {
         if (!history) return PIEZO_ERR_NULL;
-        if (history_capacity < (size_t)gl->k + 1) return PIEZO_ERR_CAPACITY;
-        history[gl->k] = x;
-        sum = gl_exact_sum(gl, history, (size_t)gl->k);
+        size_t k = (size_t)gl->k;
+        if (history_capacity < piezo_gl_history_needed(gl)) return PIEZO_ERR_CAPACITY;
+        history[2 * k] = x;
+        /* w_k by eq 14 from w_{k-1} (w_0 = 1) */
+        history[2 * k + 1] = k == 0 ? 1.0 : (1.0 - (gl->alpha + 1.0) / (double)k) * history[2 * k - 1];
+        sum = gl_exact_sum(history, k);
     } else {
         sum = gl_soe_sum(gl, x);
     }

@@ -11,8 +11,8 @@
  *
  * Two modes:
  *  - exact: the full sum, O(k) per step. The caller owns the history buffer
- *    (x(0..k), one double per sample) and passes it to every step, so the
- *    struct itself stays flat and copyable.
+ *    (two doubles per sample: history[2j] = x(j), history[2j+1] = w_j) and
+ *    passes it to every step, so the struct itself stays flat and copyable.
  *  - sum of exponentials (SOE, default): the first PIEZO_GL_HEAD+1 weights
  *    w_0..w_L0 exactly; for j > L0
  *        w_j = -(sin(pi alpha)/pi) int_0^inf e^{-s j} e^{alpha s} (1-e^{-s})^alpha ds
@@ -52,12 +52,13 @@ void piezo_gl_weights(double alpha, double *w, size_t n);
 piezo_status piezo_gl_init(piezo_gl *gl, double alpha, double gain, int exact, piezo_diag *diag);
 void piezo_gl_reset(piezo_gl *gl);
 /*
- * Consume x(k), return y(k). In exact mode history must hold at least k+1
- * doubles (history_capacity); history[k] is written. In SOE mode history may
- * be NULL. Non-finite x or a too-small history is refused, state unchanged.
+ * Consume x(k), return y(k). In exact mode history must hold at least
+ * 2(k+1) doubles (history_capacity, see piezo_gl_history_needed); entries
+ * 2k and 2k+1 are written. In SOE mode history may be NULL. Non-finite x or
+ * a too-small history is refused, state unchanged.
  */
 piezo_status piezo_gl_step(piezo_gl *gl, double x, double *history, size_t history_capacity, double *y);
-/* Samples of history an exact-mode step needs next (k+1); 0 in SOE mode. */
+/* Doubles of history the next exact-mode step needs, 2(k+1); 0 in SOE mode. */
 size_t piezo_gl_history_needed(const piezo_gl *gl);
 
 #endif

@@ -73,7 +73,7 @@ void piezo_plant_reset(piezo_plant *plant);
  */
 piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_history,
                               size_t history_capacity, piezo_plant_output *out);
-/* History doubles the next step needs (0 unless exact creep is on). */
+/* History doubles the next step needs, 2(k+1) (0 unless exact creep is on). */
 size_t piezo_plant_history_needed(const piezo_plant *plant);
 
 /* The sensor's generator, exposed for tests. */
