@@ -1,0 +1,58 @@
+/*
+ * AdaptiveCompoundController/config.h - identity, value references and flat
+ * data of the AdaptiveCompoundController FMU (DESIGN.md section 5). The value
+ * references follow the order of modelDescription/AdaptiveCompoundController.xml.
+ */
+#ifndef ADAPTIVECOMPOUNDCONTROLLER_CONFIG_H
+#define ADAPTIVECOMPOUNDCONTROLLER_CONFIG_H
+
+#include "piezo_controller.h"
+
+#define MODEL_IDENTIFIER_STRING "AdaptiveCompoundController"
+#define MODEL_GUID "{16db41db-eca1-4957-ad18-19b12743e5cb}"
+
+typedef enum {
+    vr_y_ref = 0,           /* input  [um] reference d samples ahead */
+    vr_y_meas,              /* input  [um] */
+    vr_v,                   /* output [V] */
+    vr_q,                   /* output [um] */
+    vr_est_a1,
+    vr_est_a2,
+    vr_est_b1,
+    vr_est_b2,
+    vr_pred_error,          /* output [um] */
+    vr_pi_m,                /* Integer */
+    vr_pi_v_max,
+    vr_pi_w0,
+    vr_pi_w1, vr_pi_w2, vr_pi_w3, vr_pi_w4, vr_pi_w5, vr_pi_w6, vr_pi_w7, vr_pi_w8,
+    vr_pi_w9, vr_pi_w10, vr_pi_w11, vr_pi_w12, vr_pi_w13, vr_pi_w14, vr_pi_w15, vr_pi_w16,
+    vr_tf_a1,
+    vr_tf_a2,
+    vr_tf_b1,
+    vr_tf_b2,
+    vr_creep_k_c,
+    vr_creep_alpha,
+    vr_creep_exact,         /* Boolean */
+    vr_h,
+    vr_mv_delay,            /* Integer */
+    vr_mv_lambda_u,
+    vr_rls_enabled,         /* Boolean */
+    vr_rls_forgetting,
+    vr_rls_p0,
+    vr_rls_trace_max,
+    vr_sat_enabled,         /* Boolean */
+    vr_sat_v_min,
+    vr_sat_v_max,
+    MODEL_N_VARIABLES
+} ValueReference;
+
+/* Flat and pointer-free: an FMU state is a copy of this plus the history. */
+typedef struct {
+    piezo_controller_params params; /* parameters as set through the FMI */
+    double y_ref;                   /* inputs, held over the communication step */
+    double y_meas;
+    piezo_controller ctrl;          /* core state (committed samples only) */
+    piezo_controller_output out;    /* peek of the current sample with the held inputs */
+} ModelData;
+
+#endif

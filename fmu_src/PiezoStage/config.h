@@ -1,0 +1,48 @@
+/*
+ * PiezoStage/config.h - identity, value references and flat data of the
+ * PiezoStage FMU (DESIGN.md section 5). The value references follow the
+ * order of modelDescription/PiezoStage.xml (value reference = position - 1).
+ */
+#ifndef PIEZOSTAGE_CONFIG_H
+#define PIEZOSTAGE_CONFIG_H
+
+#include "piezo_plant.h"
+
+#define MODEL_IDENTIFIER_STRING "PiezoStage"
+#define MODEL_GUID "{ef01aaba-a721-42bc-89a7-48ea3affdc56}"
+
+typedef enum {
+    vr_v = 0,               /* input  [V] */
+    vr_y,                   /* output [um] true displacement */
+    vr_y_meas,              /* output [um] sensor reading */
+    vr_u,                   /* output [um] hysteresis output u(k-1) */
+    vr_x,                   /* output [um] Hammerstein output */
+    vr_pi_m,                /* Integer, 1..16 */
+    vr_pi_v_max,
+    vr_pi_w0,
+    vr_pi_w1, vr_pi_w2, vr_pi_w3, vr_pi_w4, vr_pi_w5, vr_pi_w6, vr_pi_w7, vr_pi_w8,
+    vr_pi_w9, vr_pi_w10, vr_pi_w11, vr_pi_w12, vr_pi_w13, vr_pi_w14, vr_pi_w15, vr_pi_w16,
+    vr_tf_a1,
+    vr_tf_a2,
+    vr_tf_b1,
+    vr_tf_b2,
+    vr_tf_delay,            /* Integer */
+    vr_creep_enabled,       /* Boolean */
+    vr_creep_k_c,
+    vr_creep_alpha,
+    vr_creep_exact,         /* Boolean */
+    vr_sensor_resolution,
+    vr_sensor_noise_rms,
+    vr_sensor_seed,         /* Integer */
+    vr_h,
+    MODEL_N_VARIABLES
+} ValueReference;
+
+/* Flat and pointer-free: an FMU state is a copy of this plus the history. */
+typedef struct {
+    piezo_plant_params params;  /* parameters as set through the FMI */
+    double v;                   /* input held over the communication step */
+    piezo_plant plant;          /* core state; outputs in plant.out */
+} ModelData;
+
+#endif

@@ -1,0 +1,110 @@
+/*
+ * PiezoStage/model.c - the PiezoStage FMU's model: variable table, start
+ * values and calls into the core plant (piezo_plant.h). Everything FMI lives
+ * in the shared glue (fmu_src/fmi/fmi2_glue.c).
+ *
+ * Semantics: at t_k = t0 + k h the outputs are plant.out (u(k-1), x(k), y(k),
+ * y_meas(k)); one model_step applies the held v as v(k) and advances to k+1.
+ */
+#include <stddef.h>
+#include "fmu_model.h"
+
+#define PARAM_REAL(name, field) { name, MODEL_REAL, MODEL_PARAMETER, offsetof(ModelData, params.field) }
+#define PARAM_INT(name, field) { name, MODEL_INTEGER, MODEL_PARAMETER, offsetof(ModelData, params.field) }
+#define PARAM_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_PARAMETER, offsetof(ModelData, params.field) }
+#define OUTPUT_REAL(name, field) { name, MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, plant.out.field) }
+
+const model_variable model_variables[MODEL_N_VARIABLES] = {
+    [vr_v] = { "v", MODEL_REAL, MODEL_INPUT, offsetof(ModelData, v) },
+    [vr_y] = OUTPUT_REAL("y", y),
+    [vr_y_meas] = OUTPUT_REAL("y_meas", y_meas),
+    [vr_u] = OUTPUT_REAL("u", u),
+    [vr_x] = OUTPUT_REAL("x", x),
+    [vr_pi_m] = PARAM_INT("pi.m", pi.m),
+    [vr_pi_v_max] = PARAM_REAL("pi.v_max", pi.v_max),
+    [vr_pi_w0] = PARAM_REAL("pi.w0", pi.w0),
+    [vr_pi_w1] = PARAM_REAL("pi.w[1]", pi.w[0]),
+    [vr_pi_w2] = PARAM_REAL("pi.w[2]", pi.w[1]),
+    [vr_pi_w3] = PARAM_REAL("pi.w[3]", pi.w[2]),
+    [vr_pi_w4] = PARAM_REAL("pi.w[4]", pi.w[3]),
+    [vr_pi_w5] = PARAM_REAL("pi.w[5]", pi.w[4]),
+    [vr_pi_w6] = PARAM_REAL("pi.w[6]", pi.w[5]),
+    [vr_pi_w7] = PARAM_REAL("pi.w[7]", pi.w[6]),
+    [vr_pi_w8] = PARAM_REAL("pi.w[8]", pi.w[7]),
+    [vr_pi_w9] = PARAM_REAL("pi.w[9]", pi.w[8]),
+    [vr_pi_w10] = PARAM_REAL("pi.w[10]", pi.w[9]),
+    [vr_pi_w11] = PARAM_REAL("pi.w[11]", pi.w[10]),
+    [vr_pi_w12] = PARAM_REAL("pi.w[12]", pi.w[11]),
+    [vr_pi_w13] = PARAM_REAL("pi.w[13]", pi.w[12]),
+    [vr_pi_w14] = PARAM_REAL("pi.w[14]", pi.w[13]),
+    [vr_pi_w15] = PARAM_REAL("pi.w[15]", pi.w[14]),
+    [vr_pi_w16] = PARAM_REAL("pi.w[16]", pi.w[15]),
+    [vr_tf_a1] = PARAM_REAL("tf.a1", tf.a1),
+    [vr_tf_a2] = PARAM_REAL("tf.a2", tf.a2),
+    [vr_tf_b1] = PARAM_REAL("tf.b1", tf.b1),
+    [vr_tf_b2] = PARAM_REAL("tf.b2", tf.b2),
+    [vr_tf_delay] = PARAM_INT("tf.delay", tf.delay),
+    [vr_creep_enabled] = PARAM_BOOL("creep.enabled", creep_enabled),
+    [vr_creep_k_c] = PARAM_REAL("creep.k_c", creep_k_c),
+    [vr_creep_alpha] = PARAM_REAL("creep.alpha", creep_alpha),
+    [vr_creep_exact] = PARAM_BOOL("creep.exact", creep_exact),
+    [vr_sensor_resolution] = PARAM_REAL("sensor.resolution", sensor_resolution),
+    [vr_sensor_noise_rms] = PARAM_REAL("sensor.noise_rms", sensor_noise_rms),
+    [vr_sensor_seed] = PARAM_INT("sensor.seed", sensor_seed),
+    [vr_h] = PARAM_REAL("h", h),
+};
+
+void model_set_start_values(ModelData *data)
+{
+    piezo_plant_default_params(&data->params);
+    data->v = 0.0;
+}
+
+piezo_status model_init(ModelData *data, piezo_diag *diag)
+{
+    return piezo_plant_init(&data->plant, &data->params, diag);
+}
+
+double model_sample_period(const ModelData *data)
+{
+    return data->params.h;
+}
+
+size_t model_history_needed(const ModelData *data)
+{
+    return piezo_plant_history_needed(&data->plant);
+}
+
+piezo_status model_step(ModelData *data, double *history, size_t history_capacity)
+{
+    return piezo_plant_step(&data->plant, data->v, history, history_capacity, NULL);
+}
+
+piezo_status model_update_outputs(ModelData *data, double *history, size_t history_capacity)
+{
+    /* No direct feedthrough: the outputs of sample k are already in plant.out. */
+    (void)data;
+    (void)history;
+    (void)history_capacity;
+    return PIEZO_OK;
+}
+
+const char *model_check_data(const ModelData *data, int core_initialized)
+{
+    const piezo_plant *p = &data->plant;
+    if (!core_initialized)
+        return NULL;    /* parameters are validated by model_init later */
+    if (p->pi.m < 1 || p->pi.m > PIEZO_PI_MAX_OPERATORS)
+        return "plant.pi.m out of range";
+    if (p->tf.delay < 0 || p->tf.delay > PIEZO_TF_MAX_DELAY)
+        return "plant.tf.delay out of range";
+    if (p->tf.head < 0 || p->tf.head >= PIEZO_TF_INPUT_RING)
+        return "plant.tf.head out of range";
+    if (p->creep.head < 0 || p->creep.head >= PIEZO_GL_HEAD_LEN)
+        return "plant.creep.head out of range";
+    if (p->creep.n_terms < 0 || p->creep.n_terms > PIEZO_GL_MAX_TERMS)
+        return "plant.creep.n_terms out of range";
+    if (p->creep.exact != 0 && p->creep.exact != 1)
+        return "plant.creep.exact is not a boolean";
+    return NULL;
+}

@@ -1,0 +1,1323 @@
+/*
+ * fmi2_glue.c - the shared FMI 2.0 Co-Simulation layer, compiled into each
+ * FMU together with that FMU's model.c (see fmu_model.h for the contract).
+ *
+ * State machine (modes are bits; a call outside its modes returns fmi2Error,
+ * logs "illegal call" and changes nothing):
+ *
+ *   function                         Inst  Init  Step  Term  Err
+ *   SetDebugLogging, Reset,            x     x     x     x    x
+ *     FreeInstance, SetFMUstate,
+ *     FreeFMUstate, (De)Serialize*
+ *   GetFMUstate                        x     x     x     x    .
+ *   SetupExperiment,                   x     .     .     .    .
+ *     EnterInitializationMode
+ *   ExitInitializationMode             .     x     .     .    .
+ *   Get{Real,Integer,Boolean,String}   .     x     x     x    x
+ *   Set* of a parameter (fixed)        x     x     .     .    .
+ *   Set* of an input                   x     x     x     .    .
+ *   DoStep, Terminate                  .     .     x     .    .
+ *   Get*Status                         .     .     x     x    .
+ *   CancelStep, input/output derivatives, directional derivatives, all Model
+ *   Exchange functions: never (fmi2Error, logged).
+ *
+ * Every refused call (illegal sequence, NULL pointer, unknown value reference,
+ * wrong type or causality, non-finite Real, bad time or step size, parameter
+ * out of range at fmi2ExitInitializationMode, bad FMU state or blob) returns
+ * fmi2Error, logs why and leaves the instance exactly as it was (an
+ * ExitInitializationMode refused for a bad parameter stays in
+ * initialization mode: fix the parameter and call it again). The Error mode
+ * is entered only when the core refuses a step the glue had validated (an
+ * internal fault): the state is restored to the start of the step and only
+ * getters, SetFMUstate, Reset and FreeInstance remain.
+ *
+ * Time is t0 + k h with an integer sample counter k. A communication step H
+ * must be n h with n >= 1 (|H - n h| <= 1e-9 max(1, n) h); the n samples are
+ * computed with the inputs held. Logging: messages go through the host's
+ * logger as (..., "%s", text). Categories logEvents, logStatusWarning,
+ * logStatusError, logAll. Errors are logged even with loggingOn = false,
+ * unless logStatusError is switched off explicitly with fmi2SetDebugLogging.
+ */
+#include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+#include "fmu_model.h"
+
+/* ------------------------------------------------------------------------ */
+/* Instance                                                                  */
+
+#define INSTANCE_MAGIC 0x50494e53u   /* "PINS" */
+#define STATE_MAGIC    0x50535441u   /* "PSTA" */
+
+enum {
+    MODE_INSTANTIATED = 1,
+    MODE_INIT = 2,
+    MODE_STEP_COMPLETE = 4,
+    MODE_TERMINATED = 8,
+    MODE_ERROR = 16
+};
+#define MODE_ALL (MODE_INSTANTIATED | MODE_INIT | MODE_STEP_COMPLETE | MODE_TERMINATED | MODE_ERROR)
+#define MODE_CORE_READY (MODE_STEP_COMPLETE | MODE_TERMINATED | MODE_ERROR)
+
+enum { CAT_EVENTS = 1, CAT_WARNING = 2, CAT_ERROR = 4, CAT_ALL = 7 };
+
+typedef struct {
+    uint32_t magic;
+    char *name;
+    fmi2CallbackFunctions cb;
+    unsigned log_mask;
+    int mode;
+    double t0;                  /* start time (fmi2SetupExperiment) */
+    uint64_t k;                 /* samples since t0 */
+    double h;                   /* sample period, fixed at ExitInitializationMode */
+    int outputs_valid;          /* the output values match data (no set/step since) */
+    double *history;            /* exact-mode history, grown by doubling */
+    size_t history_capacity;    /* in doubles */
+    ModelData data;
+    ModelData backup;           /* data at the start of a doStep */
+} fmu_instance;
+
+/* An FMU state: a copy of everything that defines the instance's future. */
+typedef struct {
+    uint32_t magic;
+    uint64_t model_id;          /* hash of MODEL_GUID */
+    int mode;
+    double t0;
+    uint64_t k;
+    double h;
+    ModelData data;
+    size_t n_history;
+    size_t history_capacity;
+    double *history;
+} fmu_state;
+
+/* ------------------------------------------------------------------------ */
+/* Logging                                                                   */
+
+static const char *const category_names[] = { "logEvents", "logStatusWarning", "logStatusError", "logAll" };
+static const unsigned category_bits[] = { CAT_EVENTS, CAT_WARNING, CAT_ERROR, CAT_ALL };
+#define N_CATEGORIES (sizeof category_bits / sizeof category_bits[0])
+
+#if defined(__GNUC__)
+#define PRINTF_LIKE(f, a) __attribute__((format(printf, f, a)))
+#else
+#define PRINTF_LIKE(f, a)
+#endif
+
+static void vlog_to(const fmi2CallbackFunctions *cb, const char *name, fmi2Status status,
+                    const char *category, const char *fmt, va_list ap) PRINTF_LIKE(5, 0);
+static void vlog_to(const fmi2CallbackFunctions *cb, const char *name, fmi2Status status,
+                    const char *category, const char *fmt, va_list ap)
+{
+    char text[1024];
+    if (cb == NULL || cb->logger == NULL)
+        return;
+    vsnprintf(text, sizeof text, fmt, ap);
+    cb->logger(cb->componentEnvironment, name != NULL ? name : "?", status, category, "%s", text);
+}
+
+static void log_to(const fmi2CallbackFunctions *cb, const char *name, fmi2Status status,
+                   const char *category, const char *fmt, ...) PRINTF_LIKE(5, 6);
+static void log_to(const fmi2CallbackFunctions *cb, const char *name, fmi2Status status,
+                   const char *category, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vlog_to(cb, name, status, category, fmt, ap);
+    va_end(ap);
+}
+
+static void log_error(const fmu_instance *inst, const char *fmt, ...) PRINTF_LIKE(2, 3);
+static void log_error(const fmu_instance *inst, const char *fmt, ...)
+{
+    va_list ap;
+    if (!(inst->log_mask & CAT_ERROR))
+        return;
+    va_start(ap, fmt);
+    vlog_to(&inst->cb, inst->name, fmi2Error, "logStatusError", fmt, ap);
+    va_end(ap);
+}
+
+static void log_event(const fmu_instance *inst, const char *fmt, ...) PRINTF_LIKE(2, 3);
+static void log_event(const fmu_instance *inst, const char *fmt, ...)
+{
+    va_list ap;
+    if (!(inst->log_mask & CAT_EVENTS))
+        return;
+    va_start(ap, fmt);
+    vlog_to(&inst->cb, inst->name, fmi2OK, "logEvents", fmt, ap);
+    va_end(ap);
+}
+
+static const char *mode_name(int mode)
+{
+    switch (mode) {
+    case MODE_INSTANTIATED: return "Instantiated";
+    case MODE_INIT: return "InitializationMode";
+    case MODE_STEP_COMPLETE: return "StepComplete";
+    case MODE_TERMINATED: return "Terminated";
+    case MODE_ERROR: return "Error";
+    default: return "?";
+    }
+}
+
+static void mask_names(int mask, char *buf, size_t size)
+{
+    static const int modes[] = { MODE_INSTANTIATED, MODE_INIT, MODE_STEP_COMPLETE, MODE_TERMINATED, MODE_ERROR };
+    size_t i, used = 0;
+    buf[0] = '\0';
+    for (i = 0; i < sizeof modes / sizeof modes[0]; i++) {
+        if (mask & modes[i]) {
+            int w = snprintf(buf + used, size - used, "%s%s", used ? ", " : "", mode_name(modes[i]));
+            if (w < 0 || (size_t)w >= size - used)
+                return;
+            used += (size_t)w;
+        }
+    }
+    if (used == 0)
+        snprintf(buf, size, "none");
+}
+
+static void log_core_failure(const fmu_instance *inst, const char *fname, piezo_status st,
+                             const piezo_diag *diag)
+{
+    switch (st) {
+    case PIEZO_ERR_PARAM:
+        log_error(inst, "%s: %s = %.16g is out of range: valid range %s", fname,
+                  diag->parameter != NULL ? diag->parameter : "(unknown parameter)", diag->value,
+                  diag->valid_range != NULL ? diag->valid_range : "(unknown)");
+        break;
+    case PIEZO_ERR_NONFINITE:
+        log_error(inst, "%s: the model refused a non-finite value", fname);
+        break;
+    case PIEZO_ERR_CAPACITY:
+        log_error(inst, "%s: internal error: exact-mode history buffer too small", fname);
+        break;
+    case PIEZO_ERR_NULL:
+        log_error(inst, "%s: internal error: NULL pointer passed to the model", fname);
+        break;
+    default:
+        log_error(inst, "%s: the model failed with status %d", fname, (int)st);
+        break;
+    }
+}
+
+/* ------------------------------------------------------------------------ */
+/* Helpers                                                                   */
+
+/* The instance if c is one of ours and its mode is in mask, else NULL
+ * (logged when possible). */
+static fmu_instance *get_instance(fmi2Component c, const char *fname, int mask)
+{
+    fmu_instance *inst = (fmu_instance *)c;
+    char allowed[128];
+    if (inst == NULL || inst->magic != INSTANCE_MAGIC)
+        return NULL;
+    if (!(inst->mode & mask)) {
+        mask_names(mask, allowed, sizeof allowed);
+        log_error(inst, "%s: illegal call sequence: the FMU is in state %s (allowed in: %s)",
+                  fname, mode_name(inst->mode), allowed);
+        return NULL;
+    }
+    return inst;
+}
+
+static int null_arg(const fmu_instance *inst, const char *fname, const char *arg, const void *p)
+{
+    if (p == NULL) {
+        log_error(inst, "%s: argument %s is NULL", fname, arg);
+        return 1;
+    }
+    return 0;
+}
+
+static uint64_t fnv1a(const unsigned char *p, size_t n, uint64_t h)
+{
+    size_t i;
+    for (i = 0; i < n; i++) {
+        h ^= p[i];
+        h *= 0x100000001b3ull;
+    }
+    return h;
+}
+
+#define FNV_OFFSET 0xcbf29ce484222325ull
+
+static uint64_t model_id(void)
+{
+    static const char guid[] = MODEL_GUID;
+    return fnv1a((const unsigned char *)guid, sizeof guid - 1, FNV_OFFSET);
+}
+
+/* Make room for `needed` doubles of history (doubling), keeping the content. */
+static int ensure_history(fmu_instance *inst, size_t needed, const char *fname)
+{
+    size_t cap;
+    double *p;
+    if (needed <= inst->history_capacity)
+        return 1;
+    cap = inst->history_capacity > 0 ? inst->history_capacity : 4096;
+    while (cap < needed) {
+        if (cap > SIZE_MAX / 2 / sizeof(double)) {
+            log_error(inst, "%s: exact-mode history of %zu samples is too large", fname, needed);
+            return 0;
+        }
+        cap *= 2;
+    }
+    p = (double *)inst->cb.allocateMemory(cap, sizeof(double));
+    if (p == NULL) {
+        log_error(inst, "%s: out of memory growing the exact-mode history to %zu samples", fname, cap);
+        return 0;
+    }
+    if (inst->history != NULL) {
+        memcpy(p, inst->history, inst->history_capacity * sizeof(double));
+        inst->cb.freeMemory(inst->history);
+    }
+    inst->history = p;
+    inst->history_capacity = cap;
+    return 1;
+}
+
+static void *value_ptr(fmu_instance *inst, fmi2ValueReference vr)
+{
+    return (char *)&inst->data + model_variables[vr].offset;
+}
+
+static const char *type_name(model_type t)
+{
+    switch (t) {
+    case MODEL_REAL: return "Real";
+    case MODEL_INTEGER: return "Integer";
+    case MODEL_BOOLEAN: return "Boolean";
+    default: return "?";
+    }
+}
+
+static int check_vr(const fmu_instance *inst, const char *fname, fmi2ValueReference vr, model_type type)
+{
+    if (vr >= (fmi2ValueReference)MODEL_N_VARIABLES) {
+        log_error(inst, "%s: unknown value reference %u", fname, (unsigned)vr);
+        return 0;
+    }
+    if (model_variables[vr].type != type) {
+        log_error(inst, "%s: variable %s (value reference %u) is of type %s, not %s", fname,
+                  model_variables[vr].name, (unsigned)vr, type_name(model_variables[vr].type), type_name(type));
+        return 0;
+    }
+    return 1;
+}
+
+/* Bring the output values up to date with the parameters, inputs and state. */
+static int refresh_outputs(fmu_instance *inst, const char *fname)
+{
+    piezo_diag diag = { NULL, NULL, 0.0 };
+    piezo_status st;
+    if (inst->outputs_valid || inst->mode == MODE_ERROR)
+        return 1;
+    if (inst->mode == MODE_INIT) {
+        /* Outputs during initialization: sample 0 of the current parameters. */
+        st = model_init(&inst->data, &diag);
+        if (st != PIEZO_OK) {
+            log_core_failure(inst, fname, st, &diag);
+            return 0;
+        }
+    }
+    if (!ensure_history(inst, model_history_needed(&inst->data), fname))
+        return 0;
+    st = model_update_outputs(&inst->data, inst->history, inst->history_capacity);
+    if (st != PIEZO_OK) {
+        log_core_failure(inst, fname, st, &diag);
+        return 0;
+    }
+    inst->outputs_valid = 1;
+    return 1;
+}
+
+#define MASK_GET (MODE_INIT | MODE_STEP_COMPLETE | MODE_TERMINATED | MODE_ERROR)
+#define MASK_SET (MODE_INSTANTIATED | MODE_INIT | MODE_STEP_COMPLETE)
+
+static fmi2Status get_values(fmi2Component c, const char *fname, const fmi2ValueReference vr[],
+                             size_t nvr, model_type type, void *values)
+{
+    fmu_instance *inst = get_instance(c, fname, MASK_GET);
+    size_t i;
+    int need_outputs = 0;
+    if (inst == NULL)
+        return fmi2Error;
+    if (nvr == 0)
+        return fmi2OK;
+    if (null_arg(inst, fname, "vr", vr) || null_arg(inst, fname, "value", values))
+        return fmi2Error;
+    for (i = 0; i < nvr; i++) {
+        if (!check_vr(inst, fname, vr[i], type))
+            return fmi2Error;
+        if (model_variables[vr[i]].causality == MODEL_OUTPUT)
+            need_outputs = 1;
+    }
+    if (need_outputs && !refresh_outputs(inst, fname))
+        return fmi2Error;
+    for (i = 0; i < nvr; i++) {
+        const void *p = value_ptr(inst, vr[i]);
+        if (type == MODEL_REAL)
+            ((fmi2Real *)values)[i] = *(const double *)p;
+        else
+            ((fmi2Integer *)values)[i] = *(const int *)p;  /* fmi2Boolean is int too */
+    }
+    return fmi2OK;
+}
+
+static fmi2Status set_values(fmi2Component c, const char *fname, const fmi2ValueReference vr[],
+                             size_t nvr, model_type type, const void *values)
+{
+    fmu_instance *inst = get_instance(c, fname, MASK_SET);
+    size_t i;
+    if (inst == NULL)
+        return fmi2Error;
+    if (nvr == 0)
+        return fmi2OK;
+    if (null_arg(inst, fname, "vr", vr) || null_arg(inst, fname, "value", values))
+        return fmi2Error;
+    /* Check everything first: a refused call changes nothing. */
+    for (i = 0; i < nvr; i++) {
+        const model_variable *var;
+        if (!check_vr(inst, fname, vr[i], type))
+            return fmi2Error;
+        var = &model_variables[vr[i]];
+        if (var->causality == MODEL_OUTPUT) {
+            log_error(inst, "%s: %s is an output: it cannot be set", fname, var->name);
+            return fmi2Error;
+        }
+        if (var->causality == MODEL_PARAMETER && inst->mode == MODE_STEP_COMPLETE) {
+            log_error(inst, "%s: illegal call sequence: %s is a fixed parameter, settable only "
+                      "before fmi2ExitInitializationMode (the FMU is in state %s)",
+                      fname, var->name, mode_name(inst->mode));
+            return fmi2Error;
+        }
+        if (type == MODEL_REAL && !isfinite(((const fmi2Real *)values)[i])) {
+            log_error(inst, "%s: %s = %g refused: valid range: finite values (%s keeps %.16g)",
+                      fname, var->name, ((const fmi2Real *)values)[i], var->name,
+                      *(const double *)value_ptr(inst, vr[i]));
+            return fmi2Error;
+        }
+    }
+    for (i = 0; i < nvr; i++) {
+        void *p = value_ptr(inst, vr[i]);
+        if (type == MODEL_REAL)
+            *(double *)p = ((const fmi2Real *)values)[i];
+        else if (type == MODEL_INTEGER)
+            *(int *)p = ((const fmi2Integer *)values)[i];
+        else
+            *(int *)p = ((const fmi2Boolean *)values)[i] != fmi2False ? 1 : 0;
+    }
+    inst->outputs_valid = 0;
+    return fmi2OK;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Inquiry, instantiation, logging control                                   */
+
+const char *fmi2GetTypesPlatform(void)
+{
+    return fmi2TypesPlatform;
+}
+
+const char *fmi2GetVersion(void)
+{
+    return fmi2Version;
+}
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    fmu_instance *inst;
+    size_t len;
+    (void)fmuResourceLocation;  /* the FMUs need no resources */
+    (void)visible;
+    if (functions == NULL)
+        return NULL;
+    if (instanceName == NULL || instanceName[0] == '\0') {
+        log_to(functions, instanceName, fmi2Error, "logStatusError",
+               "fmi2Instantiate: missing instance name");
+        return NULL;
+    }
+    if (functions->allocateMemory == NULL || functions->freeMemory == NULL) {
+        log_to(functions, instanceName, fmi2Error, "logStatusError",
+               "fmi2Instantiate: the callbacks allocateMemory and freeMemory are required");
+        return NULL;
+    }
+    if (fmuType != fmi2CoSimulation) {
+        log_to(functions, instanceName, fmi2Error, "logStatusError",
+               "fmi2Instantiate: %s supports Co-Simulation only (fmuType = %d)",
+               MODEL_IDENTIFIER_STRING, (int)fmuType);
+        return NULL;
+    }
+    if (fmuGUID == NULL || strcmp(fmuGUID, MODEL_GUID) != 0) {
+        log_to(functions, instanceName, fmi2Error, "logStatusError",
+               "fmi2Instantiate: wrong GUID %s: this binary is %s %s",
+               fmuGUID != NULL ? fmuGUID : "(NULL)", MODEL_IDENTIFIER_STRING, MODEL_GUID);
+        return NULL;
+    }
+    inst = (fmu_instance *)functions->allocateMemory(1, sizeof(fmu_instance));
+    if (inst == NULL) {
+        log_to(functions, instanceName, fmi2Error, "logStatusError", "fmi2Instantiate: out of memory");
+        return NULL;
+    }
+    memset(inst, 0, sizeof *inst);
+    len = strlen(instanceName);
+    inst->name = (char *)functions->allocateMemory(len + 1, 1);
+    if (inst->name == NULL) {
+        functions->freeMemory(inst);
+        log_to(functions, instanceName, fmi2Error, "logStatusError", "fmi2Instantiate: out of memory");
+        return NULL;
+    }
+    memcpy(inst->name, instanceName, len + 1);
+    inst->magic = INSTANCE_MAGIC;
+    inst->cb = *functions;
+    inst->log_mask = loggingOn ? CAT_ALL : CAT_ERROR;
+    inst->mode = MODE_INSTANTIATED;
+    model_set_start_values(&inst->data);
+    log_event(inst, "fmi2Instantiate: %s instantiated (GUID %s)", MODEL_IDENTIFIER_STRING, MODEL_GUID);
+    return inst;
+}
+
+void fmi2FreeInstance(fmi2Component c)
+{
+    fmu_instance *inst = (fmu_instance *)c;
+    fmi2CallbackFreeMemory free_memory;
+    if (inst == NULL || inst->magic != INSTANCE_MAGIC)
+        return;
+    log_event(inst, "fmi2FreeInstance");
+    free_memory = inst->cb.freeMemory;
+    if (inst->history != NULL)
+        free_memory(inst->history);
+    free_memory(inst->name);
+    inst->magic = 0;
+    free_memory(inst);
+}
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                               const fmi2String categories[])
+{
+    fmu_instance *inst = get_instance(c, "fmi2SetDebugLogging", MODE_ALL);
+    unsigned bits = 0;
+    size_t i, j;
+    if (inst == NULL)
+        return fmi2Error;
+    if (nCategories == 0) {
+        inst->log_mask = loggingOn ? CAT_ALL : CAT_ERROR;
+        return fmi2OK;
+    }
+    if (null_arg(inst, "fmi2SetDebugLogging", "categories", categories))
+        return fmi2Error;
+    for (i = 0; i < nCategories; i++) {
+        int found = 0;
+        if (categories[i] != NULL) {
+            for (j = 0; j < N_CATEGORIES; j++) {
+                if (strcmp(categories[i], category_names[j]) == 0) {
+                    bits |= category_bits[j];
+                    found = 1;
+                }
+            }
+        }
+        if (!found) {
+            log_error(inst, "fmi2SetDebugLogging: unknown log category %s (known: logEvents, "
+                      "logStatusWarning, logStatusError, logAll)",
+                      categories[i] != NULL ? categories[i] : "(NULL)");
+            return fmi2Error;
+        }
+    }
+    if (loggingOn)
+        inst->log_mask |= bits;
+    else
+        inst->log_mask &= ~bits;
+    return fmi2OK;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Experiment, initialization, termination                                   */
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+                               fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
+{
+    fmu_instance *inst = get_instance(c, "fmi2SetupExperiment", MODE_INSTANTIATED);
+    (void)toleranceDefined;     /* a discrete-time model: no tolerance to honour */
+    (void)tolerance;
+    if (inst == NULL)
+        return fmi2Error;
+    if (!isfinite(startTime)) {
+        log_error(inst, "fmi2SetupExperiment: startTime = %g refused: valid range: finite values", startTime);
+        return fmi2Error;
+    }
+    if (stopTimeDefined && !(stopTime >= startTime)) {
+        log_error(inst, "fmi2SetupExperiment: stopTime = %.16g refused: valid range [startTime = %.16g, inf)",
+                  stopTime, startTime);
+        return fmi2Error;
+    }
+    inst->t0 = startTime;
+    log_event(inst, "fmi2SetupExperiment: t0 = %.16g", startTime);
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    fmu_instance *inst = get_instance(c, "fmi2EnterInitializationMode", MODE_INSTANTIATED);
+    if (inst == NULL)
+        return fmi2Error;
+    inst->mode = MODE_INIT;
+    inst->outputs_valid = 0;
+    log_event(inst, "fmi2EnterInitializationMode");
+    return fmi2OK;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    fmu_instance *inst = get_instance(c, "fmi2ExitInitializationMode", MODE_INIT);
+    piezo_diag diag = { NULL, NULL, 0.0 };
+    piezo_status st;
+    double h;
+    if (inst == NULL)
+        return fmi2Error;
+    st = model_init(&inst->data, &diag);
+    if (st != PIEZO_OK) {
+        log_core_failure(inst, "fmi2ExitInitializationMode", st, &diag);
+        inst->outputs_valid = 0;
+        return fmi2Error;       /* stays in initialization mode */
+    }
+    h = model_sample_period(&inst->data);
+    if (!(h > 0.0) || !isfinite(h)) {
+        log_error(inst, "fmi2ExitInitializationMode: h = %.16g is out of range: valid range (0, inf)", h);
+        return fmi2Error;
+    }
+    inst->h = h;
+    inst->k = 0;
+    inst->mode = MODE_STEP_COMPLETE;
+    inst->outputs_valid = 0;
+    log_event(inst, "fmi2ExitInitializationMode: initialized, t0 = %.16g, h = %.16g", inst->t0, h);
+    return fmi2OK;
+}
+
+fmi2Status fmi2Terminate(fmi2Component c)
+{
+    fmu_instance *inst = get_instance(c, "fmi2Terminate", MODE_STEP_COMPLETE);
+    if (inst == NULL)
+        return fmi2Error;
+    inst->mode = MODE_TERMINATED;
+    log_event(inst, "fmi2Terminate at t = %.16g", inst->t0 + (double)inst->k * inst->h);
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component c)
+{
+    fmu_instance *inst = get_instance(c, "fmi2Reset", MODE_ALL);
+    if (inst == NULL)
+        return fmi2Error;
+    memset(&inst->data, 0, sizeof inst->data);
+    model_set_start_values(&inst->data);
+    inst->mode = MODE_INSTANTIATED;
+    inst->t0 = 0.0;
+    inst->k = 0;
+    inst->h = 0.0;
+    inst->outputs_valid = 0;
+    log_event(inst, "fmi2Reset: back to Instantiated with the start values");
+    return fmi2OK;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Getting and setting variables                                             */
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    return get_values(c, "fmi2GetReal", vr, nvr, MODEL_REAL, value);
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
+{
+    return get_values(c, "fmi2GetInteger", vr, nvr, MODEL_INTEGER, value);
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
+{
+    return get_values(c, "fmi2GetBoolean", vr, nvr, MODEL_BOOLEAN, value);
+}
+
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
+{
+    fmu_instance *inst = get_instance(c, "fmi2GetString", MASK_GET);
+    (void)value;
+    if (inst == NULL)
+        return fmi2Error;
+    if (nvr == 0)
+        return fmi2OK;
+    if (null_arg(inst, "fmi2GetString", "vr", vr))
+        return fmi2Error;
+    log_error(inst, "fmi2GetString: value reference %u is not a String variable (the FMU has none)", (unsigned)vr[0]);
+    return fmi2Error;
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
+{
+    return set_values(c, "fmi2SetReal", vr, nvr, MODEL_REAL, value);
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[])
+{
+    return set_values(c, "fmi2SetInteger", vr, nvr, MODEL_INTEGER, value);
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[])
+{
+    return set_values(c, "fmi2SetBoolean", vr, nvr, MODEL_BOOLEAN, value);
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
+{
+    fmu_instance *inst = get_instance(c, "fmi2SetString", MASK_SET);
+    (void)value;
+    if (inst == NULL)
+        return fmi2Error;
+    if (nvr == 0)
+        return fmi2OK;
+    if (null_arg(inst, "fmi2SetString", "vr", vr))
+        return fmi2Error;
+    log_error(inst, "fmi2SetString: value reference %u is not a String variable (the FMU has none)", (unsigned)vr[0]);
+    return fmi2Error;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Stepping                                                                  */
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint)
+{
+    static const char fname[] = "fmi2DoStep";
+    fmu_instance *inst = get_instance(c, fname, MODE_STEP_COMPLETE);
+    double t, tol, ratio, n_real;
+    uint64_t n, i;
+    size_t needed;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (inst == NULL)
+        return fmi2Error;
+
+    t = inst->t0 + (double)inst->k * inst->h;
+    tol = 1e-9 * fmax(inst->h, fabs(t));
+    if (tol > 1e-3 * inst->h)
+        tol = 1e-3 * inst->h;
+    if (!isfinite(currentCommunicationPoint) || fabs(currentCommunicationPoint - t) > tol) {
+        log_error(inst, "%s: currentCommunicationPoint = %.17g does not match the FMU time "
+                  "t0 + k h = %.17g (k = %llu, h = %.17g): step refused, state and time unchanged",
+                  fname, currentCommunicationPoint, t, (unsigned long long)inst->k, inst->h);
+        return fmi2Error;
+    }
+    if (!isfinite(communicationStepSize) || !(communicationStepSize > 0.0)) {
+        log_error(inst, "%s: communicationStepSize = %.17g refused: it must be a positive whole "
+                  "multiple of h = %.17g; state and time unchanged", fname, communicationStepSize, inst->h);
+        return fmi2Error;
+    }
+    ratio = communicationStepSize / inst->h;
+    n_real = floor(ratio + 0.5);
+    if (ratio > 4.0e15) {
+        log_error(inst, "%s: communicationStepSize = %.17g is too large: %.17g samples of h = %.17g",
+                  fname, communicationStepSize, ratio, inst->h);
+        return fmi2Error;
+    }
+    if (n_real < 1.0 || fabs(communicationStepSize - n_real * inst->h) > 1e-9 * fmax(1.0, n_real) * inst->h) {
+        log_error(inst, "%s: communicationStepSize = %.17g is not a whole multiple of h = %.17g "
+                  "(H/h = %.17g; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
+                  "time unchanged", fname, communicationStepSize, inst->h, ratio);
+        return fmi2Error;
+    }
+    n = (uint64_t)n_real;
+
+    memcpy(&inst->backup, &inst->data, sizeof inst->data);
+    for (i = 0; i < n; i++) {
+        piezo_diag diag = { NULL, NULL, 0.0 };
+        piezo_status st;
+        /* grow the exact-mode history (by doubling) before the core needs it */
+        needed = model_history_needed(&inst->data);
+        if (needed > inst->history_capacity && !ensure_history(inst, needed, fname)) {
+            memcpy(&inst->data, &inst->backup, sizeof inst->data);
+            return fmi2Error;
+        }
+        st = model_step(&inst->data, inst->history, inst->history_capacity);
+        if (st != PIEZO_OK) {
+            memcpy(&inst->data, &inst->backup, sizeof inst->data);
+            log_core_failure(inst, fname, st, &diag);
+            log_error(inst, "%s: the model refused sample %llu of the step from t = %.17g; the state "
+                      "is restored to that time and the FMU enters state Error (use fmi2SetFMUstate "
+                      "or fmi2Reset)", fname, (unsigned long long)(inst->k + i), t);
+            inst->outputs_valid = 0;
+            inst->mode = MODE_ERROR;
+            return fmi2Error;
+        }
+    }
+    inst->k += n;
+    inst->outputs_valid = 0;
+    return fmi2OK;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    fmu_instance *inst = get_instance(c, "fmi2CancelStep", MODE_ALL);
+    if (inst == NULL)
+        return fmi2Error;
+    log_error(inst, "fmi2CancelStep: no step is in progress (fmi2DoStep is synchronous and never returns fmi2Pending)");
+    return fmi2Error;
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[])
+{
+    fmu_instance *inst = get_instance(c, "fmi2SetRealInputDerivatives", MODE_ALL);
+    (void)vr; (void)nvr; (void)order; (void)value;
+    if (inst == NULL)
+        return fmi2Error;
+    log_error(inst, "fmi2SetRealInputDerivatives: not supported (canInterpolateInputs = false: inputs are held over a step)");
+    return fmi2Error;
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[])
+{
+    fmu_instance *inst = get_instance(c, "fmi2GetRealOutputDerivatives", MODE_ALL);
+    (void)vr; (void)nvr; (void)order; (void)value;
+    if (inst == NULL)
+        return fmi2Error;
+    log_error(inst, "fmi2GetRealOutputDerivatives: not supported (maxOutputDerivativeOrder = 0)");
+    return fmi2Error;
+}
+
+#define MASK_STATUS (MODE_STEP_COMPLETE | MODE_TERMINATED)
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
+{
+    fmu_instance *inst = get_instance(c, "fmi2GetStatus", MASK_STATUS);
+    (void)value;
+    if (inst == NULL)
+        return fmi2Error;
+    log_error(inst, "fmi2GetStatus: status kind %d not available (fmi2DoStep never returns fmi2Pending)", (int)s);
+    return fmi2Error;
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
+{
+    fmu_instance *inst = get_instance(c, "fmi2GetRealStatus", MASK_STATUS);
+    if (inst == NULL)
+        return fmi2Error;
+    if (null_arg(inst, "fmi2GetRealStatus", "value", value))
+        return fmi2Error;
+    if (s != fmi2LastSuccessfulTime) {
+        log_error(inst, "fmi2GetRealStatus: status kind %d not available (only fmi2LastSuccessfulTime)", (int)s);
+        return fmi2Error;
+    }
+    *value = inst->t0 + (double)inst->k * inst->h;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
+{
+    fmu_instance *inst = get_instance(c, "fmi2GetIntegerStatus", MASK_STATUS);
+    (void)value;
+    if (inst == NULL)
+        return fmi2Error;
+    log_error(inst, "fmi2GetIntegerStatus: status kind %d not available", (int)s);
+    return fmi2Error;
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
+{
+    fmu_instance *inst = get_instance(c, "fmi2GetBooleanStatus", MASK_STATUS);
+    if (inst == NULL)
+        return fmi2Error;
+    if (null_arg(inst, "fmi2GetBooleanStatus", "value", value))
+        return fmi2Error;
+    if (s != fmi2Terminated) {
+        log_error(inst, "fmi2GetBooleanStatus: status kind %d not available (only fmi2Terminated)", (int)s);
+        return fmi2Error;
+    }
+    *value = fmi2False;     /* the slave never asks to end the simulation */
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
+{
+    fmu_instance *inst = get_instance(c, "fmi2GetStringStatus", MASK_STATUS);
+    (void)value;
+    if (inst == NULL)
+        return fmi2Error;
+    log_error(inst, "fmi2GetStringStatus: status kind %d not available", (int)s);
+    return fmi2Error;
+}
+
+/* ------------------------------------------------------------------------ */
+/* FMU states                                                                */
+
+static fmu_state *checked_state(const fmu_instance *inst, const char *fname, fmi2FMUstate s)
+{
+    fmu_state *st = (fmu_state *)s;
+    if (st == NULL) {
+        log_error(inst, "%s: the FMU state is NULL", fname);
+        return NULL;
+    }
+    if (st->magic != STATE_MAGIC || st->model_id != model_id()) {
+        log_error(inst, "%s: not an FMU state of %s", fname, MODEL_IDENTIFIER_STRING);
+        return NULL;
+    }
+    return st;
+}
+
+/* A state to fill: *slot if it is one of ours, else a new one. */
+static fmu_state *state_slot(fmu_instance *inst, const char *fname, fmi2FMUstate *slot)
+{
+    fmu_state *st = (fmu_state *)*slot;
+    if (st != NULL)
+        return checked_state(inst, fname, st);
+    st = (fmu_state *)inst->cb.allocateMemory(1, sizeof(fmu_state));
+    if (st == NULL) {
+        log_error(inst, "%s: out of memory", fname);
+        return NULL;
+    }
+    memset(st, 0, sizeof *st);
+    st->magic = STATE_MAGIC;
+    st->model_id = model_id();
+    return st;
+}
+
+static int state_reserve_history(fmu_instance *inst, const char *fname, fmu_state *st, size_t n)
+{
+    double *p;
+    if (n <= st->history_capacity)
+        return 1;
+    p = (double *)inst->cb.allocateMemory(n, sizeof(double));
+    if (p == NULL) {
+        log_error(inst, "%s: out of memory for %zu history samples", fname, n);
+        return 0;
+    }
+    if (st->history != NULL)
+        inst->cb.freeMemory(st->history);
+    st->history = p;
+    st->history_capacity = n;
+    return 1;
+}
+
+static void state_release(fmu_instance *inst, fmu_state *st, int was_new)
+{
+    if (!was_new)
+        return;
+    if (st->history != NULL)
+        inst->cb.freeMemory(st->history);
+    st->magic = 0;
+    inst->cb.freeMemory(st);
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    static const char fname[] = "fmi2GetFMUstate";
+    fmu_instance *inst = get_instance(c, fname, MODE_ALL & ~MODE_ERROR);
+    fmu_state *st;
+    size_t n_hist = 0;
+    int was_new;
+    if (inst == NULL || null_arg(inst, fname, "FMUstate", FMUstate))
+        return fmi2Error;
+    was_new = *FMUstate == NULL;
+    st = state_slot(inst, fname, FMUstate);
+    if (st == NULL)
+        return fmi2Error;
+    if (inst->mode & MODE_CORE_READY) {
+        /* the whole buffer the next step needs (slots not yet written are
+         * rewritten before they are read) */
+        n_hist = model_history_needed(&inst->data);
+        if (!ensure_history(inst, n_hist, fname)) {
+            state_release(inst, st, was_new);
+            return fmi2Error;
+        }
+    }
+    if (!state_reserve_history(inst, fname, st, n_hist)) {
+        state_release(inst, st, was_new);
+        return fmi2Error;
+    }
+    st->mode = inst->mode;
+    st->t0 = inst->t0;
+    st->k = inst->k;
+    st->h = inst->h;
+    memcpy(&st->data, &inst->data, sizeof st->data);
+    if (n_hist > 0)
+        memcpy(st->history, inst->history, n_hist * sizeof(double));
+    st->n_history = n_hist;
+    *FMUstate = st;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
+{
+    static const char fname[] = "fmi2SetFMUstate";
+    fmu_instance *inst = get_instance(c, fname, MODE_ALL);
+    fmu_state *st;
+    if (inst == NULL)
+        return fmi2Error;
+    st = checked_state(inst, fname, FMUstate);
+    if (st == NULL)
+        return fmi2Error;
+    if (!ensure_history(inst, st->n_history, fname))
+        return fmi2Error;
+    if (st->n_history > 0)
+        memcpy(inst->history, st->history, st->n_history * sizeof(double));
+    memcpy(&inst->data, &st->data, sizeof inst->data);
+    inst->mode = st->mode;
+    inst->t0 = st->t0;
+    inst->k = st->k;
+    inst->h = st->h;
+    inst->outputs_valid = 0;
+    log_event(inst, "%s: restored a state in %s at t = %.16g", fname, mode_name(inst->mode),
+              inst->t0 + (double)inst->k * inst->h);
+    return fmi2OK;
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
+{
+    static const char fname[] = "fmi2FreeFMUstate";
+    fmu_instance *inst = get_instance(c, fname, MODE_ALL);
+    fmu_state *st;
+    if (inst == NULL || null_arg(inst, fname, "FMUstate", FMUstate))
+        return fmi2Error;
+    if (*FMUstate == NULL)
+        return fmi2OK;
+    st = checked_state(inst, fname, *FMUstate);
+    if (st == NULL)
+        return fmi2Error;
+    state_release(inst, st, 1);
+    *FMUstate = NULL;
+    return fmi2OK;
+}
+
+/*
+ * Serialized FMU state (format version 1). Header integers and doubles are
+ * little-endian whatever the host; the ModelData image is the host's native
+ * layout, guarded by its size and a byte-order marker.
+ *
+ *   offset  size  field
+ *        0     8  magic "PZFMUST1"
+ *        8     4  format version (1)
+ *       12     4  header size (128)
+ *       16     8  total size of the blob, checksum included
+ *       24    48  model GUID, NUL padded
+ *       72     8  sizeof(ModelData)
+ *       80     4  byte-order marker 0x01020304 written natively
+ *       84     4  FMU mode (1 Instantiated, 2 InitializationMode, 4 StepComplete, 8 Terminated)
+ *       88     8  t0 (IEEE double)
+ *       96     8  k, samples since t0
+ *      104     8  h (IEEE double)
+ *      112     8  n_history, doubles of exact-mode history
+ *      120     8  reserved (0)
+ *      128     .  ModelData image (sizeof(ModelData) bytes)
+ *        .     .  n_history doubles (IEEE, little-endian)
+ *    end-8     8  FNV-1a 64 checksum of every preceding byte
+ */
+#define BLOB_MAGIC "PZFMUST1"
+#define BLOB_VERSION 1u
+#define BLOB_HEADER 128u
+#define BLOB_GUID_LEN 48u
+#define BLOB_BOM 0x01020304u
+
+static void put_u32(unsigned char *p, uint32_t v)
+{
+    int i;
+    for (i = 0; i < 4; i++)
+        p[i] = (unsigned char)(v >> (8 * i));
+}
+
+static void put_u64(unsigned char *p, uint64_t v)
+{
+    int i;
+    for (i = 0; i < 8; i++)
+        p[i] = (unsigned char)(v >> (8 * i));
+}
+
+static uint32_t get_u32(const unsigned char *p)
+{
+    uint32_t v = 0;
+    int i;
+    for (i = 3; i >= 0; i--)
+        v = (v << 8) | p[i];
+    return v;
+}
+
+static uint64_t get_u64(const unsigned char *p)
+{
+    uint64_t v = 0;
+    int i;
+    for (i = 7; i >= 0; i--)
+        v = (v << 8) | p[i];
+    return v;
+}
+
+static void put_f64(unsigned char *p, double d)
+{
+    uint64_t v;
+    memcpy(&v, &d, sizeof v);
+    put_u64(p, v);
+}
+
+static double get_f64(const unsigned char *p)
+{
+    uint64_t v = get_u64(p);
+    double d;
+    memcpy(&d, &v, sizeof d);
+    return d;
+}
+
+static size_t blob_size(size_t n_history)
+{
+    return BLOB_HEADER + sizeof(ModelData) + n_history * sizeof(double) + 8u;
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
+{
+    static const char fname[] = "fmi2SerializedFMUstateSize";
+    fmu_instance *inst = get_instance(c, fname, MODE_ALL);
+    fmu_state *st;
+    if (inst == NULL || null_arg(inst, fname, "size", size))
+        return fmi2Error;
+    st = checked_state(inst, fname, FMUstate);
+    if (st == NULL)
+        return fmi2Error;
+    *size = blob_size(st->n_history);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size)
+{
+    static const char fname[] = "fmi2SerializeFMUstate";
+    fmu_instance *inst = get_instance(c, fname, MODE_ALL);
+    fmu_state *st;
+    unsigned char *b = (unsigned char *)serializedState;
+    uint32_t bom = BLOB_BOM;
+    size_t total, i, off;
+    if (inst == NULL || null_arg(inst, fname, "serializedState", serializedState))
+        return fmi2Error;
+    st = checked_state(inst, fname, FMUstate);
+    if (st == NULL)
+        return fmi2Error;
+    total = blob_size(st->n_history);
+    if (size < total) {
+        log_error(inst, "%s: buffer of %zu bytes is too small: the state needs %zu (fmi2SerializedFMUstateSize)",
+                  fname, size, total);
+        return fmi2Error;
+    }
+    memset(b, 0, total);
+    memcpy(b, BLOB_MAGIC, 8);
+    put_u32(b + 8, BLOB_VERSION);
+    put_u32(b + 12, BLOB_HEADER);
+    put_u64(b + 16, (uint64_t)total);
+    memcpy(b + 24, MODEL_GUID, strlen(MODEL_GUID) < BLOB_GUID_LEN ? strlen(MODEL_GUID) : BLOB_GUID_LEN - 1);
+    put_u64(b + 72, (uint64_t)sizeof(ModelData));
+    memcpy(b + 80, &bom, 4);
+    put_u32(b + 84, (uint32_t)st->mode);
+    put_f64(b + 88, st->t0);
+    put_u64(b + 96, st->k);
+    put_f64(b + 104, st->h);
+    put_u64(b + 112, (uint64_t)st->n_history);
+    memcpy(b + BLOB_HEADER, &st->data, sizeof(ModelData));
+    off = BLOB_HEADER + sizeof(ModelData);
+    for (i = 0; i < st->n_history; i++, off += 8)
+        put_f64(b + off, st->history[i]);
+    put_u64(b + off, fnv1a(b, off, FNV_OFFSET));
+    return fmi2OK;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
+                                   fmi2FMUstate *FMUstate)
+{
+    static const char fname[] = "fmi2DeSerializeFMUstate";
+    fmu_instance *inst = get_instance(c, fname, MODE_ALL);
+    const unsigned char *b = (const unsigned char *)serializedState;
+    char guid[BLOB_GUID_LEN];
+    uint32_t bom = BLOB_BOM;
+    uint64_t total, n_hist64, k;
+    size_t n_hist, i, off;
+    int mode, was_new, core_ready;
+    double t0, h;
+    const char *fault;
+    fmu_state *st;
+    ModelData *data;
+
+    if (inst == NULL || null_arg(inst, fname, "serializedState", serializedState)
+        || null_arg(inst, fname, "FMUstate", FMUstate))
+        return fmi2Error;
+    if (size < BLOB_HEADER + 8u || memcmp(b, BLOB_MAGIC, 8) != 0) {
+        log_error(inst, "%s: refused: not a serialized %s state (bad magic or %zu bytes only)",
+                  fname, MODEL_IDENTIFIER_STRING, size);
+        return fmi2Error;
+    }
+    if (get_u32(b + 8) != BLOB_VERSION || get_u32(b + 12) != BLOB_HEADER) {
+        log_error(inst, "%s: refused: format version %u (header %u bytes) is not the supported version %u",
+                  fname, (unsigned)get_u32(b + 8), (unsigned)get_u32(b + 12), (unsigned)BLOB_VERSION);
+        return fmi2Error;
+    }
+    total = get_u64(b + 16);
+    if (total != (uint64_t)size) {
+        log_error(inst, "%s: refused: the blob says %llu bytes but %zu were given (truncated or padded)",
+                  fname, (unsigned long long)total, size);
+        return fmi2Error;
+    }
+    memcpy(guid, b + 24, BLOB_GUID_LEN);
+    guid[BLOB_GUID_LEN - 1] = '\0';
+    if (strcmp(guid, MODEL_GUID) != 0) {
+        log_error(inst, "%s: refused: the state belongs to GUID %s, not %s %s",
+                  fname, guid, MODEL_IDENTIFIER_STRING, MODEL_GUID);
+        return fmi2Error;
+    }
+    if (get_u64(b + 72) != (uint64_t)sizeof(ModelData) || memcmp(b + 80, &bom, 4) != 0) {
+        log_error(inst, "%s: refused: model data layout differs (size %llu vs %zu, or byte order): "
+                  "the state comes from another build or platform",
+                  fname, (unsigned long long)get_u64(b + 72), sizeof(ModelData));
+        return fmi2Error;
+    }
+    n_hist64 = get_u64(b + 112);
+    if (n_hist64 > (uint64_t)(SIZE_MAX / sizeof(double))
+        || (uint64_t)blob_size(0) + n_hist64 * sizeof(double) != total) {
+        log_error(inst, "%s: refused: history length %llu does not match the blob size %llu",
+                  fname, (unsigned long long)n_hist64, (unsigned long long)total);
+        return fmi2Error;
+    }
+    n_hist = (size_t)n_hist64;
+    off = (size_t)total - 8u;
+    if (fnv1a(b, off, FNV_OFFSET) != get_u64(b + off)) {
+        log_error(inst, "%s: refused: checksum mismatch (the blob is corrupted)", fname);
+        return fmi2Error;
+    }
+    mode = (int)get_u32(b + 84);
+    t0 = get_f64(b + 88);
+    k = get_u64(b + 96);
+    h = get_f64(b + 104);
+    if (mode != MODE_INSTANTIATED && mode != MODE_INIT && mode != MODE_STEP_COMPLETE && mode != MODE_TERMINATED) {
+        log_error(inst, "%s: refused: invalid FMU mode %d", fname, mode);
+        return fmi2Error;
+    }
+    core_ready = (mode & MODE_CORE_READY) != 0;
+    if (!isfinite(t0) || !isfinite(h) || (core_ready && !(h > 0.0))) {
+        log_error(inst, "%s: refused: invalid time t0 = %g, h = %g", fname, t0, h);
+        return fmi2Error;
+    }
+    data = &inst->backup;   /* the instance's scratch copy (used by fmi2DoStep only) */
+    memcpy(data, b + BLOB_HEADER, sizeof *data);
+    fault = model_check_data(data, core_ready);
+    if (fault != NULL) {
+        log_error(inst, "%s: refused: invalid model data (%s)", fname, fault);
+        return fmi2Error;
+    }
+    if (core_ready) {
+        size_t needed = model_history_needed(data);
+        if (n_hist != needed) {
+            log_error(inst, "%s: refused: %zu history samples stored, the model needs %zu", fname, n_hist, needed);
+            return fmi2Error;
+        }
+    } else if (n_hist != 0) {
+        log_error(inst, "%s: refused: history stored for a state before initialization", fname);
+        return fmi2Error;
+    }
+
+    was_new = *FMUstate == NULL;
+    st = state_slot(inst, fname, FMUstate);
+    if (st == NULL)
+        return fmi2Error;
+    if (!state_reserve_history(inst, fname, st, n_hist)) {
+        state_release(inst, st, was_new);
+        return fmi2Error;
+    }
+    st->mode = mode;
+    st->t0 = t0;
+    st->k = k;
+    st->h = h;
+    memcpy(&st->data, data, sizeof *data);
+    off = BLOB_HEADER + sizeof(ModelData);
+    for (i = 0; i < n_hist; i++, off += 8)
+        st->history[i] = get_f64(b + off);
+    st->n_history = n_hist;
+    *FMUstate = st;
+    return fmi2OK;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Not supported: directional derivatives and Model Exchange                 */
+
+static fmi2Status unsupported(fmi2Component c, const char *fname, const char *why)
+{
+    fmu_instance *inst = get_instance(c, fname, MODE_ALL);
+    if (inst != NULL)
+        log_error(inst, "%s: not supported: %s", fname, why);
+    return fmi2Error;
+}
+
+#define ME_ONLY "Model Exchange function; this FMU is Co-Simulation only"
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
+                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[])
+{
+    (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
+    return unsupported(c, "fmi2GetDirectionalDerivative", "providesDirectionalDerivative = false");
+}
+
+fmi2Status fmi2EnterEventMode(fmi2Component c)
+{
+    return unsupported(c, "fmi2EnterEventMode", ME_ONLY);
+}
+
+fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *fmi2eventInfo)
+{
+    (void)fmi2eventInfo;
+    return unsupported(c, "fmi2NewDiscreteStates", ME_ONLY);
+}
+
+fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
+{
+    return unsupported(c, "fmi2EnterContinuousTimeMode", ME_ONLY);
+}
+
+fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation)
+{
+    (void)noSetFMUStatePriorToCurrentPoint; (void)enterEventMode; (void)terminateSimulation;
+    return unsupported(c, "fmi2CompletedIntegratorStep", ME_ONLY);
+}
+
+fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
+{
+    (void)time;
+    return unsupported(c, "fmi2SetTime", ME_ONLY);
+}
+
+fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
+{
+    (void)x; (void)nx;
+    return unsupported(c, "fmi2SetContinuousStates", ME_ONLY);
+}
+
+fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
+{
+    (void)derivatives; (void)nx;
+    return unsupported(c, "fmi2GetDerivatives", ME_ONLY);
+}
+
+fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni)
+{
+    (void)eventIndicators; (void)ni;
+    return unsupported(c, "fmi2GetEventIndicators", ME_ONLY);
+}
+
+fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
+{
+    (void)x; (void)nx;
+    return unsupported(c, "fmi2GetContinuousStates", ME_ONLY);
+}
+
+fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx)
+{
+    (void)x_nominal; (void)nx;
+    return unsupported(c, "fmi2GetNominalsOfContinuousStates", ME_ONLY);
+}

@@ -1,0 +1,71 @@
+/*
+ * fmu_model.h - the contract between the shared FMI 2.0 Co-Simulation glue
+ * (fmi2_glue.c) and one model (fmu_src/<Model>/model.c + config.h).
+ *
+ * The glue is compiled into every FMU with the model's directory first on the
+ * include path, so "config.h" is that model's. config.h provides:
+ *   MODEL_IDENTIFIER_STRING  the modelIdentifier (e.g. "PiezoStage")
+ *   MODEL_GUID               the guid of modelDescription.xml
+ *   an enum of value references 0..MODEL_N_VARIABLES-1 in XML order
+ *   ModelData                flat, pointer-free model data (parameters,
+ *                            held inputs, core state, output values)
+ *
+ * The glue owns everything FMI: the call-sequence state machine, argument and
+ * value-reference checks, type and causality checks, time (t0 + k h), the
+ * step-size check, logging, FMU states and their serialization, and the
+ * exact-mode history buffer (grown before the model is asked to step).
+ * The model only maps variables to ModelData and calls the core. Because
+ * ModelData is flat, saving or restoring a state is a memcpy plus the history.
+ */
+#ifndef FMU_MODEL_H
+#define FMU_MODEL_H
+
+#include <stddef.h>
+#include "piezo_status.h"
+#include "config.h"
+
+typedef enum { MODEL_REAL = 0, MODEL_INTEGER = 1, MODEL_BOOLEAN = 2 } model_type;
+
+/* parameter: causality parameter, variability fixed (settable before
+ * fmi2ExitInitializationMode only); input: settable until terminate;
+ * output: read only, computed by model_update_outputs. */
+typedef enum { MODEL_PARAMETER = 0, MODEL_INPUT = 1, MODEL_OUTPUT = 2 } model_causality;
+
+typedef struct {
+    const char *name;          /* the XML name, used in log messages */
+    model_type type;           /* Real: double, Integer/Boolean: int */
+    model_causality causality;
+    size_t offset;             /* offsetof(ModelData, ...) of the value */
+} model_variable;
+
+/* Indexed by value reference; entry i describes value reference i. */
+extern const model_variable model_variables[MODEL_N_VARIABLES];
+
+/* Start values of all parameters and inputs (must equal the XML starts). */
+void model_set_start_values(ModelData *data);
+
+/* Validate the parameters and (re)initialize the core state to sample 0.
+ * On PIEZO_ERR_PARAM, diag names the parameter. */
+piezo_status model_init(ModelData *data, piezo_diag *diag);
+
+/* The sample period h of an initialized model. */
+double model_sample_period(const ModelData *data);
+
+/* Doubles of exact-mode history the next step (or output update) needs;
+ * 0 when the model keeps no history. Grows by one per step. */
+size_t model_history_needed(const ModelData *data);
+
+/* Advance one sample with the held inputs. May leave data modified on
+ * failure: the glue restores its own copy. */
+piezo_status model_step(ModelData *data, double *history, size_t history_capacity);
+
+/* Fill the output values of the current sample from the core and the held
+ * inputs, committing nothing (direct feedthrough is computed here). */
+piezo_status model_update_outputs(ModelData *data, double *history, size_t history_capacity);
+
+/* Sanity check of restored (deserialized) data: NULL when every index and
+ * count the core uses is in range, else a static description of the fault.
+ * core_initialized: the state was saved after fmi2ExitInitializationMode. */
+const char *model_check_data(const ModelData *data, int core_initialized);
+
+#endif

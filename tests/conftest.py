@@ -1,0 +1,241 @@
+"""Shared pytest fixtures.
+
+Blocks are owned by different parts of the project; keep each block separate.
+"""
+
+# =============================================================================
+# FMU fixtures (FMI layer: tests/test_fmu_*.py)
+#
+# Builds the FMUs with CMake into build/ when they are missing or older than
+# any of their sources, extracts each once per session, and offers `Fmu`, a
+# thin driver over fmpy's FMU2Slave that captures the FMU's log messages and
+# keeps time on the integer grid t0 + k h like an honest master.
+# =============================================================================
+import ctypes
+import pathlib
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+BUILD_DIR = REPO / "build"
+FMU_DIR = BUILD_DIR / "fmus"
+FMU_NAMES = ("PiezoStage", "AdaptiveCompoundController")
+_FMU_SOURCE_SUFFIXES = {".c", ".h", ".xml", ".map", ".txt"}
+
+
+def _fmu_sources():
+    yield REPO / "CMakeLists.txt"
+    for sub in ("fmu_src", "modelDescription"):
+        for path in (REPO / sub).rglob("*"):
+            if path.is_file() and path.suffix in _FMU_SOURCE_SUFFIXES:
+                yield path
+
+
+def _fmus_stale():
+    fmus = [FMU_DIR / f"{name}.fmu" for name in FMU_NAMES] + [BUILD_DIR / "libpiezo_core.so"]
+    if not all(f.exists() for f in fmus):
+        return True
+    oldest = min(f.stat().st_mtime for f in fmus)
+    return any(src.stat().st_mtime > oldest for src in _fmu_sources())
+
+
+def build_fmus():
+    """Build (if needed) and return {modelIdentifier: path of the .fmu}."""
+    if _fmus_stale():
+        if shutil.which("cmake") is None:
+            raise RuntimeError("cmake is needed to build the FMUs and the core library")
+        subprocess.run(["cmake", "-S", str(REPO), "-B", str(BUILD_DIR), f"-DPIEZO_PYTHON={sys.executable}"],
+                       check=True, stdout=subprocess.DEVNULL)
+        subprocess.run(["cmake", "--build", str(BUILD_DIR), "-j", "4"], check=True, stdout=subprocess.DEVNULL)
+    return {name: FMU_DIR / f"{name}.fmu" for name in FMU_NAMES}
+
+
+def pytest_sessionstart(session):
+    """Every test needs the build (core library for cffi, FMUs for fmpy): make it
+    once, before collection, so no test can silently skip for a missing artifact."""
+    build_fmus()
+
+
+@pytest.fixture(scope="session")
+def fmu_paths():
+    return build_fmus()
+
+
+class FmuPackage:
+    """An extracted FMU: its model description and where it was unzipped."""
+
+    def __init__(self, path):
+        import fmpy
+        self.path = pathlib.Path(path)
+        self.unzipdir = fmpy.extract(str(path))
+        self.md = fmpy.read_model_description(str(path))
+        self.variables = {v.name: v for v in self.md.modelVariables}
+
+    def instantiate(self, **kwargs):
+        return Fmu(self, **kwargs)
+
+
+@pytest.fixture(scope="session")
+def _fmu_packages(fmu_paths):
+    packages = {name: FmuPackage(path) for name, path in fmu_paths.items()}
+    yield packages
+    for package in packages.values():
+        shutil.rmtree(package.unzipdir, ignore_errors=True)
+
+
+@pytest.fixture(scope="session")
+def piezo_stage(_fmu_packages):
+    return _fmu_packages["PiezoStage"]
+
+
+@pytest.fixture(scope="session")
+def controller(_fmu_packages):
+    return _fmu_packages["AdaptiveCompoundController"]
+
+
+# fmpy's native logger proxy (which formats the variadic message) keeps ONE
+# Python logger per process, so every instance shares one dispatcher that
+# routes by componentEnvironment.
+_FMU_BY_ID = {}
+_fmu_ids = iter(range(1, 1 << 30))
+
+
+def _dispatch_log(env, instance_name, status, category, message):
+    fmu = _FMU_BY_ID.get(env or 0)
+    record = (status, category.decode(errors="replace"), message.decode(errors="replace"))
+    if fmu is not None:
+        fmu.messages.append(record)
+    else:
+        print(f"[{instance_name.decode(errors='replace')}] {record}")
+
+
+_dispatch_logger = None
+
+
+def _shared_logger():
+    global _dispatch_logger
+    if _dispatch_logger is None:
+        from fmpy.fmi2 import fmi2CallbackLoggerTYPE
+        _dispatch_logger = fmi2CallbackLoggerTYPE(_dispatch_log)
+    return _dispatch_logger
+
+
+class Fmu:
+    """One instance of an FMU, driven through fmpy.fmi2.FMU2Slave."""
+
+    def __init__(self, package, logging_on=False, instance_name="instance"):
+        from fmpy.fmi2 import (FMU2Slave, fmi2CallbackFunctions, fmi2CallbackAllocateMemoryTYPE,
+                               fmi2CallbackFreeMemoryTYPE)
+        from fmpy import calloc, free
+        from fmpy.logging import addLoggerProxy
+
+        self.package = package
+        self.messages = []          # (status, category, text)
+        self.id = next(_fmu_ids)
+        _FMU_BY_ID[self.id] = self
+        md = package.md
+        self.slave = FMU2Slave(guid=md.guid, unzipDirectory=package.unzipdir,
+                               modelIdentifier=md.coSimulation.modelIdentifier,
+                               instanceName=instance_name)
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = _shared_logger()
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        callbacks.componentEnvironment = self.id
+        addLoggerProxy(ctypes.byref(callbacks))     # formats the variadic message in C
+        self.callbacks = callbacks
+        self.slave.instantiate(callbacks=callbacks, loggingOn=logging_on)
+        self.t0 = 0.0
+        self.h = None
+        self.k = 0
+        self._freed = False
+
+    # -- messages -------------------------------------------------------------
+    def errors(self):
+        return [text for status, _, text in self.messages if status >= 3]
+
+    def last_error(self):
+        errors = self.errors()
+        return errors[-1] if errors else ""
+
+    def clear_messages(self):
+        self.messages.clear()
+
+    # -- variables --------------------------------------------------------------
+    def _var(self, name):
+        return self.package.variables[name]
+
+    def set(self, values):
+        for name, value in values.items():
+            var = self._var(name)
+            vr = [var.valueReference]
+            if var.type == "Real":
+                self.slave.setReal(vr, [float(value)])
+            elif var.type == "Integer":
+                self.slave.setInteger(vr, [int(value)])
+            elif var.type == "Boolean":
+                self.slave.setBoolean(vr, [bool(value)])
+            else:
+                raise TypeError(var.type)
+
+    def get(self, name):
+        var = self._var(name)
+        vr = [var.valueReference]
+        if var.type == "Real":
+            return self.slave.getReal(vr)[0]
+        if var.type == "Integer":
+            return self.slave.getInteger(vr)[0]
+        if var.type == "Boolean":
+            return bool(self.slave.getBoolean(vr)[0])
+        raise TypeError(var.type)
+
+    def get_reals(self, names):
+        return self.slave.getReal([self._var(n).valueReference for n in names])
+
+    # -- life cycle ---------------------------------------------------------------
+    def setup(self, start_time=0.0, params=None):
+        self.slave.setupExperiment(startTime=start_time)
+        self.t0 = start_time
+        if params:
+            self.set(params)
+        self.slave.enterInitializationMode()
+
+    def initialize(self, params=None, start_time=0.0):
+        self.setup(start_time, params)
+        self.slave.exitInitializationMode()
+        self.h = self.get("h")
+        self.k = 0
+
+    @property
+    def time(self):
+        return self.t0 + self.k * self.h
+
+    def step(self, n=1):
+        self.slave.doStep(self.time, n * self.h)
+        self.k += n
+
+    def free(self):
+        if not self._freed:
+            self._freed = True
+            self.slave.freeInstance()
+            _FMU_BY_ID.pop(self.id, None)
+
+
+@pytest.fixture
+def make_fmu():
+    """Factory: make_fmu(package, logging_on=False) -> Fmu; frees them all at teardown."""
+    created = []
+
+    def factory(package, **kwargs):
+        fmu = package.instantiate(**kwargs)
+        created.append(fmu)
+        return fmu
+
+    yield factory
+    for fmu in created:
+        fmu.free()
+
+# ============================ end of FMU fixtures ============================

@@ -1,0 +1,321 @@
+"""AdaptiveCompoundController FMU: interface, direct feedthrough without commit,
+stepping, FMU states, refusals, call sequences, closed loop with PiezoStage.
+
+Drives the built FMUs through fmpy's FMU2Slave (fixtures in conftest.py).
+"""
+import math
+
+import numpy as np
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmpy.validation import validate_fmu
+
+OUTPUTS = ["v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error"]
+H = 0.0005
+
+
+def y_d(k):
+    """1 Hz reference, 10 um amplitude (DESIGN.md section 4)."""
+    return 10.0 * math.sin(2.0 * math.pi * k * H)
+
+
+def y_meas_of(k):
+    """A plausible, exciting measurement sequence for open-loop runs."""
+    return 9.0 * math.sin(2.0 * math.pi * (k - 3) * H) + 0.3 * math.sin(2.0 * math.pi * 37.0 * k * H)
+
+
+def run(fmu, n, k0=0):
+    rows = []
+    for k in range(k0, k0 + n):
+        fmu.set({"y_ref": y_d(k + 1), "y_meas": y_meas_of(k)})
+        rows.append(fmu.get_reals(OUTPUTS))
+        fmu.step()
+    return np.array(rows)
+
+
+def assert_refused(call, fmu, *fragments):
+    fmu.clear_messages()
+    with pytest.raises(FMICallException) as info:
+        call()
+    assert info.value.status == 3        # fmi2Error
+    message = fmu.last_error()
+    for fragment in fragments:
+        assert fragment in message, (fragment, message)
+    return message
+
+
+def start_value(var):
+    return {"Real": float, "Integer": int}.get(var.type, lambda s: s in ("true", True))(var.start)
+
+
+# ---------------------------------------------------------------------------- interface
+
+def test_validate_fmu_reports_nothing(fmu_paths):
+    assert validate_fmu(str(fmu_paths["AdaptiveCompoundController"])) == []
+
+
+def test_model_description_matches_design(controller, piezo_stage):
+    md = controller.md
+    v = controller.variables
+    assert md.variableNamingConvention == "structured"
+    assert md.coSimulation.modelIdentifier == "AdaptiveCompoundController"
+    assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
+    assert md.coSimulation.canHandleVariableCommunicationStepSize and not md.coSimulation.canInterpolateInputs
+    de = md.defaultExperiment
+    assert (float(de.startTime), float(de.stopTime), float(de.stepSize)) == (0.0, 3.0, 0.0005)
+
+    assert [n for n, x in v.items() if x.causality == "input"] == ["y_ref", "y_meas"]
+    assert [n for n, x in v.items() if x.causality == "output"] == OUTPUTS
+    for name in ("y_ref", "y_meas", "q", "pred_error"):
+        assert v[name].unit == "um" and v[name].displayUnit == "µm", name
+    for name in ("v", "sat.v_min", "sat.v_max", "pi.v_max"):
+        assert v[name].unit == "V", name
+    assert v["h"].unit == "s"
+
+    # the nominal model uses the plant's names, types and defaults: one parameter set fits both
+    shared = ["pi.m", "pi.v_max", "pi.w0"] + [f"pi.w[{j}]" for j in range(1, 17)] + \
+        ["tf.a1", "tf.a2", "tf.b1", "tf.b2", "creep.k_c", "creep.alpha", "creep.exact", "h"]
+    for name in shared:
+        a, b = v[name], piezo_stage.variables[name]
+        assert (a.causality, a.variability, a.type, a.unit, a.start) == \
+            (b.causality, b.variability, b.type, b.unit, b.start), name
+    own = {"mv.delay": ("Integer", 0), "mv.lambda_u": ("Real", 0.0), "rls.enabled": ("Boolean", True),
+           "rls.forgetting": ("Real", 0.995), "sat.enabled": ("Boolean", False)}
+    for name, (type_, start) in own.items():
+        assert v[name].type == type_ and start_value(v[name]) == start, name
+    for name in ("rls.p0", "rls.trace_max", "sat.v_min", "sat.v_max"):
+        assert v[name].causality == "parameter" and v[name].type == "Real"
+    params = {n for n, x in v.items() if x.causality == "parameter"}
+    assert params == set(shared) | set(own) | {"rls.p0", "rls.trace_max", "sat.v_min", "sat.v_max"}
+
+    deps = {u.variable.name: sorted(d.name for d in u.dependencies) for u in md.outputs}
+    assert deps == {"v": ["y_meas", "y_ref"], "q": ["y_meas", "y_ref"],
+                    "est.a1": ["y_meas"], "est.a2": ["y_meas"], "est.b1": ["y_meas"], "est.b2": ["y_meas"],
+                    "pred_error": ["y_meas"]}
+
+
+def test_start_values_in_the_binary_match_the_xml(controller, make_fmu):
+    fmu = make_fmu(controller)
+    fmu.setup()
+    for name, var in controller.variables.items():
+        if var.causality in ("parameter", "input"):
+            assert fmu.get(name) == start_value(var), name
+
+
+def test_outputs_during_initialization(controller, make_fmu):
+    fmu = make_fmu(controller)
+    fmu.setup()
+    out = dict(zip(OUTPUTS, fmu.get_reals(OUTPUTS)))
+    assert out["v"] == 0.0 and out["q"] == 0.0
+    assert [out[n] for n in ("est.a1", "est.a2", "est.b1", "est.b2")] == [-1.3767, 0.3816, 0.5954, -0.5907]
+    fmu.set({"y_ref": 1.0})
+    assert fmu.get("v") > 0.0
+
+
+# ---------------------------------------------------------------------------- direct feedthrough
+
+def test_get_twice_gives_the_same_value_and_commits_nothing(controller, make_fmu):
+    probed = make_fmu(controller)
+    twin = make_fmu(controller)
+    probed.initialize()
+    twin.initialize()
+    for k in range(300):
+        inputs = {"y_ref": y_d(k + 1), "y_meas": y_meas_of(k)}
+        # probe with other inputs first: nothing may stick
+        for other in (0.0, 5.0, -3.0):
+            probed.set({"y_ref": other, "y_meas": other / 2})
+            probed.get_reals(OUTPUTS)
+        probed.set(inputs)
+        twin.set(inputs)
+        first = probed.get_reals(OUTPUTS)
+        assert probed.get_reals(OUTPUTS) == first
+        assert probed.get("v") == first[0]
+        if k % 7 == 0:
+            assert twin.get_reals(OUTPUTS) == first
+        probed.step()
+        twin.step()
+    assert probed.get_reals(OUTPUTS) == twin.get_reals(OUTPUTS)
+
+
+def test_model_structure_is_honest(controller, make_fmu):
+    fmu = make_fmu(controller)
+    fmu.initialize()
+    run(fmu, 400)
+    fmu.set({"y_ref": y_d(401), "y_meas": y_meas_of(400)})
+    base = dict(zip(OUTPUTS, fmu.get_reals(OUTPUTS)))
+    fmu.set({"y_ref": y_d(401) + 0.5})
+    ref_changed = dict(zip(OUTPUTS, fmu.get_reals(OUTPUTS)))
+    fmu.set({"y_ref": y_d(401), "y_meas": y_meas_of(400) + 0.5})
+    meas_changed = dict(zip(OUTPUTS, fmu.get_reals(OUTPUTS)))
+    for name in OUTPUTS:
+        if name in ("v", "q"):
+            assert ref_changed[name] != base[name], name
+        else:
+            assert ref_changed[name] == base[name], name           # no dependency on y_ref
+        assert meas_changed[name] != base[name], name               # all depend on y_meas
+
+
+# ---------------------------------------------------------------------------- stepping
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_many_samples_per_step_equal_one_sample_per_step(controller, make_fmu, exact):
+    rng = np.random.default_rng(3)
+    blocks = rng.integers(1, 30, size=50)
+    fine = make_fmu(controller)
+    coarse = make_fmu(controller)
+    params = {"creep.exact": exact, "creep.alpha": -0.0085, "creep.k_c": 1.0497}
+    fine.initialize(params)
+    coarse.initialize(params)
+    for i, n in enumerate(blocks):
+        inputs = {"y_ref": 3.0 * math.sin(0.3 * i), "y_meas": 2.9 * math.sin(0.3 * i - 0.2)}
+        fine.set(inputs)
+        coarse.set(inputs)
+        for _ in range(n):
+            fine.step()
+        coarse.step(int(n))
+        assert fine.get_reals(OUTPUTS) == coarse.get_reals(OUTPUTS)
+
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_state_save_restore_and_serialization_continue_bitwise(controller, make_fmu, exact):
+    params = {"creep.exact": exact, "sat.enabled": True, "sat.v_min": -30.0, "sat.v_max": 30.0}
+    fmu = make_fmu(controller)
+    fmu.initialize(params)
+    run(fmu, 1200)
+    state = fmu.slave.getFMUstate()
+    blob = fmu.slave.serializeFMUstate(state)
+    reference = run(fmu, 800, k0=1200)
+
+    fmu.slave.setFMUstate(state)
+    fmu.k = 1200
+    assert np.array_equal(run(fmu, 800, k0=1200), reference)
+    fmu.slave.freeFMUstate(state)
+
+    fresh = make_fmu(controller)
+    restored = fresh.slave.deSerializeFMUstate(blob)
+    fresh.slave.setFMUstate(restored)
+    fresh.slave.freeFMUstate(restored)
+    fresh.h, fresh.k = H, 1200
+    assert fresh.get("sat.enabled") is True and fresh.get("creep.exact") == exact
+    assert np.array_equal(run(fresh, 800, k0=1200), reference)
+
+
+def test_deserialize_refuses_garbage(controller, make_fmu):
+    fmu = make_fmu(controller)
+    fmu.initialize()
+    run(fmu, 50)
+    blob = fmu.slave.serializeFMUstate(fmu.slave.getFMUstate())
+    corrupted = bytearray(blob)
+    corrupted[200] ^= 1
+    assert_refused(lambda: fmu.slave.deSerializeFMUstate(bytes(corrupted)), fmu, "checksum")
+    assert_refused(lambda: fmu.slave.deSerializeFMUstate(blob[: len(blob) // 2]), fmu, "truncated")
+    assert_refused(lambda: fmu.slave.deSerializeFMUstate(b"\xff" * 64), fmu, "not a serialized")
+
+
+# ---------------------------------------------------------------------------- refusals
+
+BAD_PARAMETERS = [
+    ({"rls.forgetting": 0.0}, "rls.forgetting = 0 is out of range: valid range (0, 1]"),
+    ({"rls.forgetting": 1.5}, "rls.forgetting = 1.5 is out of range: valid range (0, 1]"),
+    ({"rls.forgetting": -0.1}, "rls.forgetting = -0.1 is out of range"),
+    ({"rls.p0": -1.0}, "rls.p0 = -1 is out of range: valid range (0, inf)"),
+    ({"rls.p0": 0.0}, "rls.p0 = 0 is out of range"),
+    ({"rls.trace_max": 0.01}, "rls.trace_max = 0.01 is out of range"),
+    ({"sat.enabled": True, "sat.v_min": 5.0, "sat.v_max": 5.0}, "sat.v_max = 5 is out of range: valid range finite, > sat.v_min"),
+    ({"sat.enabled": True, "sat.v_min": 10.0, "sat.v_max": -10.0}, "sat.v_max = -10 is out of range"),
+    ({"mv.delay": -1}, "mv.delay = -1 is out of range: valid range 0..8"),
+    ({"mv.delay": 9}, "mv.delay = 9 is out of range: valid range 0..8"),
+    ({"mv.lambda_u": -1.0}, "mv.lambda_u = -1 is out of range"),
+    ({"creep.alpha": 2.0}, "creep.alpha = 2 is out of range: valid range [-1, 1]"),
+    ({"creep.k_c": 0.0}, "creep.k_c = 0 is out of range"),
+    ({"pi.w0": 0.0}, "pi.w0 = 0 is out of range"),
+    ({"pi.w[2]": -0.1}, "pi.w[2] = -0.1 is out of range: valid range [0, inf)"),
+    ({"pi.m": 0}, "pi.m = 0 is out of range: valid range 1..16"),
+    ({"pi.m": 17}, "pi.m = 17 is out of range"),
+    ({"tf.a2": 1.2}, "tf.a2 = 1.2 is out of range"),
+    ({"tf.b1": -0.5}, "tf.b1 = -0.5 is out of range"),
+    ({"h": 0.0}, "h = 0 is out of range: valid range (0, inf)"),
+]
+
+
+@pytest.mark.parametrize("params,message", BAD_PARAMETERS)
+def test_bad_parameter_refused_at_exit_initialization(controller, make_fmu, params, message):
+    fmu = make_fmu(controller)
+    fmu.setup(params=params)
+    assert_refused(lambda: fmu.get("v"), fmu, message)
+    assert_refused(fmu.slave.exitInitializationMode, fmu, "fmi2ExitInitializationMode", message)
+    fmu.set({name: start_value(controller.variables[name]) for name in params})
+    fmu.slave.exitInitializationMode()      # still in initialization mode: fixed and accepted
+    fmu.h = H
+    fmu.step()
+
+
+def test_inconsistent_limits_are_fine_while_saturation_is_off(controller, make_fmu):
+    fmu = make_fmu(controller)
+    fmu.initialize({"sat.enabled": False, "sat.v_min": 10.0, "sat.v_max": -10.0})
+    fmu.step()
+
+
+def test_non_finite_input_refused_state_unchanged(controller, make_fmu):
+    reference = make_fmu(controller)
+    reference.initialize()
+    expected = run(reference, 60)
+    fmu = make_fmu(controller)
+    fmu.initialize()
+    part = run(fmu, 30)
+    for name in ("y_ref", "y_meas"):
+        for bad in (float("nan"), float("inf")):
+            assert_refused(lambda: fmu.set({name: bad}), fmu, f"{name} = ", "valid range: finite values")
+    rest = run(fmu, 30, k0=30)
+    assert np.array_equal(np.vstack([part, rest]), expected)
+
+
+def test_step_size_not_a_multiple_of_h_is_refused(controller, make_fmu):
+    fmu = make_fmu(controller)
+    fmu.initialize({"h": 0.001})
+    assert_refused(lambda: fmu.slave.doStep(0.0, 0.0015), fmu, "not a whole multiple of h = 0.001")
+    fmu.slave.doStep(0.0, 0.003)            # three samples
+    assert_refused(lambda: fmu.slave.doStep(0.002, 0.001), fmu, "does not match")
+    fmu.slave.doStep(0.003, 0.001)
+
+
+def test_illegal_call_sequences_return_error(controller, make_fmu):
+    fmu = make_fmu(controller)
+    assert_refused(lambda: fmu.slave.doStep(0.0, H), fmu, "illegal call sequence", "Instantiated")
+    assert_refused(lambda: fmu.get("v"), fmu, "illegal call sequence")
+    fmu.initialize()
+    assert_refused(lambda: fmu.set({"rls.forgetting": 0.99}), fmu, "rls.forgetting", "fixed parameter")
+    assert_refused(lambda: fmu.set({"v": 1.0}), fmu, "v is an output")
+    assert_refused(fmu.slave.enterInitializationMode, fmu, "illegal call sequence", "StepComplete")
+    fmu.step()
+    fmu.slave.terminate()
+    assert_refused(lambda: fmu.step(), fmu, "illegal call sequence", "Terminated")
+    assert_refused(lambda: fmu.set({"y_ref": 1.0}), fmu, "illegal call sequence", "Terminated")
+    assert_refused(fmu.slave.terminate, fmu, "illegal call sequence")
+    fmu.get("v")                           # getters stay allowed after terminate
+
+
+# ---------------------------------------------------------------------------- closed loop
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_closed_loop_with_the_nominal_plant_tracks_exactly(controller, piezo_stage, make_fmu, exact):
+    """Gauss-Seidel per sample (DESIGN.md section 3). With the plant equal to the
+    nominal model and the reference previewed d = 1 sample, the error is zero
+    up to rounding (and the SOE creep approximation, far below a picometre)."""
+    plant = make_fmu(piezo_stage)
+    ctrl = make_fmu(controller)
+    plant.initialize({"creep.exact": exact})
+    ctrl.initialize({"creep.exact": exact})
+    errors, pred_errors = [], []
+    for k in range(2000):
+        y, y_meas = plant.get_reals(["y", "y_meas"])
+        errors.append(y - y_d(k))
+        ctrl.set({"y_ref": y_d(k + 1), "y_meas": y_meas})
+        v, pred_error = ctrl.get_reals(["v", "pred_error"])
+        pred_errors.append(pred_error)
+        plant.set({"v": v})
+        plant.step()
+        ctrl.step()
+    errors = np.array(errors[1000:])
+    assert np.sqrt(np.mean(errors ** 2)) < 1e-9            # um
+    assert np.max(np.abs(pred_errors[10:])) < 1e-9

@@ -1,0 +1,469 @@
+"""PiezoStage FMU: interface, semantics, stepping, FMU states, refusals, call sequences.
+
+Drives the built FMU through fmpy's FMU2Slave (fixtures in conftest.py).
+"""
+import math
+
+import numpy as np
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmpy.validation import validate_fmu
+
+OUTPUTS = ["y", "y_meas", "u", "x"]
+H = 0.0005
+
+
+def sine_v(k, h=H):
+    return 10.0 * math.sin(2.0 * math.pi * k * h) + 10.0
+
+
+def run(fmu, n_samples, v_of_k=sine_v, k0=0):
+    """One sample per doStep: set v(k), read the outputs of sample k, step."""
+    rows = []
+    for k in range(k0, k0 + n_samples):
+        fmu.set({"v": v_of_k(k)})
+        rows.append(fmu.get_reals(OUTPUTS))
+        fmu.step()
+    return np.array(rows)
+
+
+def assert_refused(call, fmu, *fragments):
+    fmu.clear_messages()
+    with pytest.raises(FMICallException) as info:
+        call()
+    assert info.value.status == 3        # fmi2Error
+    message = fmu.last_error()
+    for fragment in fragments:
+        assert fragment in message, (fragment, message)
+    return message
+
+
+# ---------------------------------------------------------------------------- interface
+
+def test_validate_fmu_reports_nothing(fmu_paths):
+    assert validate_fmu(str(fmu_paths["PiezoStage"])) == []
+
+
+def test_model_description_matches_design(piezo_stage):
+    md = piezo_stage.md
+    v = piezo_stage.variables
+    assert md.fmiVersion == "2.0"
+    assert md.variableNamingConvention == "structured"
+    assert md.coSimulation.modelIdentifier == "PiezoStage"
+    assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
+    assert md.coSimulation.canHandleVariableCommunicationStepSize
+    assert not md.coSimulation.canInterpolateInputs
+    assert md.modelExchange is None
+    de = md.defaultExperiment
+    assert (float(de.startTime), float(de.stopTime), float(de.stepSize)) == (0.0, 3.0, 0.0005)
+    assert {c.name for c in md.logCategories} == {"logEvents", "logStatusWarning", "logStatusError", "logAll"}
+
+    assert [n for n, x in v.items() if x.causality == "input"] == ["v"]
+    assert sorted(n for n, x in v.items() if x.causality == "output") == sorted(OUTPUTS)
+    assert v["v"].unit == "V"
+    for name in OUTPUTS + ["sensor.resolution", "sensor.noise_rms"]:
+        assert v[name].unit == "um" and v[name].displayUnit == "µm", name
+    assert v["h"].unit == "s" and v["pi.v_max"].unit == "V"
+
+    expected = {"pi.m": ("Integer", 9), "pi.v_max": ("Real", 20.0), "pi.w0": ("Real", 0.3344),
+                "pi.w[1]": ("Real", 0.0714), "pi.w[2]": ("Real", 0.0322), "pi.w[3]": ("Real", 0.0072),
+                "tf.a1": ("Real", -1.3767), "tf.a2": ("Real", 0.3816), "tf.b1": ("Real", 0.5954),
+                "tf.b2": ("Real", -0.5907), "tf.delay": ("Integer", 0), "creep.enabled": ("Boolean", True),
+                "creep.k_c": ("Real", 1.0463), "creep.alpha": ("Real", 0.0002), "creep.exact": ("Boolean", False),
+                "sensor.resolution": ("Real", 0.0), "sensor.noise_rms": ("Real", 0.0),
+                "sensor.seed": ("Integer", 1), "h": ("Real", 0.0005)}
+    expected.update({f"pi.w[{j}]": ("Real", 0.0) for j in range(4, 17)})
+    params = {n: x for n, x in v.items() if x.causality == "parameter"}
+    assert set(params) == set(expected)
+    for name, (type_, start) in expected.items():
+        x = params[name]
+        assert x.type == type_ and x.variability == "fixed", name
+        start_value = {"Real": float, "Integer": int}.get(type_, lambda s: s in ("true", True))(x.start)
+        assert start_value == start, name
+
+    # no output depends on the input (no direct feedthrough)
+    assert {u.variable.name: u.dependencies for u in md.outputs} == {n: [] for n in OUTPUTS}
+
+
+def test_start_values_in_the_binary_match_the_xml(piezo_stage, make_fmu):
+    fmu = make_fmu(piezo_stage)
+    fmu.setup()
+    for name, var in piezo_stage.variables.items():
+        if var.causality in ("parameter", "input"):
+            start = {"Real": float, "Integer": int}.get(var.type, lambda s: s in ("true", True))(var.start)
+            assert fmu.get(name) == start, name
+
+
+def test_only_co_simulation_and_the_right_guid(piezo_stage):
+    from fmpy.fmi2 import FMU2Model, FMU2Slave
+    model_exchange = FMU2Model(guid=piezo_stage.md.guid, unzipDirectory=piezo_stage.unzipdir,
+                               modelIdentifier="PiezoStage")
+    wrong_guid = FMU2Slave(guid="{00000000-0000-0000-0000-000000000000}", unzipDirectory=piezo_stage.unzipdir,
+                           modelIdentifier="PiezoStage")
+    for fmu in (model_exchange, wrong_guid):
+        with pytest.raises(Exception, match="Failed to instantiate"):
+            fmu.instantiate()
+        fmu.freeLibrary()
+
+
+# ---------------------------------------------------------------------------- semantics
+
+def test_outputs_at_rest_during_initialization(piezo_stage, make_fmu):
+    fmu = make_fmu(piezo_stage)
+    fmu.setup()
+    assert fmu.get_reals(OUTPUTS) == [0.0, 0.0, 0.0, 0.0]
+    fmu.slave.exitInitializationMode()
+    assert fmu.get_reals(OUTPUTS) == [0.0, 0.0, 0.0, 0.0]
+
+
+def test_default_sine_spans_the_design_range(piezo_stage, make_fmu):
+    fmu = make_fmu(piezo_stage)
+    fmu.initialize()
+    out = run(fmu, 4001)
+    y = out[2000:4000, 0]                 # t in [1, 2) s
+    assert abs(y.min() - 0.10) <= 0.01, y.min()
+    assert abs(y.max() - 8.84) <= 0.01, y.max()
+    # without sensor settings y_meas is y
+    assert np.array_equal(out[:, 0], out[:, 1])
+    # sample 0 is at rest whatever v(0) is (no direct feedthrough); then
+    # u(0) = P[v(0)] shows up at sample 1 and x(1) = b1 u(0)
+    assert out[0].tolist() == [0.0, 0.0, 0.0, 0.0]
+    u0 = 0.3344 * 10 + 0.0714 * 10 + 0.0322 * (10 - 20 / 9) + 0.0072 * (10 - 40 / 9)
+    assert out[1, 2] == pytest.approx(u0, rel=1e-14)
+    assert out[1, 3] == pytest.approx(0.5954 * u0, rel=1e-14)
+
+
+def test_y_meas_at_sample_zero_depends_on_the_sensor_seed(piezo_stage, make_fmu):
+    values = []
+    for seed in (1, 2):
+        fmu = make_fmu(piezo_stage)
+        fmu.setup(params={"sensor.noise_rms": 0.001, "sensor.seed": seed})
+        values.append(fmu.get_reals(OUTPUTS))
+    assert values[0][1] != values[1][1]
+    assert values[0][0] == values[1][0] == 0.0
+
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_many_samples_per_step_equal_one_sample_per_step(piezo_stage, make_fmu, exact):
+    rng = np.random.default_rng(7)
+    blocks = rng.integers(1, 40, size=60)
+    levels = rng.uniform(-20.0, 30.0, size=len(blocks))
+    params = {"creep.exact": exact, "creep.alpha": -0.0085, "creep.k_c": 1.0497}
+
+    fine = make_fmu(piezo_stage)
+    fine.initialize(params)
+    coarse = make_fmu(piezo_stage)
+    coarse.initialize(params)
+    for n, level in zip(blocks, levels):
+        fine.set({"v": level})
+        coarse.set({"v": level})
+        for _ in range(n):
+            fine.step()
+        coarse.step(int(n))
+        assert fine.get_reals(OUTPUTS) == coarse.get_reals(OUTPUTS)
+    assert fine.k == coarse.k == blocks.sum()
+
+
+def test_exact_and_soe_creep_agree_to_a_nanometre_fraction(piezo_stage, make_fmu):
+    results = []
+    for exact in (False, True):
+        fmu = make_fmu(piezo_stage)
+        fmu.initialize({"creep.exact": exact, "creep.alpha": -0.0085, "creep.k_c": 1.0497})
+        results.append(run(fmu, 3000))
+    assert np.max(np.abs(results[0] - results[1])) < 1e-4     # um, i.e. 0.1 nm
+    assert not np.array_equal(results[0], results[1])
+
+
+def test_reset_then_reinitialize_repeats_the_run(piezo_stage, make_fmu):
+    fmu = make_fmu(piezo_stage)
+    fmu.initialize({"sensor.noise_rms": 0.001, "sensor.resolution": 0.002})
+    first = run(fmu, 500)
+    fmu.slave.reset()
+    fmu.initialize({"sensor.noise_rms": 0.001, "sensor.resolution": 0.002})
+    assert np.array_equal(run(fmu, 500), first)
+
+
+def test_start_time_and_accumulated_master_time(piezo_stage, make_fmu):
+    fmu = make_fmu(piezo_stage)
+    fmu.initialize(start_time=1.25)
+    t = 1.25
+    for _ in range(2000):              # a master that accumulates floats is accepted
+        fmu.slave.doStep(t, H)
+        t += H
+    assert fmu.slave.getRealStatus(2) == pytest.approx(1.25 + 2000 * H, abs=1e-15)  # fmi2LastSuccessfulTime
+
+
+# ---------------------------------------------------------------------------- FMU states
+
+PARAMS_WITH_NOISE = {"sensor.noise_rms": 0.001, "sensor.resolution": 0.002, "sensor.seed": 42}
+
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_state_save_restore_and_serialization_continue_bitwise(piezo_stage, make_fmu, exact):
+    params = dict(PARAMS_WITH_NOISE, **{"creep.exact": exact})
+    fmu = make_fmu(piezo_stage)
+    fmu.initialize(params)
+    run(fmu, 1500)
+    state = fmu.slave.getFMUstate()
+    blob = fmu.slave.serializeFMUstate(state)
+    reference = run(fmu, 1500, k0=1500)
+
+    # set the state back: same continuation
+    fmu.slave.setFMUstate(state)
+    fmu.k = 1500
+    assert np.array_equal(run(fmu, 1500, k0=1500), reference)
+    fmu.slave.freeFMUstate(state)
+
+    # deserialize in the same instance
+    state2 = fmu.slave.deSerializeFMUstate(blob)
+    fmu.slave.setFMUstate(state2)
+    fmu.k = 1500
+    assert np.array_equal(run(fmu, 1500, k0=1500), reference)
+    fmu.slave.freeFMUstate(state2)
+
+    # deserialize into a fresh instance that was never initialized
+    fresh = make_fmu(piezo_stage)
+    state3 = fresh.slave.deSerializeFMUstate(blob)
+    fresh.slave.setFMUstate(state3)
+    fresh.slave.freeFMUstate(state3)
+    fresh.h, fresh.k = H, 1500
+    assert fresh.get("creep.exact") == exact and fresh.get("sensor.seed") == 42
+    assert np.array_equal(run(fresh, 1500, k0=1500), reference)
+
+
+def test_state_restores_the_mode(piezo_stage, make_fmu):
+    fmu = make_fmu(piezo_stage)
+    fmu.initialize()
+    run(fmu, 10)
+    state = fmu.slave.getFMUstate()
+    fmu.slave.terminate()
+    assert_refused(lambda: fmu.step(), fmu, "illegal call sequence", "Terminated")
+    fmu.slave.setFMUstate(state)          # back to StepComplete at t = 10 h
+    fmu.step()
+    fmu.slave.freeFMUstate(state)
+
+
+def test_deserialize_refuses_garbage(piezo_stage, controller, make_fmu):
+    fmu = make_fmu(piezo_stage)
+    fmu.initialize({"creep.exact": True})
+    run(fmu, 100)
+    blob = fmu.slave.serializeFMUstate(fmu.slave.getFMUstate())
+    reference = run(fmu, 50, k0=100)
+
+    other = make_fmu(controller)
+    other.initialize()
+    foreign = other.slave.serializeFMUstate(other.slave.getFMUstate())
+
+    corrupted = bytearray(blob)
+    corrupted[len(blob) // 2] ^= 0x40
+    bad_version = bytearray(blob)
+    bad_version[8] = 7
+    cases = {
+        "empty": (b"", "not a serialized"),
+        "garbage": (bytes(range(256)) * 8, "not a serialized"),
+        "truncated": (blob[:-100], "truncated"),
+        "padded": (blob + b"\0" * 16, "truncated or padded"),
+        "corrupted": (bytes(corrupted), "checksum"),
+        "version": (bytes(bad_version), "format version"),
+        "other model": (foreign, "GUID"),
+    }
+    for name, (data, fragment) in cases.items():
+        assert_refused(lambda: fmu.slave.deSerializeFMUstate(data), fmu, fragment)
+    # the instance is untouched by the refusals
+    state = fmu.slave.deSerializeFMUstate(blob)
+    fmu.slave.setFMUstate(state)
+    fmu.k = 100
+    assert np.array_equal(run(fmu, 50, k0=100), reference)
+
+
+# ---------------------------------------------------------------------------- refusals
+
+BAD_PARAMETERS = [
+    ("creep.alpha", 2.0, "creep.alpha = 2 is out of range: valid range [-1, 1]"),
+    ("creep.alpha", -1.5, "valid range [-1, 1]"),
+    ("creep.k_c", 0.0, "creep.k_c = 0 is out of range: valid range (0, inf)"),
+    ("creep.k_c", -1.0, "creep.k_c = -1 is out of range"),
+    ("pi.w0", 0.0, "pi.w0 = 0 is out of range: valid range (0, inf)"),
+    ("pi.w0", -0.3, "pi.w0 = -0.3 is out of range"),
+    ("pi.w[2]", -0.1, "pi.w[2] = -0.1 is out of range: valid range [0, inf)"),
+    ("pi.m", 0, "pi.m = 0 is out of range: valid range 1..16"),
+    ("pi.m", 17, "pi.m = 17 is out of range: valid range 1..16"),
+    ("pi.v_max", 0.0, "pi.v_max = 0 is out of range"),
+    ("tf.a2", 1.2, "tf.a2 = 1.2 is out of range: valid range |tf.a2| < 1 (stable A)"),
+    ("tf.a1", -1.5, "tf.a1 = -1.5 is out of range"),
+    ("tf.delay", 33, "tf.delay = 33 is out of range: valid range 0..32"),
+    ("h", 0.0, "h = 0 is out of range: valid range (0, inf)"),
+    ("h", -0.0005, "h = -0.0005 is out of range"),
+    ("sensor.noise_rms", -0.001, "sensor.noise_rms = -0.001 is out of range"),
+]
+
+
+@pytest.mark.parametrize("name,value,message", BAD_PARAMETERS)
+def test_bad_parameter_refused_at_exit_initialization(piezo_stage, make_fmu, name, value, message):
+    fmu = make_fmu(piezo_stage)
+    fmu.setup(params={name: value})
+    # outputs cannot be computed from these parameters either
+    assert_refused(lambda: fmu.get("y"), fmu, message)
+    assert_refused(fmu.slave.exitInitializationMode, fmu, "fmi2ExitInitializationMode", message)
+    # still in initialization mode: fix the parameter and go on
+    fmu.set({name: piezo_stage.variables[name].start if piezo_stage.variables[name].type != "Integer"
+             else int(piezo_stage.variables[name].start)})
+    fmu.slave.exitInitializationMode()
+    fmu.h = H
+    fmu.step()
+
+
+def _uninterrupted(piezo_stage, make_fmu, n):
+    fmu = make_fmu(piezo_stage)
+    fmu.initialize()
+    return run(fmu, n)
+
+
+def test_step_size_not_a_multiple_of_h_is_refused(piezo_stage, make_fmu):
+    reference = _uninterrupted(piezo_stage, make_fmu, 40)
+    fmu = make_fmu(piezo_stage)
+    fmu.initialize()
+    part = run(fmu, 20)
+    fmu.set({"v": sine_v(20)})
+    for bad in (0.7 * H, 1.5 * H, 10.0001 * H, 0.0, -H, float("nan")):
+        msg = assert_refused(lambda: fmu.slave.doStep(fmu.time, bad), fmu, "communicationStepSize", "h = 0.0005")
+        assert "refused" in msg
+    # a point that is not the FMU's time
+    assert_refused(lambda: fmu.slave.doStep(fmu.time + 0.3 * H, H), fmu, "currentCommunicationPoint", "does not match")
+    assert_refused(lambda: fmu.slave.doStep(fmu.time - H, H), fmu, "currentCommunicationPoint")
+    rest = run(fmu, 20, k0=20)
+    assert np.array_equal(np.vstack([part, rest]), reference)
+
+
+def test_non_finite_input_refused_state_unchanged(piezo_stage, make_fmu):
+    reference = _uninterrupted(piezo_stage, make_fmu, 60)
+    fmu = make_fmu(piezo_stage)
+    fmu.initialize()
+    part = run(fmu, 30)
+    for bad in (float("nan"), float("inf"), -float("inf")):
+        assert_refused(lambda: fmu.set({"v": bad}), fmu, "v = ", "refused", "valid range: finite values")
+    rest = run(fmu, 30, k0=30)
+    assert np.array_equal(np.vstack([part, rest]), reference)
+    # a NaN input left in place by a refused set does not leak into the held value
+    fmu2 = make_fmu(piezo_stage)
+    fmu2.initialize()
+    fmu2.set({"v": 5.0})
+    with pytest.raises(FMICallException):
+        fmu2.set({"v": float("nan")})
+    assert fmu2.get("v") == 5.0
+
+
+# ---------------------------------------------------------------------------- call sequences
+
+def test_illegal_call_sequences_return_error(piezo_stage, make_fmu):
+    fmu = make_fmu(piezo_stage)
+    # Instantiated
+    assert_refused(lambda: fmu.slave.doStep(0.0, H), fmu, "fmi2DoStep", "illegal call sequence", "Instantiated")
+    assert_refused(lambda: fmu.get("y"), fmu, "fmi2GetReal", "illegal call sequence")
+    assert_refused(fmu.slave.exitInitializationMode, fmu, "illegal call sequence")
+    assert_refused(fmu.slave.terminate, fmu, "fmi2Terminate", "illegal call sequence")
+    # InitializationMode
+    fmu.setup()
+    assert_refused(lambda: fmu.slave.doStep(0.0, H), fmu, "illegal call sequence", "InitializationMode")
+    assert_refused(fmu.slave.enterInitializationMode, fmu, "illegal call sequence")
+    assert_refused(lambda: fmu.slave.setupExperiment(startTime=0.0), fmu, "illegal call sequence")
+    fmu.slave.exitInitializationMode()
+    fmu.h = H
+    # StepComplete
+    assert_refused(fmu.slave.exitInitializationMode, fmu, "illegal call sequence", "StepComplete")
+    assert_refused(lambda: fmu.set({"creep.alpha": 0.01}), fmu, "creep.alpha", "fixed parameter")
+    assert_refused(lambda: fmu.set({"pi.m": 5}), fmu, "pi.m", "fixed parameter")
+    assert_refused(lambda: fmu.set({"y": 1.0}), fmu, "y is an output")
+    assert_refused(fmu.slave.cancelStep, fmu, "fmi2CancelStep")
+    assert fmu.get("creep.alpha") == 0.0002
+    fmu.step()
+    fmu.slave.terminate()
+    # Terminated
+    assert_refused(lambda: fmu.step(), fmu, "illegal call sequence", "Terminated")
+    assert_refused(lambda: fmu.set({"v": 1.0}), fmu, "illegal call sequence")
+    assert_refused(fmu.slave.terminate, fmu, "illegal call sequence")
+    fmu.get("y")                           # getters stay allowed
+    fmu.slave.reset()                      # and reset brings it back
+    fmu.initialize()
+    fmu.step()
+
+
+def test_argument_errors_return_error(piezo_stage, make_fmu):
+    fmu = make_fmu(piezo_stage)
+    fmu.initialize()
+    s = fmu.slave
+    assert_refused(lambda: s.getReal([999]), fmu, "unknown value reference 999")
+    assert_refused(lambda: s.getInteger([piezo_stage.variables["y"].valueReference]), fmu, "is of type Real")
+    assert_refused(lambda: s.setBoolean([piezo_stage.variables["v"].valueReference], [True]), fmu, "not Boolean")
+    assert_refused(lambda: s.getString([0]), fmu, "String")
+    assert_refused(lambda: s.fmi2GetReal(s.component, None, 1, None), fmu, "NULL")
+    assert_refused(lambda: s.fmi2GetFMUstate(s.component, None), fmu, "NULL")
+    assert_refused(lambda: s.fmi2SetFMUstate(s.component, None), fmu, "NULL")
+    assert_refused(lambda: s.getDirectionalDerivative([1], [0], [1.0]), fmu, "not supported")
+    assert_refused(lambda: s.setRealInputDerivatives([0], [1], [1.0]), fmu, "canInterpolateInputs")
+    assert_refused(lambda: s.getRealOutputDerivatives([1], [1]), fmu, "maxOutputDerivativeOrder")
+    assert_refused(lambda: s.setDebugLogging(True, ["noSuchCategory"]), fmu, "unknown log category")
+    fmu.step()
+
+
+def test_log_categories(piezo_stage, make_fmu):
+    quiet = make_fmu(piezo_stage, logging_on=False)
+    quiet.initialize()
+    assert [m for m in quiet.messages if m[1] == "logEvents"] == []
+    quiet.slave.setDebugLogging(True, ["logEvents"])
+    quiet.slave.terminate()
+    assert [m for m in quiet.messages if m[1] == "logEvents"]
+    # errors are reported even with logging off, unless logStatusError is switched off
+    quiet.slave.setDebugLogging(False, [])
+    quiet.clear_messages()
+    with pytest.raises(FMICallException):
+        quiet.step()
+    assert quiet.errors() and quiet.messages[-1][1] == "logStatusError"
+    quiet.slave.setDebugLogging(False, ["logStatusError"])
+    quiet.clear_messages()
+    with pytest.raises(FMICallException):
+        quiet.step()
+    assert quiet.messages == []
+
+    loud = make_fmu(piezo_stage, logging_on=True)
+    loud.initialize()
+    assert any("fmi2ExitInitializationMode" in text for _, cat, text in loud.messages if cat == "logEvents")
+
+
+def test_a_step_the_core_refuses_enters_the_error_state(piezo_stage, make_fmu):
+    """v = 1e308 with w0 = 4 overflows u: the core refuses the sample, the glue
+    restores the state of the start of the step and enters Error; getters,
+    SetFMUstate and Reset remain."""
+    fmu = make_fmu(piezo_stage)
+    fmu.initialize({"pi.w0": 4.0})
+    fmu.step()
+    state = fmu.slave.getFMUstate()
+    before = fmu.get_reals(OUTPUTS)
+    fmu.set({"v": 1e308})
+    assert_refused(lambda: fmu.slave.doStep(fmu.time, 5 * H), fmu, "enters state Error")
+    assert fmu.get_reals(OUTPUTS) == before
+    assert_refused(lambda: fmu.slave.doStep(fmu.time, H), fmu, "illegal call sequence", "state Error")
+    assert_refused(lambda: fmu.slave.getFMUstate(), fmu, "illegal call sequence")
+    fmu.slave.setFMUstate(state)
+    fmu.set({"v": 1.0})
+    fmu.step()
+    assert fmu.get("u") == pytest.approx(4.0714)
+    fmu.slave.freeFMUstate(state)
+
+
+@pytest.mark.parametrize("name", ["PiezoStage", "AdaptiveCompoundController"])
+def test_binary_exports_only_the_fmi2_api(fmu_paths, name):
+    import shutil
+    import subprocess
+    import zipfile
+    if shutil.which("nm") is None:
+        pytest.skip("nm not available")
+    with zipfile.ZipFile(fmu_paths[name]) as zf:
+        names = set(zf.namelist())
+        assert {"modelDescription.xml", f"binaries/linux64/{name}.so"} <= names
+    binary = fmu_paths[name].parent.parent / "fmu_binaries" / name / f"{name}.so"
+    listing = subprocess.run(["nm", "-D", "--defined-only", str(binary)], check=True,
+                             capture_output=True, text=True).stdout
+    symbols = {line.split()[-1] for line in listing.splitlines() if line.strip()}
+    assert symbols and all(s.startswith("fmi2") for s in symbols), sorted(symbols)
+    assert {"fmi2Instantiate", "fmi2DoStep", "fmi2SerializeFMUstate", "fmi2GetDerivatives"} <= symbols
