@@ -1,0 +1,215 @@
+"""Independent NumPy reference of the plant model, written from DESIGN.md.
+
+Nothing here calls or transcribes the C core: it is the textbook form of the
+equations in DESIGN.md sections 1 and 2, favouring obviousness over speed.
+
+Timing convention (DESIGN.md section 1, piezo_plant.h): at sample k the plant
+shows u(k-1), x(k), y(k); applying v(k) gives u(k) = P[v](k) and
+x(k+1) = -a1 x(k) - a2 x(k-1) + b1 u(k-n) + b2 u(k-1-n) (n = extra delay).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+# DESIGN.md section 1 / 5 defaults, typed from the document.
+DESIGN_DEFAULTS = {
+    "pi.m": 9, "pi.v_max": 20.0, "pi.w0": 0.3344,
+    "pi.w": [0.0714, 0.0322, 0.0072, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    "tf.a1": -1.3767, "tf.a2": 0.3816, "tf.b1": 0.5954, "tf.b2": -0.5907,
+    "tf.delay": 0, "creep.enabled": True, "creep.k_c": 1.0463, "creep.alpha": 0.0002,
+    "h": 0.0005,
+}
+
+# Table 1 rows (f: k_c, alpha)
+TABLE1 = {1: (1.0463, 0.0002), 10: (1.0497, -0.0085), 20: (1.0386, -0.0077),
+          50: (1.0481, -0.0098), 100: (1.0327, -0.0059), "5/40/80": (1.0172, -0.0023)}
+
+
+# ---------------------------------------------------------------- PI model
+def pi_thresholds(m: int, v_max: float) -> np.ndarray:
+    """r_j = (j-1)/m * v_max, j = 1..m (eq 5)."""
+    return np.arange(m, dtype=float) / m * v_max
+
+
+def play(v, r: float, z0: float = 0.0) -> np.ndarray:
+    """One play operator, eq 3, as a plain loop."""
+    z = np.empty(len(v))
+    prev = z0
+    for k, vk in enumerate(v):
+        prev = max(vk - r, min(vk + r, prev))
+        z[k] = prev
+    return z
+
+
+def pi_forward(v, w0: float, w, r, z0=None):
+    """u(k) = w0 v(k) + sum_j w_j z_{r_j}(k). Returns (u, final play states)."""
+    v = np.asarray(v, dtype=float)
+    w = np.asarray(w, dtype=float)
+    r = np.asarray(r, dtype=float)
+    z0 = np.zeros(len(w)) if z0 is None else np.asarray(z0, dtype=float)
+    Z = np.column_stack([play(v, r[j], z0[j]) for j in range(len(w))]) if len(w) else np.zeros((len(v), 0))
+    u = w0 * v + Z @ w
+    zf = Z[-1].copy() if len(v) else z0.copy()
+    return u, zf
+
+
+def pi_inverse_params(w0: float, w, r):
+    """Corrected eqs 25-27 (DESIGN.md section 2): returns (w0', w', r')."""
+    w = np.asarray(w, dtype=float)
+    r = np.asarray(r, dtype=float)
+    n = len(w)
+    s_incl = np.array([w0 + w[: i + 1].sum() for i in range(n)])   # w0 + sum_{j<=i} w_j
+    s_excl = np.array([w0 + w[:i].sum() for i in range(n)])        # w0 + sum_{j<i} w_j
+    w0_inv = 1.0 / w0
+    w_inv = -w / (s_incl * s_excl)
+    r_inv = np.array([w0 * r[i] + sum(w[j] * (r[i] - r[j]) for j in range(i + 1)) for i in range(n)])
+    return w0_inv, w_inv, r_inv
+
+
+def pi_inverse_initial_states(w0: float, w, z):
+    """Corrected eq 28: z'_i(0) = (w0 + sum_{j<=i} w_j) z_i(0) + sum_{j>i} w_j z_j(0)."""
+    w = np.asarray(w, dtype=float)
+    z = np.asarray(z, dtype=float)
+    n = len(w)
+    return np.array([(w0 + w[: i + 1].sum()) * z[i] + (w[i + 1:] * z[i + 1:]).sum() for i in range(n)])
+
+
+def pi_inverse(u, w0: float, w, r, z0=None):
+    """v = P^-1[u] as the PI model with the inverse parameters; z0: forward play states."""
+    w0i, wi, ri = pi_inverse_params(w0, w, r)
+    zi0 = None if z0 is None else pi_inverse_initial_states(w0, w, z0)
+    v, _ = pi_forward(u, w0i, wi, ri, zi0)
+    return v
+
+
+# ---------------------------------------------------------------- G(z)
+def tf_filter(u, a1, a2, b1, b2, delay: int = 0) -> np.ndarray:
+    """Return x(0..N) for inputs u(0..N-1):
+    x(k+1) = -a1 x(k) - a2 x(k-1) + b1 u(k-delay) + b2 u(k-1-delay), rest before k = 0."""
+    u = np.asarray(u, dtype=float)
+    n = len(u)
+    x = np.zeros(n + 1)
+    def U(i):
+        return u[i] if 0 <= i < n else 0.0
+    for k in range(n):
+        xk = x[k]
+        xkm1 = x[k - 1] if k >= 1 else 0.0
+        x[k + 1] = -a1 * xk - a2 * xkm1 + b1 * U(k - delay) + b2 * U(k - 1 - delay)
+    return x
+
+
+# ---------------------------------------------------------------- G-L creep
+def gl_weights(alpha: float, n: int) -> np.ndarray:
+    """w_0 = 1, w_j = (1 - (alpha+1)/j) w_{j-1} (eq 14)."""
+    j = np.arange(1, n, dtype=float)
+    return np.concatenate([[1.0], np.cumprod(1.0 - (alpha + 1.0) / j)])[:n]
+
+
+def gl_exact(x, alpha: float, gain: float = 1.0) -> np.ndarray:
+    """y(k) = gain sum_{j=0..k} w_j x(k-j), full memory from k = 0 (direct convolution)."""
+    x = np.asarray(x, dtype=float)
+    w = gl_weights(alpha, len(x))
+    return gain * np.convolve(x, w)[: len(x)]
+
+
+def gl_exact_fft(x, alpha: float, gain: float = 1.0) -> np.ndarray:
+    """Same as gl_exact via an FFT convolution (for long runs; rounding ~1e-12 of max|x|)."""
+    x = np.asarray(x, dtype=float)
+    n = len(x)
+    w = gl_weights(alpha, n)
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    y = np.fft.irfft(np.fft.rfft(x, size) * np.fft.rfft(w, size), size)[:n]
+    return gain * y
+
+
+# ---------------------------------------------------------------- plant
+def plant_params(**over) -> dict:
+    p = dict(DESIGN_DEFAULTS)
+    p["pi.w"] = list(p["pi.w"])
+    p.update(over)
+    return p
+
+
+def plant_simulate(v, params: dict | None = None) -> dict:
+    """Reference plant from rest at k = 0.
+
+    Returns a dict of arrays aligned like harness.core.Plant.simulate: row k holds
+    u(k-1) (u of the last applied voltage, 0 at k = 0), x(k) and y(k).
+    """
+    p = plant_params() if params is None else params
+    v = np.asarray(v, dtype=float)
+    m = p["pi.m"]
+    w = np.asarray(p["pi.w"][:m], dtype=float)
+    r = pi_thresholds(m, p["pi.v_max"])
+    u, _ = pi_forward(v, p["pi.w0"], w, r)
+    x = tf_filter(u, p["tf.a1"], p["tf.a2"], p["tf.b1"], p["tf.b2"], p["tf.delay"])[: len(v)]
+    if p["creep.enabled"]:
+        gain = p["creep.k_c"] * p["h"] ** (-p["creep.alpha"])
+        y = gl_exact(x, p["creep.alpha"], gain)
+    else:
+        y = x.copy()
+    u_row = np.concatenate([[0.0], u[:-1]])
+    return {"u": u_row, "x": x, "y": y}
+
+
+def validation_inputs(h: float = 0.0005, duration: float = 10.0) -> dict:
+    """DESIGN.md section 4 model-validation voltages, t = k h."""
+    t = np.arange(int(round(duration / h))) * h
+    out = {f"{f} Hz": 10 * np.sin(2 * np.pi * f * t) + 10 for f in (1, 10, 20, 50, 100)}
+    out["5/40/80 Hz"] = 6 * (np.sin(2 * np.pi * 5 * t) + np.sin(2 * np.pi * 40 * t)
+                             + np.sin(2 * np.pi * 80 * t)) + 18
+    return out
+
+
+def tracking_references():
+    """DESIGN.md section 4 tracking references y_d(t) [um] as functions of t."""
+    def tone(f):
+        return lambda t: 10 * np.sin(2 * np.pi * f * t)
+
+    def mix(fs):
+        return lambda t: 10 * sum(np.sin(2 * np.pi * f * t) for f in fs)
+
+    return {"1 Hz": tone(1), "5 Hz": tone(5), "10 Hz": tone(10), "20 Hz": tone(20),
+            "1/5/10 Hz": mix((1, 5, 10)), "1/10/20 Hz": mix((1, 10, 20))}
+
+
+# ---------------------------------------------------------------- controller pieces
+def diophantine(a, d: int):
+    """1 = A(z^-1) E(z^-1) + z^-d Gd(z^-1) by long division of 1 by A (A monic, powers of
+    z^-1). Returns (E[0..d-1], Gd[0..len(A)-2])."""
+    a = np.asarray(a, dtype=float)
+    rem = np.zeros(d + len(a))
+    rem[0] = 1.0
+    e = np.zeros(d)
+    for i in range(d):
+        e[i] = rem[i]
+        rem[i:i + len(a)] -= e[i] * a
+    g = rem[d:d + len(a) - 1]
+    return e, g
+
+
+def mv_controller(y_ref, y_meas, theta, d: int, lambda_u: float = 0.0):
+    """Minimum-variance law with fixed model theta = (a1, a2, b1, b2) (DESIGN.md section 2):
+    predictor y(k+d) = Gd y(k) + F q(k), F = B E; q(k) chosen so the prediction equals
+    y_ref(k) (with control weighting: q = f0 (y_ref - rest) / (f0^2 + lambda_u))."""
+    a1, a2, b1, b2 = theta
+    e, g = diophantine([1.0, a1, a2], d)
+    f = np.convolve([b1, b2], e)                  # F = B E, deg d
+    n = len(y_ref)
+    q = np.zeros(n)
+    for k in range(n):
+        pred = g[0] * y_meas[k] + (g[1] * y_meas[k - 1] if k >= 1 else 0.0)
+        pred += sum(f[i] * q[k - i] for i in range(1, len(f)) if k - i >= 0)
+        q[k] = f[0] * (y_ref[k] - pred) / (f[0] ** 2 + lambda_u)
+    return q
+
+
+def controller_feedforward(q, params: dict | None = None):
+    """v = P^-1( G-L_{-alpha, h^alpha / k_c}(q) ): inverse creep then inverse PI, from rest."""
+    p = plant_params() if params is None else params
+    m = p["pi.m"]
+    w = np.asarray(p["pi.w"][:m], dtype=float)
+    r = pi_thresholds(m, p["pi.v_max"])
+    alpha, k_c, h = p["creep.alpha"], p["creep.k_c"], p["h"]
+    rr = gl_exact(q, -alpha, h ** alpha / k_c)
+    return pi_inverse(rr, p["pi.w0"], w, r)

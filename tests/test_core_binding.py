@@ -1,0 +1,133 @@
+"""Tests of the cffi binding itself (harness/core.py): struct layout, symbols,
+library lookup, parameter naming."""
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from harness import core  # noqa: E402
+import numpy_reference as ref  # noqa: E402
+
+
+def _struct_layouts():
+    """(typedef name, sizeof, [(field, offset)]) for every typedef cffi knows."""
+    typedefs, _, _ = core.ffi.list_types()
+    out = []
+    for name in sorted(typedefs):
+        t = core.ffi.typeof(name)
+        fields = [(f, c.offset) for f, c in t.fields] if t.kind == "struct" else []
+        out.append((name, core.ffi.sizeof(t), fields))
+    return out
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no system C compiler")
+def test_struct_layout_matches_c_compiler(tmp_path):
+    """Reference: the system C compiler. A generated C program prints sizeof and
+    offsetof of every typedef and field as compiled from the real headers; cffi's
+    layout must agree exactly (a mismatch would corrupt every call)."""
+    layouts = _struct_layouts()
+    assert {"piezo_plant", "piezo_controller", "piezo_gl", "piezo_pi_inverse"} <= {n for n, _, _ in layouts}
+    lines = ['#include <stdio.h>', '#include <stddef.h>', '#include "piezo_core.h"', "int main(void) {"]
+    for name, _, fields in layouts:
+        lines.append(f'  printf("{name} %zu\\n", sizeof({name}));')
+        for f, _ in fields:
+            lines.append(f'  printf("{name}.{f} %zu\\n", offsetof({name}, {f}));')
+    lines += ["  return 0;", "}"]
+    src = tmp_path / "layout.c"
+    src.write_text("\n".join(lines))
+    exe = tmp_path / "layout"
+    subprocess.run(["cc", "-std=c99", "-I", str(core.CORE_DIR), str(src), "-o", str(exe)], check=True)
+    got = dict(l.rsplit(" ", 1) for l in subprocess.run([str(exe)], check=True, capture_output=True,
+                                                         text=True).stdout.splitlines())
+    expected = {}
+    for name, size, fields in layouts:
+        expected[name] = str(size)
+        for f, off in fields:
+            expected[f"{name}.{f}"] = str(off)
+    mismatches = {k: (expected[k], got.get(k)) for k in expected if expected[k] != got.get(k)}
+    assert not mismatches, f"cffi vs C (cffi, C): {mismatches}"
+
+
+def test_every_declared_function_is_exported():
+    """Reference: the header declarations. Every function the cdef declares must
+    resolve in the shared library (dlsym)."""
+    L = core.lib()
+    funcs = [n for n in dir(L) if n.startswith("piezo_")]
+    missing = []
+    for n in funcs:
+        try:
+            getattr(L, n)
+        except AttributeError:
+            missing.append(n)
+    assert len(funcs) >= 29 and not missing, f"missing symbols: {missing}"
+
+
+def test_missing_library_message(tmp_path):
+    """Reference: the documented contract. A missing library raises FileNotFoundError
+    naming the exact cmake command (checked in a fresh interpreter)."""
+    code = ("import sys; sys.path.insert(0, %r)\n"
+            "from harness import core\n"
+            "try:\n    core.lib()\nexcept FileNotFoundError as e:\n    print('FNF', e)\n") % str(core.REPO_ROOT)
+    env = dict(os.environ, PIEZO_CORE_LIB=str(tmp_path / "nope.so"))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.startswith("FNF") and "cmake -S . -B build && cmake --build build" in out
+
+
+def test_defaults_match_design():
+    """Reference: DESIGN.md section 5 defaults typed in tests/numpy_reference.py."""
+    p = core.default_plant_params()
+    d = ref.DESIGN_DEFAULTS
+    for k in ("pi.m", "pi.v_max", "pi.w0", "tf.a1", "tf.a2", "tf.b1", "tf.b2", "tf.delay",
+              "creep.k_c", "creep.alpha", "h"):
+        assert p[k] == pytest.approx(d[k], abs=0), k
+    for j in range(1, 17):
+        want = d["pi.w"][j - 1] if j <= len(d["pi.w"]) else 0.0
+        assert p[f"pi.w[{j}]"] == want, j
+    assert p["creep.enabled"] is True and p["creep.exact"] is False
+    assert p["sensor.resolution"] == 0 and p["sensor.noise_rms"] == 0 and p["sensor.seed"] == 1
+    c = core.default_controller_params()
+    for k in ("pi.m", "pi.v_max", "pi.w0", "tf.a1", "tf.a2", "tf.b1", "tf.b2", "creep.k_c",
+              "creep.alpha", "h"):
+        assert c[k] == p[k], k
+    assert c["mv.delay"] == 0 and c["mv.lambda_u"] == 0 and c["rls.enabled"] is True
+    assert c["rls.forgetting"] == pytest.approx(0.995, abs=1e-12) and c["sat.enabled"] is False
+    assert c["rls.p0"] > 0 and c["rls.trace_max"] >= 4 * c["rls.p0"]
+    assert set(core.PLANT_PARAMETER_NAMES) == set(p) and len(p) == 3 + 16 + 5 + 4 + 3 + 1
+
+
+def test_unknown_parameter_name_lists_valid_names():
+    """Reference: the binding contract (KeyError listing the valid names)."""
+    with pytest.raises(KeyError) as ei:
+        core.Plant({"creep.alfa": 0.1})
+    assert "creep.alpha" in str(ei.value) and "sensor.seed" in str(ei.value)
+    with pytest.raises(KeyError) as ei:
+        core.Controller({"sensor.seed": 3})      # a plant-only name
+    assert "rls.forgetting" in str(ei.value)
+    with pytest.raises(KeyError):
+        core.Plant({"pi.w[17]": 0.0})
+    with pytest.raises(TypeError):
+        core.Plant({"pi.m": 2.5})
+
+
+def test_parameter_round_trip_through_struct():
+    """Reference: the values written. Every FMU name maps to its own struct field
+    (no two names alias one field)."""
+    names = [n for n in core.PLANT_PARAMETER_NAMES]
+    vals = {}
+    for i, n in enumerate(names):
+        kind = core._PLANT_TABLE[n][1]
+        vals[n] = (i % 2 == 0) if kind == "bool" else (i + 1 if kind == "int" else 0.001 * (i + 1))
+    s = core._plant_params_struct(vals)
+    back = core._to_dict(core._PLANT_TABLE, s)
+    assert back == vals
+    names = list(core.CONTROLLER_PARAMETER_NAMES)
+    vals = {}
+    for i, n in enumerate(names):
+        kind = core._CONTROLLER_TABLE[n][1]
+        vals[n] = (i % 2 == 0) if kind == "bool" else (i + 1 if kind == "int" else 0.001 * (i + 1))
+    s = core._controller_params_struct(vals)
+    assert core._to_dict(core._CONTROLLER_TABLE, s) == vals

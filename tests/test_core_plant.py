@@ -1,0 +1,281 @@
+"""The coupled plant model in the C core (piezo_plant.h) through harness.core.Plant."""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from harness import core  # noqa: E402
+import numpy_reference as ref  # noqa: E402
+
+H = 0.0005
+VALIDATION = ref.validation_inputs(H, 10.0)           # 20000 samples each
+ROW = {"1 Hz": 1, "10 Hz": 10, "20 Hz": 20, "50 Hz": 50, "100 Hz": 100, "5/40/80 Hz": "5/40/80"}
+
+
+def row_params(name):
+    k_c, alpha = ref.TABLE1[ROW[name]]
+    return {"creep.k_c": k_c, "creep.alpha": alpha}
+
+
+def max_errs(sim, want):
+    return {f: float(np.max(np.abs(sim[f] - want[f]))) for f in ("u", "x", "y")}
+
+
+@pytest.mark.parametrize("name", list(VALIDATION))
+def test_exact_creep_plant_matches_numpy_reference(name):
+    """Reference: numpy_reference.plant_simulate (PI loop, difference equation, direct
+    G-L convolution with gain k_c h^-alpha), each DESIGN.md section 4 validation input
+    for 10 s (20000 samples) with its Table 1 creep row, creep.exact = true.
+    Tolerance 1e-9 um on u, x and y."""
+    v = VALIDATION[name]
+    p = row_params(name)
+    sim = core.Plant({**p, "creep.exact": True}).simulate(v)
+    want = ref.plant_simulate(v, ref.plant_params(**p))
+    errs = max_errs(sim, want)
+    print(f"\n{name}: max |core - reference| u {errs['u']:.1e}, x {errs['x']:.1e}, y {errs['y']:.1e} um")
+    assert max(errs.values()) <= 1e-9, errs
+    assert np.array_equal(sim["y_meas"], sim["y"])          # sensor off by default
+    assert np.array_equal(sim["time"], np.arange(v.size) * H)
+    assert np.array_equal(sim["v"], v)
+
+
+@pytest.mark.parametrize("name", list(VALIDATION))
+def test_hammerstein_plant_matches_numpy_reference(name):
+    """Reference: numpy_reference.plant_simulate with creep disabled (y = x), every
+    validation input, 10 s; tolerance 1e-9 um on u, x, y; y must equal x exactly."""
+    v = VALIDATION[name]
+    sim = core.Plant({"creep.enabled": False}).simulate(v)
+    want = ref.plant_simulate(v, ref.plant_params(**{"creep.enabled": False}))
+    errs = max_errs(sim, want)
+    assert max(errs.values()) <= 1e-9, errs
+    assert np.array_equal(sim["y"], sim["x"])
+
+
+@pytest.mark.parametrize("name", ["1 Hz", "10 Hz", "5/40/80 Hz"])
+def test_soe_plant_close_to_exact_reference(name):
+    """Reference: numpy_reference.plant_simulate (exact creep). The default SOE creep mode
+    over 10 s must be within 1e-6 um (DESIGN.md: <= 0.001 nm for |alpha| <= 0.01)."""
+    v = VALIDATION[name]
+    p = row_params(name)
+    sim = core.Plant(p).simulate(v)
+    want = ref.plant_simulate(v, ref.plant_params(**p))
+    err = np.max(np.abs(sim["y"] - want["y"]))
+    print(f"\n{name}: SOE plant vs exact reference: {err * 1e3:.2e} nm")
+    assert err <= 1e-6
+
+
+def test_extra_input_delay_matches_reference():
+    """Reference: numpy_reference.plant_simulate with tf.delay = 3 (exact creep, 10 Hz row),
+    5000 samples; tolerance 1e-9 um."""
+    v = VALIDATION["10 Hz"][:5000]
+    p = {**row_params("10 Hz"), "tf.delay": 3}
+    sim = core.Plant({**p, "creep.exact": True}).simulate(v)
+    want = ref.plant_simulate(v, ref.plant_params(**p))
+    assert max(max_errs(sim, want).values()) <= 1e-9
+
+
+def test_exact_history_growth_by_single_steps():
+    """Reference: numpy_reference.plant_simulate. Stepping one sample at a time in exact mode
+    makes the binding grow its history buffer by doubling (1024 -> 16384 doubles); growing must keep
+    the old contents, so y stays within 1e-9 um of the reference over 5000 samples."""
+    v = VALIDATION["20 Hz"][:5000]
+    p = row_params("20 Hz")
+    plant = core.Plant({**p, "creep.exact": True})
+    ys = [plant.output.y]
+    for x in v[:-1]:
+        ys.append(plant.step(x).y)
+    assert plant._hist.capacity >= 5000
+    want = ref.plant_simulate(v, ref.plant_params(**p))
+    assert np.max(np.abs(np.array(ys) - want["y"])) <= 1e-9
+
+
+def test_step_output_semantics():
+    """Reference: piezo_plant.h timing (numpy_reference convention). step(v(k)) returns the
+    outputs of sample k+1 = plant.output; k counts; simulate rows equal a step loop
+    bitwise; reset returns to rest."""
+    v = VALIDATION["10 Hz"][:300]
+    plant = core.Plant({"sensor.noise_rms": 0.01, "sensor.resolution": 0.002})
+    assert plant.k == 0 and plant.output[:3] == (0.0, 0.0, 0.0)
+    rows = []
+    for x in v:
+        rows.append(plant.output)
+        o = plant.step(x)
+        assert o == plant.output
+    assert plant.k == 300
+    assert rows[1].u == pytest.approx(ref.pi_forward(v[:1], 0.3344, ref.DESIGN_DEFAULTS["pi.w"],
+                                                     ref.pi_thresholds(9, 20.0))[0][0], abs=1e-15)
+    plant.reset()
+    assert plant.k == 0
+    sim = plant.simulate(v)
+    for f in ("u", "x", "y", "y_meas"):
+        assert np.array_equal(sim[f], np.array([getattr(r, f) for r in rows])), f
+
+
+def test_simulate_continues_from_current_state():
+    """Reference: one uninterrupted simulate call; two consecutive calls give the same
+    rows bitwise (exact mode), times continue at k h."""
+    v = VALIDATION["50 Hz"][:3000]
+    a = core.Plant({"creep.exact": True}).simulate(v)
+    p = core.Plant({"creep.exact": True})
+    b = np.concatenate([p.simulate(v[:1111]), p.simulate(v[1111:])])
+    assert np.array_equal(a, b)
+
+
+def test_defaults_fact_1hz_span():
+    """Reference: DESIGN.md section 4: with the defaults, v = 10 sin(2 pi t) + 10 V gives
+    y spanning 0.10-8.84 um in the second second (tolerance 0.01 um)."""
+    v = VALIDATION["1 Hz"][:4000]
+    sim = core.Plant().simulate(v)
+    y = sim["y"][2000:4000]
+    print(f"\ndefaults, 1 Hz: y spans {y.min():.4f} .. {y.max():.4f} um")
+    assert y.min() == pytest.approx(0.10, abs=0.01)
+    assert y.max() == pytest.approx(8.84, abs=0.01)
+
+
+def test_defaults_fact_mixed_span():
+    """Reference: DESIGN.md section 4: v = 6(sin 2pi5t + sin 2pi40t + sin 2pi80t) + 18 V
+    (5/40/80 row) gives y spanning 0.9-14.8 um (after the first second; tolerance 0.05 um)."""
+    v = VALIDATION["5/40/80 Hz"]
+    sim = core.Plant(row_params("5/40/80 Hz")).simulate(v)
+    y = sim["y"][2000:]
+    print(f"\n5/40/80 Hz: y spans {y.min():.4f} .. {y.max():.4f} um")
+    assert y.min() == pytest.approx(0.9, abs=0.05)
+    assert y.max() == pytest.approx(14.8, abs=0.05)
+
+
+# ------------------------------------------------------------------ sensor
+def test_sensor_quantization():
+    """Reference: quantize(a) = res * round(a / res) (DESIGN.md section 1) applied with NumPy
+    to the true y; res = 2 nm, no noise, 10 Hz validation input. Tolerance 1e-12 um; every
+    reading is an integer multiple of res and within res/2 of y."""
+    res = 0.002
+    sim = core.Plant({"sensor.resolution": res}).simulate(VALIDATION["10 Hz"][:6000])
+    want = res * np.round(sim["y"] / res)
+    assert np.max(np.abs(sim["y_meas"] - want)) <= 1e-12
+    n = sim["y_meas"] / res
+    assert np.max(np.abs(n - np.round(n))) <= 1e-9
+    assert np.max(np.abs(sim["y_meas"] - sim["y"])) <= res / 2 + 1e-12
+    assert np.unique(sim["y_meas"]).size > 100
+
+
+def noise_run(seed, n=100000, rms=0.5, v=None):
+    plant = core.Plant({"sensor.noise_rms": rms, "sensor.seed": seed})
+    return plant.simulate(np.zeros(n) if v is None else v)
+
+
+def test_sensor_noise_statistics():
+    """Reference: N(0, rms^2) statistics. At rest (y = 0) over 1e5 samples: sample rms within
+    3 % of noise_rms = 0.5 um, mean within 5 sigma/sqrt(N) of 0, |lag-1 autocorrelation|
+    < 0.02 (white)."""
+    sim = noise_run(1)
+    e = sim["y_meas"] - sim["y"]
+    assert np.all(sim["y"] == 0)
+    rms = np.sqrt(np.mean(e ** 2))
+    mean = np.mean(e)
+    rho = np.corrcoef(e[:-1], e[1:])[0, 1]
+    print(f"\nnoise: rms {rms:.5f} (set 0.5), mean {mean:.2e}, lag-1 corr {rho:.2e}")
+    assert abs(rms / 0.5 - 1) <= 0.03
+    assert abs(mean) <= 5 * 0.5 / np.sqrt(e.size)
+    assert abs(rho) < 0.02
+
+
+def test_sensor_seed_reproducibility():
+    """Reference: the seeding contract. Same seed -> bitwise identical sequence (also after
+    reset()); different seed -> different sequence."""
+    v = VALIDATION["1 Hz"][:5000]
+    a = noise_run(7, v=v)["y_meas"]
+    b = noise_run(7, v=v)["y_meas"]
+    c = noise_run(8, v=v)["y_meas"]
+    assert np.array_equal(a, b)
+    assert np.mean(a != c) > 0.99
+    plant = core.Plant({"sensor.noise_rms": 0.5, "sensor.seed": 7})
+    plant.simulate(v)
+    plant.reset()
+    assert np.array_equal(plant.simulate(v)["y_meas"], a)
+
+
+def test_rng_exposed_functions():
+    """Reference: uniform(0,1) statistics: 1e5 draws strictly inside (0, 1), mean 0.5 +-
+    0.005, variance 1/12 within 2 %; normal draws mean 0 +- 0.02, std 1 within 2 %."""
+    L = core.lib()
+    rng = core.ffi.new("piezo_rng *")
+    L.piezo_rng_seed(rng, 12345)
+    u = np.array([L.piezo_rng_uniform(rng) for _ in range(100000)])
+    assert u.min() > 0 and u.max() < 1
+    assert abs(u.mean() - 0.5) < 0.005 and abs(u.var() * 12 - 1) < 0.02
+    g = np.array([L.piezo_rng_normal(rng) for _ in range(100000)])
+    assert abs(g.mean()) < 0.02 and abs(g.std() - 1) < 0.02
+
+
+# ------------------------------------------------------------------ bad input
+BAD = [
+    ("creep.alpha", 1.5), ("creep.alpha", -1.01), ("creep.alpha", float("nan")),
+    ("creep.k_c", 0.0), ("creep.k_c", -1.0), ("creep.k_c", float("inf")),
+    ("pi.w0", 0.0), ("pi.w0", -0.3),
+    ("pi.w[2]", -0.01), ("pi.w[1]", -1e-9), ("pi.w[9]", float("nan")),
+    ("pi.m", 0), ("pi.m", 17), ("pi.m", -3),
+    ("pi.v_max", 0.0), ("pi.v_max", -5.0),
+    ("h", 0.0), ("h", -0.0005), ("h", float("nan")),
+    ("tf.delay", -1), ("tf.delay", 33),
+    ("sensor.resolution", -0.002), ("sensor.noise_rms", -1e-3),
+    ("sensor.resolution", float("inf")), ("sensor.noise_rms", float("nan")),
+]
+
+
+@pytest.mark.parametrize("name,value", BAD, ids=[f"{n}={v}" for n, v in BAD])
+def test_invalid_parameter_refused(name, value):
+    """Reference: DESIGN.md sections 1/5 valid ranges. CoreParameterError naming exactly the
+    FMU variable, carrying the value and a range, with the documented message format."""
+    with pytest.raises(core.CoreParameterError) as ei:
+        core.Plant({name: value})
+    e = ei.value
+    assert e.parameter == name
+    assert e.value == value or (np.isnan(value) and np.isnan(e.value))
+    assert e.valid_range.strip()
+    assert str(e).startswith(f"{name} = ") and str(e).endswith(f"is out of range: valid range {e.valid_range}")
+    assert isinstance(e, ValueError)
+
+
+def test_unstable_a_refused_in_plant():
+    """Reference: numpy.roots: tf.a1 = -1.9, tf.a2 = 1.05 has |poles| > 1."""
+    assert np.max(np.abs(np.roots([1, -1.9, 1.05]))) > 1
+    with pytest.raises(core.CoreParameterError) as ei:
+        core.Plant({"tf.a1": -1.9, "tf.a2": 1.05})
+    assert ei.value.parameter in ("tf.a1", "tf.a2")
+
+
+def test_message_format_example():
+    """Reference: the brief's example message."""
+    with pytest.raises(core.CoreParameterError) as ei:
+        core.Plant({"creep.alpha": 2})
+    assert str(ei.value) == f"creep.alpha = 2 is out of range: valid range {ei.value.valid_range}"
+    assert ei.value.valid_range.replace(" ", "") == "[-1,1]"
+
+
+@pytest.mark.parametrize("exact", [False, True], ids=["soe", "exact"])
+def test_nonfinite_input_refused_state_unchanged(exact):
+    """Reference: an uninterrupted run (same parameters, noise on). NaN/+Inf/-Inf are refused
+    with CoreInputError at several samples; the outputs and k do not change at the refusal
+    and the continuation (incl. the noise sequence) is bitwise identical."""
+    prm = {"creep.exact": exact, "sensor.noise_rms": 0.003, "sensor.resolution": 0.002,
+           "creep.alpha": -0.0085, "creep.k_c": 1.0497}
+    v = VALIDATION["20 Hz"][:2500]
+    a = core.Plant(prm).simulate(v)
+    plant = core.Plant(prm)
+    rows = []
+    for k, x in enumerate(v):
+        rows.append(tuple(plant.output))
+        if k in (0, 1, 1023, 1024, 2047, 2400):
+            for bad in (np.nan, np.inf, -np.inf):
+                before = (plant.k, tuple(plant.output))
+                with pytest.raises(core.CoreInputError):
+                    plant.step(bad)
+                assert (plant.k, tuple(plant.output)) == before
+        plant.step(x)
+    rows = np.array(rows)
+    for i, f in enumerate(("u", "x", "y", "y_meas")):
+        assert np.array_equal(rows[:, i], a[f]), f
+    with pytest.raises(core.CoreInputError):
+        core.Plant(prm).simulate(np.array([1.0, np.nan, 2.0]))
