@@ -1,0 +1,69 @@
+"""Co-simulation harness for the piezo stage FMUs (DESIGN.md sections 3-4).
+
+Public API
+----------
+Simulation
+    :func:`simulate_closed_loop` (FMUs through fmpy), :func:`simulate_open_loop`,
+    :func:`simulate_closed_loop_core` / :func:`simulate_open_loop_core` (C core, no FMI).
+Scenarios
+    :func:`load_scenarios`, :func:`load_scenario_file`, :func:`get_scenario`,
+    :func:`list_scenarios`, :class:`Scenario`, :class:`Signal`.
+Metrics
+    :func:`compute_metrics`, :func:`rms_error`, :func:`relative_error`.
+Identification
+    :func:`identify_pi`, :func:`identify_transfer_function`.
+Reports
+    :func:`run_all`, :func:`run_scenario`.
+
+Heavy dependencies (fmpy, cffi, matplotlib) are imported on first use.
+"""
+
+from .cosim import (
+    FMUError,
+    FMUInitializationError,
+    UnknownParameterError,
+    simulate_closed_loop,
+    simulate_open_loop,
+)
+from .core_loop import simulate_closed_loop_core, simulate_open_loop_core
+from .identification import identify_pi, identify_transfer_function
+from .metrics import Metrics, compute_metrics, relative_error, rms_error
+from .report import run_all, run_scenario
+from .scenarios import (
+    Scenario,
+    ScenarioError,
+    ScenarioFileError,
+    Signal,
+    UnknownScenarioError,
+    get_scenario,
+    list_scenarios,
+    load_scenario_file,
+    load_scenarios,
+)
+
+__all__ = [
+    "simulate_closed_loop",
+    "simulate_open_loop",
+    "simulate_closed_loop_core",
+    "simulate_open_loop_core",
+    "load_scenarios",
+    "load_scenario_file",
+    "get_scenario",
+    "list_scenarios",
+    "Scenario",
+    "Signal",
+    "compute_metrics",
+    "rms_error",
+    "relative_error",
+    "Metrics",
+    "identify_pi",
+    "identify_transfer_function",
+    "run_all",
+    "run_scenario",
+    "FMUError",
+    "FMUInitializationError",
+    "UnknownParameterError",
+    "ScenarioError",
+    "ScenarioFileError",
+    "UnknownScenarioError",
+]

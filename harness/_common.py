@@ -1,0 +1,130 @@
+"""Pieces shared by the fmpy master (:mod:`harness.cosim`) and the core loop
+(:mod:`harness.core_loop`), so that both run exactly the same experiment."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .scenarios import Scenario, get_scenario
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+BUILD_COMMAND = "cmake -S . -B build && cmake --build build"
+
+MASTERS = ("gauss-seidel", "jacobi")
+
+CLOSED_LOOP_FIELDS = ("time", "y_d", "y", "y_meas", "v", "q", "a1", "a2", "b1", "b2", "pred_error")
+CLOSED_LOOP_DTYPE = np.dtype([(f, "f8") for f in CLOSED_LOOP_FIELDS])
+OPEN_LOOP_FIELDS = ("time", "v", "u", "x", "y", "y_meas")
+OPEN_LOOP_DTYPE = np.dtype([(f, "f8") for f in OPEN_LOOP_FIELDS])
+
+
+def as_structured(rows, dtype):
+    """View a C-contiguous (n, n_fields) float64 array as a structured array of n rows."""
+    rows = np.ascontiguousarray(rows, dtype=np.float64)
+    return rows.view(dtype).reshape(rows.shape[0])
+
+
+def normalize_master(master):
+    """Return the canonical master name or raise ValueError."""
+    key = str(master).lower().replace("_", "-")
+    if key in ("gs", "gauss-seidel", "gaussseidel", "seidel"):
+        return "gauss-seidel"
+    if key == "jacobi":
+        return "jacobi"
+    raise ValueError(f"master must be one of {MASTERS}, got {master!r}")
+
+
+@dataclass(frozen=True)
+class ClosedLoopSetup:
+    """Everything a closed-loop run needs, resolved from a scenario and options.
+
+    Attributes
+    ----------
+    scenario : Scenario
+    n : int
+        Number of samples (rows).
+    h : float
+        Sample period [s].
+    time : ndarray
+        ``k h`` for ``k = 0 .. n-1``.
+    y_d : ndarray
+        Desired displacement on the grid, ``y_d(k)``.
+    y_ref : list of float
+        Controller input per sample: ``y_d(k + d)`` with preview, ``y_d(k)`` without.
+    d : int
+        Loop delay of the controller's model, ``1 + mv.delay``.
+    master : str
+        ``"gauss-seidel"`` or ``"jacobi"``.
+    plant_params, controller_params : dict
+        Effective parameter overrides by FMU variable name.
+    """
+
+    scenario: Scenario
+    n: int
+    h: float
+    time: np.ndarray
+    y_d: np.ndarray
+    y_ref: list
+    d: int
+    master: str
+    plant_params: dict
+    controller_params: dict
+
+
+def prepare_closed_loop(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
+                        plant_params=None, controller_params=None, duration=None,
+                        registry=None):
+    """Resolve the scenario and options of a closed-loop run (see ``simulate_closed_loop``)."""
+    sc = get_scenario(scenario, registry)
+    if sc.kind != "tracking":
+        raise ValueError(f"scenario '{sc.name}' is a {sc.kind} scenario; "
+                         f"a closed-loop run needs a tracking scenario")
+    master = normalize_master(master)
+    h = float(sc.step_size)
+    if duration is None:
+        n = sc.n_samples
+    else:
+        if not (math.isfinite(duration) and duration > 0):
+            raise ValueError(f"duration must be a positive number, got {duration!r}")
+        n = int(round(float(duration) / h))
+        if n < 1 or abs(n * h - duration) > 1e-9 * max(1.0, duration):
+            raise ValueError(f"duration {duration!r} s is not a whole number of steps of {h:g} s")
+
+    p = dict(sc.plant)
+    p.update(plant_params or {})
+    p.setdefault("h", h)
+    c = dict(sc.controller)
+    c.update(controller_params or {})
+    c.setdefault("h", h)
+    if adaptation is not None:
+        c["rls.enabled"] = bool(adaptation)
+    extra = int(c.get("mv.delay", 0))
+    if master == "jacobi":
+        # A Jacobi master adds one sample of loop delay (DESIGN.md section 3).
+        extra += 1
+        c["mv.delay"] = extra
+    d = 1 + extra
+
+    time = np.arange(n, dtype=float) * h
+    ext = np.arange(n + d, dtype=float) * h
+    y_d_ext = sc.signal.evaluate(ext)
+    y_d = y_d_ext[:n].copy()
+    y_ref = (y_d_ext[d:d + n] if preview else y_d).tolist()
+    return ClosedLoopSetup(sc, n, h, time, y_d, y_ref, d, master, p, c)
+
+
+def open_loop_grid(v_signal, step_size):
+    """Validate an open-loop voltage sequence; return (v ndarray, time ndarray)."""
+    v = np.asarray(v_signal, dtype=float)
+    if v.ndim != 1 or v.size == 0:
+        raise ValueError(f"v_signal must be a non-empty 1-D sequence, got shape {v.shape}")
+    if not np.all(np.isfinite(v)):
+        k = int(np.flatnonzero(~np.isfinite(v))[0])
+        raise ValueError(f"v_signal[{k}] = {v[k]!r} is not finite")
+    if not (math.isfinite(step_size) and step_size > 0):
+        raise ValueError(f"step_size must be a positive number, got {step_size!r}")
+    return v, np.arange(v.size, dtype=float) * float(step_size)

@@ -1,0 +1,116 @@
+"""Command line: ``python -m harness [all|run SCENARIO|list] [options]``.
+
+* ``python -m harness`` (or ``all``): every tracking condition and the
+  validation inputs, tables next to the paper's, CSV/Markdown/PNG under ``--out``.
+* ``python -m harness run SCENARIO``: one scenario.
+* ``python -m harness list``: the known scenarios (with ``--scenario-file``, also the user's).
+
+User errors (unknown scenario, missing FMU, malformed scenario file or CSV,
+bad parameter) end with exit code 2 and a one-line message; a failing FMI
+call ends with exit code 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["build_parser", "main"]
+
+PROG = "python -m harness"
+COMMANDS = ("all", "run", "list")
+
+
+def build_parser():
+    """Return the argument parser of the command line."""
+    p = argparse.ArgumentParser(
+        prog=PROG,
+        description="Co-simulate the PiezoStage and AdaptiveCompoundController FMUs and "
+                    "compare with the paper's Tables 2-5.",
+    )
+    p.add_argument("command", nargs="?", default="all", metavar="{all,run,list}",
+                   help="all (default): run everything; run SCENARIO: one scenario; "
+                        "list: known scenarios")
+    p.add_argument("scenario", nargs="?", help="scenario name for 'run'")
+    p.add_argument("--out", default="out", metavar="DIR", help="output folder (default: out/)")
+    p.add_argument("--no-adaptation", action="store_true", help="switch the controller's RLS off")
+    p.add_argument("--no-preview", action="store_true",
+                   help="feed y_d(k) instead of y_d(k+d) (expect a lag error)")
+    p.add_argument("--jacobi", action="store_true",
+                   help="Jacobi master (one more sample of loop delay; mv.delay raised by 1)")
+    p.add_argument("--fmu-dir", metavar="DIR",
+                   help="folder of PiezoStage.fmu and AdaptiveCompoundController.fmu "
+                        "(default: build/fmus)")
+    p.add_argument("--scenario-file", action="append", default=[], metavar="FILE",
+                   help="TOML file of extra scenarios (repeatable)")
+    p.add_argument("--no-plots", action="store_true", help="do not write PNG figures")
+    p.add_argument("--backend", choices=("fmpy", "core"), default="fmpy",
+                   help="fmpy: run the FMUs (default); core: the C core via cffi")
+    return p
+
+
+def _fail(message, code=2):
+    sys.stderr.write(f"{PROG}: error: {message}\n")
+    return code
+
+
+def main(argv=None):
+    """Run the command line; return the exit code."""
+    parser = build_parser()
+    args = parser.parse_intermixed_args(argv)
+    if args.command not in COMMANDS:
+        return _fail(f"unknown command '{args.command}'; use one of: all, run SCENARIO, list")
+    if args.command == "run" and not args.scenario:
+        return _fail("'run' needs a scenario name (see: python -m harness list)")
+    if args.command != "run" and args.scenario:
+        return _fail(f"unexpected argument '{args.scenario}' for '{args.command}'")
+
+    from .scenarios import ScenarioError, load_scenarios
+    from .cosim import FMUError, UnknownParameterError
+
+    adaptation = False if args.no_adaptation else None
+    preview = not args.no_preview
+    master = "jacobi" if args.jacobi else "gauss-seidel"
+    try:
+        registry = load_scenarios(args.scenario_file)
+        if args.command == "list":
+            _list(registry)
+            return 0
+        from . import report
+        if args.command == "run":
+            report.run_scenario(args.scenario, args.out, adaptation=adaptation, preview=preview,
+                                master=master, fmu_dir=args.fmu_dir, plots=not args.no_plots,
+                                registry=registry, backend=args.backend)
+        else:
+            builtin = load_scenarios()
+            extra = [n for n in registry if n not in builtin or registry[n] is not builtin[n]]
+            report.run_all(args.out, adaptation=adaptation, preview=preview, master=master,
+                           fmu_dir=args.fmu_dir, plots=not args.no_plots, backend=args.backend,
+                           registry=registry, extra_scenarios=extra)
+        return 0
+    except (ScenarioError, UnknownParameterError, FileNotFoundError) as exc:
+        return _fail(_one_line(exc))
+    except FMUError as exc:
+        return _fail(_one_line(exc), 2 if isinstance(exc, ValueError) else 1)
+    except (ValueError, TypeError, KeyError) as exc:
+        return _fail(_one_line(exc))
+    except KeyboardInterrupt:
+        return _fail("interrupted", 130)
+
+
+def _one_line(exc):
+    text = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
+    return " ".join(text.split())
+
+
+def _list(registry):
+    kinds = {"tracking": "Tracking (closed loop, reference y_d in um)",
+             "validation": "Validation (plant alone, input v in V)"}
+    for kind, title in kinds.items():
+        names = [n for n, s in registry.items() if s.kind == kind]
+        if not names:
+            continue
+        print(title)
+        width = max(len(n) for n in names)
+        for n in names:
+            print(f"  {n:<{width}}  {registry[n].description}")

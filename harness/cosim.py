@@ -1,0 +1,538 @@
+"""FMI 2.0 co-simulation master for the PiezoStage and AdaptiveCompoundController FMUs (fmpy).
+
+Semantics (DESIGN.md section 3): both FMUs step on the grid ``t_k = k h``.
+PiezoStage has no direct feedthrough: at ``t_k`` it reports ``y(k)``,
+``y_meas(k)``, ``x(k)`` and ``u = u(k-1)``; the ``v`` set at ``t_k`` acts over
+``[t_k, t_k + h)``.  The controller has direct feedthrough: after its inputs
+are set, ``v`` is the control of sample k, committed by ``doStep``.
+
+Gauss-Seidel master, per sample::
+
+    plant.y_meas(k) -> controller.(y_ref, y_meas) -> controller.v(k)
+                    -> plant.v -> doStep(plant), doStep(controller)
+
+Jacobi master: both FMUs only use values available at the previous
+communication point, so the plant receives the controller's ``v`` one sample
+later (``v(k-1)`` over ``[t_k, t_k + h)``).  The loop then has one more sample
+of delay and the controller's ``mv.delay`` is raised by one (d = 2).
+
+Each FMU file is extracted once per process (cache keyed by path, mtime and
+size); instances are always terminated and freed, also when a run fails.
+"""
+
+from __future__ import annotations
+
+import atexit
+import ctypes
+import difflib
+import os
+from pathlib import Path
+import shutil
+import tempfile
+
+import numpy as np
+
+from ._common import (
+    BUILD_COMMAND,
+    CLOSED_LOOP_DTYPE,
+    CLOSED_LOOP_FIELDS,
+    OPEN_LOOP_DTYPE,
+    REPO_ROOT,
+    as_structured,
+    open_loop_grid,
+    prepare_closed_loop,
+)
+
+__all__ = [
+    "PLANT_MODEL",
+    "CONTROLLER_MODEL",
+    "FMUError",
+    "FMUInitializationError",
+    "UnknownParameterError",
+    "default_fmu_dir",
+    "fmu_path",
+    "simulate_closed_loop",
+    "simulate_open_loop",
+]
+
+PLANT_MODEL = "PiezoStage"
+CONTROLLER_MODEL = "AdaptiveCompoundController"
+
+_PLANT_OUTPUTS = ("u", "x", "y", "y_meas")
+_CTRL_OUTPUTS = ("v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error")
+
+
+class FMUError(RuntimeError):
+    """An FMI call failed; the message carries the FMU's log messages."""
+
+
+class FMUInitializationError(FMUError, ValueError):
+    """The FMU refused its parameters (instantiation or initialization failed)."""
+
+
+class UnknownParameterError(KeyError):
+    """A parameter name is not a parameter of the FMU; the message lists the valid names."""
+
+    def __str__(self):  # KeyError would quote the message
+        return self.args[0]
+
+
+def default_fmu_dir():
+    """Folder of the FMUs: ``$PIEZO_FMU_DIR`` or ``<repo>/build/fmus``."""
+    env = os.environ.get("PIEZO_FMU_DIR")
+    return Path(env) if env else REPO_ROOT / "build" / "fmus"
+
+
+def fmu_path(model, fmu_dir=None):
+    """Path of a model's FMU, checked to exist.
+
+    Parameters
+    ----------
+    model : str
+        ``"PiezoStage"`` or ``"AdaptiveCompoundController"``.
+    fmu_dir : str or Path, optional
+        Defaults to :func:`default_fmu_dir`.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    FileNotFoundError
+        With the command that builds the FMUs.
+    """
+    path = Path(fmu_dir if fmu_dir is not None else default_fmu_dir()) / f"{model}.fmu"
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"FMU not found: {path}; build it with `{BUILD_COMMAND}` in {REPO_ROOT}")
+    return path
+
+
+# ---------------------------------------------------------------------------
+# extraction cache
+# ---------------------------------------------------------------------------
+
+class _FMUInfo:
+    """An extracted FMU: model description, unzip folder, variables by name."""
+
+    __slots__ = ("path", "md", "unzipdir", "variables", "model")
+
+    def __init__(self, path, md, unzipdir):
+        self.path = path
+        self.md = md
+        self.unzipdir = unzipdir
+        self.variables = {v.name: v for v in md.modelVariables}
+        self.model = md.coSimulation.modelIdentifier
+
+    def vr(self, name):
+        try:
+            return self.variables[name].valueReference
+        except KeyError:
+            raise FMUError(f"{self.path.name} has no variable '{name}' "
+                           f"(DESIGN.md section 5 names)") from None
+
+
+_EXTRACTED = {}
+_TEMP_DIRS = []
+
+
+def _cleanup():
+    for d in _TEMP_DIRS:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+atexit.register(_cleanup)
+
+
+def _load(path):
+    import fmpy
+
+    st = path.stat()
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    info = _EXTRACTED.get(key)
+    if info is None:
+        md = fmpy.read_model_description(str(path))
+        if md.fmiVersion != "2.0" or md.coSimulation is None:
+            raise FMUError(f"{path} is not an FMI 2.0 Co-Simulation FMU")
+        unzipdir = tempfile.mkdtemp(prefix=f"harness_{path.stem}_")
+        _TEMP_DIRS.append(unzipdir)
+        fmpy.extract(str(path), unzipdir=unzipdir)
+        info = _FMUInfo(path, md, unzipdir)
+        _EXTRACTED[key] = info
+    return info
+
+
+# ---------------------------------------------------------------------------
+# logging: route the FMU's messages of our instances into per-instance lists
+# ---------------------------------------------------------------------------
+
+_LOGGER = None
+_LOGS = {}          # instance name -> list of messages
+_COUNTER = [0]
+
+
+def _log_message(component, instance_name, status, category, message):
+    name = instance_name.decode("utf-8", "replace") if instance_name else ""
+    text = message.decode("utf-8", "replace") if message else ""
+    sink = _LOGS.get(name)
+    if sink is not None:
+        labels = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+        label = labels[status] if 0 <= status < len(labels) else str(status)
+        if len(sink) < 200:
+            sink.append(f"[{label}] {text}")
+    else:  # somebody else's FMU in this process: behave like fmpy's default
+        from fmpy.fmi1 import printLogMessage
+        printLogMessage(component, instance_name, status, category, message)
+
+
+def _callbacks():
+    """A fresh callback structure whose (formatted) log messages reach :func:`_log_message`.
+
+    fmpy's native proxy formats the variadic message and forwards it to one
+    process-wide logger, the one of the structure it was last installed on;
+    installing it on a fresh structure per instance makes sure our instances
+    log to us even if other code in the process installed its own logger.
+    """
+    global _LOGGER
+    from fmpy import calloc, free
+    from fmpy import fmi2
+
+    if _LOGGER is None:
+        _LOGGER = fmi2.fmi2CallbackLoggerTYPE(_log_message)
+    cb = fmi2.fmi2CallbackFunctions()
+    cb.logger = _LOGGER
+    cb.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(calloc)
+    cb.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(free)
+    try:
+        from fmpy.logging import addLoggerProxy
+        addLoggerProxy(ctypes.byref(cb))
+    except Exception:  # pragma: no cover - the raw format string is logged then
+        pass
+    return cb
+
+
+# ---------------------------------------------------------------------------
+# one FMU instance
+# ---------------------------------------------------------------------------
+
+class _Instance:
+    """Thin lifetime wrapper of an fmpy FMU2Slave."""
+
+    def __init__(self, info, role):
+        from fmpy.fmi2 import FMU2Slave
+
+        _COUNTER[0] += 1
+        self.info = info
+        self.name = f"harness-{role}-{_COUNTER[0]}"
+        self.log = _LOGS.setdefault(self.name, [])
+        self.fmu = None
+        self.instantiated = False
+        self.initialized = False
+        self.fmu = FMU2Slave(guid=info.md.guid, unzipDirectory=info.unzipdir,
+                             modelIdentifier=info.model, instanceName=self.name)
+        try:
+            self.callbacks = _callbacks()   # kept alive with the instance
+            self.fmu.instantiate(callbacks=self.callbacks, loggingOn=False)
+        except Exception as exc:
+            self._release_library()
+            raise FMUInitializationError(self._message(f"instantiating {info.path.name}", exc)) from None
+        self.instantiated = True
+
+    def _message(self, what, exc):
+        detail = "; ".join(self.log[-5:]) or str(exc)
+        return f"{self.info.model}: {what} failed: {detail}"
+
+    def set_parameters(self, params):
+        """Set parameters by name, typed from the model description."""
+        reals, ints, bools = ([], []), ([], []), ([], [])
+        for name, value in params.items():
+            var = self.info.variables.get(name)
+            if var is None or var.causality != "parameter":
+                valid = [n for n, v in self.info.variables.items() if v.causality == "parameter"]
+                close = difflib.get_close_matches(name, valid, n=3)
+                hint = f" (did you mean {', '.join(close)}?)" if close else ""
+                raise UnknownParameterError(
+                    f"'{name}' is not a parameter of {self.info.model}{hint}; "
+                    f"parameters: {', '.join(valid)}")
+            if var.type == "Real":
+                if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
+                    raise TypeError(f"{self.info.model} parameter {name} is Real, got {value!r}")
+                reals[0].append(var.valueReference)
+                reals[1].append(float(value))
+            elif var.type == "Integer":
+                if isinstance(value, (bool, np.bool_)) or not float(value).is_integer():
+                    raise TypeError(f"{self.info.model} parameter {name} is Integer, got {value!r}")
+                ints[0].append(var.valueReference)
+                ints[1].append(int(value))
+            elif var.type == "Boolean":
+                if not (isinstance(value, (bool, np.bool_)) or value in (0, 1)):
+                    raise TypeError(f"{self.info.model} parameter {name} is Boolean, got {value!r}")
+                bools[0].append(var.valueReference)
+                bools[1].append(bool(value))
+            else:
+                raise TypeError(f"{self.info.model} parameter {name} has unsupported type {var.type}")
+        try:
+            if reals[0]:
+                self.fmu.setReal(*reals)
+            if ints[0]:
+                self.fmu.setInteger(*ints)
+            if bools[0]:
+                self.fmu.setBoolean(*bools)
+        except Exception as exc:
+            raise FMUInitializationError(self._message("setting parameters", exc)) from None
+
+    def initialize(self, params, stop_time):
+        try:
+            self.fmu.setupExperiment(startTime=0.0, stopTime=stop_time)
+        except Exception as exc:
+            raise FMUInitializationError(self._message("fmi2SetupExperiment", exc)) from None
+        self.set_parameters(params)
+        try:
+            self.fmu.enterInitializationMode()
+            self.fmu.exitInitializationMode()
+        except Exception as exc:
+            raise FMUInitializationError(self._message("initialization", exc)) from None
+        self.initialized = True
+
+    def _release_library(self):
+        try:
+            self.fmu.freeLibrary()
+        except Exception:
+            pass
+
+    def close(self):
+        """Terminate (if initialized) and free; never raises."""
+        if self.fmu is None:
+            return
+        try:
+            if self.initialized:
+                try:
+                    self.fmu.terminate()
+                except Exception:
+                    pass
+            if self.instantiated:
+                try:
+                    self.fmu.freeInstance()   # also unloads the library
+                except Exception:
+                    self._release_library()
+        finally:
+            self.fmu = None
+            _LOGS.pop(self.name, None)
+
+
+def _vr_array(values):
+    from fmpy.fmi2 import fmi2ValueReference
+
+    return (fmi2ValueReference * len(values))(*values)
+
+
+def _step_error(inst, what, k, h, exc):
+    return FMUError(inst._message(f"{what} at t = {k * h:.6g} s (sample {k})", exc))
+
+
+# ---------------------------------------------------------------------------
+# public runs
+# ---------------------------------------------------------------------------
+
+def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
+                         plant_params=None, controller_params=None, fmu_dir=None,
+                         duration=None, registry=None):
+    """Run a tracking scenario through both FMUs with fmpy.
+
+    Parameters
+    ----------
+    scenario : str or Scenario
+        A tracking scenario or its name (see :func:`harness.list_scenarios`).
+    adaptation : bool, optional
+        Force the controller's RLS on (True) or off (False); ``None`` keeps the
+        scenario's / FMU's setting (on by default).
+    preview : bool
+        Feed the controller ``y_ref = y_d(k + d)`` (True, DESIGN.md section 2)
+        or ``y_d(k)`` (False; gives a lag error).
+    master : {"gauss-seidel", "jacobi"}
+        Co-simulation algorithm.  ``"jacobi"`` raises the controller's
+        ``mv.delay`` by one.
+    plant_params, controller_params : dict, optional
+        Extra parameter overrides by FMU variable name (after the scenario's).
+    fmu_dir : str or Path, optional
+        Folder holding ``PiezoStage.fmu`` and ``AdaptiveCompoundController.fmu``
+        (default ``build/fmus`` or ``$PIEZO_FMU_DIR``).
+    duration : float, optional
+        Override the scenario's duration [s].
+    registry : dict, optional
+        Scenario registry for name lookup (default: built-in scenarios).
+
+    Returns
+    -------
+    ndarray
+        Structured array, one row per sample k, fields ``time, y_d, y, y_meas,
+        v, q, a1, a2, b1, b2, pred_error`` (``y``/``y_meas`` at ``t_k``; ``v``
+        the controller's output of sample k; ``a1..b2`` the estimates it used).
+
+    Raises
+    ------
+    FileNotFoundError
+        An FMU is missing (the message says how to build it).
+    UnknownParameterError
+        A parameter name is not a parameter of the FMU.
+    FMUInitializationError
+        The FMU refused a parameter value.
+    FMUError
+        An FMI call failed during the run.
+    """
+    setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
+                                plant_params=plant_params, controller_params=controller_params,
+                                duration=duration, registry=registry)
+    p_info = _load(fmu_path(PLANT_MODEL, fmu_dir))
+    c_info = _load(fmu_path(CONTROLLER_MODEL, fmu_dir))
+    n, h = setup.n, setup.h
+    rows = np.zeros((n, len(CLOSED_LOOP_FIELDS)))
+    rows[:, 0] = setup.time
+    rows[:, 1] = setup.y_d
+
+    plant = ctrl = None
+    try:
+        plant = _Instance(p_info, "plant")
+        ctrl = _Instance(c_info, "controller")
+        stop = n * h
+        plant.initialize(setup.plant_params, stop)
+        ctrl.initialize(setup.controller_params, stop)
+        _run_closed_loop(plant, ctrl, setup, rows)
+    finally:
+        if ctrl is not None:
+            ctrl.close()
+        if plant is not None:
+            plant.close()
+    return as_structured(rows, CLOSED_LOOP_DTYPE)
+
+
+def _run_closed_loop(plant, ctrl, setup, rows):
+    from fmpy.fmi2 import fmi2Real
+
+    pf, cf = plant.fmu, ctrl.fmu
+    pc, cc = pf.component, cf.component
+    p_get, p_set, p_step = pf.fmi2GetReal, pf.fmi2SetReal, pf.fmi2DoStep
+    c_get, c_set, c_step = cf.fmi2GetReal, cf.fmi2SetReal, cf.fmi2DoStep
+    pi, ci = plant.info, ctrl.info
+
+    vr_p_out = _vr_array([pi.vr("y"), pi.vr("y_meas")])
+    vr_p_in = _vr_array([pi.vr("v")])
+    vr_c_in = _vr_array([ci.vr("y_ref"), ci.vr("y_meas")])
+    vr_c_out = _vr_array([ci.vr(name) for name in _CTRL_OUTPUTS])
+    p_out = (fmi2Real * 2)()
+    c_in = (fmi2Real * 2)()
+    c_out = (fmi2Real * len(_CTRL_OUTPUTS))()
+    v_held = (fmi2Real * 1)(0.0)
+    np_p_out = np.ctypeslib.as_array(p_out)
+    np_c_out = np.ctypeslib.as_array(c_out)
+    n_c = len(_CTRL_OUTPUTS)
+
+    n, h = setup.n, setup.h
+    y_ref = setup.y_ref
+    times = setup.time.tolist()
+    jacobi = setup.master == "jacobi"
+    k = 0
+    stage = "fmi2GetReal"
+    inst = plant
+    try:
+        for k in range(n):
+            t = times[k]
+            inst, stage = plant, "fmi2GetReal"
+            p_get(pc, vr_p_out, 2, p_out)                  # y(k), y_meas(k)
+            c_in[0] = y_ref[k]
+            c_in[1] = p_out[1]
+            if jacobi:
+                inst, stage = plant, "fmi2SetReal"
+                p_set(pc, vr_p_in, 1, v_held)              # v(k-1): previous point's output
+            inst, stage = ctrl, "fmi2SetReal"
+            c_set(cc, vr_c_in, 2, c_in)
+            stage = "fmi2GetReal"
+            c_get(cc, vr_c_out, n_c, c_out)                # v(k) (not committed yet)
+            if jacobi:
+                v_held[0] = c_out[0]
+            else:
+                inst, stage = plant, "fmi2SetReal"
+                p_set(pc, vr_p_in, 1, c_out)               # v is c_out[0]
+            inst, stage = plant, "fmi2DoStep"
+            p_step(pc, t, h, 1)
+            inst = ctrl
+            c_step(cc, t, h, 1)
+            rows[k, 2:4] = np_p_out
+            rows[k, 4:] = np_c_out
+    except Exception as exc:
+        raise _step_error(inst, stage, k, h, exc) from None
+
+
+def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None):
+    """Drive the PiezoStage FMU alone with a voltage sequence.
+
+    Parameters
+    ----------
+    plant_params : dict or None
+        Parameter overrides by FMU variable name (e.g. ``{"creep.enabled": False}``).
+    v_signal : array_like, shape (N,)
+        Voltage ``v(k)`` [V] applied over ``[t_k, t_k + h)``.
+    step_size : float
+        Sample period h [s] (also set as the FMU's ``h`` unless overridden).
+    fmu_dir : str or Path, optional
+        Folder holding ``PiezoStage.fmu``.
+
+    Returns
+    -------
+    ndarray
+        Structured array of N rows, fields ``time, v, u, x, y, y_meas``.
+        Row k holds ``v(k)``, the hysteresis output ``u(k) = P[v](k)`` of that
+        voltage (which the FMU reports at ``t_{k+1}``), and ``x(k)``, ``y(k)``,
+        ``y_meas(k)`` as reported at ``t_k``.
+
+    Raises
+    ------
+    FileNotFoundError, UnknownParameterError, FMUInitializationError, FMUError
+        As :func:`simulate_closed_loop`.
+    """
+    from fmpy.fmi2 import fmi2Real
+
+    v, time = open_loop_grid(v_signal, step_size)
+    params = dict(plant_params or {})
+    params.setdefault("h", float(step_size))
+    info = _load(fmu_path(PLANT_MODEL, fmu_dir))
+    n, h = v.size, float(step_size)
+    rows = np.zeros((n, len(OPEN_LOOP_DTYPE.names)))
+    rows[:, 0] = time
+    rows[:, 1] = v
+    plant = None
+    try:
+        plant = _Instance(info, "plant")
+        plant.initialize(params, n * h)
+        f, comp = plant.fmu, plant.fmu.component
+        get, set_, step = f.fmi2GetReal, f.fmi2SetReal, f.fmi2DoStep
+        vr_out = _vr_array([info.vr(nm) for nm in _PLANT_OUTPUTS])
+        vr_in = _vr_array([info.vr("v")])
+        out = (fmi2Real * 4)()
+        vin = (fmi2Real * 1)()
+        np_out = np.ctypeslib.as_array(out)
+        vl = v.tolist()
+        times = time.tolist()
+        k, stage = 0, "fmi2GetReal"
+        try:
+            for k in range(n):
+                stage = "fmi2GetReal"
+                get(comp, vr_out, 4, out)        # u(k-1), x(k), y(k), y_meas(k)
+                rows[k, 3:6] = np_out[1:4]
+                if k:
+                    rows[k - 1, 2] = out[0]
+                vin[0] = vl[k]
+                stage = "fmi2SetReal"
+                set_(comp, vr_in, 1, vin)
+                stage = "fmi2DoStep"
+                step(comp, times[k], h, 1)
+            k, stage = n, "fmi2GetReal"
+            get(comp, vr_out, 4, out)
+            rows[n - 1, 2] = out[0]
+        except Exception as exc:
+            raise _step_error(plant, stage, k, h, exc) from None
+    finally:
+        if plant is not None:
+            plant.close()
+    return as_structured(rows, OPEN_LOOP_DTYPE)

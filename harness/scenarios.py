@@ -1,0 +1,680 @@
+"""Scenario definitions: built-in (paper Tables 1-5, DESIGN.md section 4) and user files.
+
+A scenario file is TOML (read with :mod:`tomllib`).  It may define named
+parameter sets and any number of scenarios::
+
+    [parameter_sets.my_plant]          # optional, reusable override sets
+    "creep.alpha" = -0.0085
+
+    [[scenario]]
+    name = "my_case"                   # required, [A-Za-z0-9_.-]+
+    kind = "tracking"                  # "tracking" (closed loop, y_d in um)
+                                       # or "validation" (plant alone, v in V)
+    description = "free text"          # optional
+    extends = "track_5hz"              # optional: start from a known scenario
+    duration = 3.0                     # [s], default 3.0
+    step_size = 0.0005                 # [s], default 0.0005 (h)
+    metric_window = [1.0, 3.0]         # [s], half-open, default [0, duration)
+    plant_set = "my_plant"             # optional, a parameter set's name
+    controller_set = "..."             # optional
+    plant = { "pi.w0" = 0.35 }         # optional overrides by FMU variable name
+    controller = { "rls.forgetting" = 0.99 }
+    paper = { e_rms_um = 0.0254, e_r = 0.0036 }   # optional reference values
+
+    # the signal: "reference" (y_d, tracking) or "input" (v, validation)
+    reference = { type = "sines", amplitudes = [10.0], frequencies = [5.0],
+                  phases = [0.0], offset = 0.0 }       # phases in rad
+    # or
+    reference = { type = "csv", file = "ref.csv" }     # path relative to the TOML file
+
+The CSV holds two columns, time [s] and value, with an optional header line
+(``time,y_d`` or ``time,v``); time must be strictly increasing and cover the
+run; values are linearly interpolated onto the sample grid (held constant
+after the last row, which only matters for the reference preview).
+
+Override precedence: the base scenario (``extends``), then the named set,
+then the scenario's own ``plant``/``controller`` tables.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field, replace
+import math
+from pathlib import Path
+import re
+import tomllib
+from types import MappingProxyType
+from typing import Mapping
+
+import numpy as np
+
+__all__ = [
+    "Signal",
+    "Scenario",
+    "ScenarioError",
+    "ScenarioFileError",
+    "UnknownScenarioError",
+    "DEFAULT_STEP_SIZE",
+    "BUILTIN_FILES",
+    "TRACKING_SCENARIOS",
+    "MISMATCH_SCENARIOS",
+    "VALIDATION_SCENARIOS",
+    "load_scenario_file",
+    "load_scenarios",
+    "get_scenario",
+    "list_scenarios",
+    "read_signal_csv",
+]
+
+DEFAULT_STEP_SIZE = 0.0005
+DEFAULT_DURATION = 3.0
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+BUILTIN_FILES = ("tracking.toml", "validation.toml", "mismatch.toml")
+
+TRACKING_SCENARIOS = (
+    "track_1hz",
+    "track_5hz",
+    "track_10hz",
+    "track_20hz",
+    "track_1_5_10hz",
+    "track_1_10_20hz",
+)
+MISMATCH_SCENARIOS = tuple(n.replace("track_", "mismatch_") for n in TRACKING_SCENARIOS)
+VALIDATION_SCENARIOS = (
+    "validate_1hz",
+    "validate_10hz",
+    "validate_20hz",
+    "validate_50hz",
+    "validate_100hz",
+    "validate_5_40_80hz",
+)
+
+_KINDS = ("tracking", "validation")
+_SIGNAL_KEY = {"tracking": "reference", "validation": "input"}
+_NAME_RE = re.compile(r"^[A-Za-z0-9_.\-]+$")
+_PARAM_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\[[0-9]+\])?(\.[A-Za-z_][A-Za-z0-9_]*(\[[0-9]+\])?)*$")
+_SCENARIO_KEYS = {
+    "name", "kind", "description", "extends", "duration", "step_size", "metric_window",
+    "plant_set", "controller_set", "plant", "controller", "paper", "reference", "input",
+}
+_PAPER_KEYS = {
+    "e_rms_um", "e_r",
+    "hammerstein_e_rms_um", "coupled_e_rms_um", "hammerstein_e_r", "coupled_e_r",
+}
+
+
+class ScenarioError(Exception):
+    """Base class of the scenario errors."""
+
+
+class ScenarioFileError(ScenarioError, ValueError):
+    """A scenario file or reference CSV is malformed.
+
+    The message names the file, the scenario and field (when known) and
+    what is wrong.
+    """
+
+    def __init__(self, path, message, scenario=None, field=None):
+        self.path = None if path is None else str(path)
+        self.scenario = scenario
+        self.field = field
+        where = [] if self.path is None else [self.path]
+        if scenario is not None:
+            where.append(f"scenario '{scenario}'")
+        if field is not None:
+            where.append(f"field '{field}'")
+        super().__init__((": ".join(where) + ": " if where else "") + message)
+
+
+class UnknownScenarioError(ScenarioError, KeyError):
+    """The requested scenario name is not known; the message lists the known names."""
+
+    def __init__(self, name, known):
+        self.name = name
+        self.known = tuple(known)
+        super().__init__(f"unknown scenario '{name}'; known scenarios: {', '.join(self.known)}")
+
+    def __str__(self):  # KeyError would quote the message
+        return self.args[0]
+
+
+@dataclass(frozen=True)
+class Signal:
+    """A scenario's signal: desired displacement ``y_d`` [um] or input voltage ``v`` [V].
+
+    Attributes
+    ----------
+    kind : {"sines", "table"}
+        Sum of sines plus offset, or a table interpolated linearly.
+    amplitudes, frequencies, phases : tuple of float
+        Sine parameters (frequencies in Hz, phases in rad); empty for a table.
+    offset : float
+        Constant added to the sines.
+    table_time, table_value : tuple of float
+        Table rows (``kind == "table"``).
+    source : str
+        Where the signal came from (CSV path for a table).
+    """
+
+    kind: str
+    amplitudes: tuple = ()
+    frequencies: tuple = ()
+    phases: tuple = ()
+    offset: float = 0.0
+    table_time: tuple = ()
+    table_value: tuple = ()
+    source: str = ""
+
+    def evaluate(self, time):
+        """Evaluate the signal at the given times.
+
+        Parameters
+        ----------
+        time : array_like
+            Times [s].
+
+        Returns
+        -------
+        ndarray of float
+        """
+        t = np.asarray(time, dtype=float)
+        if self.kind == "sines":
+            out = np.full(t.shape, float(self.offset))
+            for a, f, p in zip(self.amplitudes, self.frequencies, self.phases):
+                out += a * np.sin(2.0 * np.pi * f * t + p)
+            return out
+        return np.interp(t, np.asarray(self.table_time), np.asarray(self.table_value))
+
+    def describe(self):
+        """Return a short human-readable description."""
+        if self.kind == "sines":
+            terms = " + ".join(
+                f"{a:g} sin(2 pi {f:g} t{'' if p == 0 else f' + {p:g}'})"
+                for a, f, p in zip(self.amplitudes, self.frequencies, self.phases)
+            )
+            return terms + (f" + {self.offset:g}" if self.offset else "")
+        return f"table {self.source} ({len(self.table_time)} rows)"
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One simulation scenario.
+
+    Attributes
+    ----------
+    name : str
+    kind : {"tracking", "validation"}
+        Tracking runs the closed loop with ``signal`` as ``y_d`` [um];
+        validation runs the plant alone with ``signal`` as ``v`` [V].
+    description : str
+    signal : Signal
+    duration : float
+        Run length [s]; the run has ``n_samples = round(duration / step_size)`` rows.
+    step_size : float
+        Sample period h [s].
+    metric_window : tuple of float
+        Half-open window ``[start, stop)`` [s] of the metrics.
+    plant, controller : Mapping[str, bool | int | float]
+        Parameter overrides by FMU variable name.
+    paper : Mapping[str, float]
+        Paper values (``e_rms_um``/``e_r`` for tracking; ``hammerstein_*`` and
+        ``coupled_*`` for validation); ``e_r`` as a fraction.
+    source : str
+        File the scenario was read from.
+    """
+
+    name: str
+    kind: str
+    description: str
+    signal: Signal
+    duration: float = DEFAULT_DURATION
+    step_size: float = DEFAULT_STEP_SIZE
+    metric_window: tuple = (0.0, DEFAULT_DURATION)
+    plant: Mapping = field(default_factory=lambda: MappingProxyType({}))
+    controller: Mapping = field(default_factory=lambda: MappingProxyType({}))
+    paper: Mapping = field(default_factory=lambda: MappingProxyType({}))
+    source: str = ""
+
+    @property
+    def n_samples(self):
+        """Number of samples (rows) of a run."""
+        return int(round(self.duration / self.step_size))
+
+    def time_grid(self, n=None):
+        """Sample times ``k h`` for ``k = 0 .. n-1`` (integer counter, no accumulation)."""
+        n = self.n_samples if n is None else int(n)
+        return np.arange(n, dtype=float) * self.step_size
+
+    def with_overrides(self, plant=None, controller=None, **changes):
+        """Return a copy with extra parameter overrides (and other field changes)."""
+        p = dict(self.plant)
+        p.update(plant or {})
+        c = dict(self.controller)
+        c.update(controller or {})
+        return replace(self, plant=MappingProxyType(p), controller=MappingProxyType(c), **changes)
+
+
+# ---------------------------------------------------------------------------
+# CSV reference tables
+# ---------------------------------------------------------------------------
+
+def read_signal_csv(path, value_name="value"):
+    """Read a two-column CSV (time, value) with an optional header.
+
+    Parameters
+    ----------
+    path : str or Path
+    value_name : str
+        Name used in messages (``y_d`` or ``v``).
+
+    Returns
+    -------
+    time, value : ndarray
+
+    Raises
+    ------
+    ScenarioFileError
+        Missing/unreadable file, wrong number of columns, non-numeric or
+        non-finite entry, fewer than two rows, or time not strictly increasing.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except OSError as exc:
+        raise ScenarioFileError(path, f"cannot read the CSV file ({exc.strerror or exc})") from None
+    times, values = [], []
+    rows = list(csv.reader(text.splitlines()))
+    first_data = True
+    for lineno, row in enumerate(rows, start=1):
+        cells = [c.strip() for c in row]
+        if not cells or all(c == "" for c in cells) or cells[0].startswith("#"):
+            continue
+        if len(cells) != 2:
+            raise ScenarioFileError(
+                path, f"line {lineno}: expected 2 columns (time,{value_name}), found {len(cells)}")
+        try:
+            t, y = float(cells[0]), float(cells[1])
+        except ValueError:
+            if first_data and not times:
+                if cells[0].lower() not in ("time", "t", "time_s", "t_s"):
+                    raise ScenarioFileError(
+                        path, f"line {lineno}: header's first column must be 'time', "
+                              f"found '{cells[0]}'") from None
+                first_data = False
+                continue
+            bad = cells[0] if not _is_float(cells[0]) else cells[1]
+            raise ScenarioFileError(path, f"line {lineno}: '{bad}' is not a number") from None
+        first_data = False
+        if not (math.isfinite(t) and math.isfinite(y)):
+            raise ScenarioFileError(path, f"line {lineno}: non-finite value")
+        if times and not t > times[-1]:
+            raise ScenarioFileError(
+                path, f"line {lineno}: time {t:g} is not greater than the previous {times[-1]:g} "
+                      f"(time must be strictly increasing)")
+        times.append(t)
+        values.append(y)
+    if len(times) < 2:
+        raise ScenarioFileError(path, f"needs at least 2 data rows (time,{value_name}), found {len(times)}")
+    return np.asarray(times), np.asarray(values)
+
+
+def _is_float(text):
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+# ---------------------------------------------------------------------------
+# TOML parsing
+# ---------------------------------------------------------------------------
+
+def _check_params(table, path, scenario, fieldname):
+    if not isinstance(table, dict):
+        raise ScenarioFileError(path, "must be a table of FMU variable name = value",
+                                scenario, fieldname)
+    out = {}
+    for key, value in table.items():
+        if isinstance(value, dict):
+            raise ScenarioFileError(
+                path, f"'{key}' is a table; quote dotted names, e.g. \"{key}.x\" = 1.0",
+                scenario, fieldname)
+        if not _PARAM_RE.match(key):
+            raise ScenarioFileError(path, f"'{key}' is not a valid FMU variable name",
+                                    scenario, fieldname)
+        if isinstance(value, bool):
+            out[key] = value
+        elif isinstance(value, int):
+            out[key] = value
+        elif isinstance(value, float):
+            if not math.isfinite(value):
+                raise ScenarioFileError(path, f"'{key}' must be finite, got {value}",
+                                        scenario, fieldname)
+            out[key] = value
+        else:
+            raise ScenarioFileError(
+                path, f"'{key}' must be a number or a boolean, got {type(value).__name__} {value!r}",
+                scenario, fieldname)
+    return out
+
+
+def _number(value, path, scenario, fieldname, positive=False, nonneg=False):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ScenarioFileError(path, f"must be a finite number, got {value!r}", scenario, fieldname)
+    if positive and not value > 0:
+        raise ScenarioFileError(path, f"must be > 0, got {value!r}", scenario, fieldname)
+    if nonneg and value < 0:
+        raise ScenarioFileError(path, f"must be >= 0, got {value!r}", scenario, fieldname)
+    return float(value)
+
+
+def _number_list(value, path, scenario, fieldname, nonneg=False):
+    if not isinstance(value, list) or not value:
+        raise ScenarioFileError(path, f"must be a non-empty list of numbers, got {value!r}",
+                                scenario, fieldname)
+    return tuple(_number(v, path, scenario, fieldname, nonneg=nonneg) for v in value)
+
+
+def _parse_signal(spec, path, scenario, fieldname, value_name):
+    if not isinstance(spec, dict):
+        raise ScenarioFileError(path, "must be a table with a 'type' key (\"sines\" or \"csv\")",
+                                scenario, fieldname)
+    kind = spec.get("type")
+    if kind == "sines":
+        allowed = {"type", "amplitudes", "frequencies", "phases", "offset"}
+        _reject_unknown(spec, allowed, path, scenario, fieldname)
+        for key in ("amplitudes", "frequencies"):
+            if key not in spec:
+                raise ScenarioFileError(path, "missing (required for type = \"sines\")",
+                                        scenario, f"{fieldname}.{key}")
+        amps = _number_list(spec["amplitudes"], path, scenario, f"{fieldname}.amplitudes")
+        freqs = _number_list(spec["frequencies"], path, scenario, f"{fieldname}.frequencies",
+                             nonneg=True)
+        phases = (_number_list(spec["phases"], path, scenario, f"{fieldname}.phases")
+                  if "phases" in spec else (0.0,) * len(amps))
+        if not len(amps) == len(freqs) == len(phases):
+            raise ScenarioFileError(
+                path, f"amplitudes, frequencies and phases must have the same length "
+                      f"(got {len(amps)}, {len(freqs)}, {len(phases)})", scenario, fieldname)
+        offset = _number(spec.get("offset", 0.0), path, scenario, f"{fieldname}.offset")
+        return Signal("sines", amps, freqs, phases, offset, source=str(path))
+    if kind == "csv":
+        _reject_unknown(spec, {"type", "file"}, path, scenario, fieldname)
+        file = spec.get("file")
+        if not isinstance(file, str) or not file:
+            raise ScenarioFileError(path, "missing or not a string (path of the CSV file)",
+                                    scenario, f"{fieldname}.file")
+        csv_path = Path(file)
+        if not csv_path.is_absolute() and path is not None:
+            csv_path = Path(path).resolve().parent / csv_path
+        t, y = read_signal_csv(csv_path, value_name)
+        return Signal("table", table_time=tuple(t.tolist()), table_value=tuple(y.tolist()),
+                      source=str(csv_path))
+    raise ScenarioFileError(path, f"'type' must be \"sines\" or \"csv\", got {kind!r}",
+                            scenario, fieldname)
+
+
+def _reject_unknown(table, allowed, path, scenario, fieldname):
+    unknown = sorted(set(table) - set(allowed))
+    if unknown:
+        raise ScenarioFileError(
+            path, f"unknown key(s) {', '.join(repr(u) for u in unknown)}; allowed: "
+                  f"{', '.join(sorted(allowed))}", scenario, fieldname)
+
+
+def _parse_scenario(entry, index, path, known, sets):
+    label = f"#{index + 1}"
+    if not isinstance(entry, dict):
+        raise ScenarioFileError(path, "each [[scenario]] must be a table", label)
+    name = entry.get("name")
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        raise ScenarioFileError(path, f"missing or invalid (letters, digits, _ . -), got {name!r}",
+                                label, "name")
+    _reject_unknown(entry, _SCENARIO_KEYS, path, name, None)
+
+    base = None
+    if "extends" in entry:
+        base_name = entry["extends"]
+        if base_name not in known:
+            raise ScenarioFileError(
+                path, f"'{base_name}' is not a known scenario (known: {', '.join(known)})",
+                name, "extends")
+        base = known[base_name]
+
+    kind = entry.get("kind", base.kind if base else None)
+    if kind is None:
+        raise ScenarioFileError(path, "missing; must be \"tracking\" or \"validation\"",
+                                name, "kind")
+    if kind not in _KINDS:
+        raise ScenarioFileError(path, f"must be \"tracking\" or \"validation\", got {kind!r}",
+                                name, "kind")
+    description = entry.get("description", base.description if base else "")
+    if not isinstance(description, str):
+        raise ScenarioFileError(path, "must be a string", name, "description")
+
+    sig_key = _SIGNAL_KEY[kind]
+    wrong_key = _SIGNAL_KEY["validation" if kind == "tracking" else "tracking"]
+    if wrong_key in entry:
+        raise ScenarioFileError(
+            path, f"a {kind} scenario takes '{sig_key}', not '{wrong_key}'", name, wrong_key)
+    if sig_key in entry:
+        signal = _parse_signal(entry[sig_key], path, name, sig_key,
+                               "y_d" if kind == "tracking" else "v")
+    elif base is not None and base.kind == kind:
+        signal = base.signal
+    else:
+        raise ScenarioFileError(path, "missing (the scenario's signal)", name, sig_key)
+
+    duration = _number(entry.get("duration", base.duration if base else DEFAULT_DURATION),
+                       path, name, "duration", positive=True)
+    step = _number(entry.get("step_size", base.step_size if base else DEFAULT_STEP_SIZE),
+                   path, name, "step_size", positive=True)
+    n = round(duration / step)
+    if n < 1 or abs(n * step - duration) > 1e-9 * max(1.0, duration):
+        raise ScenarioFileError(
+            path, f"duration {duration:g} s is not a whole number of steps of {step:g} s",
+            name, "duration")
+    if "metric_window" in entry:
+        win = entry["metric_window"]
+        if not isinstance(win, list) or len(win) != 2:
+            raise ScenarioFileError(path, f"must be [start, stop] in s, got {win!r}",
+                                    name, "metric_window")
+        window = tuple(_number(w, path, name, "metric_window") for w in win)
+    elif base is not None:
+        window = (base.metric_window[0], min(base.metric_window[1], duration))
+        if not window[0] < window[1]:
+            raise ScenarioFileError(
+                path, f"the window [{base.metric_window[0]:g}, {base.metric_window[1]:g}] s "
+                      f"inherited from '{base.name}' is empty for duration {duration:g} s; "
+                      f"set metric_window", name, "metric_window")
+    else:
+        window = (0.0, duration)
+    if not (0.0 <= window[0] < window[1] <= duration + 1e-12):
+        raise ScenarioFileError(
+            path, f"must satisfy 0 <= start < stop <= duration ({duration:g} s), got "
+                  f"[{window[0]:g}, {window[1]:g}]", name, "metric_window")
+
+    params = {}
+    for which in ("plant", "controller"):
+        merged = dict(getattr(base, which)) if base else {}
+        set_key = f"{which}_set"
+        if set_key in entry:
+            set_name = entry[set_key]
+            if set_name not in sets:
+                raise ScenarioFileError(
+                    path, f"'{set_name}' is not a known parameter set (known: "
+                          f"{', '.join(sorted(sets)) or 'none'})", name, set_key)
+            merged.update(sets[set_name])
+        if which in entry:
+            merged.update(_check_params(entry[which], path, name, which))
+        params[which] = MappingProxyType(merged)
+
+    paper = dict(base.paper) if base else {}
+    if "paper" in entry:
+        table = entry["paper"]
+        if not isinstance(table, dict):
+            raise ScenarioFileError(path, "must be a table", name, "paper")
+        _reject_unknown(table, _PAPER_KEYS, path, name, "paper")
+        for key, value in table.items():
+            paper[key] = _number(value, path, name, f"paper.{key}", nonneg=True)
+
+    if signal.kind == "table":
+        _check_table_covers(signal, duration, step, path, name, sig_key)
+
+    return Scenario(
+        name=name, kind=kind, description=description, signal=signal, duration=duration,
+        step_size=step, metric_window=window, plant=params["plant"],
+        controller=params["controller"], paper=MappingProxyType(paper), source=str(path),
+    )
+
+
+def _check_table_covers(signal, duration, step, path, name, fieldname):
+    t0, t1 = signal.table_time[0], signal.table_time[-1]
+    last = (round(duration / step) - 1) * step
+    if t0 > 1e-12 or t1 < last - 1e-9:
+        raise ScenarioFileError(
+            path, f"the table {signal.source} covers [{t0:g}, {t1:g}] s but the run needs "
+                  f"[0, {last:g}] s", name, fieldname)
+
+
+def load_scenario_file(path, known=None, parameter_sets=None):
+    """Parse one scenario TOML file.
+
+    Parameters
+    ----------
+    path : str or Path
+    known : dict, optional
+        Scenarios already known (for ``extends``); not modified.
+    parameter_sets : dict, optional
+        Parameter sets already known (for ``plant_set``/``controller_set``);
+        updated in place with the file's ``[parameter_sets.*]``.
+
+    Returns
+    -------
+    dict of str to Scenario
+        The file's scenarios, in file order.
+
+    Raises
+    ------
+    ScenarioFileError
+        Unreadable file, TOML syntax error, or an invalid field.
+    """
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ScenarioFileError(path, f"cannot read the scenario file ({exc.strerror or exc})") from None
+    try:
+        doc = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ScenarioFileError(path, f"not UTF-8 text ({exc.reason})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioFileError(path, f"TOML syntax error: {exc}") from None
+    unknown = sorted(set(doc) - {"scenario", "parameter_sets"})
+    if unknown:
+        raise ScenarioFileError(
+            path, f"unknown top-level key(s) {', '.join(repr(u) for u in unknown)}; "
+                  f"expected [[scenario]] entries and optional [parameter_sets.NAME]")
+    sets = parameter_sets if parameter_sets is not None else {}
+    psets = doc.get("parameter_sets", {})
+    if not isinstance(psets, dict):
+        raise ScenarioFileError(path, "must be a table of tables", None, "parameter_sets")
+    for set_name, table in psets.items():
+        sets[set_name] = _check_params(table, path, None, f"parameter_sets.{set_name}")
+    entries = doc.get("scenario", [])
+    if not isinstance(entries, list):
+        raise ScenarioFileError(path, "use [[scenario]] (an array of tables)", None, "scenario")
+    if not entries and not psets:
+        raise ScenarioFileError(path, "defines no [[scenario]]")
+    known_now = dict(known or {})
+    out = {}
+    for i, entry in enumerate(entries):
+        sc = _parse_scenario(entry, i, path, known_now, sets)
+        if sc.name in out:
+            raise ScenarioFileError(path, f"duplicate scenario name '{sc.name}'", sc.name, "name")
+        out[sc.name] = sc
+        known_now[sc.name] = sc
+    return out
+
+
+_BUILTIN_CACHE = {}
+
+
+def load_scenarios(files=(), include_builtin=True):
+    """Load the built-in scenarios and, optionally, user files.
+
+    Parameters
+    ----------
+    files : iterable of str or Path
+        User scenario files, read in order (later files may ``extends``
+        scenarios of earlier ones and override their names).
+    include_builtin : bool
+        Start from the built-in scenarios of ``harness/scenarios/``.
+
+    Returns
+    -------
+    dict of str to Scenario
+        Insertion-ordered registry.
+    """
+    registry = {}
+    sets = {}
+    if include_builtin:
+        if not _BUILTIN_CACHE:
+            b_reg, b_sets = {}, {}
+            for fname in BUILTIN_FILES:
+                b_reg.update(load_scenario_file(SCENARIO_DIR / fname, b_reg, b_sets))
+            _BUILTIN_CACHE["registry"] = b_reg
+            _BUILTIN_CACHE["sets"] = b_sets
+        registry.update(_BUILTIN_CACHE["registry"])
+        sets.update(_BUILTIN_CACHE["sets"])
+    for f in files:
+        registry.update(load_scenario_file(f, registry, sets))
+    return registry
+
+
+def list_scenarios(registry=None, kind=None):
+    """Names of the known scenarios.
+
+    Parameters
+    ----------
+    registry : dict, optional
+        Defaults to the built-in scenarios.
+    kind : {"tracking", "validation"}, optional
+        Filter by kind.
+
+    Returns
+    -------
+    list of str
+    """
+    registry = load_scenarios() if registry is None else registry
+    return [n for n, s in registry.items() if kind is None or s.kind == kind]
+
+
+def get_scenario(name, registry=None):
+    """Look a scenario up by name.
+
+    Parameters
+    ----------
+    name : str or Scenario
+        A scenario object is returned unchanged.
+    registry : dict, optional
+        Defaults to the built-in scenarios.
+
+    Returns
+    -------
+    Scenario
+
+    Raises
+    ------
+    UnknownScenarioError
+        (a :class:`KeyError`) listing the known names.
+    """
+    if isinstance(name, Scenario):
+        return name
+    registry = load_scenarios() if registry is None else registry
+    try:
+        return registry[name]
+    except KeyError:
+        raise UnknownScenarioError(name, registry) from None

@@ -1,0 +1,191 @@
+"""harness.scenarios: built-in scenarios (paper Tables 1-5, DESIGN.md section 4) and user files."""
+
+import math
+
+import numpy as np
+import pytest
+
+from harness.scenarios import (
+    MISMATCH_SCENARIOS,
+    TRACKING_SCENARIOS,
+    VALIDATION_SCENARIOS,
+    ScenarioFileError,
+    UnknownScenarioError,
+    get_scenario,
+    load_scenario_file,
+    load_scenarios,
+)
+
+
+def test_builtin_names_and_paper_values():
+    # Reference: paper Tables 4/5 and DESIGN.md section 4 (e_r "0.76 %" typo -> 0.11 %).
+    reg = load_scenarios()
+    assert list(TRACKING_SCENARIOS) + list(VALIDATION_SCENARIOS) + list(MISMATCH_SCENARIOS) == list(reg)
+    e_rms = [reg[n].paper["e_rms_um"] for n in TRACKING_SCENARIOS]
+    e_r = [reg[n].paper["e_r"] for n in TRACKING_SCENARIOS]
+    assert e_rms == [0.0076, 0.0254, 0.056, 0.1153, 0.0600, 0.1787]
+    assert e_r == [0.0011, 0.0036, 0.0080, 0.0163, 0.0049, 0.0146]
+    for n in TRACKING_SCENARIOS + MISMATCH_SCENARIOS:
+        sc = reg[n]
+        assert (sc.duration, sc.metric_window, sc.n_samples) == (3.0, (1.0, 3.0), 6000)
+        assert all(a == 10.0 for a in sc.signal.amplitudes)
+    # Table 2 row 5/40/80 Hz
+    v = reg["validate_5_40_80hz"]
+    assert (v.paper["hammerstein_e_rms_um"], v.paper["coupled_e_rms_um"]) == (0.1195, 0.0682)
+
+
+def test_builtin_signals():
+    # Reference: y_d = 10 (sin 2 pi 1 t + sin 2 pi 5 t + sin 2 pi 10 t) (section 5.3 of the paper)
+    sc = get_scenario("track_1_5_10hz")
+    t = np.array([0.0, 0.01, 0.0125])
+    expected = 10 * (np.sin(2 * np.pi * t) + np.sin(2 * np.pi * 5 * t) + np.sin(2 * np.pi * 10 * t))
+    np.testing.assert_allclose(sc.signal.evaluate(t), expected, rtol=0, atol=1e-12)
+    # Reference: v = 6 (sin 2 pi 5t + sin 2 pi 40t + sin 2 pi 80t) + 18 (Tables 1-3)
+    v = get_scenario("validate_5_40_80hz").signal.evaluate([0.0, 0.003])
+    np.testing.assert_allclose(v, [18.0, 18 + 6 * sum(math.sin(2 * math.pi * f * 0.003) for f in (5, 40, 80))])
+
+
+def test_validation_creep_rows_match_table_1():
+    # Reference: paper Table 1 (f: k_c, alpha).
+    table1 = {"1hz": (1.0463, 0.0002), "10hz": (1.0497, -0.0085), "20hz": (1.0386, -0.0077),
+              "50hz": (1.0481, -0.0098), "100hz": (1.0327, -0.0059), "5_40_80hz": (1.0172, -0.0023)}
+    for key, (k_c, alpha) in table1.items():
+        sc = get_scenario(f"validate_{key}")
+        assert (sc.plant["creep.k_c"], sc.plant["creep.alpha"]) == (k_c, alpha)
+
+
+def test_mismatch_parameters_follow_design_section_4():
+    # Reference: DESIGN.md section 4: PI weights +10 %, creep row 10 Hz, numerator x1.05,
+    # poles 0.992037 and 0.45, sensor 2 nm resolution + 1 nm rms noise; controller nominal.
+    sc = get_scenario("mismatch_10hz")
+    p = sc.plant
+    for name, nominal in {"pi.w0": 0.3344, "pi.w[1]": 0.0714, "pi.w[2]": 0.0322, "pi.w[3]": 0.0072}.items():
+        assert p[name] == pytest.approx(1.1 * nominal, rel=1e-12)
+    assert (p["creep.k_c"], p["creep.alpha"]) == (1.0497, -0.0085)
+    assert p["tf.b1"] == pytest.approx(1.05 * 0.5954, rel=1e-12)
+    assert p["tf.b2"] == pytest.approx(1.05 * -0.5907, rel=1e-12)
+    poles = np.sort(np.roots([1.0, p["tf.a1"], p["tf.a2"]]).real)
+    np.testing.assert_allclose(poles, [0.45, 0.992037], rtol=0, atol=1e-12)
+    dc = (p["tf.b1"] + p["tf.b2"]) / (1 + p["tf.a1"] + p["tf.a2"])
+    assert dc / ((0.5954 - 0.5907) / (1 - 1.3767 + 0.3816)) == pytest.approx(1.175, abs=5e-4)
+    assert (p["sensor.resolution"], p["sensor.noise_rms"]) == (0.002, 0.001)
+    assert dict(sc.controller) == {}
+    assert sc.signal == get_scenario("track_10hz").signal
+    assert sc.paper == get_scenario("track_10hz").paper
+
+
+def test_user_toml_with_sines_and_extends(tmp_path):
+    f = tmp_path / "mine.toml"
+    f.write_text('''
+[parameter_sets.stiff]
+"tf.b1" = 0.6
+
+[[scenario]]
+name = "my_sines"
+kind = "tracking"
+duration = 0.5
+metric_window = [0.25, 0.5]
+reference = { type = "sines", amplitudes = [2.0, 1.0], frequencies = [4.0, 8.0], phases = [0.5, 0.0], offset = 1.0 }
+controller = { "rls.forgetting" = 0.99, "mv.delay" = 0 }
+paper = { e_rms_um = 0.01 }
+
+[[scenario]]
+name = "my_mismatch"
+extends = "mismatch_5hz"
+plant_set = "stiff"
+plant = { "sensor.noise_rms" = 0.0 }
+duration = 2.0
+''')
+    reg = load_scenarios([f])
+    sc = reg["my_sines"]
+    assert sc.n_samples == 1000 and sc.metric_window == (0.25, 0.5)
+    assert sc.signal.evaluate([0.1])[0] == pytest.approx(
+        1.0 + 2 * math.sin(2 * math.pi * 4 * 0.1 + 0.5) + math.sin(2 * math.pi * 8 * 0.1))
+    assert sc.controller == {"rls.forgetting": 0.99, "mv.delay": 0}
+    mm = reg["my_mismatch"]
+    # inherited: mismatch plant, reference, window clipped to the new duration
+    assert mm.plant["tf.b1"] == 0.6 and mm.plant["sensor.noise_rms"] == 0.0
+    assert mm.plant["creep.alpha"] == -0.0085
+    assert (mm.duration, mm.metric_window) == (2.0, (1.0, 2.0))   # inherited window, clipped
+    assert mm.signal == get_scenario("track_5hz").signal
+
+
+def test_csv_reference_is_interpolated(tmp_path):
+    (tmp_path / "ref.csv").write_text("time,y_d\n0,0\n0.1,1.0\n0.2,3.0\n0.5,3.0\n")
+    f = tmp_path / "csvcase.toml"
+    f.write_text('[[scenario]]\nname = "from_csv"\nkind = "tracking"\nduration = 0.5\n'
+                 'reference = { type = "csv", file = "ref.csv" }\n')
+    sc = load_scenario_file(f)["from_csv"]
+    # linear interpolation between the rows; held after the last row (preview only)
+    np.testing.assert_allclose(sc.signal.evaluate([0.05, 0.15, 0.3, 0.6]), [0.5, 2.0, 3.0, 3.0])
+    assert sc.metric_window == (0.0, 0.5)
+
+
+@pytest.mark.parametrize("body, needle", [
+    ("[[scenario]\nname = 'x'", "TOML syntax error"),
+    ("[[scenario]]\nname = 'x'\nkind = 'tracking'\n", "field 'reference': missing"),
+    ("[[scenario]]\nname = 'x'\nkind = 'trackin'\nreference = {type='sines', amplitudes=[1.0], frequencies=[1.0]}\n",
+     "field 'kind': must be \"tracking\" or \"validation\""),
+    ("[[scenario]]\nname = 'x'\nkind = 'tracking'\nduraton = 1.0\nreference = {type='sines', amplitudes=[1.0], frequencies=[1.0]}\n",
+     "unknown key(s) 'duraton'"),
+    ("[[scenario]]\nname = 'x'\nkind = 'tracking'\nreference = {type='sines', amplitudes=[1.0, 2.0], frequencies=[1.0]}\n",
+     "same length"),
+    ("[[scenario]]\nname = 'x'\nkind = 'tracking'\nduration = 1.0001\nreference = {type='sines', amplitudes=[1.0], frequencies=[1.0]}\n",
+     "not a whole number of steps"),
+    ("[[scenario]]\nname = 'x'\nkind = 'tracking'\nmetric_window = [2.0, 1.0]\nreference = {type='sines', amplitudes=[1.0], frequencies=[1.0]}\n",
+     "field 'metric_window'"),
+    ("[[scenario]]\nname = 'x'\nkind = 'tracking'\nplant = { \"pi.w0\" = 'big' }\nreference = {type='sines', amplitudes=[1.0], frequencies=[1.0]}\n",
+     "field 'plant': 'pi.w0' must be a number or a boolean"),
+    ("[[scenario]]\nname = 'x'\nextends = 'track_1hz'\nduration = 1.0\n",
+     "inherited from 'track_1hz' is empty for duration 1 s; set metric_window"),
+    ("[[scenario]]\nname = 'x'\nextends = 'no_such'\n", "field 'extends': 'no_such' is not a known scenario"),
+    ("[[scenario]]\nname = 'x'\nextends = 'track_1hz'\nplant_set = 'nope'\n", "'nope' is not a known parameter set"),
+    ("[[scenario]]\nname = 'x'\nkind = 'validation'\nreference = {type='sines', amplitudes=[1.0], frequencies=[1.0]}\n",
+     "takes 'input', not 'reference'"),
+])
+def test_malformed_files_are_rejected_with_a_message(tmp_path, body, needle):
+    f = tmp_path / "bad.toml"
+    f.write_text(body)
+    with pytest.raises(ScenarioFileError) as info:
+        load_scenarios([f])
+    assert isinstance(info.value, ValueError)
+    assert str(f) in str(info.value)
+    assert needle in str(info.value)
+
+
+@pytest.mark.parametrize("csv_text, needle", [
+    ("time,y_d\n0,0\n0.1,abc\n0.6,1\n", "line 3: 'abc' is not a number"),
+    ("time,y_d\n0,0\n0.2,1\n0.1,2\n0.6,1\n", "line 4: time 0.1 is not greater than the previous 0.2"),
+    ("time,y_d,extra\n0,0,0\n", "line 1: expected 2 columns"),
+    ("time,y_d\n0,0\n", "needs at least 2 data rows"),
+    ("time,y_d\n0,0\n0.2,1\n", "covers [0, 0.2] s but the run needs [0, 0.4995] s"),
+    ("stamp,y_d\n0,0\n0.6,1\n", "header's first column must be 'time'"),
+])
+def test_malformed_csv_is_rejected_with_a_message(tmp_path, csv_text, needle):
+    (tmp_path / "ref.csv").write_text(csv_text)
+    f = tmp_path / "c.toml"
+    f.write_text('[[scenario]]\nname = "c"\nkind = "tracking"\nduration = 0.5\n'
+                 'reference = { type = "csv", file = "ref.csv" }\n')
+    with pytest.raises(ScenarioFileError) as info:
+        load_scenario_file(f)
+    assert needle in str(info.value)
+    assert "ref.csv" in str(info.value)
+
+
+def test_missing_csv_and_missing_file(tmp_path):
+    f = tmp_path / "c.toml"
+    f.write_text('[[scenario]]\nname = "c"\nkind = "tracking"\n'
+                 'reference = { type = "csv", file = "nowhere.csv" }\n')
+    with pytest.raises(ScenarioFileError, match="nowhere.csv: cannot read the CSV file"):
+        load_scenario_file(f)
+    with pytest.raises(ScenarioFileError, match="cannot read the scenario file"):
+        load_scenario_file(tmp_path / "absent.toml")
+
+
+def test_unknown_scenario_lists_known_names():
+    with pytest.raises(UnknownScenarioError) as info:
+        get_scenario("track_2hz")
+    assert isinstance(info.value, KeyError)
+    msg = str(info.value)
+    assert msg.startswith("unknown scenario 'track_2hz'; known scenarios: track_1hz, track_5hz")
+    assert "mismatch_1_10_20hz" in msg and "validate_100hz" in msg
