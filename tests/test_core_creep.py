@@ -54,7 +54,7 @@ def test_weights_large_j_exact_rational(alpha):
     """Reference: mpmath (40 digits) evaluating the closed form with alpha and j exact
     (the double alpha converted exactly via Fraction), at j up to 119999 (60 s at 2 kHz).
     Relative tolerance 1e-12."""
-    mp = pytest.importorskip("mpmath")
+    import mpmath as mp  # a test dependency (pyproject [test]): never skipped
     mp.mp.dps = 40
     a = mp.mpf(Fraction(alpha).numerator) / mp.mpf(Fraction(alpha).denominator)
     idx = [1, 2, 17, 500, 10000, 60000, 119999]
