@@ -52,7 +52,7 @@ piezo_status model_init(ModelData *data, piezo_diag *diag);
 double model_sample_period(const ModelData *data);
 
 /* Doubles of exact-mode history the next step (or output update) needs;
- * 0 when the model keeps no history. Grows by one per step. */
+ * 0 when the model keeps no history. Grows by two per step (x and w_j). */
 size_t model_history_needed(const ModelData *data);
 
 /* Advance one sample with the held inputs. May leave data modified on
