@@ -42,6 +42,7 @@
 #include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "fmi2Functions.h"
@@ -107,6 +108,20 @@ static const unsigned category_bits[] = { CAT_EVENTS, CAT_WARNING, CAT_ERROR, CA
 #else
 #define PRINTF_LIKE(f, a)
 #endif
+
+/* The shortest decimal text that reads back as x (h = 0.0005, not
+ * 0.00050000000000000001): messages for people, still exact. */
+#define REAL_TEXT_SIZE 32
+static const char *real_text(char buf[REAL_TEXT_SIZE], double x)
+{
+    int digits;
+    for (digits = 15; digits <= 17; digits++) {
+        snprintf(buf, REAL_TEXT_SIZE, "%.*g", digits, x);
+        if (strtod(buf, NULL) == x || x != x)
+            break;
+    }
+    return buf;
+}
 
 static void vlog_to(const fmi2CallbackFunctions *cb, const char *name, fmi2Status status,
                     const char *category, const char *fmt, va_list ap) PRINTF_LIKE(5, 0);
@@ -697,6 +712,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     static const char fname[] = "fmi2DoStep";
     fmu_instance *inst = get_instance(c, fname, MODE_STEP_COMPLETE);
     double t, tol, ratio, n_real;
+    char t1[REAL_TEXT_SIZE], t2[REAL_TEXT_SIZE], t3[REAL_TEXT_SIZE];
     uint64_t n, i;
     size_t needed;
     (void)noSetFMUStatePriorToCurrentPoint;
@@ -708,27 +724,30 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     if (tol > 1e-3 * inst->h)
         tol = 1e-3 * inst->h;
     if (!isfinite(currentCommunicationPoint) || fabs(currentCommunicationPoint - t) > tol) {
-        log_error(inst, "%s: currentCommunicationPoint = %.17g does not match the FMU time "
-                  "t0 + k h = %.17g (k = %llu, h = %.17g): step refused, state and time unchanged",
-                  fname, currentCommunicationPoint, t, (unsigned long long)inst->k, inst->h);
+        log_error(inst, "%s: currentCommunicationPoint = %s does not match the FMU time "
+                  "t0 + k h = %s (k = %llu, h = %s): step refused, state and time unchanged",
+                  fname, real_text(t1, currentCommunicationPoint), real_text(t2, t),
+                  (unsigned long long)inst->k, real_text(t3, inst->h));
         return fmi2Error;
     }
     if (!isfinite(communicationStepSize) || !(communicationStepSize > 0.0)) {
-        log_error(inst, "%s: communicationStepSize = %.17g refused: it must be a positive whole "
-                  "multiple of h = %.17g; state and time unchanged", fname, communicationStepSize, inst->h);
+        log_error(inst, "%s: communicationStepSize = %s refused: it must be a positive whole "
+                  "multiple of h = %s; state and time unchanged", fname,
+                  real_text(t1, communicationStepSize), real_text(t2, inst->h));
         return fmi2Error;
     }
     ratio = communicationStepSize / inst->h;
     n_real = floor(ratio + 0.5);
     if (ratio > 4.0e15) {
-        log_error(inst, "%s: communicationStepSize = %.17g is too large: %.17g samples of h = %.17g",
-                  fname, communicationStepSize, ratio, inst->h);
+        log_error(inst, "%s: communicationStepSize = %s is too large: %s samples of h = %s", fname,
+                  real_text(t1, communicationStepSize), real_text(t2, ratio), real_text(t3, inst->h));
         return fmi2Error;
     }
     if (n_real < 1.0 || fabs(communicationStepSize - n_real * inst->h) > 1e-9 * fmax(1.0, n_real) * inst->h) {
-        log_error(inst, "%s: communicationStepSize = %.17g is not a whole multiple of h = %.17g "
-                  "(H/h = %.17g; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
-                  "time unchanged", fname, communicationStepSize, inst->h, ratio);
+        log_error(inst, "%s: communicationStepSize = %s is not a whole multiple of h = %s "
+                  "(H/h = %s; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
+                  "time unchanged", fname, real_text(t1, communicationStepSize), real_text(t2, inst->h),
+                  real_text(t3, ratio));
         return fmi2Error;
     }
     n = (uint64_t)n_real;
@@ -747,9 +766,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         if (st != PIEZO_OK) {
             memcpy(&inst->data, &inst->backup, sizeof inst->data);
             log_core_failure(inst, fname, st, &diag);
-            log_error(inst, "%s: the model refused sample %llu of the step from t = %.17g; the state "
+            log_error(inst, "%s: the model refused sample %llu of the step from t = %s; the state "
                       "is restored to that time and the FMU enters state Error (use fmi2SetFMUstate "
-                      "or fmi2Reset)", fname, (unsigned long long)(inst->k + i), t);
+                      "or fmi2Reset)", fname, (unsigned long long)(inst->k + i), real_text(t1, t));
             inst->outputs_valid = 0;
             inst->mode = MODE_ERROR;
             return fmi2Error;
