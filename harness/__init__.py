@@ -10,8 +10,10 @@ Scenarios
     :func:`list_scenarios`, :class:`Scenario`, :class:`Signal`.
 Metrics
     :func:`compute_metrics`, :func:`rms_error`, :func:`relative_error`.
-Identification
-    :func:`identify_pi`, :func:`identify_transfer_function`.
+Identification (paper section 3)
+    :func:`identify_pi`, :func:`identify_transfer_function`, :func:`identify_creep`,
+    :func:`identify_coupled_model`, :class:`IdentificationRecord`,
+    :class:`CoupledModelEstimate`, :func:`run_identification`.
 Reports
     :func:`run_all`, :func:`run_scenario`.
 
@@ -26,9 +28,17 @@ from .cosim import (
     simulate_open_loop,
 )
 from .core_loop import simulate_closed_loop_core, simulate_open_loop_core
-from .identification import identify_pi, identify_transfer_function
+from .identification import (
+    CoupledModelEstimate,
+    IdentificationInputError,
+    IdentificationRecord,
+    identify_coupled_model,
+    identify_creep,
+    identify_pi,
+    identify_transfer_function,
+)
 from .metrics import Metrics, compute_metrics, relative_error, rms_error
-from .report import run_all, run_scenario
+from .report import run_all, run_identification, run_scenario
 from .scenarios import (
     Scenario,
     ScenarioError,
@@ -58,6 +68,12 @@ __all__ = [
     "Metrics",
     "identify_pi",
     "identify_transfer_function",
+    "identify_creep",
+    "identify_coupled_model",
+    "IdentificationRecord",
+    "CoupledModelEstimate",
+    "IdentificationInputError",
+    "run_identification",
     "run_all",
     "run_scenario",
     "FMUError",

@@ -1,9 +1,12 @@
-"""Command line: ``python -m harness [all|run SCENARIO|list] [options]``.
+"""Command line: ``python -m harness [all|run SCENARIO|list|identify] [options]``.
 
 * ``python -m harness`` (or ``all``): every tracking condition and the
   validation inputs, tables next to the paper's, CSV/Markdown/PNG under ``--out``.
 * ``python -m harness run SCENARIO``: one scenario.
 * ``python -m harness list``: the known scenarios (with ``--scenario-file``, also the user's).
+* ``python -m harness identify``: the paper's three-step identification on records of the
+  PiezoStage model (``--noise-rms UM`` adds measurement noise), every parameter next to
+  the value the plant ran; ``identification.csv`` / ``.md`` under ``--out``.
 
 User errors (unknown scenario, missing FMU, malformed scenario file or CSV,
 bad parameter) end with exit code 2 and a one-line message; a failing FMI
@@ -13,12 +16,16 @@ call ends with exit code 1.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 __all__ = ["build_parser", "main"]
 
 PROG = "python -m harness"
-COMMANDS = ("all", "run", "list")
+COMMANDS = ("all", "run", "list", "identify")
+# options of 'identify' only: (attribute, flag)
+_IDENTIFY_OPTIONS = (("noise_rms", "--noise-rms"), ("seed", "--seed"), ("free_w0", "--free-w0"),
+                     ("displacement_only", "--displacement-only"))
 
 
 def build_parser():
@@ -28,9 +35,9 @@ def build_parser():
         description="Co-simulate the PiezoStage and AdaptiveCompoundController FMUs and "
                     "compare with the paper's Tables 2-5.",
     )
-    p.add_argument("command", nargs="?", default="all", metavar="{all,run,list}",
+    p.add_argument("command", nargs="?", default="all", metavar="{all,run,list,identify}",
                    help="all (default): run everything; run SCENARIO: one scenario; "
-                        "list: known scenarios")
+                        "list: known scenarios; identify: the paper's parameter identification")
     p.add_argument("scenario", nargs="?", help="scenario name for 'run'")
     p.add_argument("--out", default="out", metavar="DIR", help="output folder (default: out/)")
     p.add_argument("--no-adaptation", action="store_true", help="switch the controller's RLS off")
@@ -46,6 +53,17 @@ def build_parser():
     p.add_argument("--no-plots", action="store_true", help="do not write PNG figures")
     p.add_argument("--backend", choices=("fmpy", "core"), default="fmpy",
                    help="fmpy: run the FMUs (default); core: the C core via cffi")
+    g = p.add_argument_group("identify")
+    g.add_argument("--noise-rms", type=float, metavar="UM",
+                   help="white measurement noise [um rms] on every recorded channel "
+                        "(default 0; 0.001 = 1 nm)")
+    g.add_argument("--seed", type=int, metavar="N", help="base seed of the noise (default 1)")
+    g.add_argument("--free-w0", action="store_true",
+                   help="fit w0 too (only w0 + w1 is identifiable, r_1 = 0); default: w0 fixed "
+                        "at the plant's value")
+    g.add_argument("--displacement-only", action="store_true",
+                   help="fit every step to the measured displacement, as the paper's experiment "
+                        "must (the blocks then bias each other)")
     return p
 
 
@@ -59,11 +77,22 @@ def main(argv=None):
     parser = build_parser()
     args = parser.parse_intermixed_args(argv)
     if args.command not in COMMANDS:
-        return _fail(f"unknown command '{args.command}'; use one of: all, run SCENARIO, list")
+        return _fail(f"unknown command '{args.command}'; "
+                     f"use one of: all, run SCENARIO, list, identify")
     if args.command == "run" and not args.scenario:
         return _fail("'run' needs a scenario name (see: python -m harness list)")
     if args.command != "run" and args.scenario:
         return _fail(f"unexpected argument '{args.scenario}' for '{args.command}'")
+    if args.command != "identify":
+        for attr, flag in _IDENTIFY_OPTIONS:
+            if getattr(args, attr) not in (None, False):
+                return _fail(f"{flag} is only used by 'identify'")
+    else:
+        if args.noise_rms is not None and not (math.isfinite(args.noise_rms)
+                                               and args.noise_rms >= 0):
+            return _fail(f"--noise-rms must be a finite number >= 0 (um), got {args.noise_rms:g}")
+        if args.seed is not None and args.seed < 0:
+            return _fail(f"--seed must be >= 0, got {args.seed}")
 
     from .scenarios import ScenarioError, load_scenarios
     from .cosim import FMUError, UnknownParameterError
@@ -77,6 +106,13 @@ def main(argv=None):
             _list(registry)
             return 0
         from . import report
+        if args.command == "identify":
+            report.run_identification(args.out, backend=args.backend,
+                                      noise_rms_um=args.noise_rms or 0.0,
+                                      seed=1 if args.seed is None else args.seed,
+                                      fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
+                                      displacement_only=args.displacement_only)
+            return 0
         if args.command == "run":
             report.run_scenario(args.scenario, args.out, adaptation=adaptation, preview=preview,
                                 master=master, fmu_dir=args.fmu_dir, plots=not args.no_plots,
