@@ -270,20 +270,37 @@ static piezo_status controller_advance(piezo_controller *c, double y_ref, double
     return PIEZO_OK;
 }
 
+/* Refusals that must leave the state untouched, checked before any work. */
+static piezo_status check_step_inputs(const piezo_controller *c, double y_ref, double y_meas,
+                                      const double *history, size_t capacity)
+{
+    if (!(isfinite(y_ref) && isfinite(y_meas))) return PIEZO_ERR_NONFINITE;
+    if (c->inv_creep.exact) {
+        if (!history) return PIEZO_ERR_NULL;
+        if (capacity < piezo_controller_history_needed(c)) return PIEZO_ERR_CAPACITY;
+    }
+    return PIEZO_OK;
+}
+
+/* Advance `scratch` (a copy of the state) by one sample; non-finite results refused. */
+static piezo_status advance_copy(piezo_controller *scratch, double y_ref, double y_meas,
+                                 double *history, size_t capacity)
+{
+    piezo_status st = controller_advance(scratch, y_ref, y_meas, history, capacity);
+    if (st == PIEZO_OK && !(isfinite(scratch->out.v) && isfinite(scratch->out.q))) st = PIEZO_ERR_NONFINITE;
+    return st;
+}
+
 piezo_status piezo_controller_step(piezo_controller *c, double y_ref, double y_meas,
                                    double *history, size_t capacity, piezo_controller_output *out)
 {
     piezo_controller scratch;
     piezo_status st;
     if (!c) return PIEZO_ERR_NULL;
-    if (!(isfinite(y_ref) && isfinite(y_meas))) return PIEZO_ERR_NONFINITE;
-    if (c->inv_creep.exact) {
-        if (!history) return PIEZO_ERR_NULL;
-        if (capacity < piezo_controller_history_needed(c)) return PIEZO_ERR_CAPACITY;
-    }
+    st = check_step_inputs(c, y_ref, y_meas, history, capacity);
+    if (st != PIEZO_OK) return st;
     scratch = *c;
-    st = controller_advance(&scratch, y_ref, y_meas, history, capacity);
-    if (st == PIEZO_OK && !(isfinite(scratch.out.v) && isfinite(scratch.out.q))) st = PIEZO_ERR_NONFINITE;
+    st = advance_copy(&scratch, y_ref, y_meas, history, capacity);
     if (st != PIEZO_OK) return st;
     *c = scratch;
     if (out) *out = c->out;
@@ -296,7 +313,10 @@ piezo_status piezo_controller_peek(const piezo_controller *c, double y_ref, doub
     piezo_controller scratch;
     piezo_status st;
     if (!c || !out) return PIEZO_ERR_NULL;
+    st = check_step_inputs(c, y_ref, y_meas, history, capacity);
+    if (st != PIEZO_OK) return st;
     scratch = *c;
-    st = piezo_controller_step(&scratch, y_ref, y_meas, history, capacity, out);
+    st = advance_copy(&scratch, y_ref, y_meas, history, capacity);
+    if (st == PIEZO_OK) *out = scratch.out;
     return st;
 }
