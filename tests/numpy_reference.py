@@ -1,4 +1,4 @@
-"""Independent NumPy reference of the plant model, written from DESIGN.md.
+"""Independent NumPy reference of the plant model and the controller pieces, written from DESIGN.md.
 
 Nothing here calls or transcribes the C core: it is the textbook form of the
 equations in DESIGN.md sections 1 and 2, favouring obviousness over speed.
@@ -18,6 +18,15 @@ DESIGN_DEFAULTS = {
     "tf.a1": -1.3767, "tf.a2": 0.3816, "tf.b1": 0.5954, "tf.b2": -0.5907,
     "tf.delay": 0, "creep.enabled": True, "creep.k_c": 1.0463, "creep.alpha": 0.0002,
     "h": 0.0005,
+}
+
+# DESIGN.md section 5 / README.md / modelDescription start values of the controller's own
+# parameters: forgetting 0.995 (DESIGN.md sections 2 and 5, README), trace bound 100 (README),
+# initial covariance scale 1 (AdaptiveCompoundController.xml start value; DESIGN names rls.p0
+# without a value), mv.delay 0 and mv.lambda_u 0 (DESIGN.md section 5).
+CONTROLLER_DESIGN_DEFAULTS = {
+    "mv.delay": 0, "mv.lambda_u": 0.0, "rls.enabled": True, "rls.forgetting": 0.995,
+    "rls.p0": 1.0, "rls.trace_max": 100.0, "sat.enabled": False,
 }
 
 # Table 1 rows (f: k_c, alpha)
@@ -191,16 +200,21 @@ def diophantine(a, d: int):
 def mv_controller(y_ref, y_meas, theta, d: int, lambda_u: float = 0.0):
     """Minimum-variance law with fixed model theta = (a1, a2, b1, b2) (DESIGN.md section 2):
     predictor y(k+d) = Gd y(k) + F q(k), F = B E; q(k) chosen so the prediction equals
-    y_ref(k) (with control weighting: q = f0 (y_ref - rest) / (f0^2 + lambda_u))."""
+    y_ref(k). With the control weighting lambda_u of the generalised MV law, q(k) minimises
+    J(q) = (y(k+d|k) - y_ref(k))^2 + lambda_u q^2, solved here as the least-squares problem
+    [f0; sqrt(lambda_u)] q ~ [y_ref - rest; 0] (rest: the prediction without the f0 q(k) term),
+    not by a closed-form transcription."""
     a1, a2, b1, b2 = theta
     e, g = diophantine([1.0, a1, a2], d)
     f = np.convolve([b1, b2], e)                  # F = B E, deg d
     n = len(y_ref)
     q = np.zeros(n)
+    design = np.array([[f[0]], [np.sqrt(lambda_u)]])
     for k in range(n):
-        pred = g[0] * y_meas[k] + (g[1] * y_meas[k - 1] if k >= 1 else 0.0)
-        pred += sum(f[i] * q[k - i] for i in range(1, len(f)) if k - i >= 0)
-        q[k] = f[0] * (y_ref[k] - pred) / (f[0] ** 2 + lambda_u)
+        rest = g[0] * y_meas[k] + (g[1] * y_meas[k - 1] if k >= 1 else 0.0)
+        rest += sum(f[i] * q[k - i] for i in range(1, len(f)) if k - i >= 0)
+        sol, *_ = np.linalg.lstsq(design, np.array([y_ref[k] - rest, 0.0]), rcond=None)
+        q[k] = sol[0]
     return q
 
 
@@ -213,3 +227,71 @@ def controller_feedforward(q, params: dict | None = None):
     alpha, k_c, h = p["creep.alpha"], p["creep.k_c"], p["h"]
     rr = gl_exact(q, -alpha, h ** alpha / k_c)
     return pi_inverse(rr, p["pi.w0"], w, r)
+
+
+# ---------------------------------------------------------------- RLS (indirect self-tuning)
+# DESIGN.md section 2 ("Adaptation"): RLS with forgetting estimates theta = [a1, a2, b1, b2] of
+# y(k) = -a1 y(k-1) - a2 y(k-2) + b1 q(k-d) + b2 q(k-d-1), with a bound on trace(P) and a
+# projection that keeps b1 positive and the zero -b2/b1 of B inside the radius 0.999. DESIGN
+# says only "b1 > 0"; the floor 1e-3 x nominal b1 is the documented constant of
+# piezo_controller.c (B1_FLOOR_FRACTION), taken as part of the spec here.
+RLS_B1_FLOOR_FRACTION = 1e-3
+RLS_ZERO_RADIUS_MAX = 0.999
+
+
+def rls_project(theta, b1_nominal: float) -> np.ndarray:
+    """Projection of DESIGN.md section 2: b1 >= 1e-3 b1_nominal, then |b2| <= 0.999 b1."""
+    th = np.array(theta, dtype=float)
+    th[2] = max(th[2], RLS_B1_FLOOR_FRACTION * b1_nominal)
+    th[3] = float(np.clip(th[3], -RLS_ZERO_RADIUS_MAX * th[2], RLS_ZERO_RADIUS_MAX * th[2]))
+    return th
+
+
+def rls_reference(q, y, d: int, forgetting: float, p0: float, trace_max: float, theta0,
+                  skip=None) -> dict:
+    """Textbook exponentially weighted RLS, run over recorded data (q(k), y(k)), k = 0..N-1,
+    everything zero before k = 0:
+
+        phi(k) = [-y(k-1), -y(k-2), q(k-d), q(k-d-1)]
+        e(k)   = y(k) - phi^T theta(k-1)                      (a-priori prediction error)
+        K      = P phi / (lambda + phi^T P phi)
+        theta  = theta + K e,   P = (P - K phi^T P) / lambda
+        if trace(P) > trace_max: P = P trace_max / trace(P)
+        theta  = projection(theta)
+
+    starting from theta(-1) = theta0 (the nominal model) and P = p0 I. skip[k] = True leaves
+    theta and P untouched at sample k (e(k) is still reported). Returns a dict of arrays:
+    theta (N, 4) after sample k, P (N, 4, 4) after sample k, e (N,), trace_scaled (N, bool:
+    the trace bound acted at k)."""
+    q = np.asarray(q, dtype=float)
+    y = np.asarray(y, dtype=float)
+    n = len(y)
+    lam = float(forgetting)
+
+    def Y(i):
+        return y[i] if i >= 0 else 0.0
+
+    def Q(i):
+        return q[i] if i >= 0 else 0.0
+
+    theta = np.array(theta0, dtype=float)
+    b1_nominal = theta[2]
+    P = p0 * np.eye(4)
+    out = {"theta": np.zeros((n, 4)), "P": np.zeros((n, 4, 4)), "e": np.zeros(n),
+           "trace_scaled": np.zeros(n, dtype=bool)}
+    for k in range(n):
+        phi = np.array([-Y(k - 1), -Y(k - 2), Q(k - d), Q(k - d - 1)])
+        e = y[k] - phi @ theta
+        if skip is None or not skip[k]:
+            K = P @ phi / (lam + phi @ P @ phi)
+            theta = theta + K * e
+            P = (P - np.outer(K, phi @ P)) / lam
+            tr = np.trace(P)
+            if tr > trace_max:
+                P = P * (trace_max / tr)
+                out["trace_scaled"][k] = True
+            theta = rls_project(theta, b1_nominal)
+        out["theta"][k] = theta
+        out["P"][k] = P
+        out["e"][k] = e
+    return out

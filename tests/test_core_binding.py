@@ -1,10 +1,13 @@
 """Tests of the cffi binding itself (harness/core.py): struct layout, symbols,
 library lookup, parameter naming."""
 import os
+import re
 import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+import xml.etree.ElementTree as ET
 
 import pytest
 
@@ -52,18 +55,38 @@ def test_struct_layout_matches_c_compiler(tmp_path):
     assert not mismatches, f"cffi vs C (cffi, C): {mismatches}"
 
 
+def _header_function_names():
+    """Function names declared in the headers the umbrella piezo_core.h includes, found by
+    a plain regex over the comment-stripped header text (independent of the binding's own
+    header_cdef parser): '<return type> piezo_name(...);' at the start of a line."""
+    umbrella = (core.CORE_DIR / "piezo_core.h").read_text()
+    headers = re.findall(r'#\s*include\s*"([^"]+)"', umbrella)
+    decl = re.compile(r"^[ \t]*(?:[A-Za-z_]\w*[ \t*]+)+?\**(piezo_\w+)\s*\([^;{}]*\)\s*;", re.M)
+    names = []
+    for h in headers:
+        text = re.sub(r"/\*.*?\*/", " ", (core.CORE_DIR / h).read_text(), flags=re.S)
+        names += decl.findall(text)
+    return headers, names
+
+
 def test_every_declared_function_is_exported():
-    """Reference: the header declarations. Every function the cdef declares must
-    resolve in the shared library (dlsym)."""
+    """Reference: the header declarations themselves (regex over the headers piezo_core.h
+    includes). The binding declares exactly those functions (no more, none missing, no
+    duplicate declarations), and every one resolves in the shared library (dlsym)."""
+    headers, declared = _header_function_names()
+    assert set(headers) == set(core.HEADER_ORDER)
+    assert len(declared) == len(set(declared)) and declared
     L = core.lib()
-    funcs = [n for n in dir(L) if n.startswith("piezo_")]
+    bound = {n for n in dir(L) if n.startswith("piezo_")}
+    assert bound == set(declared), (sorted(bound ^ set(declared)))
     missing = []
-    for n in funcs:
+    for n in declared:
         try:
             getattr(L, n)
         except AttributeError:
             missing.append(n)
-    assert len(funcs) >= 29 and not missing, f"missing symbols: {missing}"
+    print(f"\n{len(declared)} functions declared in {len(headers)} headers")
+    assert not missing, f"missing symbols: {missing}"
 
 
 def test_missing_library_message(tmp_path):
@@ -78,7 +101,10 @@ def test_missing_library_message(tmp_path):
 
 
 def test_defaults_match_design():
-    """Reference: DESIGN.md section 5 defaults typed in tests/numpy_reference.py."""
+    """Reference: DESIGN.md section 5 defaults typed in tests/numpy_reference.py
+    (DESIGN_DEFAULTS for the model, CONTROLLER_DESIGN_DEFAULTS for the controller's own
+    parameters: rls.forgetting 0.995, rls.trace_max 100, rls.p0 1, mv.delay 0, mv.lambda_u 0),
+    and the parameter name sets of the two modelDescription files."""
     p = core.default_plant_params()
     d = ref.DESIGN_DEFAULTS
     for k in ("pi.m", "pi.v_max", "pi.w0", "tf.a1", "tf.a2", "tf.b1", "tf.b2", "tf.delay",
@@ -93,10 +119,52 @@ def test_defaults_match_design():
     for k in ("pi.m", "pi.v_max", "pi.w0", "tf.a1", "tf.a2", "tf.b1", "tf.b2", "creep.k_c",
               "creep.alpha", "h"):
         assert c[k] == p[k], k
-    assert c["mv.delay"] == 0 and c["mv.lambda_u"] == 0 and c["rls.enabled"] is True
-    assert c["rls.forgetting"] == pytest.approx(0.995, abs=1e-12) and c["sat.enabled"] is False
-    assert c["rls.p0"] > 0 and c["rls.trace_max"] >= 4 * c["rls.p0"]
-    assert set(core.PLANT_PARAMETER_NAMES) == set(p) and len(p) == 3 + 16 + 5 + 4 + 3 + 1
+    for k, want in ref.CONTROLLER_DESIGN_DEFAULTS.items():
+        assert c[k] == want, (k, c[k], want)
+    assert set(core.PLANT_PARAMETER_NAMES) == set(p) == set(_fmu_parameters("PiezoStage"))
+    assert (set(core.CONTROLLER_PARAMETER_NAMES) == set(c)
+            == set(_fmu_parameters("AdaptiveCompoundController")))
+
+
+def _fmu_parameters(model):
+    """{name: start value as typed} of the causality="parameter" variables in
+    modelDescription/<model>.xml (the FMU interface of DESIGN.md section 5)."""
+    root = ET.parse(core.REPO_ROOT / "modelDescription" / f"{model}.xml").getroot()
+    out = {}
+    for var in root.iter("ScalarVariable"):
+        if var.get("causality") == "parameter":
+            (typ,) = list(var)
+            raw = typ.get("start")
+            out[var.get("name")] = {"Real": float, "Integer": int,
+                                    "Boolean": lambda t: t == "true"}[typ.tag](raw)
+    return out
+
+
+@pytest.mark.parametrize("model", ["PiezoStage", "AdaptiveCompoundController"])
+def test_core_defaults_equal_model_description_start_values(model):
+    """Reference: the start values in modelDescription/<model>.xml (what an FMI importer shows
+    as defaults). Every core default equals its start value exactly, e.g. for the controller
+    rls.p0 = 1, rls.trace_max = 100, rls.forgetting = 0.995 (README: 0.995 and 100)."""
+    want = _fmu_parameters(model)
+    got = core.default_plant_params() if model == "PiezoStage" else core.default_controller_params()
+    assert set(got) == set(want)
+    diff = {k: (got[k], want[k]) for k in want if got[k] != want[k]}
+    assert not diff, f"core default vs modelDescription start: {diff}"
+
+
+def test_controller_initial_state_uses_p0_and_nominal_model():
+    """Reference: DESIGN.md section 2 ('initialised from the nominal model') and the header
+    (P = p0 I). A fresh controller holds theta = nominal [a1, a2, b1, b2] and P = p0 I with
+    the default p0 = 1 (trace 4 <= trace_max = 100), read through ffi; with rls.p0 = 2.5,
+    P = 2.5 I."""
+    d = ref.DESIGN_DEFAULTS
+    for p0 in (None, 2.5):
+        c = core.Controller(None if p0 is None else {"rls.p0": p0})
+        want_p0 = ref.CONTROLLER_DESIGN_DEFAULTS["rls.p0"] if p0 is None else p0
+        assert list(c.raw.theta) == [d["tf.a1"], d["tf.a2"], d["tf.b1"], d["tf.b2"]]
+        assert list(c.raw.P) == [want_p0 if i % 5 == 0 else 0.0 for i in range(16)]
+        assert c.raw.trace_max == ref.CONTROLLER_DESIGN_DEFAULTS["rls.trace_max"]
+        assert c.raw.forgetting == ref.CONTROLLER_DESIGN_DEFAULTS["rls.forgetting"]
 
 
 def test_unknown_parameter_name_lists_valid_names():
