@@ -1,6 +1,8 @@
 """Both FMUs under a second importer: tests/c_master/fmu_master.c, a plain C host
-(dlopen/dlsym, its own callbacks, no fmpy), run under valgrind's memcheck when it is
-installed (errors or definite leaks fail the run).
+(dlopen/dlsym, its own callbacks, no fmpy), run under valgrind's memcheck (errors or
+definite/indirect leaks fail the run). valgrind is required when the environment variable
+CI is set (.ci/run installs it); elsewhere, without valgrind, the host runs bare and the
+test says so (printed note and a warning in pytest's summary), it does not skip.
 
 Reference: fmpy running the same fixed-step loop on the same FMU. The two importers must
 produce bitwise identical outputs, and the C host's checks of the FMI contract (every fmi2
@@ -10,8 +12,11 @@ all pass.
 """
 import math
 import os
+import re
 import shutil
 import subprocess
+import sys
+import warnings
 import zipfile
 from pathlib import Path
 
@@ -19,7 +24,33 @@ import numpy as np
 import pytest
 
 HERE = Path(__file__).resolve().parent
+MASTER_SOURCE = HERE / "c_master" / "fmu_master.c"
 N_SAMPLES = 1000
+
+
+def n_checks_in_master():
+    """The number of check(...) calls in fmu_master.c (the definition excluded). They all
+    sit in main's straight-line path (no loop, no branch around them), so a successful run
+    passes each exactly once."""
+    text = re.sub(r"/\*.*?\*/", "", MASTER_SOURCE.read_text(), flags=re.S)
+    return len(re.findall(r"^\s*check\(", text, flags=re.M))
+
+
+def memcheck_command():
+    """valgrind's memcheck prefix, or [] when valgrind is missing outside CI (with a note).
+    Under CI (environment variable CI set, as .ci/run is run) valgrind is required."""
+    valgrind = shutil.which("valgrind")
+    if valgrind:
+        return [valgrind, "-q", "--error-exitcode=3", "--leak-check=full",
+                "--errors-for-leak-kinds=definite,indirect"]
+    if os.environ.get("CI"):
+        pytest.fail("valgrind is required under CI (CI is set): install it "
+                    "(apt-get install valgrind; .ci/run does this)", pytrace=False)
+    note = ("NOTE: valgrind is not installed: the C host ran WITHOUT memcheck, so memory errors "
+            "and leaks of the FMUs were NOT checked (install valgrind; it is required under CI)")
+    print(note, file=sys.stderr)
+    warnings.warn(note)
+    return []
 
 
 def fmi_headers_dir():
@@ -82,17 +113,17 @@ def test_second_importer_agrees_with_fmpy_and_the_fmi_contract_holds(
 
     cmd = [str(master), str(unzipdir), model, md.guid, repr(h), str(N_SAMPLES),
            str(vrs[output])] + [str(vrs[name]) for name in inputs]
-    valgrind = shutil.which("valgrind")
-    if valgrind:
-        cmd = [valgrind, "-q", "--error-exitcode=3", "--leak-check=full",
-               "--errors-for-leak-kinds=definite,indirect"] + cmd
+    cmd = memcheck_command() + cmd
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600,
                           env={**os.environ, "LC_ALL": "C"})
     report = proc.stdout + proc.stderr
     assert proc.returncode == 0, report
     assert "0 failed" in proc.stdout and "FAIL" not in proc.stdout, report
     n_passed = int(proc.stdout.strip().splitlines()[-1].split()[0])
-    assert n_passed >= 35, report
+    # every check of the C host ran and passed: as many as it has check(...) calls
+    n_checks = n_checks_in_master()
+    assert n_passed == n_checks, report
+    assert sum(line.startswith("ok ") for line in proc.stdout.splitlines()) == n_checks, report
 
     y_c = {int(k): float(v) for tag, k, v in
            (line.split() for line in proc.stdout.splitlines() if line.startswith("y "))}

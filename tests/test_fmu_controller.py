@@ -4,11 +4,16 @@ stepping, FMU states, refusals, call sequences, closed loop with PiezoStage.
 Drives the built FMUs through fmpy's FMU2Slave (fixtures in conftest.py).
 """
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from harness import core  # noqa: E402
 
 OUTPUTS = ["v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error"]
 H = 0.0005
@@ -102,14 +107,35 @@ def test_start_values_in_the_binary_match_the_xml(controller, make_fmu):
             assert fmu.get(name) == start_value(var), name
 
 
-def test_outputs_during_initialization(controller, make_fmu):
+def _core_peek(params, y_ref, y_meas):
+    """The core controller's sample-0 output for these inputs (harness.core, cffi), in the
+    order of OUTPUTS."""
+    out = core.Controller(params).peek(y_ref, y_meas)
+    return [out.v, out.q, out.a1, out.a2, out.b1, out.b2, out.pred_error]
+
+
+@pytest.mark.parametrize("params", [
+    {},
+    {"mv.delay": 2, "mv.lambda_u": 0.05, "creep.k_c": 1.0497, "creep.alpha": -0.0085,
+     "pi.w0": 0.35, "tf.b1": 0.61},
+])
+def test_outputs_during_initialization(controller, make_fmu, params):
+    """In initialization mode the outputs are sample 0 of the current parameters and held
+    inputs. Reference: harness.core.Controller(params).peek(y_ref, y_meas) on the same C
+    core through cffi, exact equality; at rest (zero inputs) v = q = 0 and the estimates
+    are the nominal tf.* start values."""
     fmu = make_fmu(controller)
-    fmu.setup()
+    fmu.setup(params=params)
     out = dict(zip(OUTPUTS, fmu.get_reals(OUTPUTS)))
     assert out["v"] == 0.0 and out["q"] == 0.0
-    assert [out[n] for n in ("est.a1", "est.a2", "est.b1", "est.b2")] == [-1.3767, 0.3816, 0.5954, -0.5907]
-    fmu.set({"y_ref": 1.0})
-    assert fmu.get("v") > 0.0
+    nominal = [params.get(n, start_value(controller.variables[n])) for n in ("tf.a1", "tf.a2", "tf.b1", "tf.b2")]
+    assert [out[n] for n in ("est.a1", "est.a2", "est.b1", "est.b2")] == nominal
+    assert list(out.values()) == _core_peek(params, 0.0, 0.0)
+    for y_ref, y_meas in ((1.0, 0.0), (1.0, 0.3), (-2.5, 0.7)):
+        fmu.set({"y_ref": y_ref, "y_meas": y_meas})
+        outputs = fmu.get_reals(OUTPUTS)
+        assert outputs == _core_peek(params, y_ref, y_meas), (y_ref, y_meas)
+        assert outputs[0] != 0.0
 
 
 # ---------------------------------------------------------------------------- direct feedthrough
@@ -200,16 +226,84 @@ def test_state_save_restore_and_serialization_continue_bitwise(controller, make_
     assert np.array_equal(run(fresh, 800, k0=1200), reference)
 
 
+def _uninterrupted(controller, make_fmu, n, params=None):
+    fmu = make_fmu(controller)
+    fmu.initialize(params)
+    return run(fmu, n)
+
+
+# Every parameter away from its XML start value, all valid together (stable A,
+# |tf.b2| <= 0.999 tf.b1, rls.trace_max >= 4 rls.p0, sat.v_min < sat.v_max).
+NON_DEFAULT_PARAMETERS = {
+    "pi.m": 12, "pi.v_max": 24.0, "pi.w0": 0.30,
+    **{f"pi.w[{j}]": 0.001 * j for j in range(1, 17)},
+    "tf.a1": -1.30, "tf.a2": 0.35, "tf.b1": 0.60, "tf.b2": -0.55,
+    "creep.k_c": 1.0497, "creep.alpha": -0.0085, "creep.exact": True, "h": 0.001,
+    "mv.delay": 1, "mv.lambda_u": 0.01, "rls.enabled": False, "rls.forgetting": 0.99,
+    "rls.p0": 2.0, "rls.trace_max": 50.0, "sat.enabled": True, "sat.v_min": -40.0, "sat.v_max": 60.0,
+}
+
+
+@pytest.mark.parametrize("terminate_first", [False, True])
+def test_reset_restores_every_start_value(controller, make_fmu, terminate_first):
+    """fmi2Reset after a run with every parameter and input changed. Reference: the start
+    values of modelDescription.xml as read by fmpy (every parameter and input, exact
+    equality), and a fresh instance: its outputs in initialization mode and its 300-sample
+    run must equal the reset instance's bitwise."""
+    variables = controller.variables
+    params = {n for n, var in variables.items() if var.causality == "parameter"}
+    assert set(NON_DEFAULT_PARAMETERS) == params       # a new parameter must be added here
+    assert all(NON_DEFAULT_PARAMETERS[n] != start_value(variables[n]) for n in params)
+
+    fmu = make_fmu(controller)
+    fmu.initialize(NON_DEFAULT_PARAMETERS)
+    run(fmu, 200)
+    fmu.set({"y_ref": 1.5, "y_meas": -0.5})
+    assert {n: fmu.get(n) for n in params} == NON_DEFAULT_PARAMETERS     # the run really used them
+    if terminate_first:
+        fmu.slave.terminate()
+    fmu.slave.reset()
+
+    fresh = make_fmu(controller)
+    fmu.setup()
+    fresh.setup()
+    for name, var in variables.items():
+        if var.causality in ("parameter", "input"):
+            assert fmu.get(name) == start_value(var), name
+    assert fmu.get_reals(OUTPUTS) == fresh.get_reals(OUTPUTS)
+    fmu.slave.exitInitializationMode()
+    fresh.slave.exitInitializationMode()
+    fmu.h, fmu.k, fresh.h, fresh.k = H, 0, H, 0
+    assert np.array_equal(run(fmu, 300), run(fresh, 300))
+
+
 def test_deserialize_refuses_garbage(controller, make_fmu):
+    """Refused blobs leave the instance untouched. Reference: an uninterrupted 100-sample
+    run, which the 50 samples before the refusals plus the 50 after must equal bitwise;
+    the intact blob still restores into that continuation."""
+    reference = _uninterrupted(controller, make_fmu, 100)
     fmu = make_fmu(controller)
     fmu.initialize()
-    run(fmu, 50)
-    blob = fmu.slave.serializeFMUstate(fmu.slave.getFMUstate())
+    part = run(fmu, 50)
+    state = fmu.slave.getFMUstate()
+    blob = fmu.slave.serializeFMUstate(state)
+    fmu.slave.freeFMUstate(state)
     corrupted = bytearray(blob)
     corrupted[200] ^= 1
+    bad_version = bytearray(blob)
+    bad_version[8] = 7
     assert_refused(lambda: fmu.slave.deSerializeFMUstate(bytes(corrupted)), fmu, "checksum")
     assert_refused(lambda: fmu.slave.deSerializeFMUstate(blob[: len(blob) // 2]), fmu, "truncated")
     assert_refused(lambda: fmu.slave.deSerializeFMUstate(b"\xff" * 64), fmu, "not a serialized")
+    assert_refused(lambda: fmu.slave.deSerializeFMUstate(bytes(bad_version)), fmu, "format version")
+    rest = run(fmu, 50, k0=50)
+    assert np.array_equal(np.vstack([part, rest]), reference)
+    # the intact blob still gives the same continuation
+    restored = fmu.slave.deSerializeFMUstate(blob)
+    fmu.slave.setFMUstate(restored)
+    fmu.slave.freeFMUstate(restored)
+    fmu.k = 50
+    assert np.array_equal(run(fmu, 50, k0=50), reference[50:])
 
 
 # ---------------------------------------------------------------------------- refusals
@@ -251,9 +345,16 @@ def test_bad_parameter_refused_at_exit_initialization(controller, make_fmu, para
 
 
 def test_inconsistent_limits_are_fine_while_saturation_is_off(controller, make_fmu):
+    """sat.v_min > sat.v_max is accepted while sat.enabled = false, and the limits are then
+    ignored. Reference: a run with the default limits (-100, 100 V), bitwise equal; every
+    control lies outside the empty interval the limits would allow, so any clipping would show."""
+    reference = _uninterrupted(controller, make_fmu, 300)
     fmu = make_fmu(controller)
     fmu.initialize({"sat.enabled": False, "sat.v_min": 10.0, "sat.v_max": -10.0})
-    fmu.step()
+    assert (fmu.get("sat.v_min"), fmu.get("sat.v_max")) == (10.0, -10.0)
+    out = run(fmu, 300)
+    assert np.array_equal(out, reference)
+    assert np.ptp(out[:, 0]) > 10.0                # v [V] really moves
 
 
 def test_non_finite_input_refused_state_unchanged(controller, make_fmu):
@@ -271,12 +372,33 @@ def test_non_finite_input_refused_state_unchanged(controller, make_fmu):
 
 
 def test_step_size_not_a_multiple_of_h_is_refused(controller, make_fmu):
+    """Refused steps (not a multiple of h = 1 ms, or from the wrong time) change nothing.
+    Reference: an uninterrupted run with h = 1 ms, which the samples before and after the
+    refusals must equal bitwise; then a 3-sample step equals three 1-sample steps."""
+    params = {"h": 0.001}
+    reference = make_fmu(controller)
+    reference.initialize(params)
+    expected = run(reference, 40)
     fmu = make_fmu(controller)
-    fmu.initialize({"h": 0.001})
-    assert_refused(lambda: fmu.slave.doStep(0.0, 0.0015), fmu, "not a whole multiple of h = 0.001")
-    fmu.slave.doStep(0.0, 0.003)            # three samples
-    assert_refused(lambda: fmu.slave.doStep(0.002, 0.001), fmu, "does not match")
-    fmu.slave.doStep(0.003, 0.001)
+    fmu.initialize(params)
+    part = run(fmu, 20)
+    fmu.set({"y_ref": y_d(21), "y_meas": y_meas_of(20)})
+    for bad in (0.0015, 0.0007, 0.001 * (1 + 1e-6), 0.0, -0.001, float("nan")):
+        assert_refused(lambda: fmu.slave.doStep(0.020, bad), fmu, "communicationStepSize", "h = 0.001")
+    assert_refused(lambda: fmu.slave.doStep(0.019, 0.001), fmu, "does not match")
+    assert_refused(lambda: fmu.slave.doStep(0.0203, 0.001), fmu, "does not match")
+    rest = run(fmu, 20, k0=20)
+    assert np.array_equal(np.vstack([part, rest]), expected)
+
+    # many samples per step, then a wrong time, then the right one
+    inputs = {"y_ref": 2.0, "y_meas": 1.5}
+    for f in (reference, fmu):
+        f.set(inputs)
+    fmu.slave.doStep(0.040, 0.003)          # three samples
+    assert_refused(lambda: fmu.slave.doStep(0.042, 0.001), fmu, "does not match")
+    fmu.slave.doStep(0.043, 0.001)
+    reference.step(4)
+    assert fmu.get_reals(OUTPUTS) == reference.get_reals(OUTPUTS)
 
 
 def test_illegal_call_sequences_return_error(controller, make_fmu):
