@@ -148,15 +148,24 @@ def test_soe_vs_exact_60s(alpha):
     """Reference: numpy_reference.gl_exact_fft (the exact G-L sum by FFT convolution,
     cross-checked against the core's exact mode above). 60 s at 2 kHz (120000 samples),
     gain 1, three offset signals (10 sin(2 pi t) + 10, a 0-20 um reflected random walk,
-    0-20 um steps every 2 s). DESIGN.md: max error <= 0.001 nm (1e-6 um) for
-    |alpha| <= 0.01 and <= 1 nm (1e-3 um) for |alpha| <= 0.5."""
-    tol = 1e-6 if abs(alpha) <= 0.01 else 1e-3
+    0-20 um steps every 2 s).
+    Regression bound (a few times the measured error): max error <= 1e-5 nm (1e-8 um) for
+    |alpha| <= 0.01 (measured <= 2.9e-6 nm, worst: steps, alpha = -0.01) and <= 0.01 nm
+    (1e-5 um) for |alpha| <= 0.5 (measured <= 4.6e-3 nm, worst: steps, alpha = -0.5; 4.1e-4 nm
+    at -0.25). Acceptance bound (the issue's, checked too): <= 0.001 nm for |alpha| <= 0.01
+    and <= 1 nm for |alpha| <= 0.5. DESIGN.md section 1 quotes, for its suggested quadrature
+    (step ~0.7), <= 0.001 nm at |alpha| = 0.01, <= 0.06 nm for |alpha| <= 0.25 and <= 0.4 nm
+    at |alpha| = 0.5; the core's finer step (0.5) does better than that."""
+    small = abs(alpha) <= 0.01
+    tol = 1e-8 if small else 1e-5
+    acceptance = 1e-6 if small else 1e-3
     errs = {}
     for name, x in _signals().items():
         got = core.gl_operator(alpha, 1.0, False).run(x)
         want = ref.gl_exact_fft(x, alpha, 1.0)
         errs[name] = np.max(np.abs(got - want))
     print("\nSOE alpha=%+.4f: " % alpha + ", ".join(f"{k} {v * 1e3:.2e} nm" for k, v in errs.items()))
+    assert max(errs.values()) <= acceptance, errs
     assert max(errs.values()) <= tol, errs
 
 
