@@ -237,11 +237,17 @@ def controller_feedforward(q, params: dict | None = None):
 # piezo_controller.c (B1_FLOOR_FRACTION), taken as part of the spec here.
 RLS_B1_FLOOR_FRACTION = 1e-3
 RLS_ZERO_RADIUS_MAX = 0.999
+RLS_A_STABILITY_MARGIN = 1e-4   # stable estimated A, with margin (README, controller)
 
 
 def rls_project(theta, b1_nominal: float) -> np.ndarray:
-    """Projection of DESIGN.md section 2: b1 >= 1e-3 b1_nominal, then |b2| <= 0.999 b1."""
+    """Projection: the estimated A inside the stability (Jury) triangle shrunk by
+    m = 1e-4 (A(1) >= m, A(-1) >= m, |a2| <= 1 - m: a2 clipped first, then a1), then
+    DESIGN.md section 2's b1 >= 1e-3 b1_nominal and |b2| <= 0.999 b1."""
     th = np.array(theta, dtype=float)
+    m = RLS_A_STABILITY_MARGIN
+    th[1] = float(np.clip(th[1], -1.0 + m, 1.0 - m))
+    th[0] = float(np.clip(th[0], -(1.0 + th[1] - m), 1.0 + th[1] - m))
     th[2] = max(th[2], RLS_B1_FLOOR_FRACTION * b1_nominal)
     th[3] = float(np.clip(th[3], -RLS_ZERO_RADIUS_MAX * th[2], RLS_ZERO_RADIUS_MAX * th[2]))
     return th

@@ -8,6 +8,12 @@
  * stays inside the unit circle so that MV, which inverts B, stays stable. */
 #define B1_FLOOR_FRACTION 1e-3  /* b1 >= 1e-3 * nominal b1 */
 #define ZERO_RADIUS_MAX 0.999   /* |b2 / b1| <= 0.999 */
+/* The estimated A stays stable with a margin: A(1) = 1 + a1 + a2 >= m,
+ * A(-1) = 1 - a1 + a2 >= m, |a2| <= 1 - m. Without it a single tone lets
+ * (a1, a2) wander along the unexcited directions; with DESIGN's -10 % PI
+ * weights the loop then diverged (a1, a2 -> 1e12 within 0.6 s). m is 50x
+ * below the nominal A(1) = 0.0049, so every plausible stage fits inside. */
+#define A_STABILITY_MARGIN 1e-4
 
 void piezo_controller_default_params(piezo_controller_params *p)
 {
@@ -155,8 +161,16 @@ static double q_past(const piezo_controller *c, int i)
 
 static void project(piezo_controller *c)
 {
+    const double m = A_STABILITY_MARGIN;
     double b1_floor = B1_FLOOR_FRACTION * c->theta_nominal[2];
     double *th = c->theta;
+    double a1_max;
+    /* stable A (Jury triangle shrunk by m): clamp a2, then a1 given a2 */
+    if (th[1] > 1.0 - m) th[1] = 1.0 - m;
+    if (th[1] < -1.0 + m) th[1] = -1.0 + m;
+    a1_max = 1.0 + th[1] - m;
+    if (fabs(th[0]) > a1_max) th[0] = copysign(a1_max, th[0]);
+    /* B: positive gain, zero inside the radius */
     if (th[2] < b1_floor) th[2] = b1_floor;
     if (fabs(th[3]) > ZERO_RADIUS_MAX * th[2]) th[3] = copysign(ZERO_RADIUS_MAX * th[2], th[3]);
 }
@@ -282,12 +296,14 @@ static piezo_status check_step_inputs(const piezo_controller *c, double y_ref, d
     return PIEZO_OK;
 }
 
-/* Advance `scratch` (a copy of the state) by one sample; non-finite results refused. */
+/* Advance `scratch` (a copy of the state) by one sample. The inputs are
+ * finite, so a non-finite value computed on the way means divergence. */
 static piezo_status advance_copy(piezo_controller *scratch, double y_ref, double y_meas,
                                  double *history, size_t capacity)
 {
     piezo_status st = controller_advance(scratch, y_ref, y_meas, history, capacity);
-    if (st == PIEZO_OK && !(isfinite(scratch->out.v) && isfinite(scratch->out.q))) st = PIEZO_ERR_NONFINITE;
+    if (st == PIEZO_ERR_NONFINITE || (st == PIEZO_OK && !(isfinite(scratch->out.v) && isfinite(scratch->out.q))))
+        st = PIEZO_ERR_DIVERGED;
     return st;
 }
 

@@ -168,8 +168,9 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
         st = piezo_gl_step(&scratch.creep, x, creep_history, history_capacity, &y); /* y(k+1) */
     else
         y = x;
-    /* non-finite intermediate values (e.g. an exploding input) are refused too */
-    if (st == PIEZO_OK && !(isfinite(u) && isfinite(x) && isfinite(y))) st = PIEZO_ERR_NONFINITE;
+    /* v is finite, so a non-finite value here was computed: overflow, not bad input */
+    if (st == PIEZO_ERR_NONFINITE || (st == PIEZO_OK && !(isfinite(u) && isfinite(x) && isfinite(y))))
+        st = PIEZO_ERR_DIVERGED;
     if (st != PIEZO_OK) return st;
     scratch.k += 1;
     scratch.out.u = u;
