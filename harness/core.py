@@ -30,7 +30,7 @@ import numpy as np
 from cffi import FFI
 
 __all__ = [
-    "CoreParameterError", "CoreInputError", "Plant", "Controller",
+    "CoreParameterError", "CoreInputError", "CoreDivergedError", "Plant", "Controller",
     "PlantOutput", "ControllerOutput", "PIModel", "PIInverse",
     "TransferFunction", "GLOperator", "pi_model", "transfer_function",
     "gl_operator", "gl_weights", "diophantine", "default_plant_params",
@@ -52,6 +52,7 @@ PIEZO_ERR_NULL = 1
 PIEZO_ERR_PARAM = 2
 PIEZO_ERR_NONFINITE = 3
 PIEZO_ERR_CAPACITY = 4
+PIEZO_ERR_DIVERGED = 5
 
 
 # --------------------------------------------------------------------------
@@ -171,6 +172,11 @@ class CoreInputError(ValueError):
     """A non-finite input was refused by the core; its state is unchanged."""
 
 
+class CoreDivergedError(FloatingPointError):
+    """The inputs were finite but a computed value was not (overflow: the model or the
+    loop diverged); the step was refused and the state is unchanged."""
+
+
 def _str(p) -> str:
     return "<unknown>" if p == ffi.NULL else ffi.string(p).decode()
 
@@ -189,6 +195,10 @@ def _raise_step(status: int, what: str, inputs: dict) -> None:
     if status == PIEZO_ERR_NONFINITE:
         desc = ", ".join(f"{k} = {v!r}" for k, v in inputs.items())
         raise CoreInputError(f"{what}: non-finite input refused ({desc}); state unchanged")
+    if status == PIEZO_ERR_DIVERGED:
+        desc = ", ".join(f"{k} = {v!r}" for k, v in inputs.items())
+        raise CoreDivergedError(f"{what}: diverged: a computed value is not finite although the "
+                                f"inputs are ({desc}); step refused, state unchanged")
     raise RuntimeError(f"{what} failed with piezo_status {status}")
 
 

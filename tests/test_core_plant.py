@@ -411,3 +411,18 @@ def test_plant_noise_is_added_before_quantization():
     assert np.max(np.abs(sim["y_meas"] - want)) == 0.0
     # the noise matters: without it, a sizeable share of the readings would differ
     assert np.mean(sim["y_meas"] != res * np.round(sim["y"] / res)) > 0.2
+
+
+def test_overflow_is_reported_as_divergence_not_as_bad_input():
+    """Reference: IEEE overflow. With pi.w0 = 4, v = 1e308 is a finite input but
+    u = 4 v + ... overflows to inf: the core refuses the step as diverged
+    (CoreDivergedError, a FloatingPointError), not as a non-finite input, and the plant is
+    unchanged (the next valid step equals that of an untouched twin, bitwise)."""
+    plant, twin = core.Plant({"pi.w0": 4.0}), core.Plant({"pi.w0": 4.0})
+    for p in (plant, twin):
+        p.step(3.0)
+    with pytest.raises(core.CoreDivergedError, match="diverged"):
+        plant.step(1e308)
+    assert not isinstance(core.CoreDivergedError("x"), ValueError)   # not "bad input"
+    assert plant.k == twin.k == 1
+    assert plant.step(5.0) == twin.step(5.0)

@@ -209,6 +209,10 @@ static void log_core_failure(const fmu_instance *inst, const char *fname, piezo_
     case PIEZO_ERR_NONFINITE:
         log_error(inst, "%s: the model refused a non-finite value", fname);
         break;
+    case PIEZO_ERR_DIVERGED:
+        log_error(inst, "%s: the model diverged: a computed value is not finite although the inputs "
+                  "are (e.g. a voltage far outside the model's range, or an unstable loop)", fname);
+        break;
     case PIEZO_ERR_CAPACITY:
         log_error(inst, "%s: internal error: exact-mode history buffer too small", fname);
         break;
