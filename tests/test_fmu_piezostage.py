@@ -655,7 +655,8 @@ def test_a_step_the_core_refuses_enters_the_error_state(piezo_stage, make_fmu):
     state = fmu.slave.getFMUstate()
     before = fmu.get_reals(OUTPUTS)
     fmu.set({"v": 1e308})
-    assert_refused(lambda: fmu.slave.doStep(fmu.time, 5 * H), fmu, "diverged", "enters state Error")
+    assert_refused(lambda: fmu.slave.doStep(fmu.time, 5 * H), fmu, "enters state Error")
+    assert any("the model diverged" in text for text in fmu.errors()), fmu.errors()
     assert fmu.get_reals(OUTPUTS) == before
     assert_refused(lambda: fmu.slave.doStep(fmu.time, H), fmu, "illegal call sequence", "state Error")
     assert_refused(lambda: fmu.slave.getFMUstate(), fmu, "illegal call sequence")
