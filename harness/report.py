@@ -377,11 +377,7 @@ def format_tracking_table(results, title=None, markdown=False):
     -------
     str
     """
-    rows = [_tracking_cells(r) for r in results]
-    table = _md_table(_TRACK_HEAD, rows) if markdown else _text_table(_TRACK_HEAD, rows)
-    if title:
-        table = (f"### {title}\n\n" if markdown else f"{title}\n") + table
-    return table
+    return _titled_table(_TRACK_HEAD, [_tracking_cells(r) for r in results], title, markdown)
 
 
 def format_validation_table(results, title=None, markdown=False):
@@ -397,8 +393,11 @@ def format_validation_table(results, title=None, markdown=False):
     -------
     str
     """
-    rows = [_validation_cells(r) for r in results]
-    table = _md_table(_VALID_HEAD, rows) if markdown else _text_table(_VALID_HEAD, rows)
+    return _titled_table(_VALID_HEAD, [_validation_cells(r) for r in results], title, markdown)
+
+
+def _titled_table(head, rows, title, markdown):
+    table = _md_table(head, rows) if markdown else _text_table(head, rows)
     if title:
         table = (f"### {title}\n\n" if markdown else f"{title}\n") + table
     return table
