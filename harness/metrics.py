@@ -73,6 +73,17 @@ def window_mask(time, window=None, step=None):
     return (time >= t_start - tol) & (time < t_stop - tol)
 
 
+def _paired(reference, output):
+    """The two signals as float arrays of one shape, with at least one sample."""
+    reference = np.asarray(reference, dtype=float)
+    output = np.asarray(output, dtype=float)
+    if reference.shape != output.shape:
+        raise ValueError(f"shape mismatch: {reference.shape} vs {output.shape}")
+    if reference.size == 0:
+        raise ValueError("no samples to evaluate the error on")
+    return reference, output
+
+
 def rms_error(reference, output):
     """Root-mean-square error, eq 36: ``sqrt(mean((reference - output)^2))``.
 
@@ -85,12 +96,7 @@ def rms_error(reference, output):
     -------
     float
     """
-    reference = np.asarray(reference, dtype=float)
-    output = np.asarray(output, dtype=float)
-    if reference.shape != output.shape:
-        raise ValueError(f"shape mismatch: {reference.shape} vs {output.shape}")
-    if reference.size == 0:
-        raise ValueError("no samples to evaluate the error on")
+    reference, output = _paired(reference, output)
     err = reference - output
     return math.sqrt(float(np.mean(err * err)))
 
@@ -112,12 +118,7 @@ def relative_error(reference, output, normalizer=None):
     float
         Dimensionless ratio; ``nan`` if the normalizer is identically zero.
     """
-    reference = np.asarray(reference, dtype=float)
-    output = np.asarray(output, dtype=float)
-    if reference.shape != output.shape:
-        raise ValueError(f"shape mismatch: {reference.shape} vs {output.shape}")
-    if reference.size == 0:
-        raise ValueError("no samples to evaluate the error on")
+    reference, output = _paired(reference, output)
     norm = output if normalizer is None else np.asarray(normalizer, dtype=float)
     err = reference - output
     den = float(np.sum(norm * norm))

@@ -508,7 +508,12 @@ def plot_tracking(results, path, title, error=False):
             ax.legend(fontsize=7, loc="upper right")
         ax.set_xlabel("time [s]")
         ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[len(results):]:
+    return _save_figure(plt, fig, axes, len(results), title, path)
+
+
+def _save_figure(plt, fig, axes, n_used, title, path):
+    """Hide the unused panels, title, save as PNG and close the figure."""
+    for ax in list(axes.flat)[n_used:]:
         ax.set_visible(False)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
@@ -549,13 +554,7 @@ def plot_validation(results, path, title, difference=False):
         ax.set_title(r.scenario, fontsize=9)
         ax.set_xlabel("time [s]")
         ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[len(results):]:
-        ax.set_visible(False)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return Path(path)
+    return _save_figure(plt, fig, axes, len(results), title, path)
 
 
 # ---------------------------------------------------------------------------
