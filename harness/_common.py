@@ -15,8 +15,16 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 BUILD_COMMAND = "cmake -S . -B build && cmake --build build"
 
 MASTERS = ("gauss-seidel", "jacobi")
+#: doStep orders of the Gauss-Seidel master (the exchange happens before both steps)
+STEP_ORDERS = ("plant-first", "controller-first")
 
-CLOSED_LOOP_FIELDS = ("time", "y_d", "y", "y_meas", "v", "q", "a1", "a2", "b1", "b2", "pred_error")
+#: Start value of the controller's ``mv.delay`` (the XML start; a test checks
+#: it against the FMU and the core): d = 2, the loop delay of the default
+#: controller, which publishes v at the end of the step that sampled its inputs.
+DEFAULT_MV_DELAY = 1
+
+CLOSED_LOOP_FIELDS = ("time", "y_d", "y", "y_meas", "v", "q", "a1", "a2", "b1", "b2", "pred_error",
+                      "saturated")
 CLOSED_LOOP_DTYPE = np.dtype([(f, "f8") for f in CLOSED_LOOP_FIELDS])
 OPEN_LOOP_FIELDS = ("time", "v", "u", "x", "y", "y_meas")
 OPEN_LOOP_DTYPE = np.dtype([(f, "f8") for f in OPEN_LOOP_FIELDS])
@@ -38,6 +46,14 @@ def normalize_master(master):
     raise ValueError(f"master must be one of {MASTERS}, got {master!r}")
 
 
+def normalize_step_order(order):
+    """Return the canonical doStep order or raise ValueError."""
+    key = str(order).lower().replace("_", "-")
+    if key in STEP_ORDERS:
+        return key
+    raise ValueError(f"step_order must be one of {STEP_ORDERS}, got {order!r}")
+
+
 @dataclass(frozen=True)
 class ClosedLoopSetup:
     """Everything a closed-loop run needs, resolved from a scenario and options.
@@ -57,8 +73,12 @@ class ClosedLoopSetup:
         Controller input per sample: ``y_d(k + d)`` with preview, ``y_d(k)`` without.
     d : int
         Loop delay of the controller's model, ``1 + mv.delay``.
+    feedthrough : bool
+        The controller's ``mv.feedthrough``: v depends directly on the inputs.
     master : str
         ``"gauss-seidel"`` or ``"jacobi"``.
+    step_order : str
+        ``"plant-first"`` or ``"controller-first"`` (the order of the doStep calls).
     plant_params, controller_params : dict
         Effective parameter overrides by FMU variable name.
     """
@@ -70,20 +90,23 @@ class ClosedLoopSetup:
     y_d: np.ndarray
     y_ref: list
     d: int
+    feedthrough: bool
     master: str
+    step_order: str
     plant_params: dict
     controller_params: dict
 
 
 def prepare_closed_loop(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
                         plant_params=None, controller_params=None, duration=None,
-                        registry=None):
+                        registry=None, step_order="plant-first"):
     """Resolve the scenario and options of a closed-loop run (see ``simulate_closed_loop``)."""
     sc = get_scenario(scenario, registry)
     if sc.kind != "tracking":
         raise ValueError(f"scenario '{sc.name}' is a {sc.kind} scenario; "
                          f"a closed-loop run needs a tracking scenario")
     master = normalize_master(master)
+    step_order = normalize_step_order(step_order)
     h = float(sc.step_size)
     if duration is None:
         n = sc.n_samples
@@ -102,19 +125,18 @@ def prepare_closed_loop(scenario, *, adaptation=None, preview=True, master="gaus
     c.setdefault("h", h)
     if adaptation is not None:
         c["rls.enabled"] = bool(adaptation)
-    extra = int(c.get("mv.delay", 0))
-    if master == "jacobi":
-        # A Jacobi master adds one sample of loop delay (DESIGN.md section 3).
-        extra += 1
-        c["mv.delay"] = extra
-    d = 1 + extra
+    # Every master here exchanges values at communication points, so the loop
+    # delay is the controller's own d = 1 + mv.delay (2 by default); the
+    # master is not a parameter of the loop.
+    d = 1 + int(c.get("mv.delay", DEFAULT_MV_DELAY))
+    feedthrough = bool(c.get("mv.feedthrough", False))
 
     time = np.arange(n, dtype=float) * h
     ext = np.arange(n + d, dtype=float) * h
     y_d_ext = sc.signal.evaluate(ext)
     y_d = y_d_ext[:n].copy()
     y_ref = (y_d_ext[d:d + n] if preview else y_d).tolist()
-    return ClosedLoopSetup(sc, n, h, time, y_d, y_ref, d, master, p, c)
+    return ClosedLoopSetup(sc, n, h, time, y_d, y_ref, d, feedthrough, master, step_order, p, c)
 
 
 def open_loop_grid(v_signal, step_size):

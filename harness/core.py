@@ -30,7 +30,8 @@ import numpy as np
 from cffi import FFI
 
 __all__ = [
-    "CoreParameterError", "CoreInputError", "CoreDivergedError", "Plant", "Controller",
+    "CoreParameterError", "CoreInputError", "CoreDivergedError", "CoreUnstableError", "Plant",
+    "Controller",
     "PlantOutput", "ControllerOutput", "PIModel", "PIInverse",
     "TransferFunction", "GLOperator", "pi_model", "transfer_function",
     "gl_operator", "gl_weights", "diophantine", "default_plant_params",
@@ -44,7 +45,7 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 # (e.g. for an installed harness outside the repository).
 CORE_DIR = Path(os.environ.get("PIEZO_CORE_INCLUDE") or REPO_ROOT / "fmu_src" / "core")
 HEADER_ORDER = ("piezo_status.h", "piezo_hysteresis.h", "piezo_tf.h",
-                "piezo_creep.h", "piezo_plant.h", "piezo_controller.h")
+                "piezo_creep.h", "piezo_plant.h", "piezo_controller.h", "piezo_reference.h")
 BUILD_COMMAND = "cmake -S . -B build && cmake --build build"
 
 PIEZO_OK = 0
@@ -53,6 +54,7 @@ PIEZO_ERR_PARAM = 2
 PIEZO_ERR_NONFINITE = 3
 PIEZO_ERR_CAPACITY = 4
 PIEZO_ERR_DIVERGED = 5
+PIEZO_ERR_UNSTABLE = 6
 
 
 # --------------------------------------------------------------------------
@@ -177,6 +179,12 @@ class CoreDivergedError(FloatingPointError):
     loop diverged); the step was refused and the state is unchanged."""
 
 
+class CoreUnstableError(CoreDivergedError):
+    """The controller's monitor found the loop unstable: ``|pred_error|`` stayed above
+    ``monitor.pred_error_max`` for ``monitor.divergence_samples`` consecutive samples;
+    the step was refused and the state is unchanged."""
+
+
 def _str(p) -> str:
     return "<unknown>" if p == ffi.NULL else ffi.string(p).decode()
 
@@ -199,6 +207,10 @@ def _raise_step(status: int, what: str, inputs: dict) -> None:
         desc = ", ".join(f"{k} = {v!r}" for k, v in inputs.items())
         raise CoreDivergedError(f"{what}: diverged: a computed value is not finite although the "
                                 f"inputs are ({desc}); step refused, state unchanged")
+    if status == PIEZO_ERR_UNSTABLE:
+        raise CoreUnstableError(f"{what}: the loop is unstable: |pred_error| stayed above "
+                                f"monitor.pred_error_max for monitor.divergence_samples consecutive "
+                                f"samples; step refused, state unchanged")
     raise RuntimeError(f"{what} failed with piezo_status {status}")
 
 
@@ -245,6 +257,7 @@ _CONTROLLER_TABLE = {
     "creep.exact": (("creep_exact",), "bool"),
     "h": (("h",), "float"),
     "mv.delay": (("mv_delay",), "int"),
+    "mv.feedthrough": (("mv_feedthrough",), "bool"),
     "mv.lambda_u": (("mv_lambda_u",), "float"),
     "rls.enabled": (("rls_enabled",), "bool"),
     "rls.forgetting": (("rls_forgetting",), "float"),
@@ -253,6 +266,8 @@ _CONTROLLER_TABLE = {
     "sat.enabled": (("sat_enabled",), "bool"),
     "sat.v_min": (("sat_v_min",), "float"),
     "sat.v_max": (("sat_v_max",), "float"),
+    "monitor.pred_error_max": (("monitor_pred_error_max",), "float"),
+    "monitor.divergence_samples": (("monitor_divergence_samples",), "int"),
 }
 
 PLANT_PARAMETER_NAMES = tuple(_PLANT_TABLE)
@@ -566,6 +581,11 @@ class Controller:
     def k(self) -> int:
         """Index of the next sample to be computed."""
         return int(self._c.k)
+
+    @property
+    def output(self) -> ControllerOutput:
+        """The last committed sample (zeros and the nominal estimates before the first)."""
+        return _ctrl_out(self._c.out)
 
     def reset(self) -> None:
         """Return to k = 0 with the nominal model and the initial covariance."""

@@ -23,13 +23,14 @@ __all__ = ["simulate_closed_loop_core", "simulate_open_loop_core"]
 
 def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
                               plant_params=None, controller_params=None, fmu_dir=None,
-                              duration=None, registry=None):
+                              duration=None, registry=None, step_order="plant-first"):
     """Run a tracking scenario on the C core (no FMUs).
 
     Parameters
     ----------
-    scenario, adaptation, preview, master, plant_params, controller_params, duration, registry
-        As :func:`harness.cosim.simulate_closed_loop`.
+    scenario, adaptation, preview, master, plant_params, controller_params, duration, registry, step_order
+        As :func:`harness.cosim.simulate_closed_loop` (the FMUs' semantics, emulated sample
+        by sample; ``step_order`` changes nothing here, as it changes nothing there).
     fmu_dir : ignored
         Accepted so that both functions share one signature.
 
@@ -51,7 +52,7 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
 
     setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
                                 plant_params=plant_params, controller_params=controller_params,
-                                duration=duration, registry=registry)
+                                duration=duration, registry=registry, step_order=step_order)
     plant = core.Plant(setup.plant_params)
     ctrl = core.Controller(setup.controller_params)
     n = setup.n
@@ -59,19 +60,37 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
     rows[:, 0] = setup.time
     rows[:, 1] = setup.y_d
     y_ref = setup.y_ref
-    jacobi = setup.master == "jacobi"
     out = plant.output
-    v_held = 0.0
     c_step, p_step = ctrl.step, plant.step
-    for k in range(n):
-        c = c_step(y_ref[k], out.y_meas)
-        rows[k, 2] = out.y
-        rows[k, 3] = out.y_meas
-        rows[k, 4:] = c[:7]
-        if jacobi:
-            out = p_step(v_held)
-            v_held = c.v
-        else:
+    published = ctrl.output          # the controller's outputs before its first step
+    if not setup.feedthrough:
+        # v computed from the inputs of t_k is published at t_(k+1) (FMU default)
+        for k in range(n):
+            rows[k, 2] = out.y
+            rows[k, 3] = out.y_meas
+            rows[k, 4:] = published
+            applied = published.v
+            published = c_step(y_ref[k], out.y_meas)
+            out = p_step(applied)
+    elif setup.master == "gauss-seidel":
+        # direct feedthrough read after the inputs are set: v(k) from the inputs of t_k
+        for k in range(n):
+            c = c_step(y_ref[k], out.y_meas)
+            rows[k, 2] = out.y
+            rows[k, 3] = out.y_meas
+            rows[k, 4:] = c
+            out = p_step(c.v)
+    else:
+        # direct feedthrough under a Jacobi master: the v read at t_k is a peek with the
+        # inputs held from t_(k-1); the step then commits v from the inputs of t_k
+        held = (0.0, 0.0)
+        for k in range(n):
+            c = ctrl.peek(*held)
+            rows[k, 2] = out.y
+            rows[k, 3] = out.y_meas
+            rows[k, 4:] = c
+            held = (y_ref[k], out.y_meas)
+            c_step(*held)
             out = p_step(c.v)
     return as_structured(rows, CLOSED_LOOP_DTYPE)
 

@@ -1,20 +1,29 @@
 """FMI 2.0 co-simulation master for the PiezoStage and AdaptiveCompoundController FMUs (fmpy).
 
-Semantics (DESIGN.md section 3): both FMUs step on the grid ``t_k = k h``.
-PiezoStage has no direct feedthrough: at ``t_k`` it reports ``y(k)``,
-``y_meas(k)``, ``x(k)`` and ``u = u(k-1)``; the ``v`` set at ``t_k`` acts over
-``[t_k, t_k + h)``.  The controller has direct feedthrough: after its inputs
-are set, ``v`` is the control of sample k, committed by ``doStep``.
+Semantics: both FMUs step on the grid ``t_k = k h``.  PiezoStage has no
+direct feedthrough: at ``t_k`` it reports ``y(k)``, ``y_meas(k)``, ``x(k)``
+and ``u = u(k-1)``; the ``v`` set at ``t_k`` acts over ``[t_k, t_k + h)``.
+The default controller has none either: a doStep from ``t_k`` samples
+``y_ref = y_d(k+d)`` and ``y_meas(k)`` and publishes the control it computed
+at ``t_(k+1)``, so the plant applies it over ``[t_(k+1), t_(k+2))`` and the
+loop delay is d = 2 (``mv.delay = 1``).
 
-Gauss-Seidel master, per sample::
+Both masters exchange values at communication points only:
 
-    plant.y_meas(k) -> controller.(y_ref, y_meas) -> controller.v(k)
-                    -> plant.v -> doStep(plant), doStep(controller)
+* ``"gauss-seidel"``: in ModelStructure order, per sample::
 
-Jacobi master: both FMUs only use values available at the previous
-communication point, so the plant receives the controller's ``v`` one sample
-later (``v(k-1)`` over ``[t_k, t_k + h)``).  The loop then has one more sample
-of delay and the controller's ``mv.delay`` is raised by one (d = 2).
+      plant.(y, y_meas)(k) -> controller.(y_ref, y_meas) -> controller.v
+                           -> plant.v -> doStep of both (``step_order``)
+
+* ``"jacobi"`` (textbook): read every output, then set every input, then
+  step every FMU.
+
+With the default controller both give the same samples (no output depends
+on an input, so the order of reads and writes does not matter).  With
+``mv.feedthrough = true`` (and ``mv.delay = 0``: d = 1) only the Gauss-Seidel
+master is sound: it reads ``v`` after setting the controller's inputs; a
+Jacobi master reads a ``v`` computed from the previous inputs, which the
+controller then never commits (the FMU logs a warning).
 
 Each FMU file is extracted once per process (cache keyed by path, mtime and
 size); instances are always terminated and freed, also when a run fails.
@@ -46,8 +55,10 @@ from ._common import (
 __all__ = [
     "PLANT_MODEL",
     "CONTROLLER_MODEL",
+    "REFERENCE_MODEL",
     "FMUError",
     "FMUInitializationError",
+    "LoopDivergedError",
     "UnknownParameterError",
     "default_fmu_dir",
     "fmu_path",
@@ -57,6 +68,7 @@ __all__ = [
 
 PLANT_MODEL = "PiezoStage"
 CONTROLLER_MODEL = "AdaptiveCompoundController"
+REFERENCE_MODEL = "ReferenceSignal"
 
 _PLANT_OUTPUTS = ("u", "x", "y", "y_meas")
 _CTRL_OUTPUTS = ("v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error")
@@ -64,6 +76,11 @@ _CTRL_OUTPUTS = ("v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error")
 
 class FMUError(RuntimeError):
     """An FMI call failed; the message carries the FMU's log messages."""
+
+
+class LoopDivergedError(FMUError):
+    """The closed loop diverged: the controller's monitor found it unstable, or a computed
+    value was not finite; the message carries the FMU's explanation."""
 
 
 class FMUInitializationError(FMUError, ValueError):
@@ -129,8 +146,7 @@ class _FMUInfo:
         try:
             return self.variables[name].valueReference
         except KeyError:
-            raise FMUError(f"{self.path.name} has no variable '{name}' "
-                           f"(DESIGN.md section 5 names)") from None
+            raise FMUError(f"{self.path.name} has no variable '{name}'") from None
 
 
 _EXTRACTED = {}
@@ -240,7 +256,8 @@ class _Instance:
         self.instantiated = True
 
     def _message(self, what, exc):
-        detail = "; ".join(self.log[-5:]) or str(exc)
+        errors = [line for line in self.log if line.startswith("[Error]")]
+        detail = "; ".join((errors or self.log)[-5:]) or str(exc)
         return f"{self.info.model}: {what} failed: {detail}"
 
     def set_parameters(self, params):
@@ -328,7 +345,10 @@ def _vr_array(values):
 
 
 def _step_error(inst, what, k, h, exc):
-    return FMUError(inst._message(f"{what} at t = {k * h:.6g} s (sample {k})", exc))
+    message = inst._message(f"{what} at t = {k * h:.6g} s (sample {k})", exc)
+    diverged = any("[Error]" in line and ("diverged" in line or "unstable" in line)
+                   for line in inst.log)
+    return (LoopDivergedError if diverged else FMUError)(message)
 
 
 # ---------------------------------------------------------------------------
@@ -337,7 +357,7 @@ def _step_error(inst, what, k, h, exc):
 
 def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
                          plant_params=None, controller_params=None, fmu_dir=None,
-                         duration=None, registry=None):
+                         duration=None, registry=None, step_order="plant-first"):
     """Run a tracking scenario through both FMUs with fmpy.
 
     Parameters
@@ -351,8 +371,8 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
         Feed the controller ``y_ref = y_d(k + d)`` (True, DESIGN.md section 2)
         or ``y_d(k)`` (False; gives a lag error).
     master : {"gauss-seidel", "jacobi"}
-        Co-simulation algorithm.  ``"jacobi"`` raises the controller's
-        ``mv.delay`` by one.
+        Co-simulation algorithm (see the module docstring); both run the same
+        loop with the default controller.
     plant_params, controller_params : dict, optional
         Extra parameter overrides by FMU variable name (after the scenario's).
     fmu_dir : str or Path, optional
@@ -362,13 +382,16 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
         Override the scenario's duration [s].
     registry : dict, optional
         Scenario registry for name lookup (default: built-in scenarios).
+    step_order : {"plant-first", "controller-first"}
+        Order of the two doStep calls of the Gauss-Seidel master.
 
     Returns
     -------
     ndarray
         Structured array, one row per sample k, fields ``time, y_d, y, y_meas,
-        v, q, a1, a2, b1, b2, pred_error`` (``y``/``y_meas`` at ``t_k``; ``v``
-        the controller's output of sample k; ``a1..b2`` the estimates it used).
+        v, q, a1, a2, b1, b2, pred_error, saturated``: the values at ``t_k``
+        (``v`` is the voltage the plant applies over ``[t_k, t_(k+1))``;
+        ``q``, ``a1..b2``, ``pred_error``, ``saturated`` belong to that ``v``).
 
     Raises
     ------
@@ -378,12 +401,14 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
         A parameter name is not a parameter of the FMU.
     FMUInitializationError
         The FMU refused a parameter value.
+    LoopDivergedError
+        The controller declared the loop unstable, or a value diverged.
     FMUError
         An FMI call failed during the run.
     """
     setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
                                 plant_params=plant_params, controller_params=controller_params,
-                                duration=duration, registry=registry)
+                                duration=duration, registry=registry, step_order=step_order)
     p_info = _load(fmu_path(PLANT_MODEL, fmu_dir))
     c_info = _load(fmu_path(CONTROLLER_MODEL, fmu_dir))
     n, h = setup.n, setup.h
@@ -408,30 +433,34 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
 
 
 def _run_closed_loop(plant, ctrl, setup, rows):
-    from fmpy.fmi2 import fmi2Real
+    from fmpy.fmi2 import fmi2Boolean, fmi2Real
 
     pf, cf = plant.fmu, ctrl.fmu
     pc, cc = pf.component, cf.component
     p_get, p_set, p_step = pf.fmi2GetReal, pf.fmi2SetReal, pf.fmi2DoStep
     c_get, c_set, c_step = cf.fmi2GetReal, cf.fmi2SetReal, cf.fmi2DoStep
+    c_get_bool = cf.fmi2GetBoolean
     pi, ci = plant.info, ctrl.info
 
     vr_p_out = _vr_array([pi.vr("y"), pi.vr("y_meas")])
     vr_p_in = _vr_array([pi.vr("v")])
     vr_c_in = _vr_array([ci.vr("y_ref"), ci.vr("y_meas")])
     vr_c_out = _vr_array([ci.vr(name) for name in _CTRL_OUTPUTS])
+    vr_c_sat = _vr_array([ci.vr("saturated")])
     p_out = (fmi2Real * 2)()
     c_in = (fmi2Real * 2)()
     c_out = (fmi2Real * len(_CTRL_OUTPUTS))()
-    v_held = (fmi2Real * 1)(0.0)
+    c_sat = (fmi2Boolean * 1)()
     np_p_out = np.ctypeslib.as_array(p_out)
     np_c_out = np.ctypeslib.as_array(c_out)
     n_c = len(_CTRL_OUTPUTS)
+    last = len(CLOSED_LOOP_FIELDS) - 1
 
     n, h = setup.n, setup.h
     y_ref = setup.y_ref
     times = setup.time.tolist()
     jacobi = setup.master == "jacobi"
+    controller_first = setup.step_order == "controller-first"
     k = 0
     stage = "fmi2GetReal"
     inst = plant
@@ -443,23 +472,39 @@ def _run_closed_loop(plant, ctrl, setup, rows):
             c_in[0] = y_ref[k]
             c_in[1] = p_out[1]
             if jacobi:
-                inst, stage = plant, "fmi2SetReal"
-                p_set(pc, vr_p_in, 1, v_held)              # v(k-1): previous point's output
-            inst, stage = ctrl, "fmi2SetReal"
-            c_set(cc, vr_c_in, 2, c_in)
-            stage = "fmi2GetReal"
-            c_get(cc, vr_c_out, n_c, c_out)                # v(k) (not committed yet)
-            if jacobi:
-                v_held[0] = c_out[0]
-            else:
+                # textbook Jacobi: every output first, then every input
+                inst = ctrl
+                c_get(cc, vr_c_out, n_c, c_out)
+                stage = "fmi2GetBoolean"
+                c_get_bool(cc, vr_c_sat, 1, c_sat)
                 inst, stage = plant, "fmi2SetReal"
                 p_set(pc, vr_p_in, 1, c_out)               # v is c_out[0]
-            inst, stage = plant, "fmi2DoStep"
-            p_step(pc, t, h, 1)
-            inst = ctrl
-            c_step(cc, t, h, 1)
+                inst = ctrl
+                c_set(cc, vr_c_in, 2, c_in)
+            else:
+                # Gauss-Seidel in ModelStructure order: plant -> controller -> plant
+                inst, stage = ctrl, "fmi2SetReal"
+                c_set(cc, vr_c_in, 2, c_in)
+                stage = "fmi2GetReal"
+                c_get(cc, vr_c_out, n_c, c_out)
+                stage = "fmi2GetBoolean"
+                c_get_bool(cc, vr_c_sat, 1, c_sat)
+                inst, stage = plant, "fmi2SetReal"
+                p_set(pc, vr_p_in, 1, c_out)
+            stage = "fmi2DoStep"
+            if controller_first:
+                inst = ctrl
+                c_step(cc, t, h, 1)
+                inst = plant
+                p_step(pc, t, h, 1)
+            else:
+                inst = plant
+                p_step(pc, t, h, 1)
+                inst = ctrl
+                c_step(cc, t, h, 1)
             rows[k, 2:4] = np_p_out
-            rows[k, 4:] = np_c_out
+            rows[k, 4:last] = np_c_out
+            rows[k, last] = 1.0 if c_sat[0] else 0.0
     except Exception as exc:
         raise _step_error(inst, stage, k, h, exc) from None
 

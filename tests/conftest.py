@@ -29,7 +29,7 @@ import pytest
 REPO = pathlib.Path(__file__).resolve().parents[1]
 BUILD_DIR = REPO / "build"
 FMU_DIR = BUILD_DIR / "fmus"
-FMU_NAMES = ("PiezoStage", "AdaptiveCompoundController")
+FMU_NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
 _FMU_SOURCE_SUFFIXES = {".c", ".h", ".xml", ".map", ".txt"}
 
 
@@ -101,6 +101,11 @@ def piezo_stage(_fmu_packages):
 @pytest.fixture(scope="session")
 def controller(_fmu_packages):
     return _fmu_packages["AdaptiveCompoundController"]
+
+
+@pytest.fixture(scope="session")
+def reference_signal(_fmu_packages):
+    return _fmu_packages["ReferenceSignal"]
 
 
 # fmpy's native logger proxy (which formats the variadic message) keeps ONE

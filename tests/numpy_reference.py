@@ -20,13 +20,16 @@ DESIGN_DEFAULTS = {
     "h": 0.0005,
 }
 
-# DESIGN.md section 5 / README.md / modelDescription start values of the controller's own
-# parameters: forgetting 0.995 (DESIGN.md sections 2 and 5, README), trace bound 100 (README),
-# initial covariance scale 1 (AdaptiveCompoundController.xml start value; DESIGN names rls.p0
-# without a value), mv.delay 0 and mv.lambda_u 0 (DESIGN.md section 5).
+# The design's start values of the controller's own parameters: forgetting 0.995, trace
+# bound 100, initial covariance scale 1, mv.lambda_u 0; the drop-in timing (v published at
+# the end of the step that sampled the inputs: no direct feedthrough, loop delay d = 2, so
+# mv.delay 1); voltage limits on at +-150 V (the paper's amplifier range; every paper
+# scenario stays below 62 V); the divergence monitor at 1 um for 200 samples.
 CONTROLLER_DESIGN_DEFAULTS = {
-    "mv.delay": 0, "mv.lambda_u": 0.0, "rls.enabled": True, "rls.forgetting": 0.995,
-    "rls.p0": 1.0, "rls.trace_max": 100.0, "sat.enabled": False,
+    "mv.delay": 1, "mv.feedthrough": False, "mv.lambda_u": 0.0, "rls.enabled": True,
+    "rls.forgetting": 0.995, "rls.p0": 1.0, "rls.trace_max": 100.0, "sat.enabled": True,
+    "sat.v_min": -150.0, "sat.v_max": 150.0, "monitor.pred_error_max": 1.0,
+    "monitor.divergence_samples": 200,
 }
 
 # Table 1 rows (f: k_c, alpha)

@@ -103,7 +103,8 @@ def test_missing_library_message(tmp_path):
 def test_defaults_match_design():
     """Reference: DESIGN.md section 5 defaults typed in tests/numpy_reference.py
     (DESIGN_DEFAULTS for the model, CONTROLLER_DESIGN_DEFAULTS for the controller's own
-    parameters: rls.forgetting 0.995, rls.trace_max 100, rls.p0 1, mv.delay 0, mv.lambda_u 0),
+    parameters: rls.forgetting 0.995, rls.trace_max 100, rls.p0 1, mv.delay 1, mv.lambda_u 0,
+    limits +-150 V on, monitor 1 um / 200 samples),
     and the parameter name sets of the two modelDescription files."""
     p = core.default_plant_params()
     d = ref.DESIGN_DEFAULTS

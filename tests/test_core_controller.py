@@ -15,6 +15,18 @@ H = 0.0005
 D = ref.DESIGN_DEFAULTS
 THETA = np.array([D["tf.a1"], D["tf.a2"], D["tf.b1"], D["tf.b2"]])
 
+# The core algorithm as these tests drive it: v applied in the same sample (loop delay
+# d = 1 + mv.delay counted from the plant's one-sample delay alone), no voltage limits
+# and no divergence monitor unless a test sets them. The FMU defaults (mv.delay = 1 for
+# the published-at-end timing, +-150 V limits, monitor on) are tested where they apply.
+ALGORITHM = {"mv.delay": 0, "sat.enabled": False, "monitor.divergence_samples": 0}
+
+
+def controller(params=None):
+    """core.Controller with the ALGORITHM base under the given overrides."""
+    return core.Controller({**ALGORITHM, **(params or {})})
+
+
 
 def random_stable_a(rng):
     """A = (1 - p1 z^-1)(1 - p2 z^-1) with poles inside the unit circle (real or complex)."""
@@ -81,16 +93,16 @@ def test_controller_inverse_creep_wiring():
     """Reference: DESIGN.md eq 29: the controller's inverse creep is order -alpha with gain
     h^alpha / k_c (10 Hz row); read through ffi, tolerance 1e-15 relative."""
     k_c, alpha = ROWS["10 Hz row"]
-    c = core.Controller({"creep.k_c": k_c, "creep.alpha": alpha})
+    c = controller({"creep.k_c": k_c, "creep.alpha": alpha})
     assert c.raw.inv_creep.alpha == -alpha
     assert c.raw.inv_creep.gain == pytest.approx(H ** alpha / k_c, rel=1e-15)
-    assert c.raw.d == 1 and core.Controller({"mv.delay": 2}).raw.d == 3
+    assert c.raw.d == 1 and controller({"mv.delay": 2}).raw.d == 3
 
 
 def run_closed_loop_core(plant_params, ctrl_params, y_d, n, d):
     """The Gauss-Seidel loop of DESIGN.md section 3 with reference preview y_d((k+d) h)."""
     plant = core.Plant(plant_params)
-    ctrl = core.Controller(ctrl_params)
+    ctrl = controller(ctrl_params)
     y = np.zeros(n)
     ym = np.zeros(n)
     outs = []
@@ -165,7 +177,7 @@ WRONG_MODEL = {"tf.a1": -1.30, "tf.a2": 0.32, "tf.b1": 0.70, "tf.b2": -0.68}
 
 
 def rls_convergence_run(extra, n=6000):
-    ctrl = core.Controller({**WRONG_MODEL, **extra})
+    ctrl = controller({**WRONG_MODEL, **extra})
     y, q, outs, traces = arx_closed_loop(ctrl, prbs_reference(n), THETA)
     est = np.array([[o.a1, o.a2, o.b1, o.b2] for o in outs])
     errs = np.max(np.abs(est - THETA), axis=1)
@@ -222,7 +234,7 @@ def test_rls_covariance_trace_bounded_under_single_sinusoid():
     winds the covariance up; trace(P), read through ffi after every sample for 20 s, must
     never exceed trace_max (relative slack 1e-12) yet reach at least half of it (the bound
     is exercised), and the estimates stay finite."""
-    ctrl = core.Controller({"tf.b1": 0.62})       # a small model error so RLS is active
+    ctrl = controller({"tf.b1": 0.62})       # a small model error so RLS is active
     trace_max = ctrl.params["rls.trace_max"]
     n = 40000
     y_ref = 10 * np.sin(2 * np.pi * 5 * (np.arange(n) + 1) * H)
@@ -248,7 +260,7 @@ def test_closed_loop_nominal_tracking(scenario, rls, d):
     out = ctrl.step(y_d((k+d)h), y_meas); plant.step(out.v)."""
     y_d = SCENARIOS[scenario]
     plant = core.Plant({"tf.delay": d - 1})
-    ctrl = core.Controller({"mv.delay": d - 1, "rls.enabled": rls})
+    ctrl = controller({"mv.delay": d - 1, "rls.enabled": rls})
     n = 6000
     y = np.zeros(n)
     for k in range(n):
@@ -270,7 +282,7 @@ def test_peek_equals_step_without_committing():
     for the same inputs and leaves the controller struct bitwise unchanged (exact creep,
     adaptation on, mismatched plant so RLS moves)."""
     plant = core.Plant({"pi.w0": 0.36, "creep.exact": True})
-    ctrl = core.Controller({"creep.exact": True})
+    ctrl = controller({"creep.exact": True})
     for k in range(1500):
         ym = plant.output.y_meas
         r = 8 * np.sin(2 * np.pi * 7 * (k + 1) * H)
@@ -290,7 +302,7 @@ def test_nonfinite_input_refused_state_unchanged():
     continued run equals the uninterrupted one bitwise."""
     def run(inject):
         plant = core.Plant({"tf.b1": 0.62, "creep.exact": True})
-        ctrl = core.Controller({"creep.exact": True})
+        ctrl = controller({"creep.exact": True})
         vs = []
         for k in range(1200):
             ym = plant.output.y_meas
@@ -313,7 +325,7 @@ def test_nonfinite_input_refused_state_unchanged():
 def test_reset_reproduces_run():
     """Reference: a fresh controller; after reset() the same inputs give bitwise the same
     outputs (RLS state and covariance restored)."""
-    ctrl = core.Controller()
+    ctrl = controller()
     ins = [(np.sin(k * 0.01) * 3, np.sin((k - 1) * 0.01) * 2.9) for k in range(800)]
     a = [ctrl.step(*i) for i in ins]
     ctrl.reset()
@@ -327,7 +339,7 @@ def test_saturation_clips_and_freezes_adaptation():
     v lies in [-2, 3], saturated is set exactly when a limit is hit, and while the loop
     stays saturated the estimates do not move."""
     plant = core.Plant({"pi.w0": 0.37})
-    ctrl = core.Controller({"sat.enabled": True, "sat.v_min": -2.0, "sat.v_max": 3.0})
+    ctrl = controller({"sat.enabled": True, "sat.v_min": -2.0, "sat.v_max": 3.0})
     sats, thetas, vs = [], [], []
     for k in range(4000):
         out = ctrl.step(10 * np.sin(2 * np.pi * 2 * (k + 1) * H), plant.output.y_meas)
@@ -361,7 +373,7 @@ def test_invalid_parameter_refused(name, value):
     """Reference: piezo_controller.h / DESIGN.md ranges. CoreParameterError naming the FMU
     variable with the value and a range."""
     with pytest.raises(core.CoreParameterError) as ei:
-        core.Controller({name: value})
+        controller({name: value})
     e = ei.value
     assert e.parameter == name
     assert e.value == value or (np.isnan(value) and np.isnan(e.value))
@@ -373,14 +385,14 @@ def test_invalid_combinations_refused():
     enabled (and ignored when it is not); unstable nominal A refused."""
     p0 = core.default_controller_params()["rls.p0"]
     with pytest.raises(core.CoreParameterError) as ei:
-        core.Controller({"rls.trace_max": 3.9 * p0})
+        controller({"rls.trace_max": 3.9 * p0})
     assert ei.value.parameter in ("rls.trace_max", "rls.p0")
     with pytest.raises(core.CoreParameterError) as ei:
-        core.Controller({"sat.enabled": True, "sat.v_min": 5.0, "sat.v_max": 5.0})
+        controller({"sat.enabled": True, "sat.v_min": 5.0, "sat.v_max": 5.0})
     assert ei.value.parameter in ("sat.v_min", "sat.v_max")
-    core.Controller({"sat.enabled": False, "sat.v_min": 5.0, "sat.v_max": 5.0})
+    controller({"sat.enabled": False, "sat.v_min": 5.0, "sat.v_max": 5.0})
     with pytest.raises(core.CoreParameterError) as ei:
-        core.Controller({"tf.a1": -2.1, "tf.a2": 1.1})
+        controller({"tf.a1": -2.1, "tf.a2": 1.1})
     assert ei.value.parameter in ("tf.a1", "tf.a2")
 
 
@@ -390,7 +402,7 @@ def test_non_minimum_phase_nominal_b_refused():
     MV law unstable and should be refused with a CoreParameterError on tf.b1/tf.b2."""
     for over in ({"tf.b2": -0.65}, {"tf.b1": -0.5954}, {"tf.b1": 0.0}):
         with pytest.raises(core.CoreParameterError) as ei:
-            core.Controller(over)
+            controller(over)
         assert ei.value.parameter in ("tf.b1", "tf.b2"), over
 
 
@@ -411,7 +423,7 @@ def _g_numerator(d):
 
 def _saturated_loop(plant_params, ctrl_params, n, d):
     plant = core.Plant({"tf.delay": d - 1, **plant_params})
-    ctrl = core.Controller({"mv.delay": d - 1, **SAT_LIMITS, **ctrl_params})
+    ctrl = controller({"mv.delay": d - 1, **SAT_LIMITS, **ctrl_params})
     y = np.zeros(n)
     outs = []
     for k in range(n):
@@ -503,7 +515,7 @@ def _record_core_loop(plant_params, ctrl_params, y_d, n, d):
     """Closed loop core plant + core controller; records effective q, y_meas, the outputs
     and the covariance raw.P after every sample."""
     plant = core.Plant({"tf.delay": d - 1, **plant_params})
-    ctrl = core.Controller({"mv.delay": d - 1, **ctrl_params})
+    ctrl = controller({"mv.delay": d - 1, **ctrl_params})
     q, ym, P = np.zeros(n), np.zeros(n), np.zeros((n, 4, 4))
     outs = []
     for k in range(n):
@@ -518,7 +530,7 @@ def _record_core_loop(plant_params, ctrl_params, y_d, n, d):
 
 def _record_arx_loop(true_theta, ctrl_params, n):
     """Closed loop with a noise-free NumPy ARX plant (d = 1), PRBS-like +-2 um reference."""
-    ctrl = core.Controller(ctrl_params)
+    ctrl = controller(ctrl_params)
     a1, a2, b1, b2 = true_theta
     y_ref = prbs_reference(n)
     y, q, P = np.zeros(n + 1), np.zeros(n), np.zeros((n, 4, 4))
@@ -658,7 +670,7 @@ def test_generalised_mv_minimises_its_cost(lambda_u, d):
     n = 3000
     y_d = SCENARIOS["1/5/10 Hz"]
     plant = core.Plant({"tf.delay": d - 1, **_pi_scaled(1.1)})
-    ctrl = core.Controller({"mv.delay": d - 1, "mv.lambda_u": lambda_u})
+    ctrl = controller({"mv.delay": d - 1, "mv.lambda_u": lambda_u})
     ym, q, y_ref, theta = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, 4))
     for k in range(n):
         ym[k] = plant.output.y_meas
@@ -710,7 +722,7 @@ def test_pi_weights_minus_10_percent_stays_stable(d, sensor):
     worst = 0.0
     for name, freqs in SIX_REFERENCES.items():
         plant = core.Plant(plant_params)
-        ctrl = core.Controller({"mv.delay": d - 1})
+        ctrl = controller({"mv.delay": d - 1})
         y_d = sum(10.0 * np.sin(2 * np.pi * f * t) for f in freqs)
         y = np.empty(n)
         theta = np.empty((n, 4))

@@ -1,5 +1,6 @@
-"""AdaptiveCompoundController FMU: interface, direct feedthrough without commit,
-stepping, FMU states, refusals, call sequences, closed loop with PiezoStage.
+"""AdaptiveCompoundController FMU: interface, timing (published at the end of a step by
+default, direct feedthrough without commit as an option), stepping, FMU states,
+refusals, call sequences, closed loop with PiezoStage.
 
 Drives the built FMUs through fmpy's FMU2Slave (fixtures in conftest.py).
 """
@@ -15,8 +16,10 @@ from fmpy.validation import validate_fmu
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from harness import core  # noqa: E402
 
-OUTPUTS = ["v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error"]
+OUTPUTS = ["v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error"]   # the Real outputs
 H = 0.0005
+# The direct-feedthrough option (d = 1): v at t_k from the inputs set at t_k.
+FEEDTHROUGH = {"mv.feedthrough": True, "mv.delay": 0}
 
 
 def y_d(k):
@@ -70,7 +73,8 @@ def test_model_description_matches_design(controller, piezo_stage):
     assert (float(de.startTime), float(de.stopTime), float(de.stepSize)) == (0.0, 3.0, 0.0005)
 
     assert [n for n, x in v.items() if x.causality == "input"] == ["y_ref", "y_meas"]
-    assert [n for n, x in v.items() if x.causality == "output"] == OUTPUTS
+    assert [n for n, x in v.items() if x.causality == "output"] == OUTPUTS + ["saturated"]
+    assert v["saturated"].type == "Boolean"
     for name in ("y_ref", "y_meas", "q", "pred_error"):
         assert v[name].unit == "um" and v[name].displayUnit == "µm", name
     for name in ("v", "sat.v_min", "sat.v_max", "pi.v_max"):
@@ -84,19 +88,22 @@ def test_model_description_matches_design(controller, piezo_stage):
         a, b = v[name], piezo_stage.variables[name]
         assert (a.causality, a.variability, a.type, a.unit, a.start) == \
             (b.causality, b.variability, b.type, b.unit, b.start), name
-    own = {"mv.delay": ("Integer", 0), "mv.lambda_u": ("Real", 0.0), "rls.enabled": ("Boolean", True),
-           "rls.forgetting": ("Real", 0.995), "sat.enabled": ("Boolean", False)}
+    # the drop-in defaults: no feedthrough (d = 2), limits on at +-150 V, monitor on
+    own = {"mv.delay": ("Integer", 1), "mv.feedthrough": ("Boolean", False),
+           "mv.lambda_u": ("Real", 0.0), "rls.enabled": ("Boolean", True),
+           "rls.forgetting": ("Real", 0.995), "sat.enabled": ("Boolean", True),
+           "sat.v_min": ("Real", -150.0), "sat.v_max": ("Real", 150.0),
+           "monitor.pred_error_max": ("Real", 1.0), "monitor.divergence_samples": ("Integer", 200)}
     for name, (type_, start) in own.items():
         assert v[name].type == type_ and start_value(v[name]) == start, name
-    for name in ("rls.p0", "rls.trace_max", "sat.v_min", "sat.v_max"):
+    for name in ("rls.p0", "rls.trace_max"):
         assert v[name].causality == "parameter" and v[name].type == "Real"
     params = {n for n, x in v.items() if x.causality == "parameter"}
-    assert params == set(shared) | set(own) | {"rls.p0", "rls.trace_max", "sat.v_min", "sat.v_max"}
+    assert params == set(shared) | set(own) | {"rls.p0", "rls.trace_max"}
 
+    # honest for the default: no output depends directly on an input
     deps = {u.variable.name: sorted(d.name for d in u.dependencies) for u in md.outputs}
-    assert deps == {"v": ["y_meas", "y_ref"], "q": ["y_meas", "y_ref"],
-                    "est.a1": ["y_meas"], "est.a2": ["y_meas"], "est.b1": ["y_meas"], "est.b2": ["y_meas"],
-                    "pred_error": ["y_meas"]}
+    assert deps == {name: [] for name in OUTPUTS + ["saturated"]}
 
 
 def test_start_values_in_the_binary_match_the_xml(controller, make_fmu):
@@ -114,16 +121,32 @@ def _core_peek(params, y_ref, y_meas):
     return [out.v, out.q, out.a1, out.a2, out.b1, out.b2, out.pred_error]
 
 
-@pytest.mark.parametrize("params", [
-    {},
-    {"mv.delay": 2, "mv.lambda_u": 0.05, "creep.k_c": 1.0497, "creep.alpha": -0.0085,
-     "pi.w0": 0.35, "tf.b1": 0.61},
-])
-def test_outputs_during_initialization(controller, make_fmu, params):
-    """In initialization mode the outputs are sample 0 of the current parameters and held
-    inputs. Reference: harness.core.Controller(params).peek(y_ref, y_meas) on the same C
-    core through cffi, exact equality; at rest (zero inputs) v = q = 0 and the estimates
-    are the nominal tf.* start values."""
+OTHER_MODEL = {"mv.lambda_u": 0.05, "creep.k_c": 1.0497, "creep.alpha": -0.0085,
+               "pi.w0": 0.35, "tf.b1": 0.61}
+
+
+@pytest.mark.parametrize("params", [{}, {"mv.delay": 2, **OTHER_MODEL}])
+def test_outputs_during_initialization_are_the_published_rest(controller, make_fmu, params):
+    """Default timing: before the first step nothing is computed, so the outputs are the
+    rest values whatever the inputs: v = q = pred_error = 0 and the estimates are the
+    nominal tf.* (reference: the start values in the XML, or the overrides)."""
+    fmu = make_fmu(controller)
+    fmu.setup(params=params)
+    nominal = [params.get(n, start_value(controller.variables[n])) for n in ("tf.a1", "tf.a2", "tf.b1", "tf.b2")]
+    rest = [0.0, 0.0] + nominal + [0.0]
+    assert fmu.get_reals(OUTPUTS) == rest
+    for y_ref, y_meas in ((1.0, 0.0), (1.0, 0.3), (-2.5, 0.7)):
+        fmu.set({"y_ref": y_ref, "y_meas": y_meas})
+        assert fmu.get_reals(OUTPUTS) == rest, (y_ref, y_meas)
+        assert fmu.get("saturated") is False
+
+
+@pytest.mark.parametrize("params", [FEEDTHROUGH, {**FEEDTHROUGH, "mv.delay": 2, **OTHER_MODEL}])
+def test_feedthrough_outputs_during_initialization(controller, make_fmu, params):
+    """mv.feedthrough: in initialization mode the outputs are sample 0 of the current
+    parameters and held inputs. Reference: harness.core.Controller(params).peek(y_ref,
+    y_meas) on the same C core through cffi, exact equality; at rest (zero inputs)
+    v = q = 0 and the estimates are the nominal tf.* start values."""
     fmu = make_fmu(controller)
     fmu.setup(params=params)
     out = dict(zip(OUTPUTS, fmu.get_reals(OUTPUTS)))
@@ -138,13 +161,39 @@ def test_outputs_during_initialization(controller, make_fmu, params):
         assert outputs[0] != 0.0
 
 
+def test_default_publishes_at_the_end_of_the_step(controller, make_fmu):
+    """Default timing: the outputs read at t_(k+1) are the sample computed in the step from
+    t_k with the inputs set before it, and setting other inputs afterwards changes nothing
+    until the next step. Reference: the core controller stepped with the same inputs
+    (harness.core.Controller(...).step, cffi), exact equality, over 300 samples."""
+    fmu = make_fmu(controller)
+    fmu.initialize()
+    twin = core.Controller()
+    for k in range(300):
+        fmu.set({"y_ref": y_d(k + 2), "y_meas": y_meas_of(k)})
+        before = fmu.get_reals(OUTPUTS)
+        fmu.step()
+        out = twin.step(y_d(k + 2), y_meas_of(k))
+        expected = [out.v, out.q, out.a1, out.a2, out.b1, out.b2, out.pred_error]
+        assert fmu.get_reals(OUTPUTS) == expected
+        assert fmu.get("saturated") is out.saturated
+        fmu.set({"y_ref": -5.0, "y_meas": 3.0})          # not sampled before the next step
+        assert fmu.get_reals(OUTPUTS) == expected
+        if k:
+            assert before != expected
+
+
 # ---------------------------------------------------------------------------- direct feedthrough
 
 def test_get_twice_gives_the_same_value_and_commits_nothing(controller, make_fmu):
+    """mv.feedthrough: reading v computes the sample with the held inputs and commits
+    nothing. Reference: a twin instance that is never probed, exact equality."""
     probed = make_fmu(controller)
     twin = make_fmu(controller)
-    probed.initialize()
-    twin.initialize()
+    # open loop on synthetic data: the divergence monitor has no loop to judge
+    params = {**FEEDTHROUGH, "monitor.divergence_samples": 0}
+    probed.initialize(params)
+    twin.initialize(params)
     for k in range(300):
         inputs = {"y_ref": y_d(k + 1), "y_meas": y_meas_of(k)}
         # probe with other inputs first: nothing may stick
@@ -164,8 +213,22 @@ def test_get_twice_gives_the_same_value_and_commits_nothing(controller, make_fmu
 
 
 def test_model_structure_is_honest(controller, make_fmu):
+    """Default: the XML says no output depends directly on an input; changing the inputs
+    between steps must then change no output (exact equality)."""
     fmu = make_fmu(controller)
     fmu.initialize()
+    run(fmu, 400)
+    base = fmu.get_reals(OUTPUTS)
+    for inputs in ({"y_ref": 3.0}, {"y_meas": -2.0}, {"y_ref": -7.0, "y_meas": 4.0}):
+        fmu.set(inputs)
+        assert fmu.get_reals(OUTPUTS) == base, inputs
+
+
+def test_feedthrough_dependencies_are_what_the_option_documents(controller, make_fmu):
+    """mv.feedthrough: v and q depend on y_ref and y_meas, the estimates and pred_error on
+    y_meas only (the RLS update uses y_meas; y_ref enters only the MV law)."""
+    fmu = make_fmu(controller)
+    fmu.initialize({**FEEDTHROUGH, "sat.enabled": False})     # no clipping to hide a change
     run(fmu, 400)
     fmu.set({"y_ref": y_d(401), "y_meas": y_meas_of(400)})
     base = dict(zip(OUTPUTS, fmu.get_reals(OUTPUTS)))
@@ -239,8 +302,10 @@ NON_DEFAULT_PARAMETERS = {
     **{f"pi.w[{j}]": 0.001 * j for j in range(1, 17)},
     "tf.a1": -1.30, "tf.a2": 0.35, "tf.b1": 0.60, "tf.b2": -0.55,
     "creep.k_c": 1.0497, "creep.alpha": -0.0085, "creep.exact": True, "h": 0.001,
-    "mv.delay": 1, "mv.lambda_u": 0.01, "rls.enabled": False, "rls.forgetting": 0.99,
-    "rls.p0": 2.0, "rls.trace_max": 50.0, "sat.enabled": True, "sat.v_min": -40.0, "sat.v_max": 60.0,
+    "mv.delay": 2, "mv.feedthrough": True, "mv.lambda_u": 0.01, "rls.enabled": False,
+    "rls.forgetting": 0.99, "rls.p0": 2.0, "rls.trace_max": 50.0, "sat.enabled": False,
+    "sat.v_min": -40.0, "sat.v_max": 60.0, "monitor.pred_error_max": 5.0,
+    "monitor.divergence_samples": 0,
 }
 
 
@@ -346,9 +411,10 @@ def test_bad_parameter_refused_at_exit_initialization(controller, make_fmu, para
 
 def test_inconsistent_limits_are_fine_while_saturation_is_off(controller, make_fmu):
     """sat.v_min > sat.v_max is accepted while sat.enabled = false, and the limits are then
-    ignored. Reference: a run with the default limits (-100, 100 V), bitwise equal; every
-    control lies outside the empty interval the limits would allow, so any clipping would show."""
-    reference = _uninterrupted(controller, make_fmu, 300)
+    ignored. Reference: a run without limits and the default limit values, bitwise equal;
+    every control lies outside the empty interval the limits would allow, so any clipping
+    would show."""
+    reference = _uninterrupted(controller, make_fmu, 300, {"sat.enabled": False})
     fmu = make_fmu(controller)
     fmu.initialize({"sat.enabled": False, "sat.v_min": 10.0, "sat.v_max": -10.0})
     assert (fmu.get("sat.v_min"), fmu.get("sat.v_max")) == (10.0, -10.0)
@@ -383,7 +449,7 @@ def test_step_size_not_a_multiple_of_h_is_refused(controller, make_fmu):
     fmu.initialize(params)
     part = run(fmu, 20)
     fmu.set({"y_ref": y_d(21), "y_meas": y_meas_of(20)})
-    for bad in (0.0015, 0.0007, 0.001 * (1 + 1e-6), 0.0, -0.001, float("nan")):
+    for bad in (0.0015, 0.0007, 0.001 * (1 + 1e-6), 0.3e-6, -0.001, float("nan")):
         assert_refused(lambda: fmu.slave.doStep(0.020, bad), fmu, "communicationStepSize", "h = 0.001")
     assert_refused(lambda: fmu.slave.doStep(0.019, 0.001), fmu, "does not match")
     assert_refused(lambda: fmu.slave.doStep(0.0203, 0.001), fmu, "does not match")
@@ -420,19 +486,23 @@ def test_illegal_call_sequences_return_error(controller, make_fmu):
 # ---------------------------------------------------------------------------- closed loop
 
 @pytest.mark.parametrize("exact", [False, True])
-def test_closed_loop_with_the_nominal_plant_tracks_exactly(controller, piezo_stage, make_fmu, exact):
-    """Gauss-Seidel per sample (DESIGN.md section 3). With the plant equal to the
-    nominal model and the reference previewed d = 1 sample, the error is zero
-    up to rounding (and the SOE creep approximation, far below a picometre)."""
+@pytest.mark.parametrize("timing", ["default", "feedthrough"])
+def test_closed_loop_with_the_nominal_plant_tracks_exactly(controller, piezo_stage, make_fmu, exact, timing):
+    """Gauss-Seidel per sample in ModelStructure order. With the plant equal to the nominal
+    model and the reference previewed d samples (d = 2 by default, d = 1 with
+    mv.feedthrough and mv.delay = 0), the error is zero up to rounding (and the SOE creep
+    approximation, far below a picometre)."""
+    params = {"creep.exact": exact, **(FEEDTHROUGH if timing == "feedthrough" else {})}
+    d = 1 if timing == "feedthrough" else 2
     plant = make_fmu(piezo_stage)
     ctrl = make_fmu(controller)
     plant.initialize({"creep.exact": exact})
-    ctrl.initialize({"creep.exact": exact})
+    ctrl.initialize(params)
     errors, pred_errors = [], []
     for k in range(2000):
         y, y_meas = plant.get_reals(["y", "y_meas"])
         errors.append(y - y_d(k))
-        ctrl.set({"y_ref": y_d(k + 1), "y_meas": y_meas})
+        ctrl.set({"y_ref": y_d(k + d), "y_meas": y_meas})
         v, pred_error = ctrl.get_reals(["v", "pred_error"])
         pred_errors.append(pred_error)
         plant.set({"v": v})

@@ -43,7 +43,7 @@ def test_fmpy_loop_equals_core_loop(name):
     fmu = _run(name)
     core = simulate_closed_loop_core(name)
     assert fmu.dtype.names == core.dtype.names == (
-        "time", "y_d", "y", "y_meas", "v", "q", "a1", "a2", "b1", "b2", "pred_error")
+        "time", "y_d", "y", "y_meas", "v", "q", "a1", "a2", "b1", "b2", "pred_error", "saturated")
     assert fmu.shape == core.shape == (6000,)
     for field in fmu.dtype.names:
         diff = np.max(np.abs(fmu[field] - core[field]))
@@ -77,65 +77,75 @@ def test_adaptation_helps_on_the_mismatched_plant():
     assert np.all(_run("mismatch_20hz", adaptation=False)["a1"] == -1.3767)   # estimates frozen
 
 
-def test_preview_off_gives_the_expected_lag_error():
+@pytest.mark.parametrize("d", [2, 1])
+def test_preview_off_gives_the_expected_lag_error(d):
     # Reference: DESIGN.md section 2 - feeding y_d(k) instead of y_d(k+d) gives a lag error.
-    # With the nominal model, y(k) = y_d(k - 1) (d = 1), so for 10 sin(2 pi t):
-    # e_rms = 2 * 10 * sin(pi * f * h) / sqrt(2) = 22.21 nm.
-    m = _metrics("track_1hz", _run("track_1hz", preview=False))
-    expected = 2 * 10 * math.sin(math.pi * 1.0 * 0.0005) / math.sqrt(2)
+    # With the nominal model, y(k) = y_d(k - d), so for 10 sin(2 pi t):
+    # e_rms = 2 * 10 * sin(pi * f * d h) / sqrt(2) = 44.43 nm for the default d = 2 and
+    # 22.21 nm for d = 1 (mv.feedthrough with mv.delay = 0).
+    params = {} if d == 2 else {"mv.delay": 0, "mv.feedthrough": True}
+    data = cosim.simulate_closed_loop("track_1hz", preview=False, controller_params=params)
+    m = _metrics("track_1hz", data)
+    expected = 2 * 10 * math.sin(math.pi * 1.0 * d * 0.0005) / math.sqrt(2)
     assert m.e_rms == pytest.approx(expected, rel=1e-6)
 
 
 @pytest.mark.parametrize("name", TRACKING_SCENARIOS)
 def test_jacobi_master_is_stable_and_exact_on_the_nominal_model(name):
-    # Reference: DESIGN.md section 3 - a Jacobi master adds one sample of delay; with the
-    # controller's mv.delay = 1 (d = 2) the nominal loop must still track (e_rms <= 1e-6 um).
+    # Reference: the Gauss-Seidel run of the same scenario. With the default controller (no
+    # direct feedthrough, d = 2) a textbook Jacobi master runs the same loop: every sample
+    # equal (tolerance 0), and the nominal loop tracks (e_rms <= 1e-6 um).
     data = _run(name, master="jacobi")
-    m = _metrics(name, data)
-    assert m.e_rms <= 1e-6, f"{name}: Jacobi e_rms = {m.e_rms:.3g} um"
+    gs = _run(name)
+    for f in data.dtype.names:
+        assert np.array_equal(data[f], gs[f]), f
+    assert _metrics(name, data).e_rms <= 1e-6
     assert np.all(np.isfinite(data["v"])) and np.max(np.abs(data["v"])) < 70.0
 
 
-def test_jacobi_master_matches_core_and_delays_v_by_one_sample():
-    """Reference: a Jacobi loop written here on the core binding with the one-sample delay
-    explicit (README / DESIGN.md section 3): at sample k the plant applies the controller's
-    v(k-1) (v(-1) = 0), the controller has mv.delay = 1 (d = 2) and gets y_d(k + 2), y_d =
-    10 sin(2 pi 10 t) computed here. The fmpy Jacobi run of mismatch_10hz (3 s) must equal it
-    exactly (tolerance 0) in y_d, y, y_meas and v, and equal harness.core_loop's Jacobi run
-    exactly in every field. Direct check of the delay: replaying the recorded v shifted by one
-    sample through an open-loop core plant reproduces the recorded y and y_meas exactly, while
-    the unshifted v does not (differs by > 1 nm). Stability: e_rms <= 5 nm."""
+@pytest.mark.parametrize("master,order", [("gauss-seidel", "plant-first"),
+                                          ("gauss-seidel", "controller-first"),
+                                          ("jacobi", "plant-first")])
+def test_every_master_runs_the_published_at_end_loop(master, order):
+    """Reference: the loop written here on the core binding with the one-sample publishing
+    delay explicit: at sample k the plant applies the v the controller computed at k-1
+    (0 at k = 0) from y_d(k-1+2) and y_meas(k-1); y_d = 10 sin(2 pi 10 t) computed here.
+    The fmpy run of mismatch_10hz (3 s) under each master and doStep order must equal it
+    exactly (tolerance 0) in y_d, y, y_meas and v, and equal harness.core_loop's run exactly
+    in every field. Direct check of the delay: replaying the recorded v (the applied
+    voltage) through an open-loop core plant reproduces y and y_meas exactly, while v
+    shifted one sample earlier does not (differs by > 1 nm). Stability: e_rms <= 3 nm."""
     name = "mismatch_10hz"
-    fmu = _run(name, master="jacobi")
+    fmu = _run(name, master=master, step_order=order)
     sc = get_scenario(name)
     h, n = sc.step_size, sc.n_samples
-    assert sc.controller.get("mv.delay", 0) == 0
     plant_params = {**sc.plant, "h": h}
     plant = core_binding.Plant(plant_params)
-    ctrl = core_binding.Controller({**sc.controller, "h": h, "mv.delay": 1})
+    ctrl = core_binding.Controller({**sc.controller, "h": h})
+    assert ctrl.raw.d == 2
     y_d = 10 * np.sin(2 * np.pi * 10 * (np.arange(n + 2) * h))
     want = {f: np.zeros(n) for f in ("y", "y_meas", "v")}
-    v_prev = 0.0
+    v_published = 0.0
     for k in range(n):
         out = plant.output
         want["y"][k], want["y_meas"][k] = out.y, out.y_meas
-        v_k = ctrl.step(y_d[k + 2], out.y_meas).v
-        want["v"][k] = v_k
-        plant.step(v_prev)                  # the plant sees the previous sample's v
-        v_prev = v_k
+        want["v"][k] = v_published
+        v_computed = ctrl.step(y_d[k + 2], out.y_meas).v
+        plant.step(v_published)             # the plant applies what was published at t_k
+        v_published = v_computed
     assert np.array_equal(fmu["y_d"], y_d[:n])
     for f in ("y", "y_meas", "v"):
         assert np.array_equal(fmu[f], want[f]), f"{f}: max diff {np.max(np.abs(fmu[f] - want[f])):.3g}"
 
-    loop = simulate_closed_loop_core(name, master="jacobi")
+    loop = simulate_closed_loop_core(name, master=master)
     for f in fmu.dtype.names:
         assert np.array_equal(fmu[f], loop[f]), f
 
-    replay = core_binding.Plant(plant_params).simulate(np.r_[0.0, fmu["v"][:-1]])
+    replay = core_binding.Plant(plant_params).simulate(fmu["v"])
     assert np.array_equal(replay["y"], fmu["y"]) and np.array_equal(replay["y_meas"], fmu["y_meas"])
-    unshifted = core_binding.Plant(plant_params).simulate(fmu["v"])
-    assert np.max(np.abs(unshifted["y"] - fmu["y"])) > 1e-3
-    assert _metrics(name, fmu).e_rms <= 5e-3   # stable on the mismatched plant too
+    early = core_binding.Plant(plant_params).simulate(np.r_[fmu["v"][1:], 0.0])
+    assert np.max(np.abs(early["y"] - fmu["y"])) > 1e-3
+    assert _metrics(name, fmu).e_rms <= 3e-3
 
 
 def test_open_loop_fmu_equals_core_and_u_is_row_aligned():
@@ -187,7 +197,7 @@ def test_failed_run_releases_both_instances(monkeypatch):
     y = 10 * np.sin(2 * np.pi * t)
     y[201] = np.nan
     bad = sc.with_overrides(signal=Signal("table", table_time=tuple(t), table_value=tuple(y)))
-    with pytest.raises(cosim.FMUError, match=r"sample 200"):
+    with pytest.raises(cosim.FMUError, match=r"sample 199"):     # y_ref(199) = y_d(201)
         cosim.simulate_closed_loop(bad)
     assert sorted(closed) == [("AdaptiveCompoundController", True), ("PiezoStage", True)]
     assert cosim._LOGS == {}

@@ -46,7 +46,7 @@ def _csv(path):
         return list(csv.DictReader(fh))
 
 
-def lag_rms(freqs, amplitude=10.0, d=1, h=H):
+def lag_rms(freqs, amplitude=10.0, d=2, h=H):
     """README: a sine followed d samples late has a lag error of ~ 2 pi f A d h / sqrt(2) rms;
     tones of distinct frequencies over whole periods are orthogonal, so their rms add in
     quadrature."""
@@ -116,7 +116,7 @@ def test_main_job_nominal_and_mismatch_rows_meet_the_bounds(main_job):
 
 
 def test_main_job_preview_off_rows_follow_the_lag_formula(main_job):
-    """Reference: the README's lag error 2 pi f A d h / sqrt(2) rms (A = 10 um, d = 1,
+    """Reference: the README's lag error 2 pi f A d h / sqrt(2) rms (A = 10 um, d = 2,
     h = 0.5 ms) for the single tones, within 5 % (measured within 0.3 %); the three-tone
     references within 5 % of the quadrature sum of their tones' lag errors (measured 0.02 %)."""
     _, _, tracking = main_job
@@ -201,8 +201,8 @@ def test_run_flags_no_adaptation_and_no_preview(tmp_path):
     Base run: e_rms <= 3 nm (measured 1.20 nm), flags 1/1.
     --no-adaptation: flags 0/1, the estimates stay the nominal G of DESIGN.md section 1
     (-1.3767, 0.3816, 0.5954, -0.5907) exactly, e_rms > 3x the base run's (measured 28.3 nm).
-    --no-preview: flags 1/0, e_rms within 5 % of 2 pi f A h / sqrt(2) = 222.1 nm, and the stage
-    follows y_d one sample late: rms(y(k) - y_d(k-1)) <= 3 nm (measured 1.19 nm)."""
+    --no-preview: flags 1/0, e_rms within 5 % of 2 pi f A d h / sqrt(2) = 444.3 nm (d = 2), and
+    the stage follows y_d two samples late: rms(y(k) - y_d(k-2)) <= 3 nm."""
     t = np.arange(6000) * H
     y_d = 10 * np.sin(2 * np.pi * 10 * t)
     base, s0 = _run_tracking(tmp_path)
@@ -221,5 +221,5 @@ def test_run_flags_no_adaptation_and_no_preview(tmp_path):
         assert np.all(s1[f] == v), f
     assert np.ptp(s0["a1"]) > 0                                   # the base run does adapt
     assert float(noprev["e_rms_um"]) == pytest.approx(lag_rms((10,)), rel=0.05)
-    lagged = s2["y"][WINDOW] - y_d[1999:5999]
+    lagged = s2["y"][WINDOW] - y_d[1998:5998]
     assert math.sqrt(np.mean(lagged ** 2)) <= 3e-3

@@ -21,6 +21,7 @@ typedef enum {
     vr_est_b1,
     vr_est_b2,
     vr_pred_error,          /* output [um] */
+    vr_saturated,           /* output Boolean: v(k) was clipped */
     vr_pi_m,                /* Integer */
     vr_pi_v_max,
     vr_pi_w0,
@@ -34,7 +35,8 @@ typedef enum {
     vr_creep_alpha,
     vr_creep_exact,         /* Boolean */
     vr_h,
-    vr_mv_delay,            /* Integer */
+    vr_mv_delay,            /* Integer, d = 1 + mv.delay */
+    vr_mv_feedthrough,      /* Boolean */
     vr_mv_lambda_u,
     vr_rls_enabled,         /* Boolean */
     vr_rls_forgetting,
@@ -43,6 +45,8 @@ typedef enum {
     vr_sat_enabled,         /* Boolean */
     vr_sat_v_min,
     vr_sat_v_max,
+    vr_monitor_pred_error_max,
+    vr_monitor_divergence_samples,  /* Integer */
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -52,7 +56,10 @@ typedef struct {
     double y_ref;                   /* inputs, held over the communication step */
     double y_meas;
     piezo_controller ctrl;          /* core state (committed samples only) */
-    piezo_controller_output out;    /* peek of the current sample with the held inputs */
+    piezo_controller_output out;    /* outputs: the last committed sample, or with
+                                       mv.feedthrough a peek with the held inputs */
+    int said_saturated;             /* the first-clipping warning was logged */
+    int said_large_error;           /* the first large-pred_error warning was logged */
 } ModelData;
 
 #endif

@@ -3,10 +3,17 @@
  * table, start values and calls into the core controller (piezo_controller.h).
  * Everything FMI lives in the shared glue (fmu_src/fmi/fmi2_glue.c).
  *
- * Direct feedthrough: the outputs of sample k are piezo_controller_peek with
- * the held inputs (y_ref = y_d(k+d), y_meas(k)); nothing is committed until
- * model_step (piezo_controller_step with the same inputs).
+ * Timing (default, mv.feedthrough = false): a doStep from t_k samples the
+ * held inputs y_ref = y_d(k+d), y_meas(k), computes and commits sample k,
+ * and the outputs at t_(k+1) are that sample's v, q, estimates. No output
+ * depends directly on an input, so every master (Jacobi, Gauss-Seidel in
+ * either order, SSP players) runs the same loop, with delay d = 2.
+ * With mv.feedthrough = true the outputs at t_k are piezo_controller_peek
+ * with the held inputs of t_k (committed by the doStep from t_k): d = 1 for a
+ * master that reads v after setting the inputs.
  */
+#include <math.h>
+#include <stdio.h>
 #include <stddef.h>
 #include "fmu_model.h"
 
@@ -14,6 +21,7 @@
 #define PARAM_INT(name, field) { name, MODEL_INTEGER, MODEL_PARAMETER, offsetof(ModelData, params.field) }
 #define PARAM_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_PARAMETER, offsetof(ModelData, params.field) }
 #define OUTPUT_REAL(name, field) { name, MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, out.field) }
+#define OUTPUT_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_OUTPUT, offsetof(ModelData, out.field) }
 
 const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_y_ref] = { "y_ref", MODEL_REAL, MODEL_INPUT, offsetof(ModelData, y_ref) },
@@ -25,6 +33,7 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_est_b1] = OUTPUT_REAL("est.b1", theta[2]),
     [vr_est_b2] = OUTPUT_REAL("est.b2", theta[3]),
     [vr_pred_error] = OUTPUT_REAL("pred_error", pred_error),
+    [vr_saturated] = OUTPUT_BOOL("saturated", saturated),
     [vr_pi_m] = PARAM_INT("pi.m", pi.m),
     [vr_pi_v_max] = PARAM_REAL("pi.v_max", pi.v_max),
     [vr_pi_w0] = PARAM_REAL("pi.w0", pi.w0),
@@ -53,6 +62,7 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_creep_exact] = PARAM_BOOL("creep.exact", creep_exact),
     [vr_h] = PARAM_REAL("h", h),
     [vr_mv_delay] = PARAM_INT("mv.delay", mv_delay),
+    [vr_mv_feedthrough] = PARAM_BOOL("mv.feedthrough", mv_feedthrough),
     [vr_mv_lambda_u] = PARAM_REAL("mv.lambda_u", mv_lambda_u),
     [vr_rls_enabled] = PARAM_BOOL("rls.enabled", rls_enabled),
     [vr_rls_forgetting] = PARAM_REAL("rls.forgetting", rls_forgetting),
@@ -61,6 +71,8 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_sat_enabled] = PARAM_BOOL("sat.enabled", sat_enabled),
     [vr_sat_v_min] = PARAM_REAL("sat.v_min", sat_v_min),
     [vr_sat_v_max] = PARAM_REAL("sat.v_max", sat_v_max),
+    [vr_monitor_pred_error_max] = PARAM_REAL("monitor.pred_error_max", monitor_pred_error_max),
+    [vr_monitor_divergence_samples] = PARAM_INT("monitor.divergence_samples", monitor_divergence_samples),
 };
 
 void model_set_start_values(ModelData *data)
@@ -70,8 +82,11 @@ void model_set_start_values(ModelData *data)
     data->y_meas = 0.0;
 }
 
-piezo_status model_init(ModelData *data, piezo_diag *diag)
+piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
 {
+    (void)start_time;   /* time-invariant */
+    data->said_saturated = 0;
+    data->said_large_error = 0;
     return piezo_controller_init(&data->ctrl, &data->params, diag);
 }
 
@@ -93,8 +108,79 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
 
 piezo_status model_update_outputs(ModelData *data, double *history, size_t history_capacity)
 {
-    return piezo_controller_peek(&data->ctrl, data->y_ref, data->y_meas,
-                                 history, history_capacity, &data->out);
+    if (data->params.mv_feedthrough)
+        return piezo_controller_peek(&data->ctrl, data->y_ref, data->y_meas,
+                                     history, history_capacity, &data->out);
+    data->out = data->ctrl.out;     /* published at the end of the last step */
+    return PIEZO_OK;
+}
+
+int model_direct_feedthrough(const ModelData *data)
+{
+    return data->params.mv_feedthrough != 0;
+}
+
+static double sample_time(const ModelData *data, double start_time, uint64_t k)
+{
+    return start_time + (double)k * data->params.h;
+}
+
+int model_step_warning(ModelData *data, double start_time, char *text, size_t size)
+{
+    const piezo_controller *c = &data->ctrl;
+    if (c->n_saturated > 0 && !data->said_saturated) {
+        data->said_saturated = 1;
+        snprintf(text, size, "v was clipped to [sat.v_min, sat.v_max] = [%g, %g] V, first at "
+                 "t = %.9g s (adaptation pauses while a clipped sample is in the regressor); "
+                 "further clipping is counted, not logged: fmi2Terminate reports the count",
+                 c->sat_v_min, c->sat_v_max, sample_time(data, start_time, c->k_first_saturated));
+        return 1;
+    }
+    if (c->n_large_error > 0 && !data->said_large_error) {
+        data->said_large_error = 1;
+        snprintf(text, size, "|pred_error| exceeded monitor.pred_error_max = %g um, first at t = %.9g s: "
+                 "the model of G no longer predicts the measurement. If it stays above for "
+                 "monitor.divergence_samples = %llu consecutive samples the loop is declared unstable "
+                 "and fmi2DoStep fails; further exceedances are counted, not logged",
+                 c->pred_error_max, sample_time(data, start_time, c->k_first_large_error),
+                 (unsigned long long)c->divergence_samples);
+        return 1;
+    }
+    return 0;
+}
+
+int model_terminate_warning(const ModelData *data, char *text, size_t size)
+{
+    const piezo_controller *c = &data->ctrl;
+    if (c->n_saturated == 0 && c->n_large_error == 0)
+        return 0;
+    snprintf(text, size, "of %llu samples, v was clipped in %llu; |pred_error| exceeded "
+             "monitor.pred_error_max = %g um in %llu (largest %.6g um)",
+             (unsigned long long)c->k, (unsigned long long)c->n_saturated, c->pred_error_max,
+             (unsigned long long)c->n_large_error, c->max_abs_pred_error);
+    return 1;
+}
+
+int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size)
+{
+    const piezo_controller *c = &data->ctrl;
+    if (st == PIEZO_ERR_UNSTABLE) {
+        snprintf(text, size, "the closed loop is unstable: |pred_error| stayed above "
+                 "monitor.pred_error_max = %g um for monitor.divergence_samples = %llu consecutive "
+                 "samples (largest so far %.6g um). Usual causes: the controller's loop delay "
+                 "d = 1 + mv.delay = %d does not match the master and the plant (a Jacobi master or "
+                 "an extra plant delay adds a sample), or the plant is far from the nominal model",
+                 c->pred_error_max, (unsigned long long)c->divergence_samples,
+                 c->max_abs_pred_error, c->d);
+        return 1;
+    }
+    if (st == PIEZO_ERR_DIVERGED) {
+        snprintf(text, size, "the closed loop diverged: a value computed by the controller is not "
+                 "finite although its inputs are (d = 1 + mv.delay = %d; check it against the master "
+                 "and the plant)", c->d);
+        return 1;
+    }
+    return 0;
 }
 
 const char *model_check_data(const ModelData *data, int core_initialized)

@@ -60,8 +60,9 @@ void model_set_start_values(ModelData *data)
     data->v = 0.0;
 }
 
-piezo_status model_init(ModelData *data, piezo_diag *diag)
+piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
 {
+    (void)start_time;   /* time-invariant: the plant starts at rest whatever t0 */
     return piezo_plant_init(&data->plant, &data->params, diag);
 }
 
@@ -87,6 +88,30 @@ piezo_status model_update_outputs(ModelData *data, double *history, size_t histo
     (void)history;
     (void)history_capacity;
     return PIEZO_OK;
+}
+
+int model_direct_feedthrough(const ModelData *data)
+{
+    (void)data;
+    return 0;
+}
+
+int model_step_warning(ModelData *data, double start_time, char *text, size_t size)
+{
+    (void)data; (void)start_time; (void)text; (void)size;
+    return 0;
+}
+
+int model_terminate_warning(const ModelData *data, char *text, size_t size)
+{
+    (void)data; (void)text; (void)size;
+    return 0;
+}
+
+int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size)
+{
+    (void)data; (void)st; (void)text; (void)size;
+    return 0;
 }
 
 const char *model_check_data(const ModelData *data, int core_initialized)

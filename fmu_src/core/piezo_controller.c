@@ -31,7 +31,10 @@ void piezo_controller_default_params(piezo_controller_params *p)
     p->creep_alpha = plant.creep_alpha;
     p->creep_exact = plant.creep_exact;
     p->h = plant.h;
-    p->mv_delay = 0;
+    /* No direct feedthrough by default: the control computed from the inputs
+     * of sample k is published at t_(k+1), so the loop delay is d = 2. */
+    p->mv_delay = 1;
+    p->mv_feedthrough = 0;
     p->mv_lambda_u = 0.0;
     /* RLS tuning measured on the DESIGN.md mismatch case (1.2-1.9 nm rms in all
      * six tracking scenarios); a trace bound of 1e3 degrades its 1 Hz run to
@@ -40,9 +43,11 @@ void piezo_controller_default_params(piezo_controller_params *p)
     p->rls_forgetting = 0.995;
     p->rls_p0 = 1.0;
     p->rls_trace_max = 100.0;
-    p->sat_enabled = 0;
-    p->sat_v_min = -100.0;
-    p->sat_v_max = 100.0;
+    p->sat_enabled = 1;
+    p->sat_v_min = -PIEZO_SAT_DEFAULT_V;
+    p->sat_v_max = PIEZO_SAT_DEFAULT_V;
+    p->monitor_pred_error_max = PIEZO_MONITOR_DEFAULT_ERROR;
+    p->monitor_divergence_samples = PIEZO_MONITOR_DEFAULT_SAMPLES;
 }
 
 /* 1 = A E + z^-d Gd: e_0 = 1, e_n = -a1 e_{n-1} - a2 e_{n-2} (n < d),
@@ -91,6 +96,8 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
         return piezo_refuse(diag, "tf.b2", "|tf.b2| <= 0.999 tf.b1 (zero of B inside the unit circle)", p->tf_b2);
     if (p->mv_delay < 0 || p->mv_delay > PIEZO_MV_MAX_EXTRA_DELAY)
         return piezo_refuse(diag, "mv.delay", "0..8 samples", (double)p->mv_delay);
+    if (p->mv_feedthrough != 0 && p->mv_feedthrough != 1)
+        return piezo_refuse(diag, "mv.feedthrough", "false or true", (double)p->mv_feedthrough);
     if (!(isfinite(p->mv_lambda_u) && p->mv_lambda_u >= 0.0))
         return piezo_refuse(diag, "mv.lambda_u", "[0, inf)", p->mv_lambda_u);
     if (!(isfinite(p->rls_forgetting) && p->rls_forgetting > 0.0 && p->rls_forgetting <= 1.0))
@@ -104,6 +111,11 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
         if (!(isfinite(p->sat_v_max) && p->sat_v_max > p->sat_v_min))
             return piezo_refuse(diag, "sat.v_max", "finite, > sat.v_min", p->sat_v_max);
     }
+    if (!(isfinite(p->monitor_pred_error_max) && p->monitor_pred_error_max > 0.0))
+        return piezo_refuse(diag, "monitor.pred_error_max", "(0, inf) um", p->monitor_pred_error_max);
+    if (p->monitor_divergence_samples < 0)
+        return piezo_refuse(diag, "monitor.divergence_samples", "0..2147483647 samples (0: never)",
+                            (double)p->monitor_divergence_samples);
 
     memset(c, 0, sizeof *c);
     pi_params = p->pi;
@@ -122,6 +134,8 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->sat_enabled = p->sat_enabled ? 1 : 0;
     c->sat_v_min = p->sat_v_min;
     c->sat_v_max = p->sat_v_max;
+    c->pred_error_max = p->monitor_pred_error_max;
+    c->divergence_samples = (uint64_t)p->monitor_divergence_samples;
     c->theta_nominal[0] = p->tf_a1;
     c->theta_nominal[1] = p->tf_a2;
     c->theta_nominal[2] = p->tf_b1;
@@ -144,6 +158,10 @@ void piezo_controller_reset(piezo_controller *c)
     memset(c->q_ring, 0, sizeof c->q_ring);
     c->head = 0;
     c->sat_hold = 0;
+    c->n_saturated = c->n_large_error = 0;
+    c->run_saturated = c->run_large_error = 0;
+    c->k_first_saturated = c->k_first_large_error = 0;
+    c->max_abs_pred_error = 0.0;
     c->k = 0;
     memset(&c->out, 0, sizeof c->out);
     memcpy(c->out.theta, c->theta, sizeof c->theta);
@@ -271,6 +289,23 @@ static piezo_status controller_advance(piezo_controller *c, double y_ref, double
         if (c->sat_hold > 0) c->sat_hold -= 1;
     }
 
+    /* monitor: counts and current runs of clipped samples and large errors */
+    if (saturated) {
+        if (c->n_saturated == 0) c->k_first_saturated = c->k;
+        c->n_saturated += 1;
+        c->run_saturated += 1;
+    } else {
+        c->run_saturated = 0;
+    }
+    if (fabs(pred_error) > c->pred_error_max) {
+        if (c->n_large_error == 0) c->k_first_large_error = c->k;
+        c->n_large_error += 1;
+        c->run_large_error += 1;
+    } else {
+        c->run_large_error = 0;
+    }
+    if (fabs(pred_error) > c->max_abs_pred_error) c->max_abs_pred_error = fabs(pred_error);
+
     /* shift the pasts */
     c->head = (c->head + PIEZO_MV_Q_RING - 1) % PIEZO_MV_Q_RING;
     c->q_ring[c->head] = q;
@@ -298,13 +333,19 @@ static piezo_status check_step_inputs(const piezo_controller *c, double y_ref, d
 }
 
 /* Advance `scratch` (a copy of the state) by one sample. The inputs are
- * finite, so a non-finite value computed on the way means divergence. */
+ * finite, so a non-finite value computed on the way means divergence. With
+ * `monitor`, a run of large prediction errors that reaches the divergence
+ * window means an unstable loop (a step refuses it; a peek reports values). */
 static piezo_status advance_copy(piezo_controller *scratch, double y_ref, double y_meas,
-                                 double *history, size_t capacity)
+                                 double *history, size_t capacity, int monitor)
 {
     piezo_status st = controller_advance(scratch, y_ref, y_meas, history, capacity);
-    if (st == PIEZO_ERR_NONFINITE || (st == PIEZO_OK && !(isfinite(scratch->out.v) && isfinite(scratch->out.q))))
+    if (st == PIEZO_ERR_NONFINITE || (st == PIEZO_OK && !(isfinite(scratch->out.v) && isfinite(scratch->out.q)
+                                                          && isfinite(scratch->out.pred_error))))
         st = PIEZO_ERR_DIVERGED;
+    if (st == PIEZO_OK && monitor && scratch->divergence_samples > 0
+        && scratch->run_large_error >= scratch->divergence_samples)
+        st = PIEZO_ERR_UNSTABLE;
     return st;
 }
 
@@ -317,7 +358,7 @@ piezo_status piezo_controller_step(piezo_controller *c, double y_ref, double y_m
     st = check_step_inputs(c, y_ref, y_meas, history, capacity);
     if (st != PIEZO_OK) return st;
     scratch = *c;
-    st = advance_copy(&scratch, y_ref, y_meas, history, capacity);
+    st = advance_copy(&scratch, y_ref, y_meas, history, capacity, 1);
     if (st != PIEZO_OK) return st;
     *c = scratch;
     if (out) *out = c->out;
@@ -333,7 +374,7 @@ piezo_status piezo_controller_peek(const piezo_controller *c, double y_ref, doub
     st = check_step_inputs(c, y_ref, y_meas, history, capacity);
     if (st != PIEZO_OK) return st;
     scratch = *c;
-    st = advance_copy(&scratch, y_ref, y_meas, history, capacity);
+    st = advance_copy(&scratch, y_ref, y_meas, history, capacity, 0);
     if (st == PIEZO_OK) *out = scratch.out;
     return st;
 }

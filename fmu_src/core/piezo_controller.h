@@ -24,6 +24,9 @@
 #define PIEZO_MV_MAX_EXTRA_DELAY 8
 #define PIEZO_MV_MAX_D 9          /* 1 + PIEZO_MV_MAX_EXTRA_DELAY */
 #define PIEZO_MV_Q_RING 10        /* PIEZO_MV_MAX_D + 1 */
+#define PIEZO_SAT_DEFAULT_V 150   /* default voltage limits +-150 V */
+#define PIEZO_MONITOR_DEFAULT_ERROR 1   /* default bound on |pred_error| [um] */
+#define PIEZO_MONITOR_DEFAULT_SAMPLES 200   /* default divergence window [samples] */
 
 typedef struct {
     piezo_pi_params pi;          /* nominal hysteresis model */
@@ -32,7 +35,8 @@ typedef struct {
     double creep_alpha;          /* [-1, 1] */
     int creep_exact;             /* 1: full-memory inverse creep */
     double h;                    /* [s], > 0 */
-    int mv_delay;                /* extra loop delay, 0..8; d = 1 + mv_delay */
+    int mv_delay;                /* loop delay beyond one sample, 0..8; d = 1 + mv_delay */
+    int mv_feedthrough;          /* 1: v(k) from the inputs of sample k (direct feedthrough) */
     double mv_lambda_u;          /* control weighting, >= 0 */
     int rls_enabled;
     double rls_forgetting;       /* (0, 1] */
@@ -40,6 +44,9 @@ typedef struct {
     double rls_trace_max;        /* bound on trace(P), >= 4 p0 */
     int sat_enabled;
     double sat_v_min, sat_v_max; /* [V], v_min < v_max when enabled */
+    double monitor_pred_error_max;   /* [um], > 0: bound on |pred_error| */
+    int monitor_divergence_samples;  /* consecutive samples beyond the bound that mean the loop
+                                        is unstable (PIEZO_ERR_UNSTABLE); 0 = never */
 } piezo_controller_params;
 
 typedef struct {
@@ -67,6 +74,16 @@ typedef struct {
     double q_ring[PIEZO_MV_Q_RING];  /* q(k-1)..q(k-10), q_ring[head] newest */
     int head;
     int sat_hold;                /* samples until a clipped q leaves the regressor (no RLS meanwhile) */
+    double pred_error_max;
+    uint64_t divergence_samples;
+    /* monitor counts since reset (see piezo_controller_diverged) */
+    uint64_t n_saturated;        /* samples whose v was clipped */
+    uint64_t n_large_error;      /* samples with |pred_error| > pred_error_max */
+    uint64_t run_saturated;      /* consecutive clipped samples up to the last one */
+    uint64_t run_large_error;    /* consecutive samples beyond the bound up to the last one */
+    uint64_t k_first_saturated;  /* first clipped sample (valid when n_saturated > 0) */
+    uint64_t k_first_large_error;/* first sample beyond the bound (valid when n_large_error > 0) */
+    double max_abs_pred_error;   /* largest |pred_error| so far [um] */
     uint64_t k;
     piezo_controller_output out; /* result of the last committed sample */
 } piezo_controller;
@@ -78,14 +95,18 @@ piezo_status piezo_controller_init(piezo_controller *ctrl, const piezo_controlle
 void piezo_controller_reset(piezo_controller *ctrl);
 /*
  * Compute the control of sample k from y_ref = y_d(k+d) and y_meas(k) and
- * commit it (RLS update, operator states, k -> k+1). Exact mode writes
+ * commit it (RLS update, operator states, monitor, k -> k+1). Returns
+ * PIEZO_ERR_UNSTABLE, committing nothing, when this sample would make the
+ * run of samples with |pred_error| > monitor_pred_error_max reach
+ * monitor_divergence_samples. Exact mode writes
  * history[2k], history[2k+1] (capacity >= piezo_controller_history_needed). Non-finite inputs refused, state unchanged.
  */
 piezo_status piezo_controller_step(piezo_controller *ctrl, double y_ref, double y_meas,
                                    double *history, size_t history_capacity,
                                    piezo_controller_output *out);
 /* Same result as piezo_controller_step without committing anything
- * (exact mode may write the unused slots history[2k], history[2k+1]). */
+ * (exact mode may write the unused slots history[2k], history[2k+1]); the
+ * divergence window is not applied (the step that commits the sample does). */
 piezo_status piezo_controller_peek(const piezo_controller *ctrl, double y_ref, double y_meas,
                                    double *history, size_t history_capacity,
                                    piezo_controller_output *out);

@@ -8,4 +8,5 @@
 #include "piezo_creep.h"
 #include "piezo_plant.h"
 #include "piezo_controller.h"
+#include "piezo_reference.h"
 #endif

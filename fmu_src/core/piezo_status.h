@@ -18,7 +18,9 @@ typedef enum {
     PIEZO_ERR_PARAM = 2,     /* a parameter is out of range: see piezo_diag */
     PIEZO_ERR_NONFINITE = 3, /* NaN or Inf input refused; state unchanged */
     PIEZO_ERR_CAPACITY = 4,  /* exact-mode history buffer too small; state unchanged */
-    PIEZO_ERR_DIVERGED = 5   /* finite inputs, non-finite result (the loop diverged); state unchanged */
+    PIEZO_ERR_DIVERGED = 5,  /* finite inputs, non-finite result (the loop diverged); state unchanged */
+    PIEZO_ERR_UNSTABLE = 6   /* the controller's monitor found the loop unstable: |pred_error| above
+                                its bound for the whole divergence window; state unchanged */
 } piezo_status;
 
 /* Which parameter an init refused, and why. Strings are static literals. */

@@ -32,11 +32,18 @@
  * getters, SetFMUstate, Reset and FreeInstance remain.
  *
  * Time is t0 + k h with an integer sample counter k. A communication step H
- * must be n h with n >= 1 (|H - n h| <= 1e-9 max(1, n) h); the n samples are
- * computed with the inputs held. Logging: messages go through the host's
+ * must be n h with n >= 0 (|H - n h| <= 1e-9 max(1, n) h); the n samples are
+ * computed with the inputs held. A step that rounds to no sample (|H| below
+ * 1e-9 h, as importers issue when they step to input time points that equal
+ * the FMU's grid up to round-off) is a no-op returning fmi2OK. A step whose
+ * end passes the stopTime of fmi2SetupExperiment is refused.
+ * After a step the model may ask for a warning (logged once per kind, e.g.
+ * the first clipped voltage, with a count at fmi2Terminate); fmi2DoStep then
+ * returns fmi2Warning. Logging: messages go through the host's
  * logger as (..., "%s", text). Categories logEvents, logStatusWarning,
- * logStatusError, logAll. Errors are logged even with loggingOn = false,
- * unless logStatusError is switched off explicitly with fmi2SetDebugLogging.
+ * logStatusError, logAll. Errors and warnings are logged even with
+ * loggingOn = false (only the logEvents trace is debug logging), unless
+ * switched off explicitly with fmi2SetDebugLogging.
  */
 #include <math.h>
 #include <stdarg.h>
@@ -75,7 +82,11 @@ typedef struct {
     double t0;                  /* start time (fmi2SetupExperiment) */
     uint64_t k;                 /* samples since t0 */
     double h;                   /* sample period, fixed at ExitInitializationMode */
+    int stop_time_defined;      /* fmi2SetupExperiment's stopTime applies */
+    double stop_time;
     int outputs_valid;          /* the output values match data (no set/step since) */
+    int outputs_read;           /* outputs were read since the last doStep */
+    int warned_read_before_set; /* that warning is given once per instance */
     double *history;            /* exact-mode history, grown by doubling */
     size_t history_capacity;    /* in doubles */
     ModelData data;
@@ -157,6 +168,17 @@ static void log_error(const fmu_instance *inst, const char *fmt, ...)
     va_end(ap);
 }
 
+static void log_warning(const fmu_instance *inst, const char *fmt, ...) PRINTF_LIKE(2, 3);
+static void log_warning(const fmu_instance *inst, const char *fmt, ...)
+{
+    va_list ap;
+    if (!(inst->log_mask & CAT_WARNING))
+        return;
+    va_start(ap, fmt);
+    vlog_to(&inst->cb, inst->name, fmi2Warning, "logStatusWarning", fmt, ap);
+    va_end(ap);
+}
+
 static void log_event(const fmu_instance *inst, const char *fmt, ...) PRINTF_LIKE(2, 3);
 static void log_event(const fmu_instance *inst, const char *fmt, ...)
 {
@@ -200,6 +222,11 @@ static void mask_names(int mask, char *buf, size_t size)
 static void log_core_failure(const fmu_instance *inst, const char *fname, piezo_status st,
                              const piezo_diag *diag)
 {
+    char text[512];
+    if (st != PIEZO_ERR_PARAM && model_failure_text(&inst->data, st, text, sizeof text)) {
+        log_error(inst, "%s: %s", fname, text);
+        return;
+    }
     switch (st) {
     case PIEZO_ERR_PARAM:
         log_error(inst, "%s: %s = %.16g is out of range: valid range %s", fname,
@@ -218,6 +245,9 @@ static void log_core_failure(const fmu_instance *inst, const char *fname, piezo_
         break;
     case PIEZO_ERR_NULL:
         log_error(inst, "%s: internal error: NULL pointer passed to the model", fname);
+        break;
+    case PIEZO_ERR_UNSTABLE:
+        log_error(inst, "%s: the model's monitor found the loop unstable", fname);
         break;
     default:
         log_error(inst, "%s: the model failed with status %d", fname, (int)st);
@@ -339,7 +369,7 @@ static int refresh_outputs(fmu_instance *inst, const char *fname)
         return 1;
     if (inst->mode == MODE_INIT) {
         /* Outputs during initialization: sample 0 of the current parameters. */
-        st = model_init(&inst->data, &diag);
+        st = model_init(&inst->data, inst->t0, &diag);
         if (st != PIEZO_OK) {
             log_core_failure(inst, fname, st, &diag);
             return 0;
@@ -379,6 +409,8 @@ static fmi2Status get_values(fmi2Component c, const char *fname, const fmi2Value
     }
     if (need_outputs && !refresh_outputs(inst, fname))
         return fmi2Error;
+    if (need_outputs)
+        inst->outputs_read = 1;
     for (i = 0; i < nvr; i++) {
         const void *p = value_ptr(inst, vr[i]);
         if (type == MODEL_REAL)
@@ -421,6 +453,23 @@ static fmi2Status set_values(fmi2Component c, const char *fname, const fmi2Value
                       fname, var->name, ((const fmi2Real *)values)[i], var->name,
                       *(const double *)value_ptr(inst, vr[i]));
             return fmi2Error;
+        }
+    }
+    if (inst->outputs_read && inst->mode == MODE_STEP_COMPLETE && !inst->warned_read_before_set
+        && model_direct_feedthrough(&inst->data)) {
+        for (i = 0; i < nvr; i++) {
+            const model_variable *var = &model_variables[vr[i]];
+            if (var->causality == MODEL_INPUT && type == MODEL_REAL
+                && *(const double *)value_ptr(inst, vr[i]) != ((const fmi2Real *)values)[i]) {
+                log_warning(inst, "%s: %s changed after the outputs were read at this communication "
+                            "point: the outputs depend directly on the inputs (direct feedthrough), so "
+                            "the values read were computed from the previous inputs and are not what "
+                            "fmi2DoStep commits. Read outputs after setting the inputs (Gauss-Seidel "
+                            "ordered by ModelStructure); a Jacobi master needs the no-feedthrough "
+                            "configuration. This warning is given once.", fname, var->name);
+                inst->warned_read_before_set = 1;
+                break;
+            }
         }
     }
     for (i = 0; i < nvr; i++) {
@@ -497,7 +546,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     memcpy(inst->name, instanceName, len + 1);
     inst->magic = INSTANCE_MAGIC;
     inst->cb = *functions;
-    inst->log_mask = loggingOn ? CAT_ALL : CAT_ERROR;
+    inst->log_mask = loggingOn ? CAT_ALL : CAT_ERROR | CAT_WARNING;
     inst->mode = MODE_INSTANTIATED;
     model_set_start_values(&inst->data);
     log_event(inst, "fmi2Instantiate: %s instantiated (GUID %s)", MODEL_IDENTIFIER_STRING, MODEL_GUID);
@@ -528,7 +577,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
     if (inst == NULL)
         return fmi2Error;
     if (nCategories == 0) {
-        inst->log_mask = loggingOn ? CAT_ALL : CAT_ERROR;
+        inst->log_mask = loggingOn ? CAT_ALL : CAT_ERROR | CAT_WARNING;
         return fmi2OK;
     }
     if (null_arg(inst, "fmi2SetDebugLogging", "categories", categories))
@@ -578,7 +627,10 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
         return fmi2Error;
     }
     inst->t0 = startTime;
-    log_event(inst, "fmi2SetupExperiment: t0 = %.16g", startTime);
+    inst->stop_time_defined = stopTimeDefined ? 1 : 0;
+    inst->stop_time = stopTimeDefined ? stopTime : 0.0;
+    log_event(inst, "fmi2SetupExperiment: t0 = %.16g%s", startTime,
+              stopTimeDefined ? " (stopTime enforced)" : "");
     return fmi2OK;
 }
 
@@ -601,7 +653,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
     double h;
     if (inst == NULL)
         return fmi2Error;
-    st = model_init(&inst->data, &diag);
+    st = model_init(&inst->data, inst->t0, &diag);
     if (st != PIEZO_OK) {
         log_core_failure(inst, "fmi2ExitInitializationMode", st, &diag);
         inst->outputs_valid = 0;
@@ -623,11 +675,17 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 fmi2Status fmi2Terminate(fmi2Component c)
 {
     fmu_instance *inst = get_instance(c, "fmi2Terminate", MODE_STEP_COMPLETE);
+    char text[512];
+    fmi2Status status = fmi2OK;
     if (inst == NULL)
         return fmi2Error;
     inst->mode = MODE_TERMINATED;
     log_event(inst, "fmi2Terminate at t = %.16g", inst->t0 + (double)inst->k * inst->h);
-    return fmi2OK;
+    if (model_terminate_warning(&inst->data, text, sizeof text)) {
+        log_warning(inst, "fmi2Terminate: %s", text);
+        status = fmi2Warning;
+    }
+    return status;
 }
 
 fmi2Status fmi2Reset(fmi2Component c)
@@ -641,7 +699,10 @@ fmi2Status fmi2Reset(fmi2Component c)
     inst->t0 = 0.0;
     inst->k = 0;
     inst->h = 0.0;
+    inst->stop_time_defined = 0;
+    inst->stop_time = 0.0;
     inst->outputs_valid = 0;
+    inst->outputs_read = 0;
     log_event(inst, "fmi2Reset: back to Instantiated with the start values");
     return fmi2OK;
 }
@@ -710,6 +771,19 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 /* ------------------------------------------------------------------------ */
 /* Stepping                                                                  */
 
+/* Log what the model asks to say after a step; fmi2Warning if anything. */
+static fmi2Status step_warnings(fmu_instance *inst, const char *fname)
+{
+    char text[512];
+    fmi2Status status = fmi2OK;
+    int i;
+    for (i = 0; i < 4 && model_step_warning(&inst->data, inst->t0, text, sizeof text); i++) {
+        log_warning(inst, "%s: %s", fname, text);
+        status = fmi2Warning;
+    }
+    return status;
+}
+
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
@@ -734,9 +808,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
                   (unsigned long long)inst->k, real_text(t3, inst->h));
         return fmi2Error;
     }
-    if (!isfinite(communicationStepSize) || !(communicationStepSize > 0.0)) {
-        log_error(inst, "%s: communicationStepSize = %s refused: it must be a positive whole "
-                  "multiple of h = %s; state and time unchanged", fname,
+    if (!isfinite(communicationStepSize) || communicationStepSize < 0.0) {
+        log_error(inst, "%s: communicationStepSize = %s refused: it must be a whole multiple "
+                  "n >= 0 of h = %s; state and time unchanged", fname,
                   real_text(t1, communicationStepSize), real_text(t2, inst->h));
         return fmi2Error;
     }
@@ -747,7 +821,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
                   real_text(t1, communicationStepSize), real_text(t2, ratio), real_text(t3, inst->h));
         return fmi2Error;
     }
-    if (n_real < 1.0 || fabs(communicationStepSize - n_real * inst->h) > 1e-9 * fmax(1.0, n_real) * inst->h) {
+    if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * fmax(1.0, n_real) * inst->h) {
         log_error(inst, "%s: communicationStepSize = %s is not a whole multiple of h = %s "
                   "(H/h = %s; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
                   "time unchanged", fname, real_text(t1, communicationStepSize), real_text(t2, inst->h),
@@ -755,6 +829,23 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         return fmi2Error;
     }
     n = (uint64_t)n_real;
+    if (inst->stop_time_defined) {
+        double t_end = inst->t0 + (double)(inst->k + n) * inst->h;
+        double tol_end = fmin(1e-9 * fmax(inst->h, fabs(inst->stop_time)), 1e-3 * inst->h);
+        if (t_end > inst->stop_time + tol_end) {
+            log_error(inst, "%s: the step from t = %s to t = %s passes stopTime = %s of "
+                      "fmi2SetupExperiment: step refused, state and time unchanged", fname,
+                      real_text(t1, t), real_text(t2, t_end), real_text(t3, inst->stop_time));
+            return fmi2Error;
+        }
+    }
+    inst->outputs_read = 0;
+    if (n == 0) {
+        /* |H| < 1e-9 h: the step ends on the sample it starts from */
+        log_event(inst, "%s: communicationStepSize = %s holds no sample of h = %s: nothing to do",
+                  fname, real_text(t1, communicationStepSize), real_text(t2, inst->h));
+        return fmi2OK;
+    }
 
     memcpy(&inst->backup, &inst->data, sizeof inst->data);
     for (i = 0; i < n; i++) {
@@ -780,7 +871,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     }
     inst->k += n;
     inst->outputs_valid = 0;
-    return fmi2OK;
+    return step_warnings(inst, fname);
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c)

@@ -44,9 +44,10 @@ extern const model_variable model_variables[MODEL_N_VARIABLES];
 /* Start values of all parameters and inputs (must equal the XML starts). */
 void model_set_start_values(ModelData *data);
 
-/* Validate the parameters and (re)initialize the core state to sample 0.
- * On PIEZO_ERR_PARAM, diag names the parameter. */
-piezo_status model_init(ModelData *data, piezo_diag *diag);
+/* Validate the parameters and (re)initialize the core state to sample 0 at
+ * time start_time (fmi2SetupExperiment). On PIEZO_ERR_PARAM, diag names the
+ * parameter. */
+piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag);
 
 /* The sample period h of an initialized model. */
 double model_sample_period(const ModelData *data);
@@ -62,6 +63,22 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
 /* Fill the output values of the current sample from the core and the held
  * inputs, committing nothing (direct feedthrough is computed here). */
 piezo_status model_update_outputs(ModelData *data, double *history, size_t history_capacity);
+
+/* 1 when the outputs currently depend directly on the inputs (the glue then
+ * warns if a master reads them before setting the inputs of a step). */
+int model_direct_feedthrough(const ModelData *data);
+
+/* After a successful doStep: write at most one warning into text (the model
+ * keeps its "already said" flags in ModelData, so each thing is said once,
+ * also across FMU state restores) and return 1, else return 0. */
+int model_step_warning(ModelData *data, double start_time, char *text, size_t size);
+
+/* At fmi2Terminate: a summary worth a warning (e.g. counts), 1 if written. */
+int model_terminate_warning(const ModelData *data, char *text, size_t size);
+
+/* Why the model refused a step with status st, in its own terms (e.g. which
+ * monitor bound was exceeded), 1 if written; else the glue's generic text. */
+int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size);
 
 /* Sanity check of restored (deserialized) data: NULL when every index and
  * count the core uses is in range, else a static description of the fault.

@@ -1,0 +1,87 @@
+/* piezo_reference.c - sum-of-sines reference with preview. See piezo_reference.h. */
+#include <math.h>
+#include <string.h>
+#include "piezo_reference.h"
+
+#define PI_D 3.14159265358979323846
+
+void piezo_reference_default_params(piezo_reference_params *p)
+{
+    if (!p) return;
+    memset(p, 0, sizeof *p);
+    p->lead = 2;
+    p->h = 0.0005;
+}
+
+/* Valid-range texts name the index, so a refusal says which tone is wrong. */
+static const char *const amplitude_names[PIEZO_REF_MAX_TONES] = {
+    "amplitude[1]", "amplitude[2]", "amplitude[3]", "amplitude[4]",
+    "amplitude[5]", "amplitude[6]", "amplitude[7]", "amplitude[8]"};
+static const char *const frequency_names[PIEZO_REF_MAX_TONES] = {
+    "frequency[1]", "frequency[2]", "frequency[3]", "frequency[4]",
+    "frequency[5]", "frequency[6]", "frequency[7]", "frequency[8]"};
+static const char *const phase_names[PIEZO_REF_MAX_TONES] = {
+    "phase[1]", "phase[2]", "phase[3]", "phase[4]",
+    "phase[5]", "phase[6]", "phase[7]", "phase[8]"};
+
+piezo_status piezo_reference_init(piezo_reference *ref, const piezo_reference_params *p,
+                                  double t0, piezo_diag *diag)
+{
+    int i;
+    double nyquist;
+    if (!ref || !p) return PIEZO_ERR_NULL;
+    if (!(isfinite(p->h) && p->h > 0.0)) return piezo_refuse(diag, "h", "(0, inf) s", p->h);
+    if (!isfinite(p->offset)) return piezo_refuse(diag, "offset", "finite values (um)", p->offset);
+    nyquist = 0.5 / p->h;
+    for (i = 0; i < PIEZO_REF_MAX_TONES; ++i) {
+        if (!isfinite(p->amplitude[i]))
+            return piezo_refuse(diag, amplitude_names[i], "finite values (um)", p->amplitude[i]);
+        /* f >= 1/(2h) aliases onto a lower frequency on the sample grid */
+        if (!(isfinite(p->frequency[i]) && p->frequency[i] >= 0.0 && p->frequency[i] < nyquist))
+            return piezo_refuse(diag, frequency_names[i],
+                                "[0, 1/(2 h)) Hz: below the Nyquist frequency (1000 Hz for h = 0.5 ms)",
+                                p->frequency[i]);
+        if (!isfinite(p->phase[i])) return piezo_refuse(diag, phase_names[i], "finite values (rad)", p->phase[i]);
+    }
+    if (p->lead < 0 || p->lead > PIEZO_REF_MAX_LEAD)
+        return piezo_refuse(diag, "lead", "0..1000000 samples", (double)p->lead);
+    if (!isfinite(t0)) return piezo_refuse(diag, "startTime", "finite values (s)", t0);
+    memset(ref, 0, sizeof *ref);
+    ref->p = *p;
+    ref->t0 = t0;
+    piezo_reference_reset(ref);
+    return PIEZO_OK;
+}
+
+/* y_d(t) = offset + sum_i a_i sin(2 pi f_i t + phi_i); zero amplitudes are skipped. */
+double piezo_reference_value(const piezo_reference *ref, double t)
+{
+    double y = ref->p.offset;
+    int i;
+    for (i = 0; i < PIEZO_REF_MAX_TONES; ++i)
+        if (ref->p.amplitude[i] != 0.0)
+            y += ref->p.amplitude[i] * sin(2.0 * PI_D * ref->p.frequency[i] * t + ref->p.phase[i]);
+    return y;
+}
+
+/* t_k = t0 + k h from the integer counter, never accumulated */
+static void update(piezo_reference *ref)
+{
+    ref->y_d = piezo_reference_value(ref, ref->t0 + (double)ref->k * ref->p.h);
+    ref->y_ref = piezo_reference_value(ref, ref->t0 + (double)(ref->k + (uint64_t)ref->p.lead) * ref->p.h);
+}
+
+void piezo_reference_reset(piezo_reference *ref)
+{
+    if (!ref) return;
+    ref->k = 0;
+    update(ref);
+}
+
+piezo_status piezo_reference_step(piezo_reference *ref)
+{
+    if (!ref) return PIEZO_ERR_NULL;
+    ref->k += 1;
+    update(ref);
+    return PIEZO_OK;
+}

@@ -1,0 +1,51 @@
+/*
+ * piezo_reference.h - the reference signal of the tracking scenarios, with
+ * the preview the minimum-variance controller needs:
+ *
+ *     y_d(t) = offset + sum_{i=1..8} a_i sin(2 pi f_i t + phi_i)      [um]
+ *     y_d(k)   = y_d(t0 + k h)              (the reference at t_k)
+ *     y_ref(k) = y_d(t0 + (k + lead) h)     (lead samples ahead, lead = d)
+ *
+ * Frequencies must lie in [0, 1/(2h)): a tone at or above the Nyquist
+ * frequency aliases on the sample grid and is refused at init.
+ * Time is t0 + k h with an integer k, never accumulated.
+ */
+#ifndef PIEZO_REFERENCE_H
+#define PIEZO_REFERENCE_H
+
+#include <stdint.h>
+#include "piezo_status.h"
+
+#define PIEZO_REF_MAX_TONES 8
+#define PIEZO_REF_MAX_LEAD 1000000
+
+typedef struct {
+    double offset;                          /* [um] */
+    double amplitude[PIEZO_REF_MAX_TONES];  /* [um] */
+    double frequency[PIEZO_REF_MAX_TONES];  /* [Hz], [0, 1/(2h)) */
+    double phase[PIEZO_REF_MAX_TONES];      /* [rad] */
+    int lead;                               /* preview [samples], 0..PIEZO_REF_MAX_LEAD */
+    double h;                               /* sample period [s], > 0 */
+} piezo_reference_params;
+
+typedef struct {
+    piezo_reference_params p;               /* validated copy */
+    double t0;                              /* start time [s] */
+    uint64_t k;                             /* current sample */
+    double y_d;                             /* y_d(k) [um] */
+    double y_ref;                           /* y_d(k + lead) [um] */
+} piezo_reference;
+
+/* All amplitudes 0, lead 2 (the default controller's d), h = 0.5 ms. */
+void piezo_reference_default_params(piezo_reference_params *params);
+/* Validate (diag names the first bad parameter), start at t0, sample 0. */
+piezo_status piezo_reference_init(piezo_reference *ref, const piezo_reference_params *params,
+                                  double t0, piezo_diag *diag);
+/* Back to sample 0. */
+void piezo_reference_reset(piezo_reference *ref);
+/* Advance to sample k + 1 and update y_d, y_ref. */
+piezo_status piezo_reference_step(piezo_reference *ref);
+/* y_d at time t [s]. */
+double piezo_reference_value(const piezo_reference *ref, double t);
+
+#endif
