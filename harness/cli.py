@@ -8,9 +8,15 @@
   PiezoStage model (``--noise-rms UM`` adds measurement noise), every parameter next to
   the value the plant ran; ``identification.csv`` / ``.md`` under ``--out``.
 
-User errors (unknown scenario, missing FMU, malformed scenario file or CSV,
-bad parameter) end with exit code 2 and a one-line message; a failing FMI
-call ends with exit code 1.
+Exit codes, each with a one-line message on stderr:
+
+* 0: done;
+* 1: an FMI call failed for another reason (a fault);
+* 2: a user error (unknown scenario, missing FMU, malformed scenario file or CSV,
+  bad parameter);
+* 3: a run failed its own checks: it diverged (the controller's monitor stopped
+  it, a value overflowed, or its error exceeds the reference) or the controller
+  clipped the voltage persistently (see :mod:`harness.checks`).
 """
 
 from __future__ import annotations
@@ -94,6 +100,7 @@ def main(argv=None):
         if args.seed is not None and args.seed < 0:
             return _fail(f"--seed must be >= 0, got {args.seed}")
 
+    from .checks import EXIT_RUN_FAILED, RunCheckError
     from .scenarios import ScenarioError, load_scenarios
     from .cosim import FMUError, UnknownParameterError
 
@@ -124,6 +131,8 @@ def main(argv=None):
                            fmu_dir=args.fmu_dir, plots=not args.no_plots, backend=args.backend,
                            registry=registry, extra_scenarios=extra)
         return 0
+    except RunCheckError as exc:
+        return _fail(_one_line(exc), EXIT_RUN_FAILED)
     except (ScenarioError, UnknownParameterError, FileNotFoundError) as exc:
         return _fail(_one_line(exc))
     except FMUError as exc:

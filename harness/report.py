@@ -76,8 +76,8 @@ TRACKING_NOTES = (
     "mismatch, adaptation off: the nominal model alone; the error grows with frequency.",
     "mismatch, preview off: the controller gets y_d(k) instead of y_d(k+d), so the stage "
     "follows the reference d samples late. This lag error is expected, not a fault: for a "
-    "sine it is ~ 2 pi f A d h / sqrt(2) rms (22 nm at 1 Hz, 444 nm at 20 Hz for A = 10 um, "
-    "d = 1, h = 0.5 ms).",
+    "sine it is ~ 2 pi f A d h / sqrt(2) rms (44 nm at 1 Hz, 888 nm at 20 Hz for A = 10 um, "
+    "d = 2, h = 0.5 ms).",
 )
 
 VALIDATION_NOTES = (
@@ -250,12 +250,27 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
     Returns
     -------
     TrackingResult
+
+    Raises
+    ------
+    harness.checks.RunCheckError
+        The run diverged (the controller stopped it, or its error exceeds the reference) or
+        saturated persistently (:func:`harness.checks.check_tracking_run`).
     """
+    from .checks import RunDivergedError, check_tracking_run
+    from .core import CoreDivergedError
+    from .cosim import LoopDivergedError
+
     sc = get_scenario(scenario, registry)
     closed, _ = _simulator(backend)
+    label = f"{condition} / {sc.name}"
     t0 = _time.perf_counter()
-    data = closed(sc, adaptation=adaptation, preview=preview, master=master, fmu_dir=fmu_dir)
+    try:
+        data = closed(sc, adaptation=adaptation, preview=preview, master=master, fmu_dir=fmu_dir)
+    except (LoopDivergedError, CoreDivergedError) as exc:
+        raise RunDivergedError(f"{label}: {exc}") from None
     elapsed = _time.perf_counter() - t0
+    check_tracking_run(data, sc, label)
     m = compute_metrics(data["time"], data["y_d"], data["y"], sc.metric_window, sc.step_size)
     return TrackingResult(
         condition=condition, scenario=sc.name, adaptation=adaptation is not False,

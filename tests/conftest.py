@@ -35,6 +35,8 @@ _FMU_SOURCE_SUFFIXES = {".c", ".h", ".xml", ".map", ".txt"}
 
 def _fmu_sources():
     yield REPO / "CMakeLists.txt"
+    yield REPO / "harness" / "ssp.py"                       # writes the closed-loop SSP
+    yield from (REPO / "harness" / "scenarios").glob("*.toml")
     for sub in ("fmu_src", "modelDescription"):
         for path in (REPO / sub).rglob("*"):
             if path.is_file() and path.suffix in _FMU_SOURCE_SUFFIXES:
@@ -42,7 +44,8 @@ def _fmu_sources():
 
 
 def _fmus_stale():
-    fmus = [FMU_DIR / f"{name}.fmu" for name in FMU_NAMES] + [BUILD_DIR / "libpiezo_core.so"]
+    fmus = ([FMU_DIR / f"{name}.fmu" for name in FMU_NAMES] + [BUILD_DIR / "libpiezo_core.so"]
+            + [FMU_DIR / "PiezoStageClosedLoop.ssp"])
     if not all(f.exists() for f in fmus):
         return True
     oldest = min(f.stat().st_mtime for f in fmus)

@@ -742,3 +742,79 @@ def test_pi_weights_minus_10_percent_stays_stable(d, sensor):
     print(f"\n-10 % PI, d = {d}, sensor {sensor}: worst e_rms {worst * 1e3:.2f} nm; "
           f"A bound reached: {bound_reached}")
     assert bound_reached
+
+
+# ---------------------------------------------------------------- drop-in defaults and monitor
+
+def test_drop_in_defaults():
+    """Reference: the documented defaults (tests/numpy_reference.py CONTROLLER_DESIGN_DEFAULTS):
+    the plain core controller has d = 1 + mv.delay = 2 (the loop delay of the FMU's
+    published-at-end timing), limits on at +-150 V, monitor 1 um / 200 samples."""
+    c = core.Controller()
+    assert c.raw.d == 2
+    assert (c.raw.sat_enabled, c.raw.sat_v_min, c.raw.sat_v_max) == (1, -150.0, 150.0)
+    assert (c.raw.pred_error_max, c.raw.divergence_samples) == (1.0, 200)
+
+
+def _monitored(window, bound=1.0):
+    return core.Controller({**ALGORITHM, "monitor.pred_error_max": bound,
+                            "monitor.divergence_samples": window, "rls.enabled": False})
+
+
+def test_monitor_counts_runs_and_refuses_the_window_sample():
+    """Open loop with rls off: y_meas = 5 um held while the nominal model, fed its own q,
+    predicts something else, so |pred_error| > 1 um from the first sample on (checked here
+    against the returned pred_error). Reference: the window of 25 samples. Samples 0..23
+    commit with n_large_error = run_large_error = k + 1 and k_first_large_error = 0; the
+    25th step raises CoreUnstableError and leaves the struct bitwise unchanged; a peek of it
+    still returns values; with the window 0 the same run goes on for 200 samples."""
+    c = _monitored(25)
+    for k in range(24):
+        out = c.step(0.0, 5.0)
+        assert abs(out.pred_error) > 1.0
+        assert (c.raw.n_large_error, c.raw.run_large_error) == (k + 1, k + 1)
+    assert c.raw.k_first_large_error == 0
+    before = bytes(core.ffi.buffer(c.raw))
+    with pytest.raises(core.CoreUnstableError, match="unstable"):
+        c.step(0.0, 5.0)
+    assert bytes(core.ffi.buffer(c.raw)) == before
+    assert abs(c.peek(0.0, 5.0).pred_error) > 1.0
+    off = _monitored(0)
+    for _ in range(200):
+        off.step(0.0, 5.0)
+    assert off.raw.n_large_error == 200 and off.raw.k == 200
+
+
+def test_monitor_run_resets_below_the_bound():
+    """The window counts consecutive samples only. y_meas = 5 um for 10 samples, then 0:
+    the errors fall below the bound for a while, so the run restarts while n_large_error
+    keeps the total. Reference: the |pred_error| sequence of an unmonitored twin (window 0),
+    compared with the 1 um bound by NumPy, and a plain loop counting the trailing run."""
+    twin = _monitored(0)
+    errors = np.array([abs(twin.step(0.0, 5.0 if k < 10 else 0.0).pred_error) for k in range(40)])
+    c = _monitored(1000)
+    for k in range(40):
+        c.step(0.0, 5.0 if k < 10 else 0.0)
+    large = errors > 1.0
+    assert large[0] and not large.all()                     # a run that ends and restarts
+    assert c.raw.n_large_error == int(large.sum())
+    run = 0
+    for flag in large:
+        run = run + 1 if flag else 0
+    assert c.raw.run_large_error == run
+    assert c.raw.max_abs_pred_error == errors.max()
+
+
+def test_saturation_counts():
+    """Limits +-2 V on a 5 um step reference (open loop, y_meas = 0): the returned saturated
+    flags are the reference; n_saturated is their sum, k_first_saturated the first flagged
+    sample, run_saturated the trailing run."""
+    c = core.Controller({**ALGORITHM, "sat.enabled": True, "sat.v_min": -2.0, "sat.v_max": 2.0})
+    flags = [c.step(5.0 if k < 30 else 0.0, 0.0).saturated for k in range(60)]
+    assert sum(flags) > 0
+    assert c.raw.n_saturated == sum(flags)
+    assert c.raw.k_first_saturated == flags.index(True)
+    run = 0
+    for flag in flags:
+        run = run + 1 if flag else 0
+    assert c.raw.run_saturated == run

@@ -511,3 +511,75 @@ def test_closed_loop_with_the_nominal_plant_tracks_exactly(controller, piezo_sta
     errors = np.array(errors[1000:])
     assert np.sqrt(np.mean(errors ** 2)) < 1e-9            # um
     assert np.max(np.abs(pred_errors[10:])) < 1e-9
+
+
+# ---------------------------------------------------------------------------- loud divergence
+
+def _warnings(fmu):
+    return [text for status, category, text in fmu.messages if status == 1]
+
+
+def test_clipping_is_warned_once_and_counted_at_terminate(controller, make_fmu):
+    """Limits +-5 V, open loop on y_meas_of, 400 samples. Reference: the saturated output
+    read after every step (the samples whose v was clipped). The first doStep that clips
+    returns fmi2Warning and logs one warning naming the limits and the time of the first
+    clipped sample; no other step warns about clipping (with loggingOn = false); fmi2Terminate
+    returns fmi2Warning with the count, equal to the number of clipped samples."""
+    fmu = make_fmu(controller)
+    fmu.initialize({"sat.v_min": -5.0, "sat.v_max": 5.0, "monitor.divergence_samples": 0})
+    statuses, clipped = [], []
+    for k in range(400):
+        fmu.set({"y_ref": y_d(k + 2), "y_meas": y_meas_of(k)})
+        statuses.append(fmu.slave.fmi2DoStep(fmu.slave.component, fmu.time, H, 1))
+        fmu.k += 1
+        clipped.append(fmu.get("saturated"))
+        if clipped[-1]:
+            assert abs(fmu.get("v")) == 5.0
+    first = clipped.index(True)
+    clip_warnings = [w for w in _warnings(fmu) if "clipped" in w]
+    assert len(clip_warnings) == 1
+    assert "[-5, 5] V" in clip_warnings[0] and f"t = {first * H:.9g} s" in clip_warnings[0]
+    # fmi2Warning exactly where something is said for the first time (clipping here; the
+    # pred_error bound may be crossed once too), fmi2OK everywhere else
+    assert statuses[first] == 1
+    assert sum(1 for st in statuses if st == 1) == len(_warnings(fmu)) <= 2
+    assert all(st in (0, 1) for st in statuses)
+    assert fmu.slave.fmi2Terminate(fmu.slave.component) == 1
+    summary = _warnings(fmu)[-1]
+    assert f"of 400 samples, v was clipped in {sum(clipped)};" in summary
+    assert sum(clipped) > 10
+
+
+def test_unstable_loop_fails_loudly(controller, piezo_stage, make_fmu):
+    """The documented diverging configuration: plant with one extra input delay (tf.delay =
+    1) and the controller in direct-feedthrough mode with d = 1 (mv.delay = 0), Gauss-Seidel
+    ordered by ModelStructure, 10 Hz reference. Within 0.2 s the controller's doStep returns
+    fmi2Error with a message that says the loop is unstable and names the monitor bound and
+    window; the FMU is then in state Error (getters allowed, doStep refused); |v| never
+    exceeded the +-150 V limits."""
+    plant = make_fmu(piezo_stage)
+    ctrl = make_fmu(controller)
+    plant.initialize({"tf.delay": 1})
+    ctrl.initialize(FEEDTHROUGH)
+    vmax = 0.0
+    failed_at = None
+    for k in range(400):
+        ctrl.set({"y_ref": 10 * math.sin(2 * math.pi * 10 * (k + 1) * H), "y_meas": plant.get("y_meas")})
+        v = ctrl.get("v")
+        vmax = max(vmax, abs(v))
+        plant.set({"v": v})
+        plant.step()
+        try:
+            ctrl.step()
+        except FMICallException as exc:
+            assert exc.status == 3                  # fmi2Error
+            failed_at = k
+            break
+    assert failed_at is not None and failed_at * H < 0.2
+    msg = " ".join(ctrl.errors())
+    assert "the closed loop is unstable" in msg and "monitor.pred_error_max = 1 um" in msg
+    assert "monitor.divergence_samples = 200" in msg and "state Error" in msg
+    assert vmax <= 150.0
+    ctrl.get("v")                                   # getters stay allowed
+    with pytest.raises(FMICallException):
+        ctrl.step()

@@ -131,3 +131,54 @@ def test_list_shows_builtin_and_user_scenarios(tmp_path):
     assert names[:6] == ["track_1hz", "track_5hz", "track_10hz", "track_20hz",
                          "track_1_5_10hz", "track_1_10_20hz"]
     assert "short_mismatch" in names and "validate_5_40_80hz" in names
+
+
+FAILING = """
+[[scenario]]
+name = "diverging_d1"
+extends = "track_10hz"
+description = "plant with one extra sample of input delay, controller assuming d = 1"
+duration = 0.5
+metric_window = [0.25, 0.5]
+plant = { "tf.delay" = 1 }
+controller = { "mv.feedthrough" = true, "mv.delay" = 0 }
+
+[[scenario]]
+name = "clipping"
+extends = "track_10hz"
+description = "voltage limits too tight for a 10 um tone"
+duration = 0.5
+metric_window = [0.25, 0.5]
+controller = { "sat.v_min" = -15.0, "sat.v_max" = 15.0 }
+
+[[scenario]]
+name = "diverging_unmonitored"
+extends = "diverging_d1"
+description = "the same loop with the monitor off: the error check of the harness catches it"
+controller = { "mv.feedthrough" = true, "mv.delay" = 0, "monitor.divergence_samples" = 0 }
+"""
+
+
+@pytest.mark.parametrize("backend", ["fmpy", "core"])
+@pytest.mark.parametrize("name,fragment", [
+    ("diverging_d1", "the closed loop is unstable"),
+    ("clipping", "the controller clipped v in"),
+    ("diverging_unmonitored", "the run diverged"),
+])
+def test_a_failing_run_exits_3_with_one_line(tmp_path, backend, name, fragment):
+    """The documented diverging configuration (plant tf.delay = 1, controller in
+    direct-feedthrough mode with d = 1), a reference the +-15 V limits cannot reach, and the
+    diverging loop with the controller's monitor off (the limits then hold v at +-150 V and
+    the harness's own error check finds the error larger than the reference). Each exits
+    with code 3 and a single stderr line naming the scenario and why."""
+    scen = tmp_path / "failing.toml"
+    scen.write_text(FAILING)
+    proc = _harness("run", name, "--scenario-file", str(scen), "--out", str(tmp_path / "out"),
+                    "--no-plots", "--backend", backend)
+    assert proc.returncode == 3, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if "error:" in line]
+    assert len(lines) == 1 and f"run / {name}:" in lines[0], proc.stderr
+    if backend == "fmpy" or fragment != "the closed loop is unstable":
+        assert fragment in lines[0], lines[0]
+    else:
+        assert "the loop is unstable" in lines[0], lines[0]

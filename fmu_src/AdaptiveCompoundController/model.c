@@ -168,8 +168,9 @@ int model_failure_text(const ModelData *data, piezo_status st, char *text, size_
         snprintf(text, size, "the closed loop is unstable: |pred_error| stayed above "
                  "monitor.pred_error_max = %g um for monitor.divergence_samples = %llu consecutive "
                  "samples (largest so far %.6g um). Usual causes: the controller's loop delay "
-                 "d = 1 + mv.delay = %d does not match the master and the plant (a Jacobi master or "
-                 "an extra plant delay adds a sample), or the plant is far from the nominal model",
+                 "d = 1 + mv.delay = %d does not match the loop (a master that hands the plant the "
+                 "controller's post-step output removes a sample, as does mv.feedthrough; an extra "
+                 "plant or actuation delay adds one), or the plant is far from the nominal model",
                  c->pred_error_max, (unsigned long long)c->divergence_samples,
                  c->max_abs_pred_error, c->d);
         return 1;

@@ -1,0 +1,346 @@
+"""The closed loop as an SSP 1.0 file: write it, and run it with fmpy's SSP player.
+
+An SSP is a zip with ``SystemStructure.ssd`` (the system: components,
+connectors, connections, default experiment) and ``resources/`` (the FMUs
+and parameter files, SSV).  :func:`write_closed_loop_ssp` writes::
+
+    reference (ReferenceSignal.fmu)   y_ref  --> controller.y_ref
+    plant (PiezoStage.fmu)            y_meas --> controller.y_meas
+    controller (AdaptiveCompoundController.fmu)  v --> plant.v
+
+with one SSV per parameter set (names ``<component>.<variable>``, bound at
+the system level; the first one is bound, the others ship beside it), a
+default experiment over the scenario's duration, and the OpenModelica
+annotation that makes OMSimulator's fixed-step master step at h.
+
+The loop needs a master that exchanges values at communication points with a
+fixed step h (what every SSP player, Jacobi master and container in parallel
+mode does): the default controller has no direct feedthrough and publishes
+the control of the step that sampled its inputs, so the loop delay is d = 2,
+and the reference's ``lead`` is 2.  :func:`simulate_closed_loop_ssp` runs the
+file with :func:`fmpy.ssp.simulation.simulate_ssp`, applying the bound SSV
+(fmpy's player does not apply bindings by itself).
+
+The build writes ``build/fmus/PiezoStageClosedLoop.ssp`` with
+``python -m harness.ssp --fmu-dir build/fmus --out build/fmus/PiezoStageClosedLoop.ssp``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+import math
+from pathlib import Path
+import sys
+from xml.sax.saxutils import quoteattr
+import zipfile
+
+__all__ = [
+    "SSP_FILENAME",
+    "SSP_SCENARIO",
+    "SSP_COMPONENTS",
+    "SspParameterSet",
+    "parameter_set_for_scenario",
+    "write_closed_loop_ssp",
+    "read_bound_parameter_set",
+    "simulate_closed_loop_ssp",
+    "main",
+]
+
+SSP_FILENAME = "PiezoStageClosedLoop.ssp"
+#: The scenario whose parameters the built SSP binds (DESIGN's mismatch case, 1/5/10 Hz).
+SSP_SCENARIO = "mismatch_1_5_10hz"
+#: component name -> (FMU file, connectors as (name, kind, SSP type, unit))
+SSP_COMPONENTS = {
+    "reference": ("ReferenceSignal.fmu", (("y_d", "output", "Real", "um"),
+                                          ("y_ref", "output", "Real", "um"))),
+    "controller": ("AdaptiveCompoundController.fmu", (("y_ref", "input", "Real", "um"),
+                                                      ("y_meas", "input", "Real", "um"),
+                                                      ("v", "output", "Real", "V"),
+                                                      ("q", "output", "Real", "um"),
+                                                      ("pred_error", "output", "Real", "um"))),
+    "plant": ("PiezoStage.fmu", (("v", "input", "Real", "V"),
+                                 ("y", "output", "Real", "um"),
+                                 ("y_meas", "output", "Real", "um"))),
+}
+#: (start component, connector, end component, connector)
+SSP_CONNECTIONS = (
+    ("reference", "y_ref", "controller", "y_ref"),
+    ("plant", "y_meas", "controller", "y_meas"),
+    ("controller", "v", "plant", "v"),
+)
+_UNITS = {"um": '<ssc:BaseUnit m="1" factor="1e-06"/>',
+          "V": '<ssc:BaseUnit kg="1" m="2" s="-3" A="-1"/>'}
+_NS = ('xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
+       'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
+       'xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" '
+       'xmlns:oms="https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"')
+#: ZIP timestamp of every entry: the same inputs give the same bytes
+_ZIP_DATE = (1980, 1, 1, 0, 0, 0)
+
+
+@dataclass(frozen=True)
+class SspParameterSet:
+    """One SSV: parameter values by ``<component>.<variable>``.
+
+    Attributes
+    ----------
+    name : str
+        File stem in ``resources/`` (``<name>.ssv``).
+    description : str
+    values : dict
+        ``{"plant.pi.w0": 0.36784, "reference.lead": 2, ...}``; bool, int or float.
+    stop_time : float
+        Duration of the scenario [s] (the SSP's default experiment).
+    step_size : float
+        h [s].
+    """
+
+    name: str
+    description: str
+    values: dict
+    stop_time: float
+    step_size: float
+
+
+def parameter_set_for_scenario(name, registry=None):
+    """The SSV of a sines tracking scenario: its plant and controller overrides and its
+    reference as ReferenceSignal parameters, ``lead`` = the controller's d.
+
+    Parameters
+    ----------
+    name : str
+        A tracking scenario whose reference is a sum of at most 8 sines.
+    registry : dict, optional
+
+    Returns
+    -------
+    SspParameterSet
+
+    Raises
+    ------
+    ValueError
+        Not a tracking scenario, a table reference, or more than 8 tones.
+    """
+    from ._common import DEFAULT_MV_DELAY
+    from .scenarios import get_scenario
+
+    sc = get_scenario(name, registry)
+    sig = sc.signal
+    if sc.kind != "tracking" or sig.kind != "sines":
+        raise ValueError(f"scenario '{sc.name}' is not a tracking scenario with a sines "
+                         f"reference; an SSP carries its reference as ReferenceSignal parameters")
+    if len(sig.amplitudes) > 8:
+        raise ValueError(f"scenario '{sc.name}' has {len(sig.amplitudes)} tones; "
+                         f"ReferenceSignal has 8")
+    values = {}
+    for comp, params in (("plant", sc.plant), ("controller", sc.controller)):
+        for key, value in params.items():
+            values[f"{comp}.{key}"] = value
+    values["plant.h"] = values["controller.h"] = values["reference.h"] = float(sc.step_size)
+    values["reference.offset"] = float(sig.offset)
+    for i, (a, f, p) in enumerate(zip(sig.amplitudes, sig.frequencies, sig.phases), start=1):
+        values[f"reference.amplitude[{i}]"] = float(a)
+        values[f"reference.frequency[{i}]"] = float(f)
+        values[f"reference.phase[{i}]"] = float(p)
+    values["reference.lead"] = 1 + int(sc.controller.get("mv.delay", DEFAULT_MV_DELAY))
+    return SspParameterSet(sc.name, sc.description, values, float(sc.duration),
+                           float(sc.step_size))
+
+
+def _ssv_value(value):
+    if isinstance(value, bool):
+        return "Boolean", "true" if value else "false"
+    if isinstance(value, int):
+        return "Integer", str(value)
+    if not math.isfinite(value):
+        raise ValueError(f"parameter value {value!r} is not finite")
+    return "Real", repr(float(value))
+
+
+def _ssv_text(pset):
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             f'<ssv:ParameterSet xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" '
+             f'version="1.0" name={quoteattr(pset.name)}>',
+             '  <ssv:Parameters>']
+    for key in sorted(pset.values):
+        kind, text = _ssv_value(pset.values[key])
+        lines.append(f'    <ssv:Parameter name={quoteattr(key)}><ssv:{kind} value="{text}"/></ssv:Parameter>')
+    lines += ['  </ssv:Parameters>', '</ssv:ParameterSet>', '']
+    return "\n".join(lines)
+
+
+def _ssd_text(bound, step_size, stop_time):
+    c = []
+    c.append('<?xml version="1.0" encoding="UTF-8"?>')
+    c.append(f'<ssd:SystemStructureDescription {_NS} name="PiezoStageClosedLoop" version="1.0">')
+    c.append('  <ssd:System name="PiezoStageClosedLoop" description='
+             + quoteattr("Piezo stage closed loop: reference with preview, adaptive compound "
+                         "controller, stage. Fixed communication step h; exchange at "
+                         "communication points (loop delay d = 2).") + '>')
+    c.append('    <ssd:ParameterBindings>')
+    c.append(f'      <ssd:ParameterBinding source="resources/{bound}.ssv"/>')
+    c.append('    </ssd:ParameterBindings>')
+    c.append('    <ssd:Elements>')
+    for name, (fmu, connectors) in SSP_COMPONENTS.items():
+        c.append(f'      <ssd:Component name="{name}" type="application/x-fmu-sharedlibrary" '
+                 f'source="resources/{fmu}">')
+        c.append('        <ssd:Connectors>')
+        for cname, kind, typ, unit in connectors:
+            c.append(f'          <ssd:Connector name="{cname}" kind="{kind}"><ssc:{typ} unit="{unit}"/>'
+                     f'</ssd:Connector>')
+        c.append('        </ssd:Connectors>')
+        c.append('      </ssd:Component>')
+    c.append('    </ssd:Elements>')
+    c.append('    <ssd:Connections>')
+    for a, ac, b, bc in SSP_CONNECTIONS:
+        c.append(f'      <ssd:Connection startElement="{a}" startConnector="{ac}" '
+                 f'endElement="{b}" endConnector="{bc}"/>')
+    c.append('    </ssd:Connections>')
+    c.append('    <ssd:Annotations>')
+    c.append('      <ssc:Annotation type="org.openmodelica">')
+    c.append('        <oms:Annotations>')
+    c.append('          <oms:SimulationInformation>')
+    c.append(f'            <oms:FixedStepMaster description="oms-ma" stepSize="{step_size!r}"/>')
+    c.append('          </oms:SimulationInformation>')
+    c.append('        </oms:Annotations>')
+    c.append('      </ssc:Annotation>')
+    c.append('    </ssd:Annotations>')
+    c.append('  </ssd:System>')
+    c.append('  <ssd:Units>')
+    for unit, base in _UNITS.items():
+        c.append(f'    <ssc:Unit name="{unit}">{base}</ssc:Unit>')
+    c.append('  </ssd:Units>')
+    c.append(f'  <ssd:DefaultExperiment startTime="0" stopTime="{stop_time!r}">')
+    c.append('    <ssd:Annotations>')
+    c.append('      <ssc:Annotation type="org.openmodelica">')
+    c.append('        <oms:Annotations>')
+    c.append(f'          <oms:SimulationInformation loggingInterval="{step_size!r}"/>')
+    c.append('        </oms:Annotations>')
+    c.append('      </ssc:Annotation>')
+    c.append('    </ssd:Annotations>')
+    c.append('  </ssd:DefaultExperiment>')
+    c.append('</ssd:SystemStructureDescription>')
+    return "\n".join(c) + "\n"
+
+
+def _add(zf, name, data):
+    info = zipfile.ZipInfo(name, date_time=_ZIP_DATE)
+    info.compress_type = zipfile.ZIP_DEFLATED
+    info.external_attr = 0o644 << 16
+    zf.writestr(info, data)
+
+
+def write_closed_loop_ssp(path, fmu_dir, parameter_sets=None):
+    """Write the closed-loop SSP.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.ssp`` to write.
+    fmu_dir : str or Path
+        Folder with PiezoStage.fmu, AdaptiveCompoundController.fmu and ReferenceSignal.fmu.
+    parameter_sets : list of SspParameterSet, optional
+        The first is bound; default: ``[parameter_set_for_scenario(SSP_SCENARIO)]``.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    FileNotFoundError
+        An FMU is missing.
+    """
+    path = Path(path)
+    fmu_dir = Path(fmu_dir)
+    sets = list(parameter_sets or [parameter_set_for_scenario(SSP_SCENARIO)])
+    fmus = {}
+    for fmu, _ in SSP_COMPONENTS.values():
+        f = fmu_dir / fmu
+        if not f.is_file():
+            raise FileNotFoundError(f"FMU not found: {f} (build the FMUs first)")
+        fmus[fmu] = f.read_bytes()
+    bound = sets[0]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with zipfile.ZipFile(tmp, "w") as zf:
+        _add(zf, "SystemStructure.ssd", _ssd_text(bound.name, bound.step_size, bound.stop_time))
+        for name in sorted(fmus):
+            _add(zf, f"resources/{name}", fmus[name])
+        for pset in sets:
+            _add(zf, f"resources/{pset.name}.ssv", _ssv_text(pset))
+    tmp.replace(path)
+    return path
+
+
+def read_bound_parameter_set(ssp_path):
+    """The parameter set bound at the system level of an SSP, as fmpy reads it.
+
+    Returns
+    -------
+    fmpy.ssp.ssd.ParameterSet or None
+    """
+    from fmpy.ssp.ssd import read_ssd
+
+    ssd = read_ssd(str(ssp_path))
+    for binding in ssd.system.parameterBindings:
+        for pset in binding.parameterValues:
+            return pset
+    return None
+
+
+def simulate_closed_loop_ssp(ssp_path, stop_time=None, step_size=None):
+    """Run an SSP with fmpy's SSP player, applying its bound parameter set.
+
+    fmpy's player (``fmpy.ssp.simulation.simulate_ssp``) steps every component, then
+    copies outputs to inputs (a Jacobi master), starting from connector values of 0.
+
+    Parameters
+    ----------
+    ssp_path : str or Path
+    stop_time, step_size : float, optional
+        Default: the SSP's default experiment and the OMSimulator step annotation.
+
+    Returns
+    -------
+    ndarray
+        fmpy's structured result: ``time`` and one field per connector
+        (``reference.y_d``, ``plant.y``, ``controller.v``, ...); the row of time
+        ``t_k`` holds the values after the step from ``t_k``.
+    """
+    import re
+    from fmpy.ssp.simulation import simulate_ssp
+
+    with zipfile.ZipFile(ssp_path) as zf:
+        ssd = zf.read("SystemStructure.ssd").decode("utf-8")
+    if stop_time is None:
+        stop_time = float(re.search(r'<ssd:DefaultExperiment[^>]*stopTime="([^"]+)"', ssd).group(1))
+    if step_size is None:
+        step_size = float(re.search(r'<oms:FixedStepMaster[^>]*stepSize="([^"]+)"', ssd).group(1))
+    return simulate_ssp(str(ssp_path), stop_time=stop_time, step_size=step_size,
+                        parameter_set=read_bound_parameter_set(ssp_path))
+
+
+def main(argv=None):
+    """``python -m harness.ssp --fmu-dir DIR --out FILE [--scenario NAME ...]``."""
+    p = argparse.ArgumentParser(prog="python -m harness.ssp",
+                                description="Write the closed-loop SSP (the build does this).")
+    p.add_argument("--fmu-dir", required=True, help="folder with the three FMUs")
+    p.add_argument("--out", required=True, help="the .ssp to write")
+    p.add_argument("--scenario", action="append", metavar="NAME",
+                   help=f"tracking scenario(s) to include as SSV; the first is bound "
+                        f"(default {SSP_SCENARIO})")
+    args = p.parse_args(argv)
+    try:
+        sets = [parameter_set_for_scenario(n) for n in (args.scenario or [SSP_SCENARIO])]
+        out = write_closed_loop_ssp(args.out, args.fmu_dir, sets)
+    except (ValueError, KeyError, FileNotFoundError) as exc:
+        sys.stderr.write(f"python -m harness.ssp: error: {exc}\n")
+        return 2
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,98 @@
+"""The closed-loop SSP written by the build (build/fmus/PiezoStageClosedLoop.ssp)."""
+import re
+import zipfile
+
+import numpy as np
+import pytest
+
+from harness import ssp
+from harness.metrics import compute_metrics
+from harness.scenarios import Signal, get_scenario
+from test_masters import FIELDS, zero_start_jacobi
+
+
+@pytest.fixture(scope="module")
+def built(fmu_paths):
+    path = next(iter(fmu_paths.values())).parent / ssp.SSP_FILENAME
+    assert path.is_file(), "the build writes the SSP beside the FMUs"
+    return path
+
+
+def test_structure(built):
+    """fmpy's reader validates the SSD against the SSP 1.0 schema; the file holds the three
+    FMUs, the documented connections, the mismatch 1/5/10 Hz SSV bound at the system level
+    (the nominal one beside it), a 3 s default experiment and OMSimulator's fixed-step
+    annotation with h."""
+    from fmpy.ssp.ssd import read_ssd
+
+    ssd = read_ssd(str(built), validate=True)
+    comps = {c.name: c.source for c in ssd.system.elements}
+    assert comps == {"reference": "resources/ReferenceSignal.fmu",
+                     "controller": "resources/AdaptiveCompoundController.fmu",
+                     "plant": "resources/PiezoStage.fmu"}
+    links = {(c.startElement, c.startConnector, c.endElement, c.endConnector)
+             for c in ssd.system.connections}
+    assert links == {("reference", "y_ref", "controller", "y_ref"),
+                     ("plant", "y_meas", "controller", "y_meas"),
+                     ("controller", "v", "plant", "v")}
+    assert [b.source for b in ssd.system.parameterBindings] == ["resources/mismatch_1_5_10hz.ssv"]
+    with zipfile.ZipFile(built) as zf:
+        names = set(zf.namelist())
+        text = zf.read("SystemStructure.ssd").decode()
+        for fmu in comps.values():
+            assert zf.read(fmu) == (built.parent / fmu.split("/")[1]).read_bytes()
+    assert {"resources/mismatch_1_5_10hz.ssv", "resources/track_1_5_10hz.ssv"} <= names
+    assert re.search(r'<ssd:DefaultExperiment startTime="0" stopTime="3.0"', text)
+    assert re.search(r'<oms:FixedStepMaster description="oms-ma" stepSize="0.0005"/>', text)
+
+
+def test_bound_parameters_are_the_scenario(built):
+    """Reference: the mismatch_1_5_10hz scenario (harness.scenarios): every plant override,
+    the three tones, lead = d = 2 and h, read back through fmpy's SSV reader."""
+    pset = ssp.read_bound_parameter_set(built)
+    values = {p.name: p.value for p in pset.parameters}
+    sc = get_scenario("mismatch_1_5_10hz")
+    for key, value in sc.plant.items():
+        assert float(values[f"plant.{key}"]) == float(value), key
+    for i, f in enumerate((1.0, 5.0, 10.0), start=1):
+        assert float(values[f"reference.amplitude[{i}]"]) == 10.0
+        assert float(values[f"reference.frequency[{i}]"]) == f
+    assert values["reference.lead"] == "2"
+    assert float(values["plant.h"]) == float(values["controller.h"]) == 0.0005
+
+
+def test_fmpy_runs_it_and_it_tracks(built):
+    """fmpy's SSP player runs the built SSP with its bound parameters: e_rms <= 3 nm over
+    [1, 3) s, and every sample equals the zero-start Jacobi loop of tests/test_masters.py
+    (the player's schedule) within 1e-12."""
+    res = ssp.simulate_closed_loop_ssp(built)
+    n = 6000
+    got = {"y_d": res["reference.y_d"][:n], "y": res["plant.y"][:n],
+           "y_meas": res["plant.y_meas"][:n], "v": res["controller.v"][:n]}
+    ref = zero_start_jacobi("mismatch_1_5_10hz")
+    for f in FIELDS:
+        assert np.max(np.abs(got[f] - ref[f])) <= 1e-12, f
+    sc = get_scenario("mismatch_1_5_10hz")
+    m = compute_metrics(ref["time"], got["y_d"], got["y"], sc.metric_window, sc.step_size)
+    assert m.e_rms <= 3e-3
+
+
+def test_writing_is_reproducible(tmp_path, built):
+    """The same FMUs and parameter sets give the same bytes (fixed zip timestamps)."""
+    a = ssp.write_closed_loop_ssp(tmp_path / "a.ssp", built.parent)
+    b = ssp.write_closed_loop_ssp(tmp_path / "b.ssp", built.parent)
+    assert a.read_bytes() == b.read_bytes()
+
+
+def test_only_sines_scenarios_fit_an_ssp():
+    sc = get_scenario("track_1hz")
+    table = {"t": sc.with_overrides(signal=Signal("table", table_time=(0.0, 3.0),
+                                                  table_value=(0.0, 1.0)))}
+    nine = {"n": sc.with_overrides(signal=Signal("sines", amplitudes=(1.0,) * 9,
+                                                 frequencies=(1.0,) * 9, phases=(0.0,) * 9))}
+    with pytest.raises(ValueError, match="sines reference"):
+        ssp.parameter_set_for_scenario("t", table)
+    with pytest.raises(ValueError, match="9 tones; ReferenceSignal has 8"):
+        ssp.parameter_set_for_scenario("n", nine)
+    with pytest.raises(ValueError, match="not a tracking scenario"):
+        ssp.parameter_set_for_scenario("validate_1hz")
