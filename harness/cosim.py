@@ -106,7 +106,7 @@ def fmu_path(model, fmu_dir=None):
     Parameters
     ----------
     model : str
-        ``"PiezoStage"`` or ``"AdaptiveCompoundController"``.
+        ``"PiezoStage"``, ``"AdaptiveCompoundController"`` or ``"ReferenceSignal"``.
     fmu_dir : str or Path, optional
         Defaults to :func:`default_fmu_dir`.
 

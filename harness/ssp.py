@@ -250,17 +250,13 @@ def write_closed_loop_ssp(path, fmu_dir, parameter_sets=None):
     Raises
     ------
     FileNotFoundError
-        An FMU is missing.
+        An FMU is missing (the message says how to build it).
     """
+    from .cosim import fmu_path
+
     path = Path(path)
-    fmu_dir = Path(fmu_dir)
     sets = list(parameter_sets or [parameter_set_for_scenario(SSP_SCENARIO)])
-    fmus = {}
-    for fmu, _ in SSP_COMPONENTS.values():
-        f = fmu_dir / fmu
-        if not f.is_file():
-            raise FileNotFoundError(f"FMU not found: {f} (build the FMUs first)")
-        fmus[fmu] = f.read_bytes()
+    fmus = {fmu: fmu_path(Path(fmu).stem, fmu_dir).read_bytes() for fmu, _ in SSP_COMPONENTS.values()}
     bound = sets[0]
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + ".tmp")
