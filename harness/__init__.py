@@ -28,7 +28,7 @@ from .cosim import (
     simulate_open_loop,
 )
 from .core_loop import simulate_closed_loop_core, simulate_open_loop_core
-from .identification import (
+from .identify import (
     CoupledModelEstimate,
     IdentificationInputError,
     IdentificationRecord,

@@ -1,11 +1,11 @@
-"""harness.identification: the paper's steps 1-2 recover the DESIGN.md section 1 defaults
+"""harness.identify.steps: the paper's steps 1-2 recover the DESIGN.md section 1 defaults
 from a noise-free run of the core plant (creep disabled, i.e. the Hammerstein model)."""
 
 import numpy as np
 import pytest
 
 from harness.core_loop import simulate_open_loop_core
-from harness.identification import (
+from harness.identify import (
     identify_pi,
     identify_transfer_function,
     pi_thresholds,
@@ -68,7 +68,7 @@ from pathlib import Path
 import subprocess
 import sys
 
-from harness.identification import (
+from harness.identify import (
     MIN_CREEP_SAMPLES,
     IdentificationInputError,
     IdentificationRecord,
