@@ -45,7 +45,7 @@ class IdentificationInputError(ValueError):
 
 
 def pi_thresholds(m, v_max):
-    """Thresholds ``r_j = (j-1)/m * v_max``, ``j = 1..m`` (eq 5, DESIGN.md section 1).
+    """Thresholds ``r_j = (j-1)/m * v_max``, ``j = 1..m`` (eq 5; the model's definition).
 
     Parameters
     ----------

@@ -78,7 +78,7 @@ def identify_pi(v, y, m=9, v_max=20.0, w0=None):
     m : int
         Number of play operators.
     v_max : float
-        Threshold scale [V] (frozen, DESIGN.md section 1).
+        Threshold scale [V], frozen at the identification input's max |v|.
     w0 : float, optional
         Known linear weight.  ``r_1 = 0`` makes ``z_{r_1} = v``, so the data
         only determine ``w0 + w1``; with ``w0`` given, ``w1..wm`` are fitted,
