@@ -308,7 +308,7 @@ def _printed_table(stdout):
 
 @pytest.mark.parametrize("backend", ["core", "fmpy"])
 def test_cli_identify_end_to_end(tmp_path, backend):
-    args = ["identify", "--out", str(tmp_path)]
+    args = ["identify", "--internal-channels", "--out", str(tmp_path)]
     if backend == "core":
         args += ["--backend", "core"]          # fmpy is the default
     proc = _harness(*args)
@@ -334,7 +334,8 @@ def test_cli_identify_end_to_end(tmp_path, backend):
 
 
 def test_cli_identify_noise_and_errors(tmp_path):
-    proc = _harness("identify", "--backend", "core", "--noise-rms", "0.001", "--out", str(tmp_path))
+    proc = _harness("identify", "--internal-channels", "--backend", "core", "--noise-rms", "0.001",
+                    "--out", str(tmp_path))
     assert proc.returncode == 0, proc.stderr
     assert "noise 1 nm rms" in proc.stdout
     rows = {r["parameter"]: r for r in csv.DictReader(open(tmp_path / "identification.csv"))}
@@ -342,7 +343,8 @@ def test_cli_identify_noise_and_errors(tmp_path):
     for args, msg in [(["identify", "--noise-rms", "-1"], "--noise-rms must be a finite number"),
                       (["list", "--noise-rms", "0.001"], "--noise-rms is only used by 'identify'"),
                       (["identify", "extra"], "unexpected argument 'extra' for 'identify'"),
-                      (["identify", "--fmu-dir", str(tmp_path)], "PiezoStage.fmu")]:
+                      (["identify", "--internal-channels", "--fmu-dir", str(tmp_path)],
+                       "PiezoStage.fmu")]:
         p = _harness(*args)
         assert p.returncode == 2, (args, p.stderr)
         lines = p.stderr.strip().splitlines()
