@@ -337,7 +337,8 @@ int fmu_start_values_init(fmu_start_values **sv, const char *resource_location,
         log_msg(cb, instance_name, fmi2Error, "%s: out of memory", where);
         return 0;
     }
-    if (!uri_to_path(resource_location, path, size, &why)) {
+    /* the decoded path is never longer than the URI: room is left for the file name */
+    if (!uri_to_path(resource_location, path, size - (sizeof "/" FMU_START_VALUES_FILE - 1), &why)) {
         /* Cannot tell whether the FMU has a start_values file: warn, keep the defaults. */
         log_msg(cb, instance_name, fmi2Warning, "%s: fmuResourceLocation '%s' is not read (%s); "
                 "the compiled start values are used", where, resource_location, why);
