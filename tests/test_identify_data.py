@@ -115,6 +115,10 @@ CASES = {
                      "sample period 0.001 s (1000 Hz) is not the model's h = 0.0005 s (2000 Hz); "
                      "record at 2000 Hz, or identify a model sampled at 0.001 s "
                      "(--sample-period 0.001)"),
+    "time in ms": (_table(_rows(h=0.5)), SamplePeriodError,
+                   "sample period 0.5 s (2 Hz) is not the model's h = 0.0005 s (2000 Hz) (is time "
+                   "in ms? the column is in s); record at 2000 Hz, or identify a model sampled at "
+                   "0.5 s (--sample-period 0.5)"),
     "one sample": (_table(_rows()[:1]), ShortRecordError,
                    "1 sample; a record needs at least 200"),
     "too few samples": (_table(_rows()[:150]), ShortRecordError,

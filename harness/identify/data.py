@@ -312,10 +312,12 @@ def read_record(path, *, h=0.0005, label=None, min_reversals=0):
                             f"{grid[k]:.9g} s (mean period {period:.9g} s; tolerance "
                             f"{TIME_TOLERANCE:.0%} of it)")
     if abs(period - h) > 1e-6 * h:
+        unit = (" (is time in ms? the column is in s)" if abs(period / 1000 - h) <= 1e-6 * h
+                else "")
         raise SamplePeriodError(
             f"{path}: sample period {period:.9g} s ({1 / period:.6g} Hz) is not the model's "
-            f"h = {_fmt(h)} s ({1 / h:.6g} Hz); record at {1 / h:.6g} Hz, or identify a model "
-            f"sampled at {period:.6g} s (--sample-period {period:.6g})")
+            f"h = {_fmt(h)} s ({1 / h:.6g} Hz){unit}; record at {1 / h:.6g} Hz, or identify a "
+            f"model sampled at {period:.6g} s (--sample-period {period:.6g})")
     if n < MIN_RECORD_SAMPLES:
         raise ShortRecordError(f"{path}: {n} samples ({n * h:.6g} s); a record needs at least "
                                f"{MIN_RECORD_SAMPLES} ({MIN_RECORD_SAMPLES * h:.6g} s)")
