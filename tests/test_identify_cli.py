@@ -164,3 +164,28 @@ def test_data_and_parameter_file_errors_are_one_line_exit_2(capsys, records, tmp
            message)
     _fails(capsys, ["export", "--params", str(params), "--out", str(tmp_path / "x")], message)
     assert not (tmp_path / "x").exists()
+
+
+def test_failed_checks_exit_3_with_one_line(capsys, monkeypatch, records):
+    # The wiring of the two "run failed its own checks" outcomes (the computations are
+    # replaced; what they detect is tested in test_identify_demo and test_identify_fit).
+    from types import SimpleNamespace
+
+    import harness.identify.demo as demo
+    import harness.identify.run as run
+    from harness.identify.fit import IdentificationFitError
+
+    monkeypatch.setattr(demo, "run_demo", lambda *a, **k: SimpleNamespace(
+        failures=["10Hz: held-out e_rms 2 nm exceeds 1.5 x the noise floor (1.7 nm)", "x"]))
+    _fails(capsys, ["identify", "--demo"], "the virtual experiment failed 2 of its checks; "
+           "first: 10Hz: held-out e_rms 2 nm exceeds 1.5 x the noise floor (1.7 nm)", 3)
+
+    def no_convergence(*a, **k):
+        raise IdentificationFitError("the joint refinement did not converge in 300 evaluations "
+                                     "(cost 1 um^2); check the records")
+
+    monkeypatch.setattr(run, "identify_files", no_convergence)
+    low, mixed = str(records["low"]), str(records["mixed"])
+    _fails(capsys, ["identify", "--pi-data", low, "--tf-data", mixed, "--creep-data", low],
+           "the joint refinement did not converge in 300 evaluations (cost 1 um^2); check the "
+           "records", 3)

@@ -21,7 +21,8 @@
 
 User errors raise ValueError (or FileNotFoundError), which the caller turns
 into exit code 2 and one line; a fit that does not converge and a virtual
-experiment that fails its own checks return exit code 1 after one line.
+experiment that fails its own checks return :data:`EXIT_CHECKS_FAILED` (3)
+after one line.
 """
 
 from __future__ import annotations
@@ -33,6 +34,9 @@ __all__ = ["add_arguments", "check_arguments", "run_identify", "run_export",
            "apply_param_files"]
 
 PROG = "python -m harness"
+#: Exit code of a run that fails its own checks (a fit that does not converge, a virtual
+#: experiment that misses its acceptance figures).
+EXIT_CHECKS_FAILED = 3
 
 _DATA = (("pi_data", "--pi-data"), ("tf_data", "--tf-data"), ("creep_data", "--creep-data"))
 _FIT = (("sample_period", "--sample-period"), ("operators", "--operators"), ("v_max", "--v-max"),
@@ -186,11 +190,11 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
                             stream=stream, progress=progress)
             if demo.failures:
                 return _fail(f"the virtual experiment failed {len(demo.failures)} of its "
-                             f"checks; first: {demo.failures[0]}", 1)
+                             f"checks; first: {demo.failures[0]}", EXIT_CHECKS_FAILED)
             return 0
         return _identify_records(args, holdout, stream)
     except IdentificationFitError as exc:
-        return _fail(exc, 1)
+        return _fail(exc, EXIT_CHECKS_FAILED)
 
 
 def _identify_records(args, holdout, stream):

@@ -12,7 +12,7 @@ way, and with the sensor's noise floor on the held-out samples (``rms(y_meas
 - y)``, ``y`` the stage's true displacement, which only a virtual stage gives).
 
 :func:`run_demo` also checks what the identification promises and lists any
-failure in :attr:`DemoResult.failures` (the command line then exits 1):
+failure in :attr:`DemoResult.failures` (the command line then exits 3):
 
 * noise-free records: held-out ``e_rms <= 1 nm``; weight ratios ``w_j/w0``,
   poles and zero within 1e-3; ``alpha`` within 1e-3; static gain within 0.1 %;
