@@ -10,10 +10,12 @@ Scenarios
     :func:`list_scenarios`, :class:`Scenario`, :class:`Signal`.
 Metrics
     :func:`compute_metrics`, :func:`rms_error`, :func:`relative_error`.
-Identification (paper section 3)
+Identification (paper section 3; :mod:`harness.identify`)
     :func:`identify_pi`, :func:`identify_transfer_function`, :func:`identify_creep`,
     :func:`identify_coupled_model`, :class:`IdentificationRecord`,
-    :class:`CoupledModelEstimate`, :func:`run_identification`.
+    :class:`CoupledModelEstimate`, :func:`run_identification`; from measured
+    records: :func:`read_record`, :func:`fit_coupled_model`, :class:`CoupledModel`,
+    :func:`read_params`, :func:`export_fmus`.
 Reports
     :func:`run_all`, :func:`run_scenario`.
 
@@ -28,15 +30,20 @@ from .cosim import (
     simulate_open_loop,
 )
 from .core_loop import simulate_closed_loop_core, simulate_open_loop_core
-from .identification import (
+from .identify import (
+    CoupledModel,
     CoupledModelEstimate,
     IdentificationInputError,
     IdentificationRecord,
+    fit_coupled_model,
     identify_coupled_model,
     identify_creep,
     identify_pi,
     identify_transfer_function,
+    read_params,
+    read_record,
 )
+from .identify.export import export_fmus
 from .metrics import Metrics, compute_metrics, relative_error, rms_error
 from .report import run_all, run_identification, run_scenario
 from .scenarios import (
@@ -73,6 +80,11 @@ __all__ = [
     "IdentificationRecord",
     "CoupledModelEstimate",
     "IdentificationInputError",
+    "read_record",
+    "fit_coupled_model",
+    "CoupledModel",
+    "read_params",
+    "export_fmus",
     "run_identification",
     "run_all",
     "run_scenario",

@@ -4,9 +4,14 @@
   validation inputs, tables next to the paper's, CSV/Markdown/PNG under ``--out``.
 * ``python -m harness run SCENARIO``: one scenario.
 * ``python -m harness list``: the known scenarios (with ``--scenario-file``, also the user's).
-* ``python -m harness identify``: the paper's three-step identification on records of the
-  PiezoStage model (``--noise-rms UM`` adds measurement noise), every parameter next to
-  the value the plant ran; ``identification.csv`` / ``.md`` under ``--out``.
+* ``python -m harness identify``: identify the coupled model from measured records
+  (``--pi-data``, ``--tf-data``, ``--creep-data``; ``--demo``: the virtual experiment;
+  ``--internal-channels``: each step alone on the PiezoStage model's u and x), see
+  :mod:`harness.identify.cli`.
+* ``python -m harness export --params FILE``: PiezoStage.fmu and AdaptiveCompoundController.fmu
+  with the file's values as start values, under ``--out``.
+* ``--plant-params FILE`` / ``--controller-params FILE`` (``run``, ``all``): a parameter
+  file applied to every scenario.
 
 Exit codes, each with a one-line message on stderr:
 
@@ -28,7 +33,7 @@ import sys
 __all__ = ["build_parser", "main"]
 
 PROG = "python -m harness"
-COMMANDS = ("all", "run", "list", "identify")
+COMMANDS = ("all", "run", "list", "identify", "export")
 # options of 'identify' only: (attribute, flag)
 _IDENTIFY_OPTIONS = (("noise_rms", "--noise-rms"), ("seed", "--seed"), ("free_w0", "--free-w0"),
                      ("displacement_only", "--displacement-only"))
@@ -41,9 +46,10 @@ def build_parser():
         description="Co-simulate the PiezoStage and AdaptiveCompoundController FMUs and "
                     "compare with the paper's Tables 2-5.",
     )
-    p.add_argument("command", nargs="?", default="all", metavar="{all,run,list,identify}",
+    p.add_argument("command", nargs="?", default="all", metavar="{all,run,list,identify,export}",
                    help="all (default): run everything; run SCENARIO: one scenario; "
-                        "list: known scenarios; identify: the paper's parameter identification")
+                        "list: known scenarios; identify: the paper's parameter identification; "
+                        "export: parameterised FMUs")
     p.add_argument("scenario", nargs="?", help="scenario name for 'run'")
     p.add_argument("--out", default="out", metavar="DIR", help="output folder (default: out/)")
     p.add_argument("--no-adaptation", action="store_true", help="switch the controller's RLS off")
@@ -70,6 +76,8 @@ def build_parser():
     g.add_argument("--displacement-only", action="store_true",
                    help="fit every step to the measured displacement, as the paper's experiment "
                         "must (the blocks then bias each other)")
+    from .identify.cli import add_arguments as add_identification_arguments
+    add_identification_arguments(p)
     return p
 
 
@@ -84,7 +92,7 @@ def main(argv=None):
     args = parser.parse_intermixed_args(argv)
     if args.command not in COMMANDS:
         return _fail(f"unknown command '{args.command}'; "
-                     f"use one of: all, run SCENARIO, list, identify")
+                     f"use one of: all, run SCENARIO, list, identify, export")
     if args.command == "run" and not args.scenario:
         return _fail("'run' needs a scenario name (see: python -m harness list)")
     if args.command != "run" and args.scenario:
@@ -99,6 +107,10 @@ def main(argv=None):
             return _fail(f"--noise-rms must be a finite number >= 0 (um), got {args.noise_rms:g}")
         if args.seed is not None and args.seed < 0:
             return _fail(f"--seed must be >= 0, got {args.seed}")
+    from .identify import cli as identification_cli
+    problem = identification_cli.check_arguments(args)
+    if problem:
+        return _fail(problem)
 
     from .checks import EXIT_RUN_FAILED, RunCheckError
     from .scenarios import ScenarioError, load_scenarios
@@ -114,22 +126,20 @@ def main(argv=None):
             return 0
         from . import report
         if args.command == "identify":
-            report.run_identification(args.out, backend=args.backend,
-                                      noise_rms_um=args.noise_rms or 0.0,
-                                      seed=1 if args.seed is None else args.seed,
-                                      fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
-                                      displacement_only=args.displacement_only)
-            return 0
+            return identification_cli.run_identify(args)
+        if args.command == "export":
+            return identification_cli.run_export(args)
+        with_params = identification_cli.apply_param_files(args, registry)
         if args.command == "run":
             report.run_scenario(args.scenario, args.out, adaptation=adaptation, preview=preview,
                                 master=master, fmu_dir=args.fmu_dir, plots=not args.no_plots,
-                                registry=registry, backend=args.backend)
+                                registry=with_params, backend=args.backend)
         else:
             builtin = load_scenarios()
             extra = [n for n in registry if n not in builtin or registry[n] is not builtin[n]]
             report.run_all(args.out, adaptation=adaptation, preview=preview, master=master,
                            fmu_dir=args.fmu_dir, plots=not args.no_plots, backend=args.backend,
-                           registry=registry, extra_scenarios=extra)
+                           registry=with_params, extra_scenarios=extra)
         return 0
     except RunCheckError as exc:
         return _fail(_one_line(exc), EXIT_RUN_FAILED)

@@ -54,6 +54,7 @@
 
 #include "fmi2Functions.h"
 #include "fmu_model.h"
+#include "fmu_start_values.h"
 
 /* ------------------------------------------------------------------------ */
 /* Instance                                                                  */
@@ -91,6 +92,7 @@ typedef struct {
     size_t history_capacity;    /* in doubles */
     ModelData data;
     ModelData backup;           /* data at the start of a doStep */
+    fmu_start_values *start_values;  /* resources/start_values, applied at instantiation and reset */
 } fmu_instance;
 
 /* An FMU state: a copy of everything that defines the instance's future. */
@@ -504,7 +506,6 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 {
     fmu_instance *inst;
     size_t len;
-    (void)fmuResourceLocation;  /* the FMUs need no resources */
     (void)visible;
     if (functions == NULL)
         return NULL;
@@ -549,6 +550,12 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->log_mask = loggingOn ? CAT_ALL : CAT_ERROR | CAT_WARNING;
     inst->mode = MODE_INSTANTIATED;
     model_set_start_values(&inst->data);
+    /* resources/start_values of a parameterised FMU (harness export), over the defaults */
+    if (!fmu_start_values_init(&inst->start_values, fmuResourceLocation, functions, instanceName,
+                               &inst->data)) {
+        fmi2FreeInstance(inst);
+        return NULL;
+    }
     log_event(inst, "fmi2Instantiate: %s instantiated (GUID %s)", MODEL_IDENTIFIER_STRING, MODEL_GUID);
     return inst;
 }
@@ -564,6 +571,7 @@ void fmi2FreeInstance(fmi2Component c)
     if (inst->history != NULL)
         free_memory(inst->history);
     free_memory(inst->name);
+    fmu_start_values_free(&inst->start_values, &inst->cb);
     inst->magic = 0;
     free_memory(inst);
 }
@@ -695,6 +703,7 @@ fmi2Status fmi2Reset(fmi2Component c)
         return fmi2Error;
     memset(&inst->data, 0, sizeof inst->data);
     model_set_start_values(&inst->data);
+    fmu_start_values_apply(inst->start_values, &inst->data);
     inst->mode = MODE_INSTANTIATED;
     inst->t0 = 0.0;
     inst->k = 0;

@@ -1,11 +1,11 @@
-"""harness.identification: the paper's steps 1-2 recover the DESIGN.md section 1 defaults
+"""harness.identify.steps: the paper's steps 1-2 recover the model defaults
 from a noise-free run of the core plant (creep disabled, i.e. the Hammerstein model)."""
 
 import numpy as np
 import pytest
 
 from harness.core_loop import simulate_open_loop_core
-from harness.identification import (
+from harness.identify import (
     identify_pi,
     identify_transfer_function,
     pi_thresholds,
@@ -23,7 +23,7 @@ def _run(v):
 
 
 def test_thresholds_and_play_operator():
-    # Reference: DESIGN.md section 1, r_j = (j-1)/m v_max; eq 3 play operator.
+    # Reference: the model definition, r_j = (j-1)/m v_max; eq 3 play operator.
     np.testing.assert_allclose(pi_thresholds(9, 20.0), np.arange(9) * 20.0 / 9)
     z = play_operator_outputs([1.0, 3.0, 2.0, -1.0], [1.0])[:, 0]
     np.testing.assert_allclose(z, [0.0, 2.0, 2.0, 0.0])
@@ -68,7 +68,7 @@ from pathlib import Path
 import subprocess
 import sys
 
-from harness.identification import (
+from harness.identify import (
     MIN_CREEP_SAMPLES,
     IdentificationInputError,
     IdentificationRecord,
@@ -81,7 +81,7 @@ from harness.report import generate_identification_records
 
 REPO = Path(__file__).resolve().parents[1]
 
-# Table 1 rows (DESIGN.md section 1): label -> (k_c, alpha, input v(t) of that row)
+# Table 1 rows of the paper: label -> (k_c, alpha, input v(t) of that row)
 TABLE1 = {
     "1 Hz": (1.0463, 0.0002, lambda t: 10 * np.sin(2 * np.pi * t) + 10),
     "10 Hz": (1.0497, -0.0085, lambda t: 10 * np.sin(2 * np.pi * 10 * t) + 10),
@@ -308,7 +308,7 @@ def _printed_table(stdout):
 
 @pytest.mark.parametrize("backend", ["core", "fmpy"])
 def test_cli_identify_end_to_end(tmp_path, backend):
-    args = ["identify", "--out", str(tmp_path)]
+    args = ["identify", "--internal-channels", "--out", str(tmp_path)]
     if backend == "core":
         args += ["--backend", "core"]          # fmpy is the default
     proc = _harness(*args)
@@ -334,7 +334,8 @@ def test_cli_identify_end_to_end(tmp_path, backend):
 
 
 def test_cli_identify_noise_and_errors(tmp_path):
-    proc = _harness("identify", "--backend", "core", "--noise-rms", "0.001", "--out", str(tmp_path))
+    proc = _harness("identify", "--internal-channels", "--backend", "core", "--noise-rms", "0.001",
+                    "--out", str(tmp_path))
     assert proc.returncode == 0, proc.stderr
     assert "noise 1 nm rms" in proc.stdout
     rows = {r["parameter"]: r for r in csv.DictReader(open(tmp_path / "identification.csv"))}
@@ -342,7 +343,8 @@ def test_cli_identify_noise_and_errors(tmp_path):
     for args, msg in [(["identify", "--noise-rms", "-1"], "--noise-rms must be a finite number"),
                       (["list", "--noise-rms", "0.001"], "--noise-rms is only used by 'identify'"),
                       (["identify", "extra"], "unexpected argument 'extra' for 'identify'"),
-                      (["identify", "--fmu-dir", str(tmp_path)], "PiezoStage.fmu")]:
+                      (["identify", "--internal-channels", "--fmu-dir", str(tmp_path)],
+                       "PiezoStage.fmu")]:
         p = _harness(*args)
         assert p.returncode == 2, (args, p.stderr)
         lines = p.stderr.strip().splitlines()

@@ -1,0 +1,262 @@
+"""Command-line pieces of identification, export and parameter files.
+
+:mod:`harness.cli` owns the parser and the dispatch; it calls
+
+* :func:`add_arguments` to add the options below to a parser;
+* :func:`check_arguments` before running (a one-line error or None);
+* :func:`run_identify` / :func:`run_export` for ``identify`` / ``export``;
+* :func:`apply_param_files` to put ``--plant-params`` / ``--controller-params``
+  into the scenarios of ``run`` and ``all``.
+
+::
+
+    python -m harness identify --pi-data LOW.csv --tf-data MIXED.csv --creep-data A.csv [B.csv ...]
+                               [--out params.json] [--sample-period S] [--operators M]
+                               [--v-max V] [--delay N] [--holdout F]
+    python -m harness identify --demo [--duration S] [--noise-free] [--seed N] [--out DIR]
+    python -m harness identify --internal-channels [--noise-rms UM] [--seed N] [--free-w0]
+                               [--displacement-only]
+    python -m harness export --params FILE [--out DIR] [--fmu-dir DIR]
+    python -m harness [all | run SCENARIO] --plant-params FILE --controller-params FILE
+
+User errors raise ValueError (or FileNotFoundError), which the caller turns
+into exit code 2 and one line; a fit that does not converge and a virtual
+experiment that fails its own checks return :data:`EXIT_RUN_FAILED` (3)
+after one line.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+from ..checks import EXIT_RUN_FAILED
+
+__all__ = ["add_arguments", "check_arguments", "run_identify", "run_export",
+           "apply_param_files"]
+
+PROG = "python -m harness"
+
+_DATA = (("pi_data", "--pi-data"), ("tf_data", "--tf-data"), ("creep_data", "--creep-data"))
+_FIT = (("sample_period", "--sample-period"), ("operators", "--operators"), ("v_max", "--v-max"),
+        ("delay", "--delay"), ("holdout", "--holdout"))
+_DEMO = (("duration", "--duration"), ("noise_free", "--noise-free"))
+_INTERNAL = (("noise_rms", "--noise-rms"), ("free_w0", "--free-w0"),
+             ("displacement_only", "--displacement-only"))
+_PARAM_FILES = (("plant_params", "--plant-params"), ("controller_params", "--controller-params"))
+
+
+def add_arguments(parser):
+    """Add the identify, export and parameter-file options to an argparse parser."""
+    g = parser.add_argument_group(
+        "identify from measured records",
+        "Records are CSV files with the columns time [s], v [V], y [um], sampled at h from rest. "
+        "--out is the parameter file (a .json path) or a folder (params.json in it); the "
+        "reports <stem>.report.md and .report.json go beside it.")
+    g.add_argument("--pi-data", metavar="FILE",
+                   help="step 1 (PI): a low-frequency record, e.g. v = 10 sin(2 pi t) + 10 V")
+    g.add_argument("--tf-data", metavar="FILE",
+                   help="step 2 (G): a mixed-frequency record, e.g. 5/40/80 Hz")
+    g.add_argument("--creep-data", metavar="FILE", nargs="+", action="extend",
+                   help="step 3 (creep): one or more records (a file may serve several steps)")
+    g.add_argument("--sample-period", type=float, metavar="S",
+                   help="the model's sample period h [s] (default 0.0005); records must be "
+                        "sampled at it")
+    g.add_argument("--operators", type=int, metavar="M", help="play operators (default 9)")
+    g.add_argument("--v-max", type=float, metavar="V",
+                   help="threshold scale [V] (default: max |v| of the --pi-data record)")
+    g.add_argument("--delay", type=int, metavar="N",
+                   help="extra input delay of G in samples, tf.delay (default 0; not fitted)")
+    g.add_argument("--holdout", type=float, metavar="F",
+                   help="fraction of each record held out at its end (default 0.25; 0: none)")
+    g.add_argument("--demo", action="store_true",
+                   help="the virtual experiment: records of the PiezoStage FMU with known "
+                        "parameters, identified like user data")
+    g.add_argument("--duration", type=float, metavar="S",
+                   help="--demo: length of each record [s] (default 10)")
+    g.add_argument("--noise-free", action="store_true",
+                   help="--demo: no sensor noise or quantisation (default: 2 nm, 1 nm rms)")
+    g.add_argument("--internal-channels", action="store_true",
+                   help="check each step alone on the PiezoStage model's internal outputs u and "
+                        "x (a real stage gives only v and y)")
+    e = parser.add_argument_group("export")
+    e.add_argument("--params", metavar="FILE",
+                   help="export: parameter file (JSON of FMU variable names) to put into "
+                        "PiezoStage.fmu and AdaptiveCompoundController.fmu as start values")
+    r = parser.add_argument_group("run and all")
+    r.add_argument("--plant-params", metavar="FILE",
+                   help="parameter file applied to the PiezoStage of every scenario (names the "
+                        "plant has)")
+    r.add_argument("--controller-params", metavar="FILE",
+                   help="parameter file applied to the controller of every scenario (names the "
+                        "controller has)")
+
+
+def _given(args, attr):
+    return getattr(args, attr, None) not in (None, False, [])
+
+
+def check_arguments(args):
+    """A one-line error about the options of these commands, or None."""
+    cmd = args.command
+    if cmd != "identify":
+        for attr, flag in _DATA + _FIT + _DEMO + (("demo", "--demo"),
+                                                   ("internal_channels", "--internal-channels")):
+            if _given(args, attr):
+                return f"{flag} is only used by 'identify'"
+    if cmd != "export" and _given(args, "params"):
+        return "--params is only used by 'export'"
+    if cmd not in ("run", "all"):
+        for attr, flag in _PARAM_FILES:
+            if _given(args, attr):
+                return f"{flag} is only used by 'run' and 'all'"
+    if cmd == "export" and not _given(args, "params"):
+        return "export needs --params FILE (a parameter file, e.g. from identify)"
+    if cmd != "identify":
+        return None
+
+    data = [flag for attr, flag in _DATA if _given(args, attr)]
+    modes = [m for m, on in (("records", bool(data)), ("--demo", args.demo),
+                             ("--internal-channels", args.internal_channels)) if on]
+    if len(modes) > 1:
+        return f"identify takes one of: the records, --demo, --internal-channels (got " \
+               f"{' and '.join(modes)})"
+    if not modes:
+        return ("identify needs the records: --pi-data LOW.csv --tf-data MIXED.csv "
+                "--creep-data A.csv [B.csv ...] (or --demo for the virtual experiment)")
+    if data and len(data) < 3:
+        missing = [flag for attr, flag in _DATA if not _given(args, attr)]
+        return f"identify needs --pi-data, --tf-data and --creep-data (missing: {', '.join(missing)})"
+    if not args.internal_channels:
+        for attr, flag in _INTERNAL:
+            if _given(args, attr):
+                return f"{flag} is only used by 'identify --internal-channels'"
+    if not args.demo:
+        for attr, flag in _DEMO:
+            if _given(args, attr):
+                return f"{flag} is only used by 'identify --demo'"
+        if data and _given(args, "seed"):
+            return "--seed is only used by 'identify --demo' and 'identify --internal-channels'"
+    if args.internal_channels:
+        for attr, flag in _FIT:
+            if _given(args, attr):
+                return f"{flag} is not used by 'identify --internal-channels'"
+    if args.demo:
+        for attr, flag in _FIT[:4]:
+            if _given(args, attr):
+                return f"{flag} is not used by 'identify --demo' (the virtual stage fixes it)"
+    checks = (
+        ("sample_period", lambda x: math.isfinite(x) and x > 0, "a finite number > 0 (s)"),
+        ("operators", lambda x: 1 <= x <= 16, "in 1..16"),
+        ("v_max", lambda x: math.isfinite(x) and x > 0, "a finite number > 0 (V)"),
+        ("delay", lambda x: 0 <= x <= 8, "in 0..8 samples"),
+        ("holdout", lambda x: 0 <= x <= 0.9, "in [0, 0.9]"),
+        ("duration", lambda x: math.isfinite(x) and x > 0, "a finite number > 0 (s)"),
+    )
+    for attr, ok, valid in checks:
+        value = getattr(args, attr, None)
+        if value is not None and not ok(value):
+            return f"--{attr.replace('_', '-')} must be {valid}, got {value:g}"
+    return None
+
+
+def _fail(message, code):
+    sys.stderr.write(f"{PROG}: error: {' '.join(str(message).split())}\n")
+    return code
+
+
+def run_identify(args, stream=sys.stdout, progress=sys.stderr):
+    """Run ``identify`` (records, --demo or --internal-channels); return the exit code."""
+    from .fit import DEFAULT_HOLDOUT, IdentificationFitError
+
+    holdout = DEFAULT_HOLDOUT if args.holdout is None else args.holdout
+    try:
+        if args.internal_channels:
+            from .. import report
+
+            report.run_identification(args.out, backend=args.backend,
+                                      noise_rms_um=args.noise_rms or 0.0,
+                                      seed=1 if args.seed is None else args.seed,
+                                      fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
+                                      displacement_only=args.displacement_only)
+            return 0
+        if args.demo:
+            from .demo import run_demo
+
+            demo = run_demo(args.out, duration=10.0 if args.duration is None else args.duration,
+                            noise=not args.noise_free, seed=1 if args.seed is None else args.seed,
+                            holdout=holdout, fmu_dir=args.fmu_dir, backend=args.backend,
+                            stream=stream, progress=progress)
+            if demo.failures:
+                return _fail(f"the virtual experiment failed {len(demo.failures)} of its "
+                             f"checks; first: {demo.failures[0]}", EXIT_RUN_FAILED)
+            return 0
+        return _identify_records(args, holdout, stream)
+    except IdentificationFitError as exc:
+        return _fail(exc, EXIT_RUN_FAILED)
+
+
+def _identify_records(args, holdout, stream):
+    from .run import identify_files, write_outputs
+    from .tables import format_report
+
+    h = 0.0005 if args.sample_period is None else args.sample_period
+    m = 9 if args.operators is None else args.operators
+    result, records = identify_files(args.pi_data, args.tf_data, args.creep_data, h=h, m=m,
+                                     v_max=args.v_max, delay=args.delay or 0, holdout=holdout)
+    header = [f"Identification from measured records (v and y only): step 1 {args.pi_data}, "
+              f"step 2 {args.tf_data}, step 3 {', '.join(args.creep_data)}; h = {h:g} s, "
+              f"m = {m}, v_max = {result.model.v_max:g} V; the last {holdout:.0%} of each "
+              f"record held out; {result.elapsed_s:.1f} s."]
+    files = write_outputs(result, args.out, records=records, header=header)
+    if stream is not None:
+        stream.write(format_report(result, header=header) + "\n\n")
+        stream.write(f"Wrote {files[0]} (parameters, for --plant-params, --controller-params and "
+                     f"export) and its reports {files[1].name}, {files[2].name}\n")
+        stream.flush()
+    return 0
+
+
+def run_export(args, stream=sys.stdout):
+    """Run ``export``: the parameter file into both FMUs; return the exit code."""
+    from .export import export_fmus
+    from .params import read_params
+
+    params = read_params(args.params)
+    written = export_fmus(params, args.out, fmu_dir=args.fmu_dir, source=args.params)
+    if stream is not None:
+        for model, (path, given) in written.items():
+            names = ", ".join(given) if given else "none"
+            stream.write(f"{path}: {len(given)} start values from {args.params} ({names})\n")
+        stream.flush()
+    return 0
+
+
+def apply_param_files(args, registry, progress=sys.stderr):
+    """The registry with ``--plant-params`` / ``--controller-params`` applied to every scenario.
+
+    Each FMU takes the names it has; a name of neither FMU is an error
+    (:class:`harness.identify.params.ParameterFileError`).
+    """
+    from .params import (CONTROLLER_MODEL, PLANT_MODEL, override_scenarios, parameter_types,
+                         read_params, split_params)
+
+    files = [(attr, flag, getattr(args, attr, None)) for attr, flag in _PARAM_FILES]
+    if not any(f for _, _, f in files):
+        return registry
+    types = {m: parameter_types(m, fmu_dir=args.fmu_dir, backend=args.backend)
+             for m in (PLANT_MODEL, CONTROLLER_MODEL)}
+    plant, controller = {}, {}
+    for attr, flag, path in files:
+        if not path:
+            continue
+        p, c = split_params(read_params(path), types[PLANT_MODEL], types[CONTROLLER_MODEL],
+                            source=path)
+        if attr == "plant_params":
+            plant, target, model = p, p, PLANT_MODEL
+        else:
+            controller, target, model = c, c, CONTROLLER_MODEL
+        if progress is not None:
+            progress.write(f"{flag} {path}: {len(target)} parameters applied to the {model} of "
+                           f"every scenario\n")
+    return override_scenarios(registry, plant, controller)
