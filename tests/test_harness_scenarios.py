@@ -87,7 +87,6 @@ duration = 0.5
 metric_window = [0.25, 0.5]
 reference = { type = "sines", amplitudes = [2.0, 1.0], frequencies = [4.0, 8.0], phases = [0.5, 0.0], offset = 1.0 }
 controller = { "rls.forgetting" = 0.99, "mv.delay" = 0 }
-paper = { e_rms_um = 0.01 }
 
 [[scenario]]
 name = "my_mismatch"
@@ -108,6 +107,9 @@ duration = 2.0
     assert mm.plant["creep.alpha"] == -0.0085
     assert (mm.duration, mm.metric_window) == (2.0, (1.0, 2.0))   # inherited window, clipped
     assert mm.signal == get_scenario("track_5hz").signal
+    # a user scenario is not the paper's experiment: no paper values, even through extends
+    assert dict(mm.paper) == {} and dict(sc.paper) == {}
+    assert dict(get_scenario("mismatch_5hz").paper) == {"e_rms_um": 0.0254, "e_r": 0.0036}
 
 
 def test_csv_reference_is_interpolated(tmp_path):
