@@ -15,7 +15,8 @@ Identification (paper section 3)
     :func:`identify_coupled_model`, :class:`IdentificationRecord`,
     :class:`CoupledModelEstimate`, :func:`run_identification`.
 Reports
-    :func:`run_all`, :func:`run_scenario`.
+    :func:`run_all` (the main job), :func:`run_scenario`, :func:`evaluate_tracking`,
+    :func:`evaluate_validation` (package :mod:`harness.report`).
 
 Heavy dependencies (fmpy, cffi, matplotlib) are imported on first use.
 """
@@ -38,7 +39,13 @@ from .identification import (
     identify_transfer_function,
 )
 from .metrics import Metrics, compute_metrics, relative_error, rms_error
-from .report import run_all, run_identification, run_scenario
+from .report import (
+    evaluate_tracking,
+    evaluate_validation,
+    run_all,
+    run_identification,
+    run_scenario,
+)
 from .scenarios import (
     Scenario,
     ScenarioError,
@@ -76,6 +83,8 @@ __all__ = [
     "run_identification",
     "run_all",
     "run_scenario",
+    "evaluate_tracking",
+    "evaluate_validation",
     "FMUError",
     "FMUInitializationError",
     "UnknownParameterError",
