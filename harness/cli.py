@@ -120,7 +120,7 @@ def _add_run_parser(sub):
     x.add_argument("--no-timeseries", action="store_true",
                    help="write no time series file (long runs)")
     x.add_argument("--timeseries-format", choices=("csv", "npz"), default="csv",
-                   help="csv (default) or npz: NumPy arrays, about a third of the CSV's size, "
+                   help="csv (default) or npz: NumPy arrays, less than half the CSV's size, "
                         "read back with numpy.load(FILE)['y']")
     _loop_options(p, "tracking scenarios only")
     p.set_defaults(handler=_cmd_run)

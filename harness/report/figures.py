@@ -83,7 +83,7 @@ def _style(plt):
         "font.size": 8.5, "axes.titlesize": 9, "axes.labelsize": 8.5, "legend.fontsize": 7.5,
         "xtick.labelsize": 7.5, "ytick.labelsize": 7.5, "axes.grid": True, "grid.alpha": 0.3,
         "axes.spines.top": False, "axes.spines.right": False, "svg.hashsalt": "piezo",
-        "svg.fonttype": "path", "lines.linewidth": 0.9,
+        "svg.fonttype": "none", "lines.linewidth": 0.9,
     })
 
 

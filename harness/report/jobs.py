@@ -417,7 +417,7 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
     if timeseries is not None:
         size = tables.timeseries_size(series, timeseries)
         if size > LARGE_FILE_BYTES:
-            hint = (" (--timeseries-format npz writes about a third, --no-timeseries nothing)"
+            hint = (" (--timeseries-format npz writes less than half, --no-timeseries nothing)"
                     if timeseries == "csv" else "")
             prog.note(f"writing {sc.name}_timeseries.{timeseries}, about {size / 1e6:.0f} MB"
                       f"{hint}")

@@ -68,7 +68,7 @@ class Progress:
                 return
             last[0] = now
             which = f" ({part})" if part else ""
-            self._write(f"{self._prefix()} {what}{which}: {done * h:.0f} of {n * h:.0f} s "
+            self._write(f"{self._prefix()} {what}{which}: {done * h:.0f} of {n * h:.6g} s "
                         f"simulated ({now - t0:.1f} s)")
 
         return report

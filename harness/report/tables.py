@@ -255,6 +255,7 @@ def write_timeseries(data, stem, fmt="csv"):
 
 
 def timeseries_size(data, fmt):
-    """Approximate size in bytes of a time series written in a format."""
+    """Approximate size in bytes of a time series written in a format (CSV: about 18
+    characters per value, measured on a 600 s closed-loop run)."""
     values = data.size * len(data.dtype.names)
-    return values * (8 if fmt == "npz" else 23)
+    return values * (8 if fmt == "npz" else 18)
