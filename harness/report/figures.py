@@ -6,12 +6,19 @@ Main job (:func:`draw_main_figures`):
 * ``tracking_error``: the headline's error over the whole run (the metric
   window shaded, symmetric-log scale so the start-up transient and the
   steady state both show) and a zoom on the metric window;
-* ``tracking_period``: over one period of each reference, y_d and y [µm]
-  and the error [nm] of every mismatch condition;
-* ``control_voltage``: the voltage over one period, with its peak;
-* ``rls_estimates``: the RLS estimates converging (and the prediction error);
-* ``hysteresis``: y against v for the validation inputs, both models;
-* ``creep``: what the creep block adds (coupled minus Hammerstein) over the run.
+* ``tracking_period``: over one period of each reference, y_d and y [µm],
+  a zoom on the steepest zero crossing (where a late output shows) and the
+  error [nm] of every mismatch condition;
+* ``control_voltage``: the voltage over one period, with its peak over the run;
+* ``rls_estimates``: the RLS estimates converging (with the DC gain and the
+  prediction error), when the headline adapts;
+* ``user_tracking_error``: as ``tracking_error``, for the user's scenarios;
+* ``hysteresis``: y against v over the last period of each validation input,
+  both models;
+* ``creep``: what the creep block adds (coupled minus Hammerstein) over the
+  run: its per-period mean (the drift) and range.
+
+``run SCENARIO`` draws one figure (:func:`draw_scenario_figure`).
 
 The validation figures compare two models, not a model with data, and say so
 in their titles.  The nominal-model condition (round-off error by construction)
@@ -295,14 +302,17 @@ def tracking_error_figure(results, out_dir, name="tracking_error", label=""):
     return _save(plt, fig, out_dir, name, caption, f"Tracking error: {label}")
 
 
-def _steepest_crossing(t, y_d):
-    """Time of the steepest rising zero crossing of y_d (around its mean) in t."""
+def _steepest_crossing(t, y_d, margin=0.0):
+    """Time of the steepest zero crossing of y_d (around its mean), at least ``margin``
+    from both ends of t when there is one."""
     yc = y_d - y_d.mean()
-    rising = np.flatnonzero((yc[:-1] < 0) & (yc[1:] >= 0))
-    if rising.size == 0:
+    cross = np.flatnonzero(np.signbit(yc[:-1]) != np.signbit(yc[1:]))
+    inside = cross[(t[cross] - margin >= t[0]) & (t[cross] + margin <= t[-1])]
+    cross = inside if inside.size else cross
+    if cross.size == 0:
         return t[t.size // 2]
-    slope = yc[rising + 1] - yc[rising]
-    return t[rising[int(np.argmax(slope))]]
+    slope = np.abs(yc[cross + 1] - yc[cross])
+    return t[cross[int(np.argmax(slope))]]
 
 
 def tracking_period_figure(by_condition, out_dir, name="tracking_period"):
@@ -329,8 +339,8 @@ def tracking_period_figure(by_condition, out_dir, name="tracking_period"):
         outputs = [(lab, res[i], colors[j % len(colors)])
                    for j, (lab, res) in enumerate(by_condition)]
         # the zoom: the steepest zero crossing, where a late output shows most
-        tc = _steepest_crossing(t, d["y_d"][sel])
         half = 6 * sc.step_size
+        tc = _steepest_crossing(t, d["y_d"][sel], half)
         zm = (d["time"] >= tc - half - 1e-12) & (d["time"] <= tc + half + 1e-12)
         a.axvspan(tc - half, tc + half, color="0.8", lw=0)
         a.plot(t, d["y_d"][sel], color="k", lw=1.6, label="y_d (reference)")
@@ -349,17 +359,18 @@ def tracking_period_figure(by_condition, out_dir, name="tracking_period"):
         b.set_ylabel(f"y_d {MINUS} y [{NM}]")
         b.set_title("error over the period", loc="left")
         b.legend(loc="upper right", frameon=True, framealpha=0.85, fontsize=6.5)
-        if i == 0:
-            z.legend(loc="upper left", frameon=True, framealpha=0.85, fontsize=6)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
+    _figure_legend(fig, [axes[0, 1]])
+    fig.tight_layout(rect=(0, 0.02, 1, 0.97))
     caption = ("One period of each reference at the end of the run, for every mismatch "
                "condition. Left: reference y_d and stage output y [µm]; at full scale they "
                "overlap. Middle: a zoom on the steepest zero crossing (grey band; dots: the "
                "samples of y_d), where a late output shows most. Right: the error [nm] over "
                "the period: what adaptation and preview each contribute.")
     return _save(plt, fig, out_dir, name, caption,
-                 "Reference vs output over one period, and the error of each condition")
+                 "Reference vs output over one period, and the error of each condition",
+                 layout=False)
 
 
 def _num_text(x):
@@ -552,9 +563,9 @@ def hysteresis_figure(results, out_dir, name="hysteresis"):
         _loop_panel(ax, r, legend=(i == 0))
         ax.set_title(f"{reference_label(r.spec)} input ({r.scenario})", loc="left")
     caption = ("Hysteresis loops: stage displacement y against the input voltage v over the "
-               "last period of each validation input of Tables 1-3 (the slowest tone's period "
-               "for 5/40/80 Hz), coupled model (solid) and Hammerstein model (dashed). Both are "
-               "models: the paper's loops are measured, and we have no measured data.")
+               "last period of each validation input (the slowest tone's period for several "
+               "tones), coupled model (solid) and Hammerstein model (dashed). Both are models: "
+               "the paper's loops are measured, and we have no measured data.")
     return _save(plt, fig, out_dir, name, caption, f"Hysteresis, {_MODEL_VS_MODEL}")
 
 

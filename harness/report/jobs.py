@@ -17,7 +17,6 @@ import json
 from pathlib import Path
 import sys
 import textwrap
-import time as _time
 
 from ..scenarios import VALIDATION_SCENARIOS, get_scenario, load_scenarios
 from . import document as doc_
@@ -277,10 +276,15 @@ def _terminal_text(conditions, tracking, validation, registry):
              + "\n" + "\n".join(textwrap.wrap(CONDITIONS_TABLE_NOTE, REPORT_WIDTH))]
     for c in conditions:
         if c.role == "user":
-            parts.append(tables.format_tracking_table(tracking[c.key], f"User scenarios: "
-                                                      f"{c.label}"))
+            parts.append(tables.format_tracking_table(
+                tracking[c.key], f"User scenarios ({c.label.split(', ', 1)[1]}), no paper values"))
+    paper_v = [r for r in validation if r.has_paper]
+    user_v = [r for r in validation if not r.has_paper]
     parts.append(tables.format_validation_table(
-        validation, "Validation: coupled vs Hammerstein model (model vs model, no measured data)"))
+        paper_v, "Validation: coupled vs Hammerstein model (model vs model, no measured data)"))
+    if user_v:
+        parts.append(tables.format_validation_table(
+            user_v, "User validation inputs: coupled vs Hammerstein model"))
     described = condition_notes(conditions, registry)
     notes = [_wrap_notes(f"{c.label}:", described[c.key]) for c in conditions]
     parts.append("What each condition is\n" + "\n".join(notes))
@@ -339,12 +343,18 @@ def _main_document(conditions, tracking, validation, figures, prov, scenarios, d
         if name in figs:
             doc.add(_figure_block(figs[name]))
 
-    v_head, v_rows = tables.validation_table_rows(validation, markdown=True)
+    paper_v = [r for r in validation if r.has_paper]
+    user_v = [r for r in validation if not r.has_paper]
+    v_head, v_rows = tables.validation_table_rows(paper_v, markdown=True)
     doc.add(D.Heading("Model validation: coupled vs Hammerstein model (model vs model)"),
             D.Paragraph("The plant alone (open loop) on the six inputs of Tables 1-3, run twice: "
                         "with creep (coupled model) and without (Hammerstein model)."),
             D.Table(tuple(v_head), tuple(map(tuple, v_rows))),
             D.Bullets(VALIDATION_NOTES))
+    if user_v:
+        u_head, u_rows = tables.validation_table_rows(user_v, markdown=True)
+        doc.add(D.Paragraph("**User validation inputs** (not the paper's, so no paper values):"),
+                D.Table(tuple(u_head), tuple(map(tuple, u_rows))))
     for name in ("hysteresis", "creep"):
         if name in figs:
             doc.add(_figure_block(figs[name]))
