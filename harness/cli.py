@@ -8,10 +8,11 @@
 * ``identify``: the paper's three-step identification on records of the
   PiezoStage model, every parameter next to the value the plant ran.
 
-Each subcommand has its own options (``SUBCOMMAND --help``), declared in one
-function per subcommand (``_add_<name>_parser``); an option a subcommand does
-not take is refused like any other unknown option.  Adding a subcommand is one
-such function plus its handler, listed in :data:`SUBCOMMANDS`.
+Each subcommand lives in one place: a function that declares its parser and
+options (``_add_<name>_parser``, built from the shared option groups it
+needs) followed by its handler (``_cmd_<name>``).  Adding a subcommand is
+those two functions and one entry in :data:`SUBCOMMANDS`.  An option a
+subcommand does not take is refused like any unknown option, in one line.
 
 Exit codes, each with a one-line message on stderr that names the program:
 
@@ -85,8 +86,26 @@ def _plots_option(p):
     p.add_argument("--no-plots", action="store_true", help="draw no figures (PNG/SVG)")
 
 
+def _out_dir(args):
+    """Create --out now, so a path that cannot be a folder fails before any run."""
+    from .report import prepare_out_dir
+
+    try:
+        return prepare_out_dir(args.out)
+    except NotADirectoryError as exc:
+        raise UsageError(f"--out: {exc}") from None
+    except OSError as exc:
+        raise UsageError(f"--out: cannot create the output folder {args.out}: "
+                         f"{exc.strerror or exc}") from None
+
+
+def _loop_settings(args):
+    return (False if args.no_adaptation else None, not args.no_preview,
+            "jacobi" if args.jacobi else "gauss-seidel")
+
+
 # ---------------------------------------------------------------------------
-# one function per subcommand: its parser, then its handler
+# each subcommand in one place: its parser function, then its handler
 # ---------------------------------------------------------------------------
 
 def _add_all_parser(sub):
@@ -103,6 +122,21 @@ def _add_all_parser(sub):
     _loop_options(p, "the base of every tracking condition")
     p.set_defaults(handler=_cmd_all)
     return p
+
+
+def _cmd_all(args, command):
+    from . import report
+    from .scenarios import load_scenarios
+
+    registry = load_scenarios(args.scenario_file)
+    builtin = load_scenarios()
+    extra = [n for n in registry if n not in builtin]
+    adaptation, preview, master = _loop_settings(args)
+    _out_dir(args)
+    report.run_all(args.out, adaptation=adaptation, preview=preview, master=master,
+                   fmu_dir=args.fmu_dir, plots=not args.no_plots, backend=args.backend,
+                   registry=registry, extra_scenarios=extra, command=command)
+    return EXIT_OK
 
 
 def _add_run_parser(sub):
@@ -127,12 +161,54 @@ def _add_run_parser(sub):
     return p
 
 
+def _cmd_run(args, command):
+    from . import report
+    from .scenarios import get_scenario, load_scenarios
+
+    registry = load_scenarios(args.scenario_file)
+    sc = get_scenario(args.scenario, registry)
+    if sc.kind != "tracking":
+        given = [f for f, on in (("--no-adaptation", args.no_adaptation),
+                                 ("--no-preview", args.no_preview),
+                                 ("--jacobi", args.jacobi)) if on]
+        if given:
+            raise UsageError(f"{given[0]} does not apply to '{sc.name}', a {sc.kind} scenario "
+                             f"(the plant runs alone: no controller, no reference)")
+    adaptation, preview, master = _loop_settings(args)
+    _out_dir(args)
+    report.run_scenario(sc.name, args.out, adaptation=adaptation, preview=preview, master=master,
+                        fmu_dir=args.fmu_dir, plots=not args.no_plots, registry=registry,
+                        backend=args.backend,
+                        timeseries=None if args.no_timeseries else args.timeseries_format)
+    return EXIT_OK
+
+
 def _add_list_parser(sub):
     p = sub.add_parser("list", help="list the known scenarios",
                        description="List the built-in scenarios and those of --scenario-file.")
     _scenario_file_option(p)
     p.set_defaults(handler=_cmd_list)
     return p
+
+
+def _cmd_list(args, command):
+    from .scenarios import SCENARIO_DIR, load_scenarios
+    from pathlib import Path
+
+    registry = load_scenarios(args.scenario_file)
+    kinds = {"tracking": "Tracking (closed loop, reference y_d in µm)",
+             "validation": "Validation (plant alone, input v in V)"}
+    for kind, title in kinds.items():
+        names = [n for n, s in registry.items() if s.kind == kind]
+        if not names:
+            continue
+        print(title)
+        width = max(len(n) for n in names)
+        for n in names:
+            sc = registry[n]
+            user = "" if Path(sc.source).parent == SCENARIO_DIR else f" [{sc.source}]"
+            print(f"  {n:<{width}}  {sc.description}{user}")
+    return EXIT_OK
 
 
 def _add_identify_parser(sub):
@@ -158,6 +234,20 @@ def _add_identify_parser(sub):
     return p
 
 
+def _cmd_identify(args, command):
+    from . import report
+
+    if not (math.isfinite(args.noise_rms) and args.noise_rms >= 0):
+        raise UsageError(f"--noise-rms must be a finite number >= 0 (µm), got {args.noise_rms:g}")
+    if args.seed < 0:
+        raise UsageError(f"--seed must be >= 0, got {args.seed}")
+    _out_dir(args)
+    report.run_identification(args.out, backend=args.backend, noise_rms_um=args.noise_rms,
+                              seed=args.seed, fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
+                              displacement_only=args.displacement_only)
+    return EXIT_OK
+
+
 #: The subcommands, in --help order: each adds its parser and sets its handler.
 SUBCOMMANDS = (_add_all_parser, _add_run_parser, _add_list_parser, _add_identify_parser)
 
@@ -178,99 +268,6 @@ def build_parser(prog=MODULE_PROG):
 
 
 # ---------------------------------------------------------------------------
-# handlers
-# ---------------------------------------------------------------------------
-
-def _out_dir(args):
-    """Create --out now, so a path that cannot be a folder fails before any run."""
-    from .report import prepare_out_dir
-
-    try:
-        return prepare_out_dir(args.out)
-    except NotADirectoryError as exc:
-        raise UsageError(f"--out: {exc}") from None
-    except OSError as exc:
-        raise UsageError(f"--out: cannot create the output folder {args.out}: "
-                         f"{exc.strerror or exc}") from None
-
-
-def _loop_settings(args):
-    return (False if args.no_adaptation else None, not args.no_preview,
-            "jacobi" if args.jacobi else "gauss-seidel")
-
-
-def _cmd_all(args, command):
-    from . import report
-    from .scenarios import load_scenarios
-
-    registry = load_scenarios(args.scenario_file)
-    builtin = load_scenarios()
-    extra = [n for n in registry if n not in builtin]
-    adaptation, preview, master = _loop_settings(args)
-    _out_dir(args)
-    report.run_all(args.out, adaptation=adaptation, preview=preview, master=master,
-                   fmu_dir=args.fmu_dir, plots=not args.no_plots, backend=args.backend,
-                   registry=registry, extra_scenarios=extra, command=command)
-    return EXIT_OK
-
-
-def _cmd_run(args, command):
-    from . import report
-    from .scenarios import get_scenario, load_scenarios
-
-    registry = load_scenarios(args.scenario_file)
-    sc = get_scenario(args.scenario, registry)
-    if sc.kind != "tracking":
-        given = [f for f, on in (("--no-adaptation", args.no_adaptation),
-                                 ("--no-preview", args.no_preview),
-                                 ("--jacobi", args.jacobi)) if on]
-        if given:
-            raise UsageError(f"{given[0]} does not apply to '{sc.name}', a {sc.kind} scenario "
-                             f"(the plant runs alone: no controller, no reference)")
-    adaptation, preview, master = _loop_settings(args)
-    _out_dir(args)
-    report.run_scenario(sc.name, args.out, adaptation=adaptation, preview=preview, master=master,
-                        fmu_dir=args.fmu_dir, plots=not args.no_plots, registry=registry,
-                        backend=args.backend,
-                        timeseries=None if args.no_timeseries else args.timeseries_format)
-    return EXIT_OK
-
-
-def _cmd_list(args, command):
-    from .scenarios import SCENARIO_DIR, load_scenarios
-    from pathlib import Path
-
-    registry = load_scenarios(args.scenario_file)
-    kinds = {"tracking": "Tracking (closed loop, reference y_d in µm)",
-             "validation": "Validation (plant alone, input v in V)"}
-    for kind, title in kinds.items():
-        names = [n for n, s in registry.items() if s.kind == kind]
-        if not names:
-            continue
-        print(title)
-        width = max(len(n) for n in names)
-        for n in names:
-            sc = registry[n]
-            user = "" if Path(sc.source).parent == SCENARIO_DIR else f" [{sc.source}]"
-            print(f"  {n:<{width}}  {sc.description}{user}")
-    return EXIT_OK
-
-
-def _cmd_identify(args, command):
-    from . import report
-
-    if not (math.isfinite(args.noise_rms) and args.noise_rms >= 0):
-        raise UsageError(f"--noise-rms must be a finite number >= 0 (µm), got {args.noise_rms:g}")
-    if args.seed < 0:
-        raise UsageError(f"--seed must be >= 0, got {args.seed}")
-    _out_dir(args)
-    report.run_identification(args.out, backend=args.backend, noise_rms_um=args.noise_rms,
-                              seed=args.seed, fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
-                              displacement_only=args.displacement_only)
-    return EXIT_OK
-
-
-# ---------------------------------------------------------------------------
 # main
 # ---------------------------------------------------------------------------
 
@@ -287,11 +284,11 @@ def _one_line(exc):
     return " ".join(text.split())
 
 
-def _subcommand_names():
-    names = []
-    for add in SUBCOMMANDS:
-        names.append(add.__name__[len("_add_"):-len("_parser")])
-    return names
+def _subcommand_names(parser):
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return set(action.choices)
+    return set()
 
 
 def _options_with_value(parser):
@@ -317,8 +314,9 @@ def _with_default_command(argv, parser):
     if argv and argv[0] in ("-h", "--help"):
         return list(argv)
     takes_value = _options_with_value(parser)
+    names = _subcommand_names(parser)
     for i, tok in enumerate(argv):
-        if tok in _subcommand_names() and (i == 0 or argv[i - 1] not in takes_value):
+        if tok in names and (i == 0 or argv[i - 1] not in takes_value):
             raise UsageError(f"options go after the subcommand: {parser.prog} {tok} ... "
                              f"{' '.join(argv[:i])}")
     return ["all", *argv]
