@@ -177,11 +177,11 @@ def _symlog(ax, linthresh, values):
     lin = _decade_up(linthresh)
     ax.set_yscale("symlog", linthresh=lin, linscale=1.0)
     top = float(np.nanmax(np.abs(values))) if np.size(values) else lin
-    ticks = [0.0, lin]
-    t = lin * 10
-    while t <= top * 1.0001:
-        ticks.append(t)
-        t *= 10
+    decades = [lin]
+    while decades[-1] * 10 <= top * 1.0001:
+        decades.append(decades[-1] * 10)
+    step = -(-len(decades) // 4)             # at most 4 decades labelled on each side
+    ticks = [0.0] + decades[::step]
     ticks = sorted({-x for x in ticks} | set(ticks))
     ax.yaxis.set_major_locator(mticker.FixedLocator(ticks))
     ax.yaxis.set_minor_locator(mticker.NullLocator())
@@ -234,7 +234,7 @@ def headline_figure(results, out_dir, name="headline", label="ours"):
     for xi, o, p in zip(x, ours, paper):
         ax.annotate(f"{o:.3g} nm\n×{o / p:.2g}", (xi + w / 2, o), textcoords="offset points",
                     xytext=(0, 2), ha="center", va="bottom", fontsize=7)
-        ax.annotate(f"{p:.3g}", (xi - w / 2, p), textcoords="offset points", xytext=(0, 2),
+        ax.annotate(f"{p:.4g}", (xi - w / 2, p), textcoords="offset points", xytext=(0, 2),
                     ha="center", va="bottom", fontsize=7, color="0.3")
     ax.set_xticks(x, [reference_label(r.spec) for r in rs])
     ax.set_xlabel("reference (10 µm per tone)")
@@ -422,7 +422,8 @@ def _robust_limits(values, refs, start=0):
     v = np.concatenate([np.asarray(x)[start:] for x in values] + [np.asarray(refs, float)])
     v = v[np.isfinite(v)]
     lo, hi = float(v.min()), float(v.max())
-    pad = 0.08 * (hi - lo or abs(hi) or 1.0)
+    # at least 1 % of the values' size: a constant estimate is a flat line, not round-off
+    pad = max(0.08 * (hi - lo), 0.01 * max(abs(lo), abs(hi)), 1e-12)
     return lo - pad, hi + pad
 
 
