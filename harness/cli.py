@@ -87,16 +87,14 @@ def _plots_option(p):
 
 
 def _out_dir(args):
-    """Create --out now, so a path that cannot be a folder fails before any run."""
-    from .report import prepare_out_dir
+    """Check --out now (creating nothing), so a path that cannot be a folder fails before
+    any run."""
+    from .report import check_out_dir
 
     try:
-        return prepare_out_dir(args.out)
-    except NotADirectoryError as exc:
-        raise UsageError(f"--out: {exc}") from None
+        return check_out_dir(args.out)
     except OSError as exc:
-        raise UsageError(f"--out: cannot create the output folder {args.out}: "
-                         f"{exc.strerror or exc}") from None
+        raise UsageError(f"--out: {exc}") from None
 
 
 def _loop_settings(args):

@@ -25,7 +25,7 @@ from .identification import (
     run_identification,
     write_identification_csv,
 )
-from .jobs import VALIDATION_NOTES, prepare_out_dir, run_all, run_scenario
+from .jobs import VALIDATION_NOTES, check_out_dir, prepare_out_dir, run_all, run_scenario
 from .provenance import Provenance, collect_provenance
 from .run import TrackingResult, ValidationResult, evaluate_tracking, evaluate_validation
 from .tables import (
@@ -58,6 +58,7 @@ __all__ = [
     "write_timeseries_csv",
     "write_timeseries_npz",
     "collect_provenance",
+    "check_out_dir",
     "prepare_out_dir",
     "run_all",
     "run_scenario",

@@ -14,6 +14,7 @@ A job runs what :mod:`.conditions` and :mod:`.run` define, then writes what
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 import sys
 import textwrap
@@ -30,7 +31,8 @@ from .conditions import (
 from .progress import Progress
 from .run import evaluate_tracking, evaluate_validation, parameter_defaults, validation_series
 
-__all__ = ["run_all", "run_scenario", "prepare_out_dir", "VALIDATION_NOTES", "REPORT_WIDTH"]
+__all__ = ["run_all", "run_scenario", "check_out_dir", "prepare_out_dir", "VALIDATION_NOTES",
+           "REPORT_WIDTH"]
 
 #: Terminal width the printed notes are wrapped to.
 REPORT_WIDTH = 100
@@ -47,20 +49,37 @@ VALIDATION_NOTES = (
 )
 
 
-def prepare_out_dir(out_dir):
-    """Create the output folder (and its parents); refuse a path that is a file.
+def check_out_dir(out_dir):
+    """Refuse an output folder that cannot be created, without creating anything.
 
     Raises
     ------
     NotADirectoryError
         ``out_dir`` (or a parent) is an existing file.
-    PermissionError, OSError
-        The folder cannot be created.
+    PermissionError
+        The folder (or the parent it would be created in) is not writable.
     """
     out = Path(out_dir)
     for p in [out, *out.parents]:
-        if p.exists() and not p.is_dir():
-            raise NotADirectoryError(f"cannot create the output folder {out}: {p} is a file")
+        if p.exists():
+            if not p.is_dir():
+                raise NotADirectoryError(f"cannot create the output folder {out}: {p} is a file")
+            if not os.access(p, os.W_OK | os.X_OK):
+                raise PermissionError(f"cannot create the output folder {out}: {p} is not "
+                                      f"writable")
+            break
+    return out
+
+
+def prepare_out_dir(out_dir):
+    """Create the output folder (and its parents); refuse a path that is a file.
+
+    Raises
+    ------
+    NotADirectoryError, PermissionError, OSError
+        The folder cannot be created (see :func:`check_out_dir`).
+    """
+    out = check_out_dir(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     return out
 
