@@ -17,7 +17,8 @@ Identification (paper section 3; :mod:`harness.identify`)
     records: :func:`read_record`, :func:`fit_coupled_model`, :class:`CoupledModel`,
     :func:`read_params`, :func:`export_fmus`.
 Reports
-    :func:`run_all`, :func:`run_scenario`.
+    :func:`run_all` (the main job), :func:`run_scenario`, :func:`evaluate_tracking`,
+    :func:`evaluate_validation` (package :mod:`harness.report`).
 
 Heavy dependencies (fmpy, cffi, matplotlib) are imported on first use.
 """
@@ -45,7 +46,13 @@ from .identify import (
 )
 from .identify.export import export_fmus
 from .metrics import Metrics, compute_metrics, relative_error, rms_error
-from .report import run_all, run_identification, run_scenario
+from .report import (
+    evaluate_tracking,
+    evaluate_validation,
+    run_all,
+    run_identification,
+    run_scenario,
+)
 from .scenarios import (
     Scenario,
     ScenarioError,
@@ -88,6 +95,8 @@ __all__ = [
     "run_identification",
     "run_all",
     "run_scenario",
+    "evaluate_tracking",
+    "evaluate_validation",
     "FMUError",
     "FMUInitializationError",
     "UnknownParameterError",

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+import itertools
 import math
 from pathlib import Path
 
@@ -137,6 +138,28 @@ def prepare_closed_loop(scenario, *, adaptation=None, preview=True, master="gaus
     y_d = y_d_ext[:n].copy()
     y_ref = (y_d_ext[d:d + n] if preview else y_d).tolist()
     return ClosedLoopSetup(sc, n, h, time, y_d, y_ref, d, feedthrough, master, step_order, p, c)
+
+
+def sample_blocks(n, h, progress=None):
+    """Split the samples ``0 .. n-1`` into blocks of one simulated second.
+
+    Yields one ``range`` per block; after each block, calls ``progress(done, n)``
+    (``done`` samples simulated so far), so a long run can report itself without a
+    check in the per-sample loop.
+    """
+    size = max(1, int(round(1.0 / h)))
+    for start in range(0, n, size):
+        stop = min(n, start + size)
+        yield range(start, stop)
+        if progress is not None:
+            progress(stop, n)
+
+
+def sample_range(n, h, progress=None):
+    """``range(n)``, reporting ``progress(done, n)`` after every simulated second (if given)."""
+    if progress is None:
+        return range(n)
+    return itertools.chain.from_iterable(sample_blocks(n, h, progress))
 
 
 def open_loop_grid(v_signal, step_size):

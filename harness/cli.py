@@ -1,24 +1,28 @@
-"""Command line: ``python -m harness [all|run SCENARIO|list|identify] [options]``.
+"""Command line: ``python -m harness [all|run|list|identify|export] [options]`` (or ``piezo-harness``).
 
-* ``python -m harness`` (or ``all``): every tracking condition and the
-  validation inputs, tables next to the paper's, CSV/Markdown/PNG under ``--out``.
-* ``python -m harness run SCENARIO``: one scenario.
-* ``python -m harness list``: the known scenarios (with ``--scenario-file``, also the user's).
-* ``python -m harness identify``: identify the coupled model from measured records
-  (``--pi-data``, ``--tf-data``, ``--creep-data``; ``--demo``: the virtual experiment;
-  ``--internal-channels``: each step alone on the PiezoStage model's u and x), see
-  :mod:`harness.identify.cli`.
-* ``python -m harness export --params FILE``: PiezoStage.fmu and AdaptiveCompoundController.fmu
-  with the file's values as start values, under ``--out``.
-* ``--plant-params FILE`` / ``--controller-params FILE`` (``run``, ``all``): a parameter
-  file applied to every scenario.
+* ``all`` (the default when no subcommand is given): every tracking condition
+  and the validation inputs; the headline table next to the paper's, a report
+  (report.md, report.html) with figures and provenance under ``--out``.
+* ``run SCENARIO``: one scenario; its metrics, time series and figure.
+* ``list``: the known scenarios (with ``--scenario-file``, also the user's).
+* ``identify``: identify the coupled model from measured records (``--pi-data``,
+  ``--tf-data``, ``--creep-data``), or ``--demo`` (the virtual experiment), or
+  ``--internal-channels`` (each step alone on the model's internal outputs).
+* ``export --params FILE``: PiezoStage.fmu and AdaptiveCompoundController.fmu with
+  the file's values as start values.
 
-Exit codes, each with a one-line message on stderr:
+Each subcommand lives in one place: a function that declares its parser and
+options (``_add_<name>_parser``, built from the shared option groups it
+needs) followed by its handler (``_cmd_<name>``).  Adding a subcommand is
+those two functions and one entry in :data:`SUBCOMMANDS`.  An option a
+subcommand does not take is refused like any unknown option, in one line.
+
+Exit codes, each with a one-line message on stderr that names the program:
 
 * 0: done;
 * 1: an FMI call failed for another reason (a fault);
-* 2: a user error (unknown scenario, missing FMU, malformed scenario file or CSV,
-  bad parameter);
+* 2: a user error (bad command line, unknown scenario, missing FMU, malformed
+  scenario file or CSV, bad parameter, output folder that cannot be written);
 * 3: a run failed its own checks: it diverged (the controller's monitor stopped
   it, a value overflowed, or its error exceeds the reference) or the controller
   clipped the voltage persistently (see :mod:`harness.checks`).
@@ -27,139 +31,181 @@ Exit codes, each with a one-line message on stderr:
 from __future__ import annotations
 
 import argparse
-import math
+import os
 import sys
 
-__all__ = ["build_parser", "main"]
+from .identify.cli import (add_export_arguments, add_identify_arguments,
+                           add_param_file_arguments)
 
-PROG = "python -m harness"
-COMMANDS = ("all", "run", "list", "identify", "export")
-# options of 'identify' only: (attribute, flag)
-_IDENTIFY_OPTIONS = (("noise_rms", "--noise-rms"), ("seed", "--seed"), ("free_w0", "--free-w0"),
-                     ("displacement_only", "--displacement-only"))
+__all__ = ["build_parser", "main", "SUBCOMMANDS", "UsageError"]
+
+#: How the program is named when run as a module.
+MODULE_PROG = "python -m harness"
+EXIT_OK, EXIT_FAULT, EXIT_USER = 0, 1, 2
 
 
-def build_parser():
-    """Return the argument parser of the command line."""
-    p = argparse.ArgumentParser(
-        prog=PROG,
-        description="Co-simulate the PiezoStage and AdaptiveCompoundController FMUs and "
-                    "compare with the paper's Tables 2-5.",
-    )
-    p.add_argument("command", nargs="?", default="all", metavar="{all,run,list,identify,export}",
-                   help="all (default): run everything; run SCENARIO: one scenario; "
-                        "list: known scenarios; identify: the paper's parameter identification; "
-                        "export: parameterised FMUs")
-    p.add_argument("scenario", nargs="?", help="scenario name for 'run'")
-    p.add_argument("--out", default="out", metavar="DIR", help="output folder (default: out/)")
-    p.add_argument("--no-adaptation", action="store_true", help="switch the controller's RLS off")
-    p.add_argument("--no-preview", action="store_true",
-                   help="feed y_d(k) instead of y_d(k+d) (expect a lag error)")
-    p.add_argument("--jacobi", action="store_true",
-                   help="Jacobi master (one more sample of loop delay; mv.delay raised by 1)")
+class UsageError(Exception):
+    """A command-line mistake: reported in one line with exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (no usage dump) and name the help."""
+
+    def error(self, message):
+        raise UsageError(f"{message} (see: {self.prog} --help)")
+
+
+# ---------------------------------------------------------------------------
+# option groups shared by several subcommands (each subcommand picks its own)
+# ---------------------------------------------------------------------------
+
+def _output_option(p, what):
+    p.add_argument("--out", default="out", metavar="DIR",
+                   help=f"output folder for {what} (default: out/, created if missing)")
+
+
+def _backend_options(p):
+    p.add_argument("--backend", choices=("fmpy", "core"), default="fmpy",
+                   help="fmpy: run the FMUs (default); core: the C core through cffi, no FMI")
     p.add_argument("--fmu-dir", metavar="DIR",
                    help="folder of PiezoStage.fmu and AdaptiveCompoundController.fmu "
-                        "(default: build/fmus)")
+                        "(default: build/fmus or $PIEZO_FMU_DIR)")
+
+
+def _scenario_file_option(p):
     p.add_argument("--scenario-file", action="append", default=[], metavar="FILE",
-                   help="TOML file of extra scenarios (repeatable)")
-    p.add_argument("--no-plots", action="store_true", help="do not write PNG figures")
-    p.add_argument("--backend", choices=("fmpy", "core"), default="fmpy",
-                   help="fmpy: run the FMUs (default); core: the C core via cffi")
-    g = p.add_argument_group("identify")
-    g.add_argument("--noise-rms", type=float, metavar="UM",
-                   help="white measurement noise [um rms] on every recorded channel "
-                        "(default 0; 0.001 = 1 nm)")
-    g.add_argument("--seed", type=int, metavar="N", help="base seed of the noise (default 1)")
-    g.add_argument("--free-w0", action="store_true",
-                   help="fit w0 too (only w0 + w1 is identifiable, r_1 = 0); default: w0 fixed "
-                        "at the plant's value")
-    g.add_argument("--displacement-only", action="store_true",
-                   help="fit every step to the measured displacement, as the paper's experiment "
-                        "must (the blocks then bias each other)")
-    from .identify.cli import add_arguments as add_identification_arguments
-    add_identification_arguments(p)
+                   help="TOML file of extra scenarios (repeatable; format: harness/scenarios.py)")
+
+
+def _loop_options(p, applies_to):
+    g = p.add_argument_group(f"closed-loop options ({applies_to})")
+    g.add_argument("--no-adaptation", action="store_true", help="switch the controller's RLS off")
+    g.add_argument("--no-preview", action="store_true",
+                   help="give the controller y_d(k) instead of y_d(k+d) (expect a lag error)")
+    g.add_argument("--jacobi", action="store_true",
+                   help="Jacobi master (outputs read before inputs are set); with the default "
+                        "controller it gives the same samples as Gauss-Seidel")
+
+
+def _plots_option(p):
+    p.add_argument("--no-plots", action="store_true", help="draw no figures (PNG/SVG)")
+
+
+def _out_dir(args):
+    """Check --out now (creating nothing), so a path that cannot be a folder fails before
+    any run."""
+    from .report import check_out_dir
+
+    try:
+        return check_out_dir(args.out)
+    except OSError as exc:
+        raise UsageError(f"--out: {exc}") from None
+
+
+def _loop_settings(args):
+    return (False if args.no_adaptation else None, not args.no_preview,
+            "jacobi" if args.jacobi else "gauss-seidel")
+
+
+# ---------------------------------------------------------------------------
+# each subcommand in one place: its parser function, then its handler
+# ---------------------------------------------------------------------------
+
+def _add_all_parser(sub):
+    p = sub.add_parser(
+        "all", help="run everything: the paper's scenarios, the report (default)",
+        description="Run every tracking condition on the paper's six references and the six "
+                    "validation inputs; print the headline table next to the paper's Tables "
+                    "4/5 and write report.md, report.html, provenance.json, the CSV tables and "
+                    "the figures (PNG and SVG) to --out.")
+    _output_option(p, "the report")
+    _backend_options(p)
+    _scenario_file_option(p)
+    _plots_option(p)
+    _loop_options(p, "the base of every tracking condition")
+    add_param_file_arguments(p)
+    p.set_defaults(handler=_cmd_all)
     return p
 
 
-def _fail(message, code=2):
-    sys.stderr.write(f"{PROG}: error: {message}\n")
-    return code
+def _cmd_all(args, command):
+    from . import report
+    from .identify.cli import apply_param_files
+    from .scenarios import load_scenarios
+
+    registry = load_scenarios(args.scenario_file)
+    builtin = load_scenarios()
+    extra = [n for n in registry if n not in builtin]
+    adaptation, preview, master = _loop_settings(args)
+    _out_dir(args)
+    registry = apply_param_files(args, registry)
+    report.run_all(args.out, adaptation=adaptation, preview=preview, master=master,
+                   fmu_dir=args.fmu_dir, plots=not args.no_plots, backend=args.backend,
+                   registry=registry, extra_scenarios=extra, command=command)
+    return EXIT_OK
 
 
-def main(argv=None):
-    """Run the command line; return the exit code."""
-    parser = build_parser()
-    args = parser.parse_intermixed_args(argv)
-    if args.command not in COMMANDS:
-        return _fail(f"unknown command '{args.command}'; "
-                     f"use one of: all, run SCENARIO, list, identify, export")
-    if args.command == "run" and not args.scenario:
-        return _fail("'run' needs a scenario name (see: python -m harness list)")
-    if args.command != "run" and args.scenario:
-        return _fail(f"unexpected argument '{args.scenario}' for '{args.command}'")
-    if args.command != "identify":
-        for attr, flag in _IDENTIFY_OPTIONS:
-            if getattr(args, attr) not in (None, False):
-                return _fail(f"{flag} is only used by 'identify'")
-    else:
-        if args.noise_rms is not None and not (math.isfinite(args.noise_rms)
-                                               and args.noise_rms >= 0):
-            return _fail(f"--noise-rms must be a finite number >= 0 (um), got {args.noise_rms:g}")
-        if args.seed is not None and args.seed < 0:
-            return _fail(f"--seed must be >= 0, got {args.seed}")
-    from .identify import cli as identification_cli
-    problem = identification_cli.check_arguments(args)
-    if problem:
-        return _fail(problem)
-
-    from .checks import EXIT_RUN_FAILED, RunCheckError
-    from .scenarios import ScenarioError, load_scenarios
-    from .cosim import FMUError, UnknownParameterError
-
-    adaptation = False if args.no_adaptation else None
-    preview = not args.no_preview
-    master = "jacobi" if args.jacobi else "gauss-seidel"
-    try:
-        registry = load_scenarios(args.scenario_file)
-        if args.command == "list":
-            _list(registry)
-            return 0
-        from . import report
-        if args.command == "identify":
-            return identification_cli.run_identify(args)
-        if args.command == "export":
-            return identification_cli.run_export(args)
-        with_params = identification_cli.apply_param_files(args, registry)
-        if args.command == "run":
-            report.run_scenario(args.scenario, args.out, adaptation=adaptation, preview=preview,
-                                master=master, fmu_dir=args.fmu_dir, plots=not args.no_plots,
-                                registry=with_params, backend=args.backend)
-        else:
-            builtin = load_scenarios()
-            extra = [n for n in registry if n not in builtin or registry[n] is not builtin[n]]
-            report.run_all(args.out, adaptation=adaptation, preview=preview, master=master,
-                           fmu_dir=args.fmu_dir, plots=not args.no_plots, backend=args.backend,
-                           registry=with_params, extra_scenarios=extra)
-        return 0
-    except RunCheckError as exc:
-        return _fail(_one_line(exc), EXIT_RUN_FAILED)
-    except (ScenarioError, UnknownParameterError, FileNotFoundError) as exc:
-        return _fail(_one_line(exc))
-    except FMUError as exc:
-        return _fail(_one_line(exc), 2 if isinstance(exc, ValueError) else 1)
-    except (ValueError, TypeError, KeyError) as exc:
-        return _fail(_one_line(exc))
-    except KeyboardInterrupt:
-        return _fail("interrupted", 130)
+def _add_run_parser(sub):
+    p = sub.add_parser(
+        "run", help="run one scenario",
+        description="Run one scenario (see: list); print its table and write <SCENARIO>.csv, "
+                    "its time series and its figure to --out.")
+    p.add_argument("scenario", metavar="SCENARIO", help="scenario name (see: list)")
+    _output_option(p, "the files")
+    _backend_options(p)
+    _scenario_file_option(p)
+    _plots_option(p)
+    g = p.add_argument_group("time series")
+    x = g.add_mutually_exclusive_group()
+    x.add_argument("--no-timeseries", action="store_true",
+                   help="write no time series file (long runs)")
+    x.add_argument("--timeseries-format", choices=("csv", "npz"), default="csv",
+                   help="csv (default) or npz: NumPy arrays, less than half the CSV's size, "
+                        "read back with numpy.load(FILE)['y']")
+    _loop_options(p, "tracking scenarios only")
+    add_param_file_arguments(p)
+    p.set_defaults(handler=_cmd_run)
+    return p
 
 
-def _one_line(exc):
-    text = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
-    return " ".join(text.split())
+def _cmd_run(args, command):
+    from . import report
+    from .identify.cli import apply_param_files
+    from .scenarios import get_scenario, load_scenarios
+
+    registry = load_scenarios(args.scenario_file)
+    sc = get_scenario(args.scenario, registry)
+    if sc.kind != "tracking":
+        given = [f for f, on in (("--no-adaptation", args.no_adaptation),
+                                 ("--no-preview", args.no_preview),
+                                 ("--jacobi", args.jacobi)) if on]
+        if given:
+            raise UsageError(f"{given[0]} does not apply to '{sc.name}', a {sc.kind} scenario "
+                             f"(the plant runs alone: no controller, no reference)")
+    adaptation, preview, master = _loop_settings(args)
+    _out_dir(args)
+    registry = apply_param_files(args, registry)
+    report.run_scenario(sc.name, args.out, adaptation=adaptation, preview=preview, master=master,
+                        fmu_dir=args.fmu_dir, plots=not args.no_plots, registry=registry,
+                        backend=args.backend,
+                        timeseries=None if args.no_timeseries else args.timeseries_format)
+    return EXIT_OK
 
 
-def _list(registry):
-    kinds = {"tracking": "Tracking (closed loop, reference y_d in um)",
+def _add_list_parser(sub):
+    p = sub.add_parser("list", help="list the known scenarios",
+                       description="List the built-in scenarios and those of --scenario-file.")
+    _scenario_file_option(p)
+    p.set_defaults(handler=_cmd_list)
+    return p
+
+
+def _cmd_list(args, command):
+    from .scenarios import SCENARIO_DIR, load_scenarios
+    from pathlib import Path
+
+    registry = load_scenarios(args.scenario_file)
+    kinds = {"tracking": "Tracking (closed loop, reference y_d in µm)",
              "validation": "Validation (plant alone, input v in V)"}
     for kind, title in kinds.items():
         names = [n for n, s in registry.items() if s.kind == kind]
@@ -168,4 +214,193 @@ def _list(registry):
         print(title)
         width = max(len(n) for n in names)
         for n in names:
-            print(f"  {n:<{width}}  {registry[n].description}")
+            sc = registry[n]
+            user = "" if Path(sc.source).parent == SCENARIO_DIR else f" [{sc.source}]"
+            print(f"  {n:<{width}}  {sc.description}{user}")
+    return EXIT_OK
+
+
+def _add_identify_parser(sub):
+    p = sub.add_parser(
+        "identify", help="identify the coupled model (paper section 3) from measured records",
+        description="Identify the coupled model from measured records of voltage and "
+                    "displacement (the paper's three steps on y, then a joint refinement); or "
+                    "--demo: a virtual experiment on the PiezoStage FMU with known parameters; or "
+                    "--internal-channels: each step alone on the model's internal outputs u and "
+                    "x. Writes a parameter file keyed by FMU variable names, for export, "
+                    "--plant-params and --controller-params.")
+    p.add_argument("--out", default="out", metavar="PATH",
+                   help="the parameter file (a .json path) or a folder (default: out/)")
+    _backend_options(p)
+    add_identify_arguments(p)
+    p.set_defaults(handler=_cmd_identify)
+    return p
+
+
+def _cmd_identify(args, command):
+    from .identify.cli import check_identify_arguments, run_identify
+
+    problem = check_identify_arguments(args)
+    if problem:
+        raise UsageError(problem)
+    if not str(args.out).endswith(".json"):
+        _out_dir(args)
+    return run_identify(args)
+
+
+def _add_export_parser(sub):
+    p = sub.add_parser(
+        "export", help="parameterised FMUs from a parameter file",
+        description="Write PiezoStage.fmu and AdaptiveCompoundController.fmu with the values of "
+                    "a parameter file as their start values (the built binaries reused, the "
+                    "modelDescription rewritten, the GUID kept); each FMU takes the names it has.")
+    _output_option(p, "the two FMUs")
+    p.add_argument("--fmu-dir", metavar="DIR",
+                   help="folder of the built FMUs (default: build/fmus or $PIEZO_FMU_DIR)")
+    add_export_arguments(p)
+    p.set_defaults(handler=_cmd_export)
+    return p
+
+
+def _cmd_export(args, command):
+    from .identify.cli import run_export
+
+    _out_dir(args)
+    return run_export(args)
+
+
+#: The subcommands, in --help order: each adds its parser and sets its handler.
+SUBCOMMANDS = (_add_all_parser, _add_run_parser, _add_list_parser, _add_identify_parser,
+               _add_export_parser)
+
+
+def build_parser(prog=MODULE_PROG):
+    """Return the argument parser of the command line."""
+    p = _Parser(
+        prog=prog,
+        description="Co-simulate the PiezoStage and AdaptiveCompoundController FMUs and compare "
+                    "with the paper's Tables 2-5. Without a subcommand: all.",
+        epilog="Each subcommand has its own options: %(prog)s SUBCOMMAND --help. Exit codes: "
+               "0 done, 1 FMI fault, 2 user error, 3 a run diverged or saturated.")
+    sub = p.add_subparsers(title="subcommands", dest="command", metavar="SUBCOMMAND",
+                           parser_class=_Parser)
+    for add in SUBCOMMANDS:
+        add(sub)
+    return p
+
+
+# ---------------------------------------------------------------------------
+# main
+# ---------------------------------------------------------------------------
+
+def _program_name():
+    """'piezo-harness' from the console script, 'python -m harness' otherwise."""
+    name = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else ""
+    if not name or name in ("__main__.py", "-c", "-m") or name.endswith(".py"):
+        return MODULE_PROG
+    return name
+
+
+def _one_line(exc):
+    text = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
+    return " ".join(text.split())
+
+
+def _subcommand_names(parser):
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return set(action.choices)
+    return set()
+
+
+def _options_with_value(parser):
+    """Every option string (of every subcommand) that takes a value."""
+    out = set()
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sp in action.choices.values():
+                out |= _options_with_value(sp)
+        elif action.option_strings and action.nargs != 0:
+            out.update(action.option_strings)
+    return out
+
+
+def _with_default_command(argv, parser):
+    """No subcommand means ``all``: ``--backend core`` is ``all --backend core``.
+
+    Options given before a subcommand (``--out DIR run X``) are refused with a
+    hint: each subcommand takes its own options after its name.
+    """
+    if argv and not argv[0].startswith("-"):
+        return list(argv)
+    if argv and argv[0] in ("-h", "--help"):
+        return list(argv)
+    takes_value = _options_with_value(parser)
+    names = _subcommand_names(parser)
+    for i, tok in enumerate(argv):
+        if tok in names and (i == 0 or argv[i - 1] not in takes_value):
+            raise UsageError(f"options go after the subcommand: {parser.prog} {tok} ... "
+                             f"{' '.join(argv[:i])}")
+    return ["all", *argv]
+
+
+def main(argv=None, prog=None):
+    """Run the command line; return the exit code.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments (default: ``sys.argv[1:]``).
+    prog : str, optional
+        Program name in messages (default: the console script's name, or
+        ``python -m harness``).
+    """
+    prog = prog or _program_name()
+    argv = list(sys.argv[1:] if argv is None else argv)
+
+    def fail(message, code=EXIT_USER):
+        sys.stderr.write(f"{prog}: error: {message}\n")
+        sys.stderr.flush()
+        return code
+
+    for stream in (sys.stdout, sys.stderr):      # µ and − on a terminal that cannot show them
+        try:
+            stream.reconfigure(errors="replace")
+        except (AttributeError, ValueError):
+            pass
+    parser = build_parser(prog)
+    try:
+        argv = _with_default_command(argv, parser)
+        args, extra = parser.parse_known_args(argv)
+        if extra:
+            raise UsageError(f"'{args.command}' does not take {' '.join(extra)} "
+                             f"(see: {prog} {args.command} --help)")
+    except UsageError as exc:
+        return fail(str(exc))
+    except SystemExit as exc:                    # --help
+        return exc.code if isinstance(exc.code, int) else EXIT_OK
+
+    from .checks import EXIT_RUN_FAILED, RunCheckError
+    from .cosim import FMUError, UnknownParameterError
+    from .scenarios import ScenarioError
+
+    command = " ".join([prog, *argv])
+    try:
+        return args.handler(args, command)
+    except UsageError as exc:
+        return fail(str(exc))
+    except RunCheckError as exc:
+        return fail(_one_line(exc), EXIT_RUN_FAILED)
+    except (ScenarioError, UnknownParameterError) as exc:
+        return fail(_one_line(exc))
+    except FMUError as exc:
+        return fail(_one_line(exc), EXIT_USER if isinstance(exc, ValueError) else EXIT_FAULT)
+    except (FileNotFoundError, NotADirectoryError, IsADirectoryError, PermissionError,
+            FileExistsError) as exc:
+        return fail(_one_line(exc))
+    except OSError as exc:
+        return fail(_one_line(exc), EXIT_FAULT)
+    except (ValueError, TypeError, KeyError) as exc:
+        return fail(_one_line(exc))
+    except KeyboardInterrupt:
+        return fail("interrupted", 130)

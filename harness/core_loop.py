@@ -16,6 +16,7 @@ from ._common import (
     as_structured,
     open_loop_grid,
     prepare_closed_loop,
+    sample_range,
 )
 
 __all__ = ["simulate_closed_loop_core", "simulate_open_loop_core"]
@@ -23,12 +24,13 @@ __all__ = ["simulate_closed_loop_core", "simulate_open_loop_core"]
 
 def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
                               plant_params=None, controller_params=None, fmu_dir=None,
-                              duration=None, registry=None, step_order="plant-first"):
+                              duration=None, registry=None, step_order="plant-first",
+                              progress=None):
     """Run a tracking scenario on the C core (no FMUs).
 
     Parameters
     ----------
-    scenario, adaptation, preview, master, plant_params, controller_params, duration, registry, step_order
+    scenario, adaptation, preview, master, plant_params, controller_params, duration, registry, step_order, progress
         As :func:`harness.cosim.simulate_closed_loop` (the FMUs' semantics, emulated sample
         by sample; ``step_order`` changes nothing here, as it changes nothing there).
     fmu_dir : ignored
@@ -56,6 +58,7 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
     plant = core.Plant(setup.plant_params)
     ctrl = core.Controller(setup.controller_params)
     n = setup.n
+    samples = sample_range(n, setup.h, progress)
     rows = np.zeros((n, len(CLOSED_LOOP_FIELDS)))
     rows[:, 0] = setup.time
     rows[:, 1] = setup.y_d
@@ -65,7 +68,7 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
     published = ctrl.output          # the controller's outputs before its first step
     if not setup.feedthrough:
         # v computed from the inputs of t_k is published at t_(k+1) (FMU default)
-        for k in range(n):
+        for k in samples:
             rows[k, 2] = out.y
             rows[k, 3] = out.y_meas
             rows[k, 4:] = published
@@ -74,7 +77,7 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
             out = p_step(applied)
     elif setup.master == "gauss-seidel":
         # direct feedthrough read after the inputs are set: v(k) from the inputs of t_k
-        for k in range(n):
+        for k in samples:
             c = c_step(y_ref[k], out.y_meas)
             rows[k, 2] = out.y
             rows[k, 3] = out.y_meas
@@ -84,7 +87,7 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
         # direct feedthrough under a Jacobi master: the v read at t_k is a peek with the
         # inputs held from t_(k-1); the step then commits v from the inputs of t_k
         held = (0.0, 0.0)
-        for k in range(n):
+        for k in samples:
             c = ctrl.peek(*held)
             rows[k, 2] = out.y
             rows[k, 3] = out.y_meas
@@ -95,7 +98,8 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
     return as_structured(rows, CLOSED_LOOP_DTYPE)
 
 
-def simulate_open_loop_core(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None):
+def simulate_open_loop_core(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None,
+                            progress=None):
     """Drive the core plant alone; same result as :func:`harness.cosim.simulate_open_loop`.
 
     Parameters
@@ -107,6 +111,8 @@ def simulate_open_loop_core(plant_params, v_signal, *, step_size=0.0005, fmu_dir
     step_size : float
         Sample period h [s].
     fmu_dir : ignored
+    progress : callable, optional
+        As :func:`harness.cosim.simulate_open_loop`.
 
     Returns
     -------
@@ -124,7 +130,9 @@ def simulate_open_loop_core(plant_params, v_signal, *, step_size=0.0005, fmu_dir
     rows[:, 0] = time
     rows[:, 1] = v
     out = plant.output
-    for k, vk in enumerate(v.tolist()):
+    vl = v.tolist()
+    for k in sample_range(n, float(step_size), progress):
+        vk = vl[k]
         rows[k, 3] = out.x
         rows[k, 4] = out.y
         rows[k, 5] = out.y_meas

@@ -50,6 +50,7 @@ from ._common import (
     as_structured,
     open_loop_grid,
     prepare_closed_loop,
+    sample_range,
 )
 
 __all__ = [
@@ -357,7 +358,7 @@ def _step_error(inst, what, k, h, exc):
 
 def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
                          plant_params=None, controller_params=None, fmu_dir=None,
-                         duration=None, registry=None, step_order="plant-first"):
+                         duration=None, registry=None, step_order="plant-first", progress=None):
     """Run a tracking scenario through both FMUs with fmpy.
 
     Parameters
@@ -384,6 +385,8 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
         Scenario registry for name lookup (default: built-in scenarios).
     step_order : {"plant-first", "controller-first"}
         Order of the two doStep calls of the Gauss-Seidel master.
+    progress : callable, optional
+        Called as ``progress(done, n)`` after every simulated second and at the end.
 
     Returns
     -------
@@ -423,7 +426,7 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
         stop = n * h
         plant.initialize(setup.plant_params, stop)
         ctrl.initialize(setup.controller_params, stop)
-        _run_closed_loop(plant, ctrl, setup, rows)
+        _run_closed_loop(plant, ctrl, setup, rows, progress)
     finally:
         if ctrl is not None:
             ctrl.close()
@@ -432,7 +435,7 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
     return as_structured(rows, CLOSED_LOOP_DTYPE)
 
 
-def _run_closed_loop(plant, ctrl, setup, rows):
+def _run_closed_loop(plant, ctrl, setup, rows, progress=None):
     from fmpy.fmi2 import fmi2Boolean, fmi2Real
 
     pf, cf = plant.fmu, ctrl.fmu
@@ -465,7 +468,7 @@ def _run_closed_loop(plant, ctrl, setup, rows):
     stage = "fmi2GetReal"
     inst = plant
     try:
-        for k in range(n):
+        for k in sample_range(n, h, progress):
             t = times[k]
             inst, stage = plant, "fmi2GetReal"
             p_get(pc, vr_p_out, 2, p_out)                  # y(k), y_meas(k)
@@ -509,7 +512,7 @@ def _run_closed_loop(plant, ctrl, setup, rows):
         raise _step_error(inst, stage, k, h, exc) from None
 
 
-def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None):
+def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None, progress=None):
     """Drive the PiezoStage FMU alone with a voltage sequence.
 
     Parameters
@@ -522,6 +525,8 @@ def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None
         Sample period h [s] (also set as the FMU's ``h`` unless overridden).
     fmu_dir : str or Path, optional
         Folder holding ``PiezoStage.fmu``.
+    progress : callable, optional
+        Called as ``progress(done, n)`` after every simulated second and at the end.
 
     Returns
     -------
@@ -561,7 +566,7 @@ def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None
         times = time.tolist()
         k, stage = 0, "fmi2GetReal"
         try:
-            for k in range(n):
+            for k in sample_range(n, h, progress):
                 stage = "fmi2GetReal"
                 get(comp, vr_out, 4, out)        # u(k-1), x(k), y(k), y_meas(k)
                 rows[k, 3:6] = np_out[1:4]

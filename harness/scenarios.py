@@ -7,19 +7,18 @@ parameter sets and any number of scenarios::
     "creep.alpha" = -0.0085
 
     [[scenario]]
-    name = "my_case"                   # required, [A-Za-z0-9_.-]+
+    name = "my_case"                   # required, [A-Za-z0-9_.-]+, not a known name
     kind = "tracking"                  # "tracking" (closed loop, y_d in um)
                                        # or "validation" (plant alone, v in V)
     description = "free text"          # optional
     extends = "track_5hz"              # optional: start from a known scenario
     duration = 3.0                     # [s], default 3.0
-    step_size = 0.0005                 # [s], default 0.0005 (h)
+    step_size = 0.0005                 # [s], default 0.0005; must equal the FMUs' h
     metric_window = [1.0, 3.0]         # [s], half-open, default [0, duration)
     plant_set = "my_plant"             # optional, a parameter set's name
-    controller_set = "..."             # optional
+    controller_set = "..."             # optional (tracking only)
     plant = { "pi.w0" = 0.35 }         # optional overrides by FMU variable name
-    controller = { "rls.forgetting" = 0.99 }
-    paper = { e_rms_um = 0.0254, e_r = 0.0036 }   # optional reference values
+    controller = { "rls.forgetting" = 0.99 }   # tracking only
 
     # the signal: "reference" (y_d, tracking) or "input" (v, validation)
     reference = { type = "sines", amplitudes = [10.0], frequencies = [5.0],
@@ -27,10 +26,29 @@ parameter sets and any number of scenarios::
     # or
     reference = { type = "csv", file = "ref.csv" }     # path relative to the TOML file
 
-The CSV holds two columns, time [s] and value, with an optional header line
-(``time,y_d`` or ``time,v``); time must be strictly increasing and cover the
-run; values are linearly interpolated onto the sample grid (held constant
-after the last row, which only matters for the reference preview).
+Rules a file is checked against (each broken rule is one error naming the
+file, the scenario and the field):
+
+* a name names one scenario: a user scenario may not reuse a built-in name
+  or one defined by an earlier file (use ``extends`` to start from it);
+* ``step_size`` is the sample period of the run and must equal the FMUs'
+  ``h`` (0.0005 s unless the scenario sets ``"h"`` in ``plant`` and
+  ``controller``): the harness exchanges values once per sample;
+* every sine frequency must lie below the Nyquist frequency
+  ``1 / (2 step_size)``;
+* a validation scenario runs the plant alone, so it takes no controller
+  overrides;
+* paper values (``paper = {...}``: ``e_rms_um``/``e_r`` for tracking,
+  ``hammerstein_*``/``coupled_*`` for validation) belong to the built-in
+  scenarios of the paper's tables; a user file may not set them, and a user
+  scenario that ``extends`` a built-in one does not inherit them.
+
+The CSV holds two columns, time [s] and value, with an optional header line,
+``time,y_d`` for a tracking reference [um] and ``time,v`` for a validation
+input [V] (a unit may follow, e.g. ``time [s],y_d [um]``); time must be
+strictly increasing and cover the run; values are linearly interpolated onto
+the sample grid (held constant after the last row, which only matters for the
+reference preview).
 
 Override precedence: the base scenario (``extends``), then the named set,
 then the scenario's own ``plant``/``controller`` tables.
@@ -297,10 +315,7 @@ def read_signal_csv(path, value_name="value"):
             t, y = float(cells[0]), float(cells[1])
         except ValueError:
             if first_data and not times:
-                if cells[0].lower() not in ("time", "t", "time_s", "t_s"):
-                    raise ScenarioFileError(
-                        path, f"line {lineno}: header's first column must be 'time', "
-                              f"found '{cells[0]}'") from None
+                _check_csv_header(cells, path, lineno, value_name)
                 first_data = False
                 continue
             bad = cells[0] if not _is_float(cells[0]) else cells[1]
@@ -317,6 +332,35 @@ def read_signal_csv(path, value_name="value"):
     if len(times) < 2:
         raise ScenarioFileError(path, f"needs at least 2 data rows (time,{value_name}), found {len(times)}")
     return np.asarray(times), np.asarray(values)
+
+
+#: Accepted header names of the time column, after lower-casing and dropping a unit.
+_TIME_HEADERS = ("time", "t")
+#: What each signal's value column is, for the header check's message.
+_VALUE_MEANING = {"y_d": "the desired displacement y_d [um] of a tracking reference",
+                  "v": "the input voltage v [V] of a validation input"}
+_UNIT_RE = re.compile(r"\s*(\[[^\]]*\]|\([^)]*\))$|_(s|um|µm|v)$", re.IGNORECASE)
+
+
+def _header_name(cell):
+    """A header cell without its unit: 'time [s]', 'time_s', 'y_d (um)' -> 'time', 'time', 'y_d'."""
+    return _UNIT_RE.sub("", cell.strip()).strip().lower()
+
+
+def _check_csv_header(cells, path, lineno, value_name):
+    """Refuse a header that does not say ``time,<value_name>`` (e.g. a voltage file as a reference)."""
+    if _is_float(cells[0]):      # a data row with a bad value, not a header
+        raise ScenarioFileError(path, f"line {lineno}: '{cells[1]}' is not a number")
+    time_name, value = _header_name(cells[0]), _header_name(cells[1])
+    expected = f"time,{value_name}"
+    if time_name not in _TIME_HEADERS:
+        raise ScenarioFileError(
+            path, f"line {lineno}: header's first column must be 'time', found '{cells[0]}' "
+                  f"(expected header '{expected}')")
+    if value_name in _VALUE_MEANING and value != value_name.lower():
+        raise ScenarioFileError(
+            path, f"line {lineno}: header's second column is '{cells[1]}', expected "
+                  f"'{value_name}': this file must hold {_VALUE_MEANING[value_name]}")
 
 
 def _is_float(text):
@@ -409,7 +453,10 @@ def _parse_signal(spec, path, scenario, fieldname, value_name):
         csv_path = Path(file)
         if not csv_path.is_absolute() and path is not None:
             csv_path = Path(path).resolve().parent / csv_path
-        t, y = read_signal_csv(csv_path, value_name)
+        try:
+            t, y = read_signal_csv(csv_path, value_name)
+        except ScenarioFileError as exc:    # name the scenario that wants the CSV, too
+            raise ScenarioFileError(path, str(exc), scenario, f"{fieldname}.file") from None
         return Signal("table", table_time=tuple(t.tolist()), table_value=tuple(y.tolist()),
                       source=str(csv_path))
     raise ScenarioFileError(path, f"'type' must be \"sines\" or \"csv\", got {kind!r}",
@@ -424,7 +471,7 @@ def _reject_unknown(table, allowed, path, scenario, fieldname):
                   f"{', '.join(sorted(allowed))}", scenario, fieldname)
 
 
-def _parse_scenario(entry, index, path, known, sets):
+def _parse_scenario(entry, index, path, known, sets, builtin=False):
     label = f"#{index + 1}"
     if not isinstance(entry, dict):
         raise ScenarioFileError(path, "each [[scenario]] must be a table", label)
@@ -496,6 +543,16 @@ def _parse_scenario(entry, index, path, known, sets):
             path, f"must satisfy 0 <= start < stop <= duration ({duration:g} s), got "
                   f"[{window[0]:g}, {window[1]:g}]", name, "metric_window")
 
+    if kind == "validation":
+        given = [k for k in ("controller", "controller_set") if k in entry]
+        if given:
+            raise ScenarioFileError(
+                path, "a validation scenario runs the plant alone: controller overrides do not "
+                      "apply (remove them, or make it a tracking scenario)", name, given[0])
+        if base is not None and base.controller:
+            raise ScenarioFileError(
+                path, f"'{base.name}' has controller overrides, which do not apply to a "
+                      f"validation scenario (the plant runs alone)", name, "extends")
     params = {}
     for which in ("plant", "controller"):
         merged = dict(getattr(base, which)) if base else {}
@@ -511,7 +568,17 @@ def _parse_scenario(entry, index, path, known, sets):
             merged.update(_check_params(entry[which], path, name, which))
         params[which] = MappingProxyType(merged)
 
-    paper = dict(base.paper) if base else {}
+    _check_sample_period(step, params, kind, path, name, "step_size" in entry)
+    if signal.kind == "sines":
+        _check_nyquist(signal, step, path, name, sig_key)
+
+    # Paper values belong to the paper's own (built-in) scenarios: a user scenario
+    # that extends one is a different experiment and must not be shown next to them.
+    paper = dict(base.paper) if base is not None and builtin else {}
+    if "paper" in entry and not builtin:
+        raise ScenarioFileError(
+            path, "paper values belong to the built-in scenarios of the paper's tables; a user "
+                  "scenario is reported without them (remove this table)", name, "paper")
     if "paper" in entry:
         table = entry["paper"]
         if not isinstance(table, dict):
@@ -530,6 +597,40 @@ def _parse_scenario(entry, index, path, known, sets):
     )
 
 
+#: Relative tolerance of the sample-period check (h is written with a few digits).
+_H_RTOL = 1e-9
+
+
+def _check_sample_period(step, params, kind, path, name, step_given):
+    """``step_size`` must be the FMUs' sample period h: the harness exchanges values once per
+    sample, so any other step would silently resample the reference and hold the inputs."""
+    models = [("plant", "PiezoStage")]
+    if kind == "tracking":
+        models.append(("controller", "AdaptiveCompoundController"))
+    for which, model in models:
+        h = params[which].get("h", DEFAULT_STEP_SIZE)
+        if isinstance(h, bool) or abs(float(h) - step) > _H_RTOL * step:
+            where = (f"its {which} override \"h\" = {h!r}" if "h" in params[which]
+                     else f"h = {DEFAULT_STEP_SIZE:g} s, the {model} default")
+            hint = (f"set step_size = {float(h):g}" if not isinstance(h, bool) else "fix \"h\"")
+            raise ScenarioFileError(
+                path, f"step_size {step:g} s differs from the sample period of {model} "
+                      f"({where}); the run steps once per sample: {hint}, or set \"h\" in plant "
+                      f"and controller to change the sample period",
+                name, "step_size" if step_given else which)
+
+
+def _check_nyquist(signal, step, path, name, fieldname):
+    """Every tone must lie below the Nyquist frequency of the sample grid."""
+    nyquist = 0.5 / step
+    for f, a in zip(signal.frequencies, signal.amplitudes):
+        if a != 0 and f >= nyquist:
+            raise ScenarioFileError(
+                path, f"{f:g} Hz is at or above the Nyquist frequency {nyquist:g} Hz of "
+                      f"step_size {step:g} s: its samples alias to a different tone",
+                name, f"{fieldname}.frequencies")
+
+
 def _check_table_covers(signal, duration, step, path, name, fieldname):
     t0, t1 = signal.table_time[0], signal.table_time[-1]
     last = (round(duration / step) - 1) * step
@@ -539,7 +640,7 @@ def _check_table_covers(signal, duration, step, path, name, fieldname):
                   f"[0, {last:g}] s", name, fieldname)
 
 
-def load_scenario_file(path, known=None, parameter_sets=None):
+def load_scenario_file(path, known=None, parameter_sets=None, builtin=False):
     """Parse one scenario TOML file.
 
     Parameters
@@ -550,6 +651,9 @@ def load_scenario_file(path, known=None, parameter_sets=None):
     parameter_sets : dict, optional
         Parameter sets already known (for ``plant_set``/``controller_set``);
         updated in place with the file's ``[parameter_sets.*]``.
+    builtin : bool
+        The file is one of the built-in scenario files: it may set paper
+        values, and ``extends`` inherits them.
 
     Returns
     -------
@@ -559,7 +663,8 @@ def load_scenario_file(path, known=None, parameter_sets=None):
     Raises
     ------
     ScenarioFileError
-        Unreadable file, TOML syntax error, or an invalid field.
+        Unreadable file, TOML syntax error, an invalid field, or a name that
+        is already known.
     """
     path = Path(path)
     try:
@@ -591,9 +696,16 @@ def load_scenario_file(path, known=None, parameter_sets=None):
     known_now = dict(known or {})
     out = {}
     for i, entry in enumerate(entries):
-        sc = _parse_scenario(entry, i, path, known_now, sets)
+        sc = _parse_scenario(entry, i, path, known_now, sets, builtin)
         if sc.name in out:
             raise ScenarioFileError(path, f"duplicate scenario name '{sc.name}'", sc.name, "name")
+        if sc.name in (known or {}):
+            other = known[sc.name]
+            owner = ("a built-in scenario" if Path(other.source).parent == SCENARIO_DIR
+                     else f"a scenario of {other.source}")
+            raise ScenarioFileError(
+                path, f"'{sc.name}' is already the name of {owner}; choose another name "
+                      f"(extends = \"{sc.name}\" starts from it)", sc.name, "name")
         out[sc.name] = sc
         known_now[sc.name] = sc
     return out
@@ -609,7 +721,7 @@ def load_scenarios(files=(), include_builtin=True):
     ----------
     files : iterable of str or Path
         User scenario files, read in order (later files may ``extends``
-        scenarios of earlier ones and override their names).
+        scenarios of earlier ones; no file may reuse a known name).
     include_builtin : bool
         Start from the built-in scenarios of ``harness/scenarios/``.
 
@@ -624,7 +736,8 @@ def load_scenarios(files=(), include_builtin=True):
         if not _BUILTIN_CACHE:
             b_reg, b_sets = {}, {}
             for fname in BUILTIN_FILES:
-                b_reg.update(load_scenario_file(SCENARIO_DIR / fname, b_reg, b_sets))
+                b_reg.update(load_scenario_file(SCENARIO_DIR / fname, b_reg, b_sets,
+                                                builtin=True))
             _BUILTIN_CACHE["registry"] = b_reg
             _BUILTIN_CACHE["sets"] = b_sets
         registry.update(_BUILTIN_CACHE["registry"])

@@ -1,6 +1,7 @@
 """The README's main job (``python -m harness``) and ``run`` end to end, as subprocesses, on the
-C core backend: the files and tables of harness/report.py checked against DESIGN.md section 4's
-bounds, the README's lag formula, the paper's Tables 4/5 and tests/numpy_reference.py."""
+C core backend: the files and tables of harness/report/ checked against DESIGN.md section 4's
+bounds, the README's lag formula, the paper's Tables 4/5 and tests/numpy_reference.py; the
+report (headline table, provenance, figures) in tests/test_harness_document.py."""
 
 import csv
 import math
@@ -24,8 +25,9 @@ FREQS = {"1hz": (1,), "5hz": (5,), "10hz": (10,), "20hz": (20,), "1_5_10hz": (1,
 # DESIGN.md section 4 / paper Tables 4/5: e_rms [nm], e_r [%]
 PAPER = {"1hz": (7.6, 0.11), "5hz": (25.4, 0.36), "10hz": (56.0, 0.80), "20hz": (115.3, 1.63),
          "1_5_10hz": (60.0, 0.49), "1_10_20hz": (178.7, 1.46)}
-CONDITIONS = (("nominal", "track_", 1, 1), ("mismatch", "mismatch_", 1, 1),
-              ("mismatch_no_adaptation", "mismatch_", 0, 1), ("mismatch_no_preview", "mismatch_", 1, 0))
+# report order: the headline, its two ablations, the nominal-model check
+CONDITIONS = (("mismatch", "mismatch_", 1, 1), ("mismatch_no_adaptation", "mismatch_", 0, 1),
+              ("mismatch_no_preview", "mismatch_", 1, 0), ("nominal", "track_", 1, 1))
 VALIDATION = (("validate_1hz", "1 Hz", 1), ("validate_10hz", "10 Hz", 10),
               ("validate_20hz", "20 Hz", 20), ("validate_50hz", "50 Hz", 50),
               ("validate_100hz", "100 Hz", 100), ("validate_5_40_80hz", "5/40/80 Hz", "5/40/80"))
@@ -83,10 +85,10 @@ def _rows(tracking, condition):
 
 
 def test_main_job_writes_four_conditions_of_six_scenarios(main_job):
-    """Reference: harness/report.py's documented layout (4 conditions x the 6 scenarios of
-    Tables 4/5, in order, flags as the condition says), the paper's values of DESIGN.md
+    """Reference: harness/report/'s documented layout (4 conditions x the 6 scenarios of
+    Tables 4/5, headline first, flags as the condition says), the paper's values of DESIGN.md
     section 4 in every row (um and fraction, exact), 4000 samples in the [1, 3) s window,
-    and the five report files; no PNG with --no-plots."""
+    and the five report files; no figure with --no-plots."""
     _, out, tracking = main_job
     want = [(c, p + s, a, pv) for c, p, a, pv in CONDITIONS for s in SCEN]
     got = [(r["condition"], r["scenario"], int(r["adaptation"]), int(r["preview"])) for r in tracking]
@@ -97,7 +99,8 @@ def test_main_job_writes_four_conditions_of_six_scenarios(main_job):
         assert float(r["paper_e_r"]) == pytest.approx(PAPER[s][1] / 100, rel=1e-12)
         assert int(r["n_samples"]) == 4000 and r["master"] == "gauss-seidel"
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["report.md", "tracking.csv", "tracking.md", "validation.csv", "validation.md"]
+    assert names == ["provenance.json", "report.html", "report.md", "tracking.csv",
+                     "validation.csv"]
 
 
 def test_main_job_nominal_and_mismatch_rows_meet_the_bounds(main_job):
@@ -125,24 +128,51 @@ def test_main_job_preview_off_rows_follow_the_lag_formula(main_job):
         assert float(rows[s]["e_rms_um"]) == pytest.approx(lag_rms(FREQS[s]), rel=0.05), s
 
 
-def test_main_job_printed_tables_show_ours_next_to_the_paper(main_job):
-    """Reference: the paper's Tables 4/5 (DESIGN.md section 4): in each of the four printed
-    tracking tables, every scenario line shows the paper's e_rms (7.6, 25.4, 56, 115.3, 60.0,
-    178.7 nm) and e_r (0.11, 0.36, 0.80, 1.63, 0.49, 1.46 %) exactly, and our values equal the
-    CSV's to the 4 printed digits (rel. 1e-3)."""
+def test_main_job_prints_the_headline_table_first(main_job):
+    """Reference: the paper's Tables 4/5 (DESIGN.md section 4). The first table printed is the
+    headline (mismatch, adaptation on, preview on): every scenario line shows our e_rms and
+    e_r equal to the CSV's to the 4 printed digits (rel. 1e-3), the paper's e_rms (7.6, 25.4,
+    56, 115.3, 60.0, 178.7 nm) and e_r (0.11, 0.36, 0.80, 1.63, 0.49, 1.46 %) exactly, and
+    ratio = ours / paper to its 3 printed digits."""
     proc, _, tracking = main_job
-    csv_rows = {(r["condition"], r["scenario"]): r for r in tracking}
+    rows = _rows(tracking, "mismatch")
     lines = proc.stdout.splitlines()
-    heads = [i for i, l in enumerate(lines) if l.startswith("Tracking: ")]
-    assert len(heads) == 4
-    for (cond, prefix, _, _), i in zip(CONDITIONS, heads):
-        for j, s in enumerate(SCEN):
-            cells = lines[i + 3 + j].split()
-            assert cells[0] == prefix + s
-            assert (float(cells[2]), float(cells[5])) == PAPER[s], cells
-            r = csv_rows[(cond, prefix + s)]
-            assert float(cells[1]) == pytest.approx(float(r["e_rms_um"]) * 1e3, rel=1e-3)
-            assert float(cells[4]) == pytest.approx(float(r["e_r"]) * 100, rel=1e-3)
+    assert lines[0].startswith("Headline (mismatch, adaptation on, preview on) vs the paper")
+    assert lines[1].split() == ["scenario", "e_rms", "ours", "[nm]", "paper", "[nm]", "ratio",
+                                "e_r", "ours", "[%]", "paper", "[%]", "ratio"]
+    for j, s in enumerate(SCEN):
+        cells = lines[3 + j].split()
+        assert cells[0] == "mismatch_" + s
+        assert (float(cells[2]), float(cells[5])) == PAPER[s], cells
+        ours_nm, ours_pct = float(rows[s]["e_rms_um"]) * 1e3, float(rows[s]["e_r"]) * 100
+        assert float(cells[1]) == pytest.approx(ours_nm, rel=1e-3)
+        assert float(cells[4]) == pytest.approx(ours_pct, rel=1e-3)
+        assert float(cells[3]) == pytest.approx(ours_nm / PAPER[s][0], rel=2e-3)
+        assert float(cells[6]) == pytest.approx(ours_pct / PAPER[s][1], rel=2e-3)
+
+
+def test_main_job_prints_every_condition_side_by_side(main_job):
+    """Reference: tracking.csv. The second table has one row per reference (1 Hz ... 1/10/20
+    Hz), the paper's e_rms, then the e_rms [nm] of the headline, RLS off, no preview and the
+    nominal model, each equal to the CSV's to its printed digits (3, or 2 for round-off in
+    e-notation); and no printed line is wider than 100 characters (the validation table
+    included)."""
+    proc, out, tracking = main_job
+    lines = proc.stdout.splitlines()
+    i = lines.index("All conditions: e_rms [nm] per reference")
+    assert lines[i + 1].split() == ["reference", "paper", "headline", "RLS", "off", "no",
+                                    "preview", "nominal", "model"]
+    labels = ("1 Hz", "5 Hz", "10 Hz", "20 Hz", "1/5/10 Hz", "1/10/20 Hz")
+    for j, (s, label) in enumerate(zip(SCEN, labels)):
+        line = lines[i + 3 + j]
+        assert line.startswith(label + " ")
+        cells = line[len(label):].split()
+        assert float(cells[0]) == PAPER[s][0]
+        for cell, (cond, _, _, _) in zip(cells[1:], CONDITIONS):
+            want = float(_rows(tracking, cond)[s]["e_rms_um"]) * 1e3
+            digits_rel = 5e-2 if "e" in cell else 5e-3      # round-off printed as 1.4e-10
+            assert float(cell) == pytest.approx(want, rel=digits_rel), (cond, s)
+    assert max(len(line) for line in lines if str(out) not in line) <= 100
 
 
 def test_main_job_validation_csv_equals_numpy_reference(main_job):

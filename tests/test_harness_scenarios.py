@@ -87,7 +87,6 @@ duration = 0.5
 metric_window = [0.25, 0.5]
 reference = { type = "sines", amplitudes = [2.0, 1.0], frequencies = [4.0, 8.0], phases = [0.5, 0.0], offset = 1.0 }
 controller = { "rls.forgetting" = 0.99, "mv.delay" = 0 }
-paper = { e_rms_um = 0.01 }
 
 [[scenario]]
 name = "my_mismatch"
@@ -108,6 +107,9 @@ duration = 2.0
     assert mm.plant["creep.alpha"] == -0.0085
     assert (mm.duration, mm.metric_window) == (2.0, (1.0, 2.0))   # inherited window, clipped
     assert mm.signal == get_scenario("track_5hz").signal
+    # a user scenario is not the paper's experiment: no paper values, even through extends
+    assert dict(mm.paper) == {} and dict(sc.paper) == {}
+    assert dict(get_scenario("mismatch_5hz").paper) == {"e_rms_um": 0.0254, "e_r": 0.0036}
 
 
 def test_csv_reference_is_interpolated(tmp_path):
@@ -189,3 +191,128 @@ def test_unknown_scenario_lists_known_names():
     msg = str(info.value)
     assert msg.startswith("unknown scenario 'track_2hz'; known scenarios: track_1hz, track_5hz")
     assert "mismatch_1_10_20hz" in msg and "validate_100hz" in msg
+
+
+# ---------------------------------------------------------------------------
+# rules a user file is checked against (harness/scenarios.py's docstring)
+# ---------------------------------------------------------------------------
+
+def _one(tmp_path, body, name="s.toml"):
+    f = tmp_path / name
+    f.write_text(body)
+    return f
+
+
+@pytest.mark.parametrize("freq,ok", [(999.0, True), (1000.0, False), (2500.0, False)])
+def test_a_tone_must_lie_below_nyquist(tmp_path, freq, ok):
+    # Reference: sampling theorem, f_N = 1 / (2 h) = 1000 Hz at h = 0.5 ms; a tone at f_N
+    # samples to sin(pi k) = 0, one above aliases.
+    f = _one(tmp_path, f'[[scenario]]\nname = "t"\nkind = "tracking"\nduration = 0.5\n'
+                       f'reference = {{ type = "sines", amplitudes = [1.0, 1.0], '
+                       f'frequencies = [5.0, {freq}] }}\n')
+    if ok:
+        assert load_scenario_file(f)["t"].signal.frequencies == (5.0, freq)
+    else:
+        with pytest.raises(ScenarioFileError, match=r"field 'reference.frequencies': "
+                                                    rf"{freq:g} Hz is at or above the Nyquist"):
+            load_scenario_file(f)
+
+
+def test_a_silent_tone_above_nyquist_is_allowed(tmp_path):
+    f = _one(tmp_path, '[[scenario]]\nname = "t"\nkind = "validation"\nduration = 0.5\n'
+                       'input = { type = "sines", amplitudes = [1.0, 0.0], '
+                       'frequencies = [5.0, 3000.0], offset = 5.0 }\n')
+    assert load_scenario_file(f)["t"].signal.amplitudes == (1.0, 0.0)
+
+
+def test_step_size_must_be_the_fmus_sample_period(tmp_path):
+    # both FMUs' h set to the step: accepted; only the plant's: the controller's default
+    # h = 0.5 ms still differs, refused naming it
+    both = _one(tmp_path, '[[scenario]]\nname = "slow"\nextends = "track_5hz"\n'
+                          'step_size = 0.001\nplant = { h = 0.001 }\ncontroller = { h = 0.001 }\n')
+    sc = load_scenarios([both])["slow"]
+    assert (sc.step_size, sc.n_samples) == (0.001, 3000)
+    plant_only = _one(tmp_path, '[[scenario]]\nname = "slow"\nextends = "track_5hz"\n'
+                                'step_size = 0.001\nplant = { h = 0.001 }\n', "p.toml")
+    with pytest.raises(ScenarioFileError, match=r"field 'step_size': step_size 0.001 s differs "
+                                                r"from the sample period of "
+                                                r"AdaptiveCompoundController"):
+        load_scenarios([plant_only])
+    h_only = _one(tmp_path, '[[scenario]]\nname = "fast_h"\nextends = "validate_1hz"\n'
+                            'plant = { h = 0.001 }\n', "h.toml")
+    with pytest.raises(ScenarioFileError, match=r"field 'plant': step_size 0.0005 s differs "
+                                                r"from the sample period of PiezoStage \(its "
+                                                r"plant override \"h\" = 0.001\)"):
+        load_scenarios([h_only])
+
+
+def test_default_step_size_is_the_fmus_h():
+    # Reference: the start value of h in both model descriptions; the sample-period check
+    # above compares with DEFAULT_STEP_SIZE, so it must be the FMUs' h.
+    import xml.etree.ElementTree as ET
+    from pathlib import Path
+    from harness.scenarios import DEFAULT_STEP_SIZE
+
+    root = Path(__file__).resolve().parents[1] / "modelDescription"
+    for model in ("PiezoStage", "AdaptiveCompoundController"):
+        xml = ET.parse(root / f"{model}.xml").getroot()
+        var = next(v for v in xml.iter("ScalarVariable") if v.get("name") == "h")
+        assert float(var.find("Real").get("start")) == DEFAULT_STEP_SIZE, model
+
+
+def test_validation_scenario_takes_no_controller(tmp_path):
+    for body, field in [
+        ('[[scenario]]\nname = "v"\nextends = "validate_1hz"\ncontroller_set = "x"\n',
+         "controller_set"),
+        ('[[scenario]]\nname = "t"\nextends = "track_1hz"\n'
+         'controller = { "rls.forgetting" = 0.99 }\n'
+         '[[scenario]]\nname = "v"\nextends = "t"\nkind = "validation"\n'
+         'input = { type = "sines", amplitudes = [1.0], frequencies = [1.0], offset = 5.0 }\n',
+         "extends"),
+    ]:
+        f = _one(tmp_path, body)
+        with pytest.raises(ScenarioFileError, match=rf"scenario 'v': field '{field}': .*"
+                                                    r"(do not apply|does not apply|which do not)"):
+            load_scenarios([f])
+
+
+def test_names_are_unique_across_files(tmp_path):
+    a = _one(tmp_path, '[[scenario]]\nname = "mine"\nextends = "track_5hz"\n', "a.toml")
+    b = _one(tmp_path, '[[scenario]]\nname = "mine"\nextends = "track_10hz"\n', "b.toml")
+    with pytest.raises(ScenarioFileError, match=rf"{b}: scenario 'mine': field 'name': 'mine' "
+                                                rf"is already the name of a scenario of {a}"):
+        load_scenarios([a, b])
+    c = _one(tmp_path, '[[scenario]]\nname = "mismatch_5hz"\nextends = "mismatch_5hz"\n', "c.toml")
+    with pytest.raises(ScenarioFileError, match="already the name of a built-in scenario"):
+        load_scenarios([c])
+
+
+@pytest.mark.parametrize("header,kind,ok", [
+    ("time,y_d", "tracking", True),
+    ("time [s],y_d [um]", "tracking", True),
+    ("t_s,y_d_um", "tracking", True),
+    ("Time,Y_D (µm)", "tracking", True),
+    ("time,v", "tracking", False),
+    ("time,y", "tracking", False),
+    ("time,v [V]", "validation", True),
+    ("time,y_d", "validation", False),
+])
+def test_csv_header_must_name_the_signal(tmp_path, header, kind, ok):
+    (tmp_path / "sig.csv").write_text(f"{header}\n0,1\n1,2\n")
+    key = "reference" if kind == "tracking" else "input"
+    f = _one(tmp_path, f'[[scenario]]\nname = "c"\nkind = "{kind}"\nduration = 0.5\n'
+                       f'{key} = {{ type = "csv", file = "sig.csv" }}\n')
+    if ok:
+        assert load_scenario_file(f)["c"].signal.evaluate([0.5])[0] == pytest.approx(1.5)
+    else:
+        with pytest.raises(ScenarioFileError, match=rf"scenario 'c': field '{key}.file': "
+                                                    r".*sig.csv: line 1: header's second column"):
+            load_scenario_file(f)
+
+
+def test_a_bad_value_in_the_first_row_is_not_taken_for_a_header(tmp_path):
+    (tmp_path / "r.csv").write_text("0,abc\n1,2\n")
+    f = _one(tmp_path, '[[scenario]]\nname = "c"\nkind = "tracking"\nduration = 0.5\n'
+                       'reference = { type = "csv", file = "r.csv" }\n')
+    with pytest.raises(ScenarioFileError, match="line 1: 'abc' is not a number"):
+        load_scenario_file(f)

@@ -340,9 +340,10 @@ def test_cli_identify_noise_and_errors(tmp_path):
     assert "noise 1 nm rms" in proc.stdout
     rows = {r["parameter"]: r for r in csv.DictReader(open(tmp_path / "identification.csv"))}
     assert 1e-5 < abs(float(rows["k_c (1 Hz)"]["rel_error"])) < 1e-3
-    for args, msg in [(["identify", "--noise-rms", "-1"], "--noise-rms must be a finite number"),
-                      (["list", "--noise-rms", "0.001"], "--noise-rms is only used by 'identify'"),
-                      (["identify", "extra"], "unexpected argument 'extra' for 'identify'"),
+    for args, msg in [(["identify", "--internal-channels", "--noise-rms", "-1"],
+                       "--noise-rms must be a finite number"),
+                      (["list", "--noise-rms", "0.001"], "'list' does not take --noise-rms"),
+                      (["identify", "extra"], "'identify' does not take extra"),
                       (["identify", "--internal-channels", "--fmu-dir", str(tmp_path)],
                        "PiezoStage.fmu")]:
         p = _harness(*args)

@@ -1,12 +1,13 @@
 """Command-line pieces of identification, export and parameter files.
 
-:mod:`harness.cli` owns the parser and the dispatch; it calls
+:mod:`harness.cli` owns the parser and the dispatch; per subcommand it calls
 
-* :func:`add_arguments` to add the options below to a parser;
-* :func:`check_arguments` before running (a one-line error or None);
-* :func:`run_identify` / :func:`run_export` for ``identify`` / ``export``;
-* :func:`apply_param_files` to put ``--plant-params`` / ``--controller-params``
-  into the scenarios of ``run`` and ``all``.
+* ``identify``: :func:`add_identify_arguments`, then :func:`check_identify_arguments`
+  (a one-line error or None) and :func:`run_identify`;
+* ``export``: :func:`add_export_arguments`, then :func:`run_export`;
+* ``run`` and ``all``: :func:`add_param_file_arguments`, then
+  :func:`apply_param_files` puts ``--plant-params`` / ``--controller-params`` into
+  their scenarios.
 
 ::
 
@@ -21,8 +22,8 @@
 
 User errors raise ValueError (or FileNotFoundError), which the caller turns
 into exit code 2 and one line; a fit that does not converge and a virtual
-experiment that fails its own checks return :data:`EXIT_RUN_FAILED` (3)
-after one line.
+experiment that fails its own checks raise :class:`harness.checks.RunCheckError`
+(exit code 3).
 """
 
 from __future__ import annotations
@@ -30,12 +31,11 @@ from __future__ import annotations
 import math
 import sys
 
-from ..checks import EXIT_RUN_FAILED
+from ..checks import RunCheckError
 
-__all__ = ["add_arguments", "check_arguments", "run_identify", "run_export",
+__all__ = ["add_identify_arguments", "check_identify_arguments", "run_identify",
+           "add_export_arguments", "run_export", "add_param_file_arguments",
            "apply_param_files"]
-
-PROG = "python -m harness"
 
 _DATA = (("pi_data", "--pi-data"), ("tf_data", "--tf-data"), ("creep_data", "--creep-data"))
 _FIT = (("sample_period", "--sample-period"), ("operators", "--operators"), ("v_max", "--v-max"),
@@ -46,10 +46,10 @@ _INTERNAL = (("noise_rms", "--noise-rms"), ("free_w0", "--free-w0"),
 _PARAM_FILES = (("plant_params", "--plant-params"), ("controller_params", "--controller-params"))
 
 
-def add_arguments(parser):
-    """Add the identify, export and parameter-file options to an argparse parser."""
+def add_identify_arguments(parser):
+    """Add the options of ``identify`` (records, --demo, --internal-channels) to a parser."""
     g = parser.add_argument_group(
-        "identify from measured records",
+        "from measured records",
         "Records are CSV files with the columns time [s], v [V], y [um], sampled at h from rest. "
         "--out is the parameter file (a .json path) or a folder (params.json in it); the "
         "reports <stem>.report.md and .report.json go beside it.")
@@ -69,21 +69,42 @@ def add_arguments(parser):
                    help="extra input delay of G in samples, tf.delay (default 0; not fitted)")
     g.add_argument("--holdout", type=float, metavar="F",
                    help="fraction of each record held out at its end (default 0.25; 0: none)")
-    g.add_argument("--demo", action="store_true",
-                   help="the virtual experiment: records of the PiezoStage FMU with known "
-                        "parameters, identified like user data")
-    g.add_argument("--duration", type=float, metavar="S",
+    d = parser.add_argument_group("the virtual experiment")
+    d.add_argument("--demo", action="store_true",
+                   help="records of the PiezoStage FMU with known parameters, identified like "
+                        "user data")
+    d.add_argument("--duration", type=float, metavar="S",
                    help="--demo: length of each record [s] (default 10)")
-    g.add_argument("--noise-free", action="store_true",
+    d.add_argument("--noise-free", action="store_true",
                    help="--demo: no sensor noise or quantisation (default: 2 nm, 1 nm rms)")
-    g.add_argument("--internal-channels", action="store_true",
+    d.add_argument("--seed", type=int, metavar="N",
+                   help="--demo, --internal-channels: base seed of the noise (default 1)")
+    i = parser.add_argument_group("each step alone on the model's internal channels")
+    i.add_argument("--internal-channels", action="store_true",
                    help="check each step alone on the PiezoStage model's internal outputs u and "
                         "x (a real stage gives only v and y)")
-    e = parser.add_argument_group("export")
-    e.add_argument("--params", metavar="FILE",
-                   help="export: parameter file (JSON of FMU variable names) to put into "
-                        "PiezoStage.fmu and AdaptiveCompoundController.fmu as start values")
-    r = parser.add_argument_group("run and all")
+    i.add_argument("--noise-rms", type=float, metavar="UM",
+                   help="white measurement noise [µm rms] on every recorded channel "
+                        "(default 0; 0.001 = 1 nm)")
+    i.add_argument("--free-w0", action="store_true",
+                   help="fit w0 too (only w0 + w1 is identifiable, r_1 = 0); default: w0 fixed "
+                        "at the plant's value")
+    i.add_argument("--displacement-only", action="store_true",
+                   help="fit every step to the measured displacement, as the paper's experiment "
+                        "must (the blocks then bias each other)")
+
+
+def add_export_arguments(parser):
+    """Add the options of ``export`` to a parser."""
+    parser.add_argument("--params", metavar="FILE", required=True,
+                        help="parameter file (JSON of FMU variable names, e.g. from identify) to "
+                             "put into PiezoStage.fmu and AdaptiveCompoundController.fmu as start "
+                             "values")
+
+
+def add_param_file_arguments(parser):
+    """Add ``--plant-params`` / ``--controller-params`` (``run`` and ``all``) to a parser."""
+    r = parser.add_argument_group("parameter files")
     r.add_argument("--plant-params", metavar="FILE",
                    help="parameter file applied to the PiezoStage of every scenario (names the "
                         "plant has)")
@@ -96,25 +117,8 @@ def _given(args, attr):
     return getattr(args, attr, None) not in (None, False, [])
 
 
-def check_arguments(args):
-    """A one-line error about the options of these commands, or None."""
-    cmd = args.command
-    if cmd != "identify":
-        for attr, flag in _DATA + _FIT + _DEMO + (("demo", "--demo"),
-                                                   ("internal_channels", "--internal-channels")):
-            if _given(args, attr):
-                return f"{flag} is only used by 'identify'"
-    if cmd != "export" and _given(args, "params"):
-        return "--params is only used by 'export'"
-    if cmd not in ("run", "all"):
-        for attr, flag in _PARAM_FILES:
-            if _given(args, attr):
-                return f"{flag} is only used by 'run' and 'all'"
-    if cmd == "export" and not _given(args, "params"):
-        return "export needs --params FILE (a parameter file, e.g. from identify)"
-    if cmd != "identify":
-        return None
-
+def check_identify_arguments(args):
+    """A one-line error about the combination of ``identify``'s options, or None."""
     data = [flag for attr, flag in _DATA if _given(args, attr)]
     modes = [m for m, on in (("records", bool(data)), ("--demo", args.demo),
                              ("--internal-channels", args.internal_channels)) if on]
@@ -152,6 +156,8 @@ def check_arguments(args):
         ("delay", lambda x: 0 <= x <= 8, "in 0..8 samples"),
         ("holdout", lambda x: 0 <= x <= 0.9, "in [0, 0.9]"),
         ("duration", lambda x: math.isfinite(x) and x > 0, "a finite number > 0 (s)"),
+        ("noise_rms", lambda x: math.isfinite(x) and x >= 0, "a finite number >= 0 (µm)"),
+        ("seed", lambda x: x >= 0, ">= 0"),
     )
     for attr, ok, valid in checks:
         value = getattr(args, attr, None)
@@ -160,13 +166,14 @@ def check_arguments(args):
     return None
 
 
-def _fail(message, code):
-    sys.stderr.write(f"{PROG}: error: {' '.join(str(message).split())}\n")
-    return code
-
-
 def run_identify(args, stream=sys.stdout, progress=sys.stderr):
-    """Run ``identify`` (records, --demo or --internal-channels); return the exit code."""
+    """Run ``identify`` (records, --demo or --internal-channels); return the exit code.
+
+    Raises
+    ------
+    harness.checks.RunCheckError
+        The fit did not converge, or the virtual experiment failed its checks.
+    """
     from .fit import DEFAULT_HOLDOUT, IdentificationFitError
 
     holdout = DEFAULT_HOLDOUT if args.holdout is None else args.holdout
@@ -188,12 +195,12 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
                             holdout=holdout, fmu_dir=args.fmu_dir, backend=args.backend,
                             stream=stream, progress=progress)
             if demo.failures:
-                return _fail(f"the virtual experiment failed {len(demo.failures)} of its "
-                             f"checks; first: {demo.failures[0]}", EXIT_RUN_FAILED)
+                raise RunCheckError(f"the virtual experiment failed {len(demo.failures)} of its "
+                                    f"checks; first: {demo.failures[0]}")
             return 0
         return _identify_records(args, holdout, stream)
     except IdentificationFitError as exc:
-        return _fail(exc, EXIT_RUN_FAILED)
+        raise RunCheckError(str(exc)) from None
 
 
 def _identify_records(args, holdout, stream):

@@ -1,0 +1,182 @@
+"""Where a report's numbers come from: commit, FMUs, package versions, date, machine.
+
+:func:`collect_provenance` gathers everything a reader needs to reproduce a
+report: the commit of the harness (and whether the tree had uncommitted
+changes), each FMU's GUID, version and checksum from its modelDescription, the
+versions of Python, fmpy and numpy, the date and the machine.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+import datetime as _dt
+import hashlib
+from importlib import metadata
+import os
+from pathlib import Path
+import platform
+import subprocess
+import sys
+
+from .._common import REPO_ROOT
+
+__all__ = ["FMUInfo", "Provenance", "collect_provenance", "model_description", "fmu_info"]
+
+_MD_CACHE = {}
+
+
+def model_description(path):
+    """fmpy's model description of an FMU file (cached by path, mtime and size)."""
+    import fmpy
+
+    path = Path(path)
+    st = path.stat()
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    if key not in _MD_CACHE:
+        _MD_CACHE[key] = fmpy.read_model_description(str(path))
+    return _MD_CACHE[key]
+
+
+def _sha256(path):
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class FMUInfo:
+    """What identifies one FMU (or the core library) that a report ran."""
+
+    name: str
+    path: str
+    guid: str
+    version: str
+    fmi_version: str
+    generation_tool: str
+    generated: str
+    sha256: str
+
+
+def fmu_info(path):
+    """Read an FMU's identity from its modelDescription."""
+    md = model_description(path)
+    return FMUInfo(name=md.modelName, path=str(path), guid=md.guid or "",
+                   version=getattr(md, "version", None) or "not set",
+                   fmi_version=md.fmiVersion or "",
+                   generation_tool=md.generationTool or "",
+                   generated=md.generationDateAndTime or "",
+                   sha256=_sha256(path))
+
+
+@dataclass
+class Provenance:
+    """Everything that identifies a report's run.
+
+    Attributes
+    ----------
+    commit : str
+        Commit hash of the harness's repository, with `` (uncommitted changes)``
+        when the tracked files differ from it; ``unknown`` outside a git checkout.
+    backend : str
+    fmus : list of FMUInfo
+        The FMUs that ran (empty with the core backend).
+    core_library : dict
+        Path and sha256 of the C core library (core backend only).
+    versions : dict
+        Python and package versions.
+    date : str
+        ISO 8601 with the time zone.
+    machine : str
+    command : str
+    """
+
+    commit: str
+    backend: str
+    fmus: list = field(default_factory=list)
+    core_library: dict = field(default_factory=dict)
+    versions: dict = field(default_factory=dict)
+    date: str = ""
+    machine: str = ""
+    command: str = ""
+
+    def as_dict(self):
+        """A JSON-ready dict."""
+        return asdict(self)
+
+
+def _git(*args):
+    try:
+        proc = subprocess.run(["git", "-C", str(REPO_ROOT), *args], capture_output=True,
+                              text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return proc.stdout.strip() if proc.returncode == 0 else None
+
+
+def commit_id():
+    """The harness's commit, or 'unknown' outside a git checkout."""
+    head = _git("rev-parse", "HEAD")
+    if not head:
+        return "unknown (not a git checkout)"
+    dirty = _git("status", "--porcelain", "--untracked-files=no")
+    return head + (" (uncommitted changes)" if dirty else "")
+
+
+def _version(dist):
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return "not installed"
+
+
+def _cpu_model():
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def machine_description():
+    """Host name, OS, CPU model and count."""
+    return (f"{platform.node() or 'unknown host'}: {platform.system()} {platform.release()} "
+            f"{platform.machine()}, {_cpu_model()}, {os.cpu_count()} CPUs")
+
+
+def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None):
+    """Gather the provenance of a run.
+
+    Parameters
+    ----------
+    backend : {"fmpy", "core"}
+    fmu_dir : str or Path, optional
+    models : sequence of str, optional
+        The FMUs that ran (default: PiezoStage and AdaptiveCompoundController).
+    command : str, optional
+        The command line (default: ``sys.argv``).
+
+    Returns
+    -------
+    Provenance
+    """
+    from ..cosim import CONTROLLER_MODEL, PLANT_MODEL, fmu_path
+
+    models = (PLANT_MODEL, CONTROLLER_MODEL) if models is None else tuple(models)
+    prov = Provenance(commit=commit_id(), backend=backend)
+    if backend == "fmpy":
+        prov.fmus = [fmu_info(fmu_path(m, fmu_dir)) for m in models]
+    else:
+        from .. import core
+        lib = core.library_path()
+        prov.core_library = {"path": str(lib), "sha256": _sha256(lib) if lib.is_file() else ""}
+    prov.versions = {"python": platform.python_version(), "fmpy": _version("fmpy"),
+                     "numpy": _version("numpy"), "scipy": _version("scipy"),
+                     "matplotlib": _version("matplotlib"), "cffi": _version("cffi")}
+    prov.date = _dt.datetime.now().astimezone().isoformat(timespec="seconds")
+    prov.machine = machine_description()
+    prov.command = command if command is not None else " ".join(sys.argv)
+    return prov
