@@ -423,6 +423,11 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
     setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
                                 plant_params=plant_params, controller_params=controller_params,
                                 duration=duration, registry=registry, step_order=step_order)
+    return _simulate(setup, fmu_dir)
+
+
+def _simulate(setup, fmu_dir=None, block=0, block_ns=None):
+    """Run a prepared closed loop (see :func:`_run_closed_loop` for the timing arguments)."""
     p_info = _load(fmu_path(PLANT_MODEL, fmu_dir))
     c_info = _load(fmu_path(CONTROLLER_MODEL, fmu_dir))
     n, h = setup.n, setup.h
@@ -437,7 +442,7 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
         stop = n * h
         plant.initialize(setup.plant_params, stop)
         ctrl.initialize(setup.controller_params, stop)
-        _run_closed_loop(plant, ctrl, setup, rows)
+        _run_closed_loop(plant, ctrl, setup, rows, block, block_ns)
     finally:
         if ctrl is not None:
             ctrl.close()

@@ -227,7 +227,12 @@ def _simulator(backend):
     if backend == "core":
         from .core_loop import simulate_closed_loop_core, simulate_open_loop_core
         return simulate_closed_loop_core, simulate_open_loop_core
-    raise ValueError(f"backend must be 'fmpy' or 'core', got {backend!r}")
+    if backend in ("native", "auto"):   # closed loops only; the plant alone runs in fmpy
+        from .cosim import simulate_open_loop
+        from .native import simulate_closed_loop_auto, simulate_closed_loop_native
+        return (simulate_closed_loop_native if backend == "native" else simulate_closed_loop_auto,
+                simulate_open_loop)
+    raise ValueError(f"backend must be 'auto', 'fmpy', 'native' or 'core', got {backend!r}")
 
 
 def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=True,
