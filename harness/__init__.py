@@ -4,7 +4,11 @@ Public API
 ----------
 Simulation
     :func:`simulate_closed_loop` (FMUs through fmpy), :func:`simulate_open_loop`,
+    :func:`simulate_closed_loop_native` (the same FMUs and loop in the native C master),
     :func:`simulate_closed_loop_core` / :func:`simulate_open_loop_core` (C core, no FMI).
+Speed and scale
+    ``python -m harness bench`` (:mod:`harness.bench`), Monte Carlo sweeps on Dask
+    :func:`run_sweep` (``python -m harness sweep``, :mod:`harness.sweep`).
 Scenarios
     :func:`load_scenarios`, :func:`load_scenario_file`, :func:`get_scenario`,
     :func:`list_scenarios`, :class:`Scenario`, :class:`Signal`.
@@ -28,6 +32,8 @@ from .cosim import (
     simulate_open_loop,
 )
 from .core_loop import simulate_closed_loop_core, simulate_open_loop_core
+from .native import simulate_closed_loop_native
+from .sweep import run_sweep
 from .identification import (
     CoupledModelEstimate,
     IdentificationInputError,
@@ -54,6 +60,8 @@ from .scenarios import (
 __all__ = [
     "simulate_closed_loop",
     "simulate_open_loop",
+    "simulate_closed_loop_native",
+    "run_sweep",
     "simulate_closed_loop_core",
     "simulate_open_loop_core",
     "load_scenarios",

@@ -7,6 +7,13 @@
 * ``python -m harness identify``: the paper's three-step identification on records of the
   PiezoStage model (``--noise-rms UM`` adds measurement noise), every parameter next to
   the value the plant ran; ``identification.csv`` / ``.md`` under ``--out``.
+* ``python -m harness bench``: speed and memory figures (:mod:`harness.bench`).
+* ``python -m harness sweep SCENARIO... --vary KEY=SPEC``: Monte Carlo robustness sweeps
+  on Dask (:mod:`harness.sweep`).
+
+``--backend``: ``auto`` (default) runs long closed loops (``harness.native.LONG_RUN_SAMPLES``)
+on the native master and the rest with fmpy; ``fmpy``, ``native`` (closed loops; the plant
+alone still runs in fmpy) and ``core`` (the C core without FMI) force one.
 
 Exit codes, each with a one-line message on stderr:
 
@@ -41,9 +48,11 @@ def build_parser():
         description="Co-simulate the PiezoStage and AdaptiveCompoundController FMUs and "
                     "compare with the paper's Tables 2-5.",
     )
-    p.add_argument("command", nargs="?", default="all", metavar="{all,run,list,identify}",
+    p.add_argument("command", nargs="?", default="all", metavar="{all,run,list,identify,bench,sweep}",
                    help="all (default): run everything; run SCENARIO: one scenario; "
-                        "list: known scenarios; identify: the paper's parameter identification")
+                        "list: known scenarios; identify: the paper's parameter identification; "
+                        "bench: speed and memory figures; sweep: Monte Carlo robustness sweeps "
+                        "(python -m harness bench --help, python -m harness sweep --help)")
     p.add_argument("scenario", nargs="?", help="scenario name for 'run'")
     p.add_argument("--out", default="out", metavar="DIR", help="output folder (default: out/)")
     p.add_argument("--no-adaptation", action="store_true", help="switch the controller's RLS off")
@@ -57,8 +66,9 @@ def build_parser():
     p.add_argument("--scenario-file", action="append", default=[], metavar="FILE",
                    help="TOML file of extra scenarios (repeatable)")
     p.add_argument("--no-plots", action="store_true", help="do not write PNG figures")
-    p.add_argument("--backend", choices=("fmpy", "core"), default="fmpy",
-                   help="fmpy: run the FMUs (default); core: the C core via cffi")
+    p.add_argument("--backend", choices=("auto", "fmpy", "native", "core"), default="auto",
+                   help="auto (default): the native master for long closed loops, else fmpy; "
+                        "fmpy or native: that master for the FMUs; core: the C core via cffi")
     g = p.add_argument_group("identify")
     g.add_argument("--noise-rms", type=float, metavar="UM",
                    help="white measurement noise [um rms] on every recorded channel "
@@ -80,11 +90,14 @@ def _fail(message, code=2):
 
 def main(argv=None):
     """Run the command line; return the exit code."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] in _TOOLS:
+        return _run_tool(argv[0], argv[1:])
     parser = build_parser()
     args = parser.parse_intermixed_args(argv)
     if args.command not in COMMANDS:
         return _fail(f"unknown command '{args.command}'; "
-                     f"use one of: all, run SCENARIO, list, identify")
+                     f"use one of: all, run SCENARIO, list, identify, bench, sweep")
     if args.command == "run" and not args.scenario:
         return _fail("'run' needs a scenario name (see: python -m harness list)")
     if args.command != "run" and args.scenario:
@@ -114,7 +127,9 @@ def main(argv=None):
             return 0
         from . import report
         if args.command == "identify":
-            report.run_identification(args.out, backend=args.backend,
+            if args.backend == "native":
+                return _fail("identify runs the plant alone: use --backend fmpy or core")
+            report.run_identification(args.out, backend="fmpy" if args.backend == "auto" else args.backend,
                                       noise_rms_um=args.noise_rms or 0.0,
                                       seed=1 if args.seed is None else args.seed,
                                       fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
@@ -159,3 +174,67 @@ def _list(registry):
         width = max(len(n) for n in names)
         for n in names:
             print(f"  {n:<{width}}  {registry[n].description}")
+
+
+# --- bench and sweep (issue 11): per command, one function adds its options, one runs it ---
+_TOOLS = ("bench", "sweep")
+
+
+def add_bench_parser(parser):
+    """Options of ``bench`` (see :mod:`harness.bench`)."""
+    from .bench import add_bench_arguments
+
+    parser.description = ("Speed and memory of the core, the FMI layer and the masters: "
+                          "ns/sample at 2e3, 2e4, 1.2e5 and 1e6 samples into a run (medians "
+                          "of repeated runs, thread CPU time), memory per instance, exact "
+                          "creep mode's O(k) cost, ratios and real-time factors.")
+    return add_bench_arguments(parser)
+
+
+def run_bench_command(args):
+    """Run ``bench``; return the exit code."""
+    from .bench import run_bench
+
+    return run_bench(args)
+
+
+def add_sweep_parser(parser):
+    """Options of ``sweep`` (see :mod:`harness.sweep`)."""
+    from .sweep import add_sweep_arguments
+
+    parser.description = ("Monte Carlo robustness sweep: N closed-loop runs per scenario with "
+                          "the plant's parameters drawn from the given spreads, on a local Dask "
+                          "cluster or an existing one (--scheduler); percentiles and worst case "
+                          "of e_rms and e_r, the worst parameter set as a scenario file, "
+                          "histogram and CDF of e_rms.")
+    return add_sweep_arguments(parser)
+
+
+def run_sweep_command(args):
+    """Run ``sweep``; return the exit code (diverged runs are results, not failures)."""
+    from .sweep import run_sweep_command as run
+
+    return run(args)
+
+
+def _run_tool(name, argv):
+    add, run = {"bench": (add_bench_parser, run_bench_command),
+                "sweep": (add_sweep_parser, run_sweep_command)}[name]
+    parser = argparse.ArgumentParser(prog=f"{PROG} {name}")
+    add(parser)
+    args = parser.parse_args(argv)
+    from .cosim import FMUError
+    from .scenarios import ScenarioError
+
+    def fail(message, code=2):
+        sys.stderr.write(f"{PROG} {name}: error: {message}\n")
+        return code
+
+    try:
+        return run(args)
+    except (ScenarioError, FileNotFoundError, ValueError, TypeError, KeyError) as exc:
+        return fail(_one_line(exc))
+    except FMUError as exc:
+        return fail(_one_line(exc), 1)
+    except KeyboardInterrupt:
+        return fail("interrupted", 130)
