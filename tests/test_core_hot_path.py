@@ -413,3 +413,63 @@ def test_step_is_peek_then_commit_also_when_clipping(exact):
         plant.step(applied)
         applied = s.v
     assert clipped > 20
+
+
+@pytest.mark.parametrize("exact", [False, True], ids=["soe", "exact"])
+def test_evaluate_then_commit_is_the_step(exact):
+    """Reference: an identical twin stepped with piezo_controller_step. Each sample is
+    evaluated twice (other inputs first, then the real ones: only the latest evaluation is
+    committed), leaving the struct bytes alone; committing it gives the twin's output and
+    the twin's struct bytes; a stale sample (evaluated at an earlier k) is refused with
+    PIEZO_ERR_PARAM and changes nothing."""
+    L, ffi = core.lib(), core.ffi
+    plant = core.Plant({**MISMATCH, "creep.exact": exact})
+    ctrl = core.Controller({"sat.v_max": 18.0, "sat.v_min": 2.0, "creep.exact": exact})
+    twin = core.Controller({"sat.v_max": 18.0, "sat.v_min": 2.0, "creep.exact": exact})
+    hist = np.zeros(4000)
+    hp = ffi.from_buffer("double[]", hist)
+    sample, stale = ffi.new("piezo_controller_sample *"), ffi.new("piezo_controller_sample *")
+    out = ffi.new("piezo_controller_output *")
+    applied = 0.0
+    for k in range(600):
+        y_ref = 6 + 5 * math.sin(2 * math.pi * 9 * (k + 2) * H)
+        ym = plant.output.y_meas
+        before = raw_bytes(ctrl)
+        assert L.piezo_controller_evaluate(ctrl.raw, y_ref + 1.0, ym, hp, 4000, sample) == 0
+        assert L.piezo_controller_evaluate(ctrl.raw, y_ref, ym, hp, 4000, sample) == 0
+        assert raw_bytes(ctrl) == before
+        assert (sample.k, sample.y_ref, sample.y_meas) == (k, y_ref, ym)
+        if k == 100:
+            ffi.memmove(stale, sample, ffi.sizeof(sample[0]))
+        if k == 101:
+            assert L.piezo_controller_commit(ctrl.raw, stale, out) == core.PIEZO_ERR_PARAM
+            assert raw_bytes(ctrl) == before
+        assert L.piezo_controller_commit(ctrl.raw, sample, out) == 0
+        want = twin.step(y_ref, ym)
+        assert np.array_equal(bits(tuple(core._ctrl_out(out[0]))[:7]), bits(tuple(want)[:7]))
+        assert raw_bytes(ctrl) == raw_bytes(twin)
+        plant.step(applied)
+        applied = out.v
+    assert ctrl.raw.n_saturated > 20
+
+
+def test_commit_refuses_the_sample_that_completes_the_divergence_window():
+    """Reference: the monitor's definition (window of 25 samples beyond 1 um, rls off, y_meas
+    held at 5 um as in test_core_controller). The 25th evaluation succeeds with
+    reaches_window set and the values a peek returns; its commit is refused with
+    PIEZO_ERR_UNSTABLE, nothing changed; the 24 before commit normally."""
+    L, ffi = core.lib(), core.ffi
+    c = core.Controller({"mv.delay": 0, "sat.enabled": False, "rls.enabled": False,
+                         "monitor.pred_error_max": 1.0, "monitor.divergence_samples": 25})
+    sample = ffi.new("piezo_controller_sample *")
+    for k in range(25):
+        assert L.piezo_controller_evaluate(c.raw, 0.0, 5.0, ffi.NULL, 0, sample) == 0
+        assert sample.reaches_window == (k == 24)
+        before = raw_bytes(c)
+        st = L.piezo_controller_commit(c.raw, sample, ffi.NULL)
+        if k < 24:
+            assert st == 0 and c.raw.run_large_error == k + 1
+        else:
+            assert st == core.PIEZO_ERR_UNSTABLE and raw_bytes(c) == before
+            assert np.array_equal(bits(tuple(c.peek(0.0, 5.0))[:7]),
+                                  bits(tuple(core._ctrl_out(sample.out))[:7]))

@@ -194,24 +194,13 @@ static void project(const piezo_controller *c, double *th)
 }
 
 /*
- * One sample is evaluated into a controller_sample (on the caller's stack)
- * without changing the controller, then committed by copying the few states
- * it changed. A refusal after the input checks (overflow, or the monitor's
- * window) therefore needs no rollback, a peek is the evaluation alone, and
- * the saturation back-calculation re-evaluates from the untouched state
- * instead of keeping snapshots.
+ * One sample is evaluated into a piezo_controller_sample (the caller's
+ * storage) without changing the controller, then committed by copying the
+ * few states it changed. A refusal after the input checks (overflow, or the
+ * monitor's window) therefore needs no rollback, a peek is the evaluation
+ * alone, and the saturation back-calculation re-evaluates from the untouched
+ * state instead of keeping snapshots.
  */
-typedef struct {
-    double theta[4], P[16];          /* RLS result (valid when rls_updated) */
-    int rls_updated;
-    double creep_next[PIEZO_GL_MAX_TERMS];   /* inverse creep SOE states of k+1 */
-    double inv_z[PIEZO_PI_MAX_OPERATORS];    /* inverse PI play states of k+1 */
-    double fwd_z[PIEZO_PI_MAX_OPERATORS];    /* forward PI play states of k+1 */
-    int sat_hold;
-    int large_error;                 /* |pred_error| > pred_error_max */
-    uint64_t run_large_error;
-    piezo_controller_output out;
-} controller_sample;
 
 /*
  * RLS with forgetting on y(k) = phi^T theta, phi = [-y(k-1), -y(k-2), q(k-d), q(k-d-1)]:
@@ -219,7 +208,7 @@ typedef struct {
  *   theta += K e,  P = (P - K phi^T P) / lambda,  trace(P) <= trace_max.
  * Returns the a-priori prediction error; the updated theta and P go to *s.
  */
-static double rls_update(const piezo_controller *c, double y, controller_sample *s)
+static double rls_update(const piezo_controller *c, double y, piezo_controller_sample *s)
 {
     double phi[4], Pphi[4], denom, e, trace = 0.0;
     double *P_new = s->P, *theta = s->theta;
@@ -263,12 +252,11 @@ static double rls_update(const piezo_controller *c, double y, controller_sample 
 /* Evaluate sample k into *s without changing *c (the caller guarantees
  * finite inputs and enough history). Exact mode writes history[2k],
  * history[2k+1]. The inputs are finite, so a non-finite value computed on
- * the way means divergence. With `monitor`, a run of large prediction errors
- * that reaches the divergence window means an unstable loop (a step refuses
- * it; a peek reports values). */
+ * the way means divergence. A run of large prediction errors that reaches
+ * the divergence window is only marked (s->reaches_window): the commit
+ * refuses it, a peek reports the values. */
 static piezo_status controller_eval(const piezo_controller *c, double y_ref, double y_meas,
-                                    double *history, size_t capacity, int monitor,
-                                    controller_sample *s)
+                                    double *history, size_t capacity, piezo_controller_sample *s)
 {
     double e[PIEZO_MV_MAX_D] = {0.0}, g[2] = {0.0, 0.0}, f[PIEZO_MV_MAX_D + 1];
     double pred_error, numerator, q, r, v;
@@ -277,6 +265,10 @@ static piezo_status controller_eval(const piezo_controller *c, double y_ref, dou
     int i, d = c->d, saturated = 0;
 
     memset(&s->out, 0, sizeof s->out);   /* defined padding: FMU states are hashed bytewise */
+    s->k = c->k;
+    s->y_ref = y_ref;
+    s->y_meas = y_meas;
+    s->reaches_window = 0;
     pred_error = rls_update(c, y_meas, s);
     theta = s->rls_updated ? s->theta : c->theta;
 
@@ -326,15 +318,14 @@ static piezo_status controller_eval(const piezo_controller *c, double y_ref, dou
     s->out.saturated = saturated;
     if (!(isfinite(v) && isfinite(q) && isfinite(pred_error)))
         return PIEZO_ERR_DIVERGED;
-    if (monitor && c->divergence_samples > 0 && s->run_large_error >= c->divergence_samples)
-        return PIEZO_ERR_UNSTABLE;
+    s->reaches_window = c->divergence_samples > 0 && s->run_large_error >= c->divergence_samples;
     return PIEZO_OK;
 }
 
 /* Make the evaluated sample k the controller's state (k -> k+1). */
-static void controller_commit(piezo_controller *c, double y_meas, const controller_sample *s)
+static void controller_commit(piezo_controller *c, const piezo_controller_sample *s)
 {
-    double q = s->out.q;
+    double q = s->out.q, y_meas = s->y_meas;
     if (s->rls_updated) {
         memcpy(c->theta, s->theta, sizeof c->theta);
         memcpy(c->P, s->P, sizeof c->P);
@@ -380,17 +371,39 @@ static piezo_status check_step_inputs(const piezo_controller *c, double y_ref, d
     return PIEZO_OK;
 }
 
+piezo_status piezo_controller_evaluate(const piezo_controller *c, double y_ref, double y_meas,
+                                       double *history, size_t capacity, piezo_controller_sample *sample)
+{
+    piezo_status st;
+    if (!c || !sample) return PIEZO_ERR_NULL;
+    st = check_step_inputs(c, y_ref, y_meas, history, capacity);
+    if (st != PIEZO_OK) return st;
+    return controller_eval(c, y_ref, y_meas, history, capacity, sample);
+}
+
+piezo_status piezo_controller_commit(piezo_controller *c, const piezo_controller_sample *sample,
+                                     piezo_controller_output *out)
+{
+    if (!c || !sample) return PIEZO_ERR_NULL;
+    if (sample->k != c->k) return PIEZO_ERR_PARAM;
+    if (sample->reaches_window) return PIEZO_ERR_UNSTABLE;
+    controller_commit(c, sample);
+    if (out) *out = c->out;
+    return PIEZO_OK;
+}
+
+/* evaluate + commit, without the exported entry points (no PLT in the hot path) */
 piezo_status piezo_controller_step(piezo_controller *c, double y_ref, double y_meas,
                                    double *history, size_t capacity, piezo_controller_output *out)
 {
-    controller_sample s;
+    piezo_controller_sample s;
     piezo_status st;
     if (!c) return PIEZO_ERR_NULL;
     st = check_step_inputs(c, y_ref, y_meas, history, capacity);
+    if (st == PIEZO_OK) st = controller_eval(c, y_ref, y_meas, history, capacity, &s);
     if (st != PIEZO_OK) return st;
-    st = controller_eval(c, y_ref, y_meas, history, capacity, 1, &s);
-    if (st != PIEZO_OK) return st;
-    controller_commit(c, y_meas, &s);
+    if (s.reaches_window) return PIEZO_ERR_UNSTABLE;
+    controller_commit(c, &s);
     if (out) *out = c->out;
     return PIEZO_OK;
 }
@@ -398,12 +411,10 @@ piezo_status piezo_controller_step(piezo_controller *c, double y_ref, double y_m
 piezo_status piezo_controller_peek(const piezo_controller *c, double y_ref, double y_meas,
                                    double *history, size_t capacity, piezo_controller_output *out)
 {
-    controller_sample s;
+    piezo_controller_sample s;
     piezo_status st;
     if (!c || !out) return PIEZO_ERR_NULL;
-    st = check_step_inputs(c, y_ref, y_meas, history, capacity);
-    if (st != PIEZO_OK) return st;
-    st = controller_eval(c, y_ref, y_meas, history, capacity, 0, &s);
+    st = piezo_controller_evaluate(c, y_ref, y_meas, history, capacity, &s);
     if (st == PIEZO_OK) *out = s.out;
     return st;
 }
