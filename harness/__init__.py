@@ -4,7 +4,11 @@ Public API
 ----------
 Simulation
     :func:`simulate_closed_loop` (FMUs through fmpy), :func:`simulate_open_loop`,
+    :func:`simulate_closed_loop_native` (the same FMUs and loop in the native C master),
     :func:`simulate_closed_loop_core` / :func:`simulate_open_loop_core` (C core, no FMI).
+Speed and scale
+    ``python -m harness bench`` (:mod:`harness.bench`), Monte Carlo sweeps on Dask
+    :func:`run_sweep` (``python -m harness sweep``, :mod:`harness.sweep`).
 Scenarios
     :func:`load_scenarios`, :func:`load_scenario_file`, :func:`get_scenario`,
     :func:`list_scenarios`, :class:`Scenario`, :class:`Signal`.
@@ -45,6 +49,8 @@ from .identify import (
     read_record,
 )
 from .identify.export import export_fmus
+from .native import simulate_closed_loop_native
+from .sweep import run_sweep
 from .metrics import Metrics, compute_metrics, relative_error, rms_error
 from .report import (
     evaluate_tracking,
@@ -68,6 +74,8 @@ from .scenarios import (
 __all__ = [
     "simulate_closed_loop",
     "simulate_open_loop",
+    "simulate_closed_loop_native",
+    "run_sweep",
     "simulate_closed_loop_core",
     "simulate_open_loop_core",
     "load_scenarios",

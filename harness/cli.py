@@ -10,6 +10,14 @@
   ``--internal-channels`` (each step alone on the model's internal outputs).
 * ``export --params FILE``: PiezoStage.fmu and AdaptiveCompoundController.fmu with
   the file's values as start values.
+* ``bench``: speed and memory figures (:mod:`harness.bench`).
+* ``sweep SCENARIO... --vary KEY=SPEC``: Monte Carlo robustness sweeps on Dask
+  (:mod:`harness.sweep`).
+
+``--backend`` of ``all`` and ``run``: ``auto`` (default) runs long closed loops
+(``harness.native.LONG_RUN_SAMPLES``) on the native C master and the rest with
+fmpy; ``fmpy``, ``native`` (closed loops; the plant alone still runs in fmpy) and
+``core`` (the C core without FMI) force one.
 
 Each subcommand lives in one place: a function that declares its parser and
 options (``_add_<name>_parser``, built from the shared option groups it
@@ -64,9 +72,15 @@ def _output_option(p, what):
                    help=f"output folder for {what} (default: out/, created if missing)")
 
 
-def _backend_options(p):
-    p.add_argument("--backend", choices=("fmpy", "core"), default="fmpy",
-                   help="fmpy: run the FMUs (default); core: the C core through cffi, no FMI")
+def _backend_options(p, closed_loop=False):
+    if closed_loop:
+        p.add_argument("--backend", choices=("auto", "fmpy", "native", "core"), default="auto",
+                       help="auto (default): the native C master for long closed loops, fmpy "
+                            "otherwise; fmpy or native: that master for the FMUs; core: the C "
+                            "core through cffi, no FMI")
+    else:
+        p.add_argument("--backend", choices=("fmpy", "core"), default="fmpy",
+                       help="fmpy: run the FMUs (default); core: the C core through cffi, no FMI")
     p.add_argument("--fmu-dir", metavar="DIR",
                    help="folder of PiezoStage.fmu and AdaptiveCompoundController.fmu "
                         "(default: build/fmus or $PIEZO_FMU_DIR)")
@@ -119,7 +133,7 @@ def _add_all_parser(sub):
                     "4/5 and write report.md, report.html, provenance.json, the CSV tables and "
                     "the figures (PNG and SVG) to --out.")
     _output_option(p, "the report")
-    _backend_options(p)
+    _backend_options(p, closed_loop=True)
     _scenario_file_option(p)
     _plots_option(p)
     _loop_options(p, "the base of every tracking condition")
@@ -152,7 +166,7 @@ def _add_run_parser(sub):
                     "its time series and its figure to --out.")
     p.add_argument("scenario", metavar="SCENARIO", help="scenario name (see: list)")
     _output_option(p, "the files")
-    _backend_options(p)
+    _backend_options(p, closed_loop=True)
     _scenario_file_option(p)
     _plots_option(p)
     g = p.add_argument_group("time series")
@@ -269,9 +283,51 @@ def _cmd_export(args, command):
     return run_export(args)
 
 
+def _add_bench_parser(sub):
+    from .bench import add_bench_arguments
+
+    p = sub.add_parser(
+        "bench", help="speed and memory figures",
+        description="Speed and memory of the core, the FMI layer and the masters: ns/sample at "
+                    "2e3, 2e4, 1.2e5 and 1e6 samples into a run (medians of repeated runs, thread "
+                    "CPU time), memory per instance, exact creep mode's O(k) cost, ratios and "
+                    "real-time factors.")
+    add_bench_arguments(p)
+    p.set_defaults(handler=_cmd_bench)
+    return p
+
+
+def _cmd_bench(args, command):
+    from .bench import run_bench
+
+    return run_bench(args)
+
+
+def _add_sweep_parser(sub):
+    from .sweep import add_sweep_arguments
+
+    p = sub.add_parser(
+        "sweep", help="Monte Carlo robustness sweeps on Dask",
+        description="Monte Carlo robustness sweep: N closed-loop runs per scenario with the "
+                    "plant's parameters drawn from the given spreads, on a local Dask cluster or "
+                    "an existing one (--scheduler); percentiles and worst case of e_rms and e_r, "
+                    "the worst parameter set as a scenario file, histogram and CDF of e_rms. "
+                    "Runs that diverge are results of the sweep, counted, not failures.")
+    add_sweep_arguments(p)
+    p.set_defaults(handler=_cmd_sweep)
+    return p
+
+
+def _cmd_sweep(args, command):
+    from .sweep import run_sweep_command
+
+    _out_dir(args)
+    return run_sweep_command(args)
+
+
 #: The subcommands, in --help order: each adds its parser and sets its handler.
 SUBCOMMANDS = (_add_all_parser, _add_run_parser, _add_list_parser, _add_identify_parser,
-               _add_export_parser)
+               _add_export_parser, _add_bench_parser, _add_sweep_parser)
 
 
 def build_parser(prog=MODULE_PROG):

@@ -65,13 +65,15 @@ _GUARD = re.compile(r"#\s*(ifndef|define)\s+([A-Za-z_]\w*_H)\s*|#\s*endif\s*")
 _INCLUDE = re.compile(r"#\s*include\s*[<\"][^>\"]+[>\"]\s*")
 
 
-def header_cdef(core_dir: Path = CORE_DIR) -> str:
+def header_cdef(core_dir: Path = CORE_DIR, names=HEADER_ORDER) -> str:
     """Return the cffi ``cdef`` source built from the core headers.
 
     Parameters
     ----------
     core_dir : Path
-        Directory holding the headers listed in ``HEADER_ORDER``.
+        Directory holding the headers.
+    names : sequence of str
+        The headers, in dependency order (default ``HEADER_ORDER``).
 
     Returns
     -------
@@ -86,7 +88,7 @@ def header_cdef(core_dir: Path = CORE_DIR) -> str:
         include guard or an integer ``#define`` (cffi could not use it).
     """
     chunks = []
-    for name in HEADER_ORDER:
+    for name in names:
         text = (core_dir / name).read_text()
         text = re.sub(r"/\*.*?\*/", " ", text, flags=re.S)
         text = re.sub(r"//[^\n]*", "", text)

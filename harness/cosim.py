@@ -233,6 +233,46 @@ def _callbacks():
 # one FMU instance
 # ---------------------------------------------------------------------------
 
+def _typed_parameters(info, params):
+    """Parameters by FMU variable name as ``(reals, ints, bools)``, each ``([vr], [value])``.
+
+    Raises
+    ------
+    UnknownParameterError
+        A name is not a parameter of the FMU (the message lists the close ones and all).
+    TypeError
+        A value does not fit the variable's type.
+    """
+    reals, ints, bools = ([], []), ([], []), ([], [])
+    for name, value in params.items():
+        var = info.variables.get(name)
+        if var is None or var.causality != "parameter":
+            valid = [n for n, v in info.variables.items() if v.causality == "parameter"]
+            close = difflib.get_close_matches(name, valid, n=3)
+            hint = f" (did you mean {', '.join(close)}?)" if close else ""
+            raise UnknownParameterError(
+                f"'{name}' is not a parameter of {info.model}{hint}; "
+                f"parameters: {', '.join(valid)}")
+        if var.type == "Real":
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
+                raise TypeError(f"{info.model} parameter {name} is Real, got {value!r}")
+            reals[0].append(var.valueReference)
+            reals[1].append(float(value))
+        elif var.type == "Integer":
+            if isinstance(value, (bool, np.bool_)) or not float(value).is_integer():
+                raise TypeError(f"{info.model} parameter {name} is Integer, got {value!r}")
+            ints[0].append(var.valueReference)
+            ints[1].append(int(value))
+        elif var.type == "Boolean":
+            if not (isinstance(value, (bool, np.bool_)) or value in (0, 1)):
+                raise TypeError(f"{info.model} parameter {name} is Boolean, got {value!r}")
+            bools[0].append(var.valueReference)
+            bools[1].append(bool(value))
+        else:
+            raise TypeError(f"{info.model} parameter {name} has unsupported type {var.type}")
+    return reals, ints, bools
+
+
 class _Instance:
     """Thin lifetime wrapper of an fmpy FMU2Slave."""
 
@@ -263,33 +303,7 @@ class _Instance:
 
     def set_parameters(self, params):
         """Set parameters by name, typed from the model description."""
-        reals, ints, bools = ([], []), ([], []), ([], [])
-        for name, value in params.items():
-            var = self.info.variables.get(name)
-            if var is None or var.causality != "parameter":
-                valid = [n for n, v in self.info.variables.items() if v.causality == "parameter"]
-                close = difflib.get_close_matches(name, valid, n=3)
-                hint = f" (did you mean {', '.join(close)}?)" if close else ""
-                raise UnknownParameterError(
-                    f"'{name}' is not a parameter of {self.info.model}{hint}; "
-                    f"parameters: {', '.join(valid)}")
-            if var.type == "Real":
-                if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
-                    raise TypeError(f"{self.info.model} parameter {name} is Real, got {value!r}")
-                reals[0].append(var.valueReference)
-                reals[1].append(float(value))
-            elif var.type == "Integer":
-                if isinstance(value, (bool, np.bool_)) or not float(value).is_integer():
-                    raise TypeError(f"{self.info.model} parameter {name} is Integer, got {value!r}")
-                ints[0].append(var.valueReference)
-                ints[1].append(int(value))
-            elif var.type == "Boolean":
-                if not (isinstance(value, (bool, np.bool_)) or value in (0, 1)):
-                    raise TypeError(f"{self.info.model} parameter {name} is Boolean, got {value!r}")
-                bools[0].append(var.valueReference)
-                bools[1].append(bool(value))
-            else:
-                raise TypeError(f"{self.info.model} parameter {name} has unsupported type {var.type}")
+        reals, ints, bools = _typed_parameters(self.info, params)
         try:
             if reals[0]:
                 self.fmu.setReal(*reals)
@@ -412,6 +426,12 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
     setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
                                 plant_params=plant_params, controller_params=controller_params,
                                 duration=duration, registry=registry, step_order=step_order)
+    return _simulate(setup, fmu_dir, progress=progress)
+
+
+def _simulate(setup, fmu_dir=None, block=0, block_ns=None, progress=None):
+    """Run a prepared closed loop (see :func:`_run_closed_loop` for the timing and progress
+    arguments)."""
     p_info = _load(fmu_path(PLANT_MODEL, fmu_dir))
     c_info = _load(fmu_path(CONTROLLER_MODEL, fmu_dir))
     n, h = setup.n, setup.h
@@ -426,7 +446,7 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
         stop = n * h
         plant.initialize(setup.plant_params, stop)
         ctrl.initialize(setup.controller_params, stop)
-        _run_closed_loop(plant, ctrl, setup, rows, progress)
+        _run_closed_loop(plant, ctrl, setup, rows, block, block_ns, progress)
     finally:
         if ctrl is not None:
             ctrl.close()
@@ -435,81 +455,165 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
     return as_structured(rows, CLOSED_LOOP_DTYPE)
 
 
-def _run_closed_loop(plant, ctrl, setup, rows, progress=None):
-    from fmpy.fmi2 import fmi2Boolean, fmi2Real
+def _raw_function(fmu, name, *argtypes):
+    """The FMU's C function ``name`` as a bare ctypes prototype returning the status.
 
-    pf, cf = plant.fmu, ctrl.fmu
-    pc, cc = pf.component, cf.component
-    p_get, p_set, p_step = pf.fmi2GetReal, pf.fmi2SetReal, pf.fmi2DoStep
-    c_get, c_set, c_step = cf.fmi2GetReal, cf.fmi2SetReal, cf.fmi2DoStep
-    c_get_bool = cf.fmi2GetBoolean
+    fmpy's ``FMU2Slave.fmi2*`` methods wrap every call in Python (argument
+    conversion, call logging, a status check that raises); the hot loop calls
+    the C functions directly, passes raw addresses into its result arrays and
+    checks the status itself.
+    """
+    address = ctypes.cast(getattr(fmu.dll, name), ctypes.c_void_p).value
+    return ctypes.CFUNCTYPE(ctypes.c_int, *argtypes)(address)
+
+
+class _LoopFunctions:
+    """The fmi2 functions of the closed loop for one plant and one controller instance."""
+
+    def __init__(self, plant, ctrl):
+        vp, sz, dbl, i32 = ctypes.c_void_p, ctypes.c_size_t, ctypes.c_double, ctypes.c_int
+        pf, cf = plant.fmu, ctrl.fmu
+        self.pc, self.cc = pf.component, cf.component
+        self.p_get = _raw_function(pf, "fmi2GetReal", vp, vp, sz, vp)
+        self.p_set = _raw_function(pf, "fmi2SetReal", vp, vp, sz, vp)
+        self.p_step = _raw_function(pf, "fmi2DoStep", vp, dbl, dbl, i32)
+        self.c_get = _raw_function(cf, "fmi2GetReal", vp, vp, sz, vp)
+        self.c_set = _raw_function(cf, "fmi2SetReal", vp, vp, sz, vp)
+        self.c_get_bool = _raw_function(cf, "fmi2GetBoolean", vp, vp, sz, vp)
+        self.c_step = _raw_function(cf, "fmi2DoStep", vp, dbl, dbl, i32)
+
+
+def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=None):
+    """Run the whole loop into ``rows`` (n x 12, the CLOSED_LOOP_FIELDS).
+
+    Every value goes straight from the FMU into its place in memory: the plant
+    writes ``y_meas, y`` of sample k next to ``y_ref(k)`` in an exchange array,
+    whose first two entries are then exactly the controller's inputs; the
+    controller writes ``v, q, a1..b2, pred_error`` into row k, and the plant
+    takes its ``v`` from there. ``block``/``block_ns``: thread CPU time [ns]
+    of every complete block of ``block`` samples is appended to the list.
+    ``progress(done, n)`` is called after every simulated second (blocks of one
+    second then, unless timed).
+    """
+    import time
+
+    from fmpy.fmi2 import fmi2Boolean
+
+    fn = _LoopFunctions(plant, ctrl)
+    pc, cc = fn.pc, fn.cc
+    p_get, p_set, p_step = fn.p_get, fn.p_set, fn.p_step
+    c_get, c_set, c_get_bool, c_step = fn.c_get, fn.c_set, fn.c_get_bool, fn.c_step
     pi, ci = plant.info, ctrl.info
 
-    vr_p_out = _vr_array([pi.vr("y"), pi.vr("y_meas")])
-    vr_p_in = _vr_array([pi.vr("v")])
-    vr_c_in = _vr_array([ci.vr("y_ref"), ci.vr("y_meas")])
-    vr_c_out = _vr_array([ci.vr(name) for name in _CTRL_OUTPUTS])
-    vr_c_sat = _vr_array([ci.vr("saturated")])
-    p_out = (fmi2Real * 2)()
-    c_in = (fmi2Real * 2)()
-    c_out = (fmi2Real * len(_CTRL_OUTPUTS))()
-    c_sat = (fmi2Boolean * 1)()
-    np_p_out = np.ctypeslib.as_array(p_out)
-    np_c_out = np.ctypeslib.as_array(c_out)
+    keep = []                       # ctypes arrays whose addresses are passed
+
+    def addr(values):
+        arr = _vr_array(values)
+        keep.append(arr)
+        return ctypes.addressof(arr)
+
+    vr_p_out = addr([pi.vr("y_meas"), pi.vr("y")])
+    vr_p_in = addr([pi.vr("v")])
+    vr_c_in = addr([ci.vr("y_ref"), ci.vr("y_meas")])
+    vr_c_out = addr([ci.vr(name) for name in _CTRL_OUTPUTS])
+    vr_c_sat = addr([ci.vr("saturated")])
     n_c = len(_CTRL_OUTPUTS)
-    last = len(CLOSED_LOOP_FIELDS) - 1
 
     n, h = setup.n, setup.h
-    y_ref = setup.y_ref
+    exchange = np.zeros((n, 3))          # y_ref(k), y_meas(k), y(k)
+    exchange[:, 0] = setup.y_ref
+    saturated = np.zeros(n, dtype=np.dtype(fmi2Boolean))
+    row_bytes, ex_bytes, sat_bytes = rows.strides[0], exchange.strides[0], saturated.strides[0]
+    rows_v = rows.ctypes.data + 4 * rows.strides[1]          # &rows[0, 4]: v, q, a1..pred_error
+    ex0 = exchange.ctypes.data
+    sat0 = saturated.ctypes.data
     times = setup.time.tolist()
     jacobi = setup.master == "jacobi"
     controller_first = setup.step_order == "controller-first"
-    k = 0
-    stage = "fmi2GetReal"
-    inst = plant
-    try:
-        for k in sample_range(n, h, progress):
-            t = times[k]
-            inst, stage = plant, "fmi2GetReal"
-            p_get(pc, vr_p_out, 2, p_out)                  # y(k), y_meas(k)
-            c_in[0] = y_ref[k]
-            c_in[1] = p_out[1]
+    if block_ns is not None and block > 0:
+        block = int(block)
+    elif progress is not None:
+        block = max(1, int(round(1.0 / h)))          # one simulated second
+    else:
+        block = n
+
+    k, stage, inst, status = 0, "fmi2GetReal", plant, 0
+    for k0 in range(0, n, block):
+        t_block = time.thread_time_ns()
+        for k in range(k0, min(k0 + block, n)):
+            ex = ex0 + k * ex_bytes
+            out = rows_v + k * row_bytes
+            status = p_get(pc, vr_p_out, 2, ex + 8)                    # y_meas(k), y(k)
+            if status > 1:
+                inst, stage = plant, "fmi2GetReal"
+                break
             if jacobi:
                 # textbook Jacobi: every output first, then every input
-                inst = ctrl
-                c_get(cc, vr_c_out, n_c, c_out)
-                stage = "fmi2GetBoolean"
-                c_get_bool(cc, vr_c_sat, 1, c_sat)
-                inst, stage = plant, "fmi2SetReal"
-                p_set(pc, vr_p_in, 1, c_out)               # v is c_out[0]
-                inst = ctrl
-                c_set(cc, vr_c_in, 2, c_in)
+                status = c_get(cc, vr_c_out, n_c, out)
+                if status > 1:
+                    inst, stage = ctrl, "fmi2GetReal"
+                    break
+                status = c_get_bool(cc, vr_c_sat, 1, sat0 + k * sat_bytes)
+                if status > 1:
+                    inst, stage = ctrl, "fmi2GetBoolean"
+                    break
+                status = p_set(pc, vr_p_in, 1, out)                     # v
+                if status > 1:
+                    inst, stage = plant, "fmi2SetReal"
+                    break
+                status = c_set(cc, vr_c_in, 2, ex)                      # y_ref(k), y_meas(k)
+                if status > 1:
+                    inst, stage = ctrl, "fmi2SetReal"
+                    break
             else:
                 # Gauss-Seidel in ModelStructure order: plant -> controller -> plant
-                inst, stage = ctrl, "fmi2SetReal"
-                c_set(cc, vr_c_in, 2, c_in)
-                stage = "fmi2GetReal"
-                c_get(cc, vr_c_out, n_c, c_out)
-                stage = "fmi2GetBoolean"
-                c_get_bool(cc, vr_c_sat, 1, c_sat)
-                inst, stage = plant, "fmi2SetReal"
-                p_set(pc, vr_p_in, 1, c_out)
-            stage = "fmi2DoStep"
+                status = c_set(cc, vr_c_in, 2, ex)
+                if status > 1:
+                    inst, stage = ctrl, "fmi2SetReal"
+                    break
+                status = c_get(cc, vr_c_out, n_c, out)
+                if status > 1:
+                    inst, stage = ctrl, "fmi2GetReal"
+                    break
+                status = c_get_bool(cc, vr_c_sat, 1, sat0 + k * sat_bytes)
+                if status > 1:
+                    inst, stage = ctrl, "fmi2GetBoolean"
+                    break
+                status = p_set(pc, vr_p_in, 1, out)
+                if status > 1:
+                    inst, stage = plant, "fmi2SetReal"
+                    break
+            t = times[k]
             if controller_first:
-                inst = ctrl
-                c_step(cc, t, h, 1)
-                inst = plant
-                p_step(pc, t, h, 1)
+                status = c_step(cc, t, h, 1)
+                if status > 1:
+                    inst, stage = ctrl, "fmi2DoStep"
+                    break
+                status = p_step(pc, t, h, 1)
+                if status > 1:
+                    inst, stage = plant, "fmi2DoStep"
+                    break
             else:
-                inst = plant
-                p_step(pc, t, h, 1)
-                inst = ctrl
-                c_step(cc, t, h, 1)
-            rows[k, 2:4] = np_p_out
-            rows[k, 4:last] = np_c_out
-            rows[k, last] = 1.0 if c_sat[0] else 0.0
-    except Exception as exc:
-        raise _step_error(inst, stage, k, h, exc) from None
+                status = p_step(pc, t, h, 1)
+                if status > 1:
+                    inst, stage = plant, "fmi2DoStep"
+                    break
+                status = c_step(cc, t, h, 1)
+                if status > 1:
+                    inst, stage = ctrl, "fmi2DoStep"
+                    break
+        if status > 1:
+            break
+        if block_ns is not None and k0 + block <= n:
+            block_ns.append(time.thread_time_ns() - t_block)
+        if progress is not None:
+            progress(min(k0 + block, n), n)
+    del keep
+    rows[:, 2] = exchange[:, 2]
+    rows[:, 3] = exchange[:, 1]
+    rows[:, -1] = saturated != 0
+    if status > 1:
+        raise _step_error(inst, stage, k, h, FMUError(f"{stage} returned status {status}"))
 
 
 def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None, progress=None):

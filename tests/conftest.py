@@ -45,7 +45,8 @@ def _fmu_sources():
 
 def _fmus_stale():
     fmus = ([FMU_DIR / f"{name}.fmu" for name in FMU_NAMES] + [BUILD_DIR / "libpiezo_core.so"]
-            + [FMU_DIR / "PiezoStageClosedLoop.ssp"])
+            + [FMU_DIR / "PiezoStageClosedLoop.ssp"]
+            + [BUILD_DIR / "libpiezo_runner.so", BUILD_DIR / "libpiezo_bench.so"])   # native master, bench
     if not all(f.exists() for f in fmus):
         return True
     oldest = min(f.stat().st_mtime for f in fmus)

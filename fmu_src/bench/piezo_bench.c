@@ -1,107 +1,170 @@
-/*
- * piezo_bench.c - speed and memory figures of the core (printed, not asserted).
- *
- * Targets (DESIGN.md section 1): the default SOE creep costs O(1) per step
- * with fixed-size state; the exact mode costs O(k) per step and O(k) memory.
- * Usage: piezo_bench [seconds_of_signal]   (default 60 s at 2 kHz)
- */
+/* piezo_bench.c - timing loops of the core. See piezo_bench.h. */
 #define _POSIX_C_SOURCE 199309L
 #include <math.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <time.h>
-#include "piezo_core.h"
+#include "piezo_bench.h"
 
-static double now_seconds(void)
+static double thread_ns(void)
 {
     struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec * 1e9 + (double)ts.tv_nsec;
 }
 
-static double input_voltage(size_t k, double h)
+/* Block timer: call tick(k + 1) after sample k. */
+typedef struct {
+    size_t block;
+    double *block_ns;
+    double t;
+} block_timer;
+
+static void timer_start(block_timer *tm, size_t block, double *block_ns)
 {
-    double t = (double)k * h;
-    return 10.0 * sin(2.0 * 3.14159265358979323846 * t) + 10.0;
+    tm->block = block_ns != NULL ? block : 0;
+    tm->block_ns = block_ns;
+    tm->t = tm->block ? thread_ns() : 0.0;
 }
 
-/* Runs the plant for n samples; returns ns per sample, or -1 on failure. */
-static double bench_plant(int exact, size_t n, double *y_last)
+static void timer_tick(block_timer *tm, size_t done)
 {
-    piezo_plant_params params;
-    piezo_plant plant;
-    piezo_diag diag;
-    double *history = NULL, t0, t1;
-    size_t k;
-    piezo_plant_default_params(&params);
-    params.creep_exact = exact;
-    if (piezo_plant_init(&plant, &params, &diag) != PIEZO_OK) return -1.0;
-    if (exact) {
-        history = malloc(2 * (n + 1) * sizeof *history);
-        if (!history) return -1.0;
+    if (tm->block && done % tm->block == 0) {
+        double now = thread_ns();
+        tm->block_ns[done / tm->block - 1] = now - tm->t;
+        tm->t = now;
     }
-    t0 = now_seconds();
-    for (k = 0; k < n; ++k)
-        if (piezo_plant_step(&plant, input_voltage(k, params.h), history, exact ? 2 * (n + 1) : 0, NULL) != PIEZO_OK) {
-            free(history);
-            return -1.0;
-        }
-    t1 = now_seconds();
-    *y_last = plant.out.y;
-    free(history);
-    return (t1 - t0) / (double)n * 1e9;
 }
 
-/* Closed loop (nominal model, preview): controller + plant per sample. */
-static double bench_closed_loop(size_t n, double *e_last)
+static int set_status(int *status, int st)
 {
-    piezo_plant_params pp;
-    piezo_controller_params cp;
+    if (status) *status = st;
+    return st;
+}
+
+/* Nothing run: why in *status. */
+static size_t refuse(int *status, int st)
+{
+    set_status(status, st);
+    return 0;
+}
+
+size_t piezo_bench_closed_loop(const piezo_plant_params *pp, const piezo_controller_params *cp,
+                               const double *y_ref, size_t n, double *y_meas, double *v,
+                               size_t block, double *block_ns, int *status)
+{
     piezo_plant plant;
     piezo_controller ctrl;
     piezo_controller_output out;
-    piezo_diag diag;
-    double t0, t1, h;
+    block_timer tm;
+    double published;
     size_t k;
-    piezo_plant_default_params(&pp);
-    piezo_controller_default_params(&cp);
-    if (piezo_plant_init(&plant, &pp, &diag) != PIEZO_OK) return -1.0;
-    if (piezo_controller_init(&ctrl, &cp, &diag) != PIEZO_OK) return -1.0;
-    h = pp.h;
-    t0 = now_seconds();
+    int st;
+    if (!pp || !cp || !y_ref) return refuse(status, PIEZO_ERR_NULL);
+    if (pp->creep_exact || cp->creep_exact) return refuse(status, PIEZO_ERR_PARAM);
+    st = piezo_plant_init(&plant, pp, NULL);
+    if (st == PIEZO_OK) st = piezo_controller_init(&ctrl, cp, NULL);
+    if (set_status(status, st) != PIEZO_OK) return 0;
+    published = ctrl.out.v;
+    timer_start(&tm, block, block_ns);
     for (k = 0; k < n; ++k) {
-        double y_ref = 10.0 * sin(2.0 * 3.14159265358979323846 * (double)(k + 1) * h);
-        if (piezo_controller_step(&ctrl, y_ref, plant.out.y_meas, NULL, 0, &out) != PIEZO_OK) return -1.0;
-        if (piezo_plant_step(&plant, out.v, NULL, 0, NULL) != PIEZO_OK) return -1.0;
+        double applied;
+        if (y_meas) y_meas[k] = plant.out.y_meas;
+        st = piezo_controller_step(&ctrl, y_ref[k], plant.out.y_meas, NULL, 0, &out);
+        if (st != PIEZO_OK) break;
+        applied = cp->mv_feedthrough ? out.v : published;
+        published = out.v;
+        if (v) v[k] = applied;
+        st = piezo_plant_step(&plant, applied, NULL, 0, NULL);
+        if (st != PIEZO_OK) break;
+        timer_tick(&tm, k + 1);
     }
-    t1 = now_seconds();
-    *e_last = 10.0 * sin(2.0 * 3.14159265358979323846 * (double)n * h) - plant.out.y;
-    return (t1 - t0) / (double)n * 1e9;
+    set_status(status, st);
+    return k;
 }
 
-int main(int argc, char **argv)
+size_t piezo_bench_plant(const piezo_plant_params *params, const double *v, size_t n,
+                         size_t block, double *block_ns, int *status)
 {
-    double seconds = argc > 1 ? atof(argv[1]) : 60.0;
-    size_t n = (size_t)(seconds / 0.0005);
-    size_t n_short = n / 10;
-    double y_soe = 0.0, y_exact = 0.0, e_loop = 0.0, ns;
-    piezo_gl gl;
+    piezo_plant plant;
+    block_timer tm;
+    size_t k;
+    int st;
+    if (!params || !v) return refuse(status, PIEZO_ERR_NULL);
+    if (params->creep_exact) return refuse(status, PIEZO_ERR_PARAM);
+    st = piezo_plant_init(&plant, params, NULL);
+    if (set_status(status, st) != PIEZO_OK) return 0;
+    timer_start(&tm, block, block_ns);
+    for (k = 0; k < n; ++k) {
+        st = piezo_plant_step(&plant, v[k], NULL, 0, NULL);
+        if (st != PIEZO_OK) break;
+        timer_tick(&tm, k + 1);
+    }
+    set_status(status, st);
+    return k;
+}
 
-    piezo_gl_init(&gl, 0.0002, 1.0, 0, NULL);
-    printf("piezo core benchmark, %.0f s of signal at 2 kHz (%zu samples)\n", seconds, n);
-    printf("memory: sizeof piezo_plant %zu B, piezo_controller %zu B, piezo_gl %zu B (fixed, SOE terms %d)\n",
-           sizeof(piezo_plant), sizeof(piezo_controller), sizeof(piezo_gl), gl.n_terms);
-    printf("        exact mode history: 16 B per sample (x and w_j) = %.1f MB after %.0f s\n", 16.0 * (double)n / 1e6, seconds);
+size_t piezo_bench_controller(const piezo_controller_params *params, const double *y_ref,
+                              const double *y_meas, size_t n, size_t block, double *block_ns,
+                              int *status)
+{
+    piezo_controller ctrl;
+    piezo_controller_output out;
+    block_timer tm;
+    size_t k;
+    int st;
+    if (!params || !y_ref || !y_meas) return refuse(status, PIEZO_ERR_NULL);
+    if (params->creep_exact) return refuse(status, PIEZO_ERR_PARAM);
+    st = piezo_controller_init(&ctrl, params, NULL);
+    if (set_status(status, st) != PIEZO_OK) return 0;
+    timer_start(&tm, block, block_ns);
+    for (k = 0; k < n; ++k) {
+        st = piezo_controller_step(&ctrl, y_ref[k], y_meas[k], NULL, 0, &out);
+        if (st != PIEZO_OK) break;
+        timer_tick(&tm, k + 1);
+    }
+    set_status(status, st);
+    return k;
+}
 
-    ns = bench_plant(0, n, &y_soe);
-    printf("plant, SOE creep (default):  %8.1f ns/sample over %zu samples\n", ns, n);
-    ns = bench_plant(1, n_short, &y_exact);
-    printf("plant, exact creep:          %8.1f ns/sample over %zu samples (mean; grows with k)\n", ns, n_short);
-    ns = bench_plant(1, n, &y_exact);
-    printf("plant, exact creep:          %8.1f ns/sample over %zu samples\n", ns, n);
-    printf("|y_SOE - y_exact| at the end: %.3e um\n", fabs(y_soe - y_exact));
-    ns = bench_closed_loop(n, &e_loop);
-    printf("closed loop (controller + plant, SOE): %8.1f ns/sample; final error %.3e um\n", ns, e_loop);
-    printf("real-time margin at h = 0.5 ms: %.0fx\n", 0.0005 / (ns * 1e-9));
-    return 0;
+size_t piezo_bench_exact_plant(const piezo_plant_params *params, size_t k0, size_t n,
+                               size_t block, double *block_ns, int *status)
+{
+    piezo_plant_params p;
+    piezo_plant plant;
+    block_timer tm;
+    double *history, *w;
+    size_t j, k, capacity;
+    int st;
+    if (!params) return refuse(status, PIEZO_ERR_NULL);
+    p = *params;
+    p.creep_exact = 1;
+    p.creep_enabled = 1;
+    st = piezo_plant_init(&plant, &p, NULL);
+    if (set_status(status, st) != PIEZO_OK) return 0;
+    capacity = 2 * (k0 + n + 1);
+    history = malloc(capacity * sizeof *history);
+    w = malloc((k0 + 1) * sizeof *w);
+    if (!history || !w) {
+        free(history);
+        free(w);
+        return refuse(status, PIEZO_ERR_CAPACITY);
+    }
+    /* history[2j] = x(j), history[2j+1] = w_j (piezo_creep.h) */
+    piezo_gl_weights(p.creep_alpha, w, k0 + 1);
+    for (j = 0; j < k0; ++j) {
+        history[2 * j] = 5.0 + 4.0 * sin(2.0 * 3.14159265358979323846 * (double)j * p.h);
+        history[2 * j + 1] = w[j];
+    }
+    plant.creep.k = k0;
+    timer_start(&tm, block, block_ns);
+    for (k = 0; k < n; ++k) {
+        double vk = 10.0 + 8.0 * sin(2.0 * 3.14159265358979323846 * (double)(k0 + k) * p.h);
+        st = piezo_plant_step(&plant, vk, history, capacity, NULL);
+        if (st != PIEZO_OK) break;
+        timer_tick(&tm, k + 1);
+    }
+    free(history);
+    free(w);
+    set_status(status, st);
+    return k;
 }

@@ -178,11 +178,10 @@ static double q_past(const piezo_controller *c, int i)
     return c->q_ring[(c->head + i - 1) % PIEZO_MV_Q_RING];
 }
 
-static void project(piezo_controller *c)
+static void project(const piezo_controller *c, double *th)
 {
     const double m = A_STABILITY_MARGIN;
     double b1_floor = B1_FLOOR_FRACTION * c->theta_nominal[2];
-    double *th = c->theta;
     double a1_max;
     /* stable A (Jury triangle shrunk by m): clamp a2, then a1 given a2 */
     if (th[1] > 1.0 - m) th[1] = 1.0 - m;
@@ -195,14 +194,24 @@ static void project(piezo_controller *c)
 }
 
 /*
+ * One sample is evaluated into a piezo_controller_sample (the caller's
+ * storage) without changing the controller, then committed by copying the
+ * few states it changed. A refusal after the input checks (overflow, or the
+ * monitor's window) therefore needs no rollback, a peek is the evaluation
+ * alone, and the saturation back-calculation re-evaluates from the untouched
+ * state instead of keeping snapshots.
+ */
+
+/*
  * RLS with forgetting on y(k) = phi^T theta, phi = [-y(k-1), -y(k-2), q(k-d), q(k-d-1)]:
  *   e = y(k) - phi^T theta,  K = P phi / (lambda + phi^T P phi),
  *   theta += K e,  P = (P - K phi^T P) / lambda,  trace(P) <= trace_max.
- * Returns the a-priori prediction error.
+ * Returns the a-priori prediction error; the updated theta and P go to *s.
  */
-static double rls_update(piezo_controller *c, double y)
+static double rls_update(const piezo_controller *c, double y, piezo_controller_sample *s)
 {
-    double phi[4], Pphi[4], denom, e, trace = 0.0, P_new[16];
+    double phi[4], Pphi[4], denom, e, trace = 0.0;
+    double *P_new = s->P, *theta = s->theta;
     int i, j;
     phi[0] = -c->y_prev[0];
     phi[1] = -c->y_prev[1];
@@ -210,7 +219,8 @@ static double rls_update(piezo_controller *c, double y)
     phi[3] = q_past(c, c->d + 1);
     e = y;
     for (i = 0; i < 4; ++i) e -= phi[i] * c->theta[i];
-    if (!c->rls_enabled || c->sat_hold > 0) return e;
+    s->rls_updated = c->rls_enabled && !(c->sat_hold > 0);
+    if (!s->rls_updated) return e;
 
     denom = c->forgetting;
     for (i = 0; i < 4; ++i) {
@@ -218,41 +228,54 @@ static double rls_update(piezo_controller *c, double y)
         for (j = 0; j < 4; ++j) Pphi[i] += c->P[4 * i + j] * phi[j];
         denom += phi[i] * Pphi[i];
     }
-    for (i = 0; i < 4; ++i) c->theta[i] += Pphi[i] / denom * e;
-    /* P is symmetric, so phi^T P = (P phi)^T; keep it exactly symmetric */
-    for (i = 0; i < 4; ++i)
-        for (j = 0; j < 4; ++j)
-            P_new[4 * i + j] = (c->P[4 * i + j] - Pphi[i] * Pphi[j] / denom) / c->forgetting;
+    for (i = 0; i < 4; ++i) theta[i] = c->theta[i] + Pphi[i] / denom * e;
+    /* P is symmetric, so phi^T P = (P phi)^T; keep it exactly symmetric:
+     * P_new[ij] = P_new[ji] = (a_ij + a_ji) / 2. P stays bitwise symmetric from
+     * the diagonal P0 on, so a_ji = a_ij (same operands) and one triangle is
+     * computed (the divisions dominate the update). */
     for (i = 0; i < 4; ++i) {
-        for (j = 0; j < i; ++j) P_new[4 * i + j] = P_new[4 * j + i] = 0.5 * (P_new[4 * i + j] + P_new[4 * j + i]);
+        P_new[5 * i] = (c->P[5 * i] - Pphi[i] * Pphi[i] / denom) / c->forgetting;
+        for (j = 0; j < i; ++j) {
+            double a = (c->P[4 * i + j] - Pphi[i] * Pphi[j] / denom) / c->forgetting;
+            P_new[4 * i + j] = P_new[4 * j + i] = 0.5 * (a + a);
+        }
         trace += P_new[5 * i];
     }
     if (trace > c->trace_max) {
         double scale = c->trace_max / trace;
         for (i = 0; i < 16; ++i) P_new[i] *= scale;
     }
-    memcpy(c->P, P_new, sizeof P_new);
-    project(c);
+    project(c, theta);
     return e;
 }
 
-/* Commit one sample on *c (the caller guarantees the inputs are finite). */
-static piezo_status controller_advance(piezo_controller *c, double y_ref, double y_meas,
-                                       double *history, size_t capacity)
+/* Evaluate sample k into *s without changing *c (the caller guarantees
+ * finite inputs and enough history). Exact mode writes history[2k],
+ * history[2k+1]. The inputs are finite, so a non-finite value computed on
+ * the way means divergence. A run of large prediction errors that reaches
+ * the divergence window is only marked (s->reaches_window): the commit
+ * refuses it, a peek reports the values. */
+static piezo_status controller_eval(const piezo_controller *c, double y_ref, double y_meas,
+                                    double *history, size_t capacity, piezo_controller_sample *s)
 {
     double e[PIEZO_MV_MAX_D] = {0.0}, g[2] = {0.0, 0.0}, f[PIEZO_MV_MAX_D + 1];
     double pred_error, numerator, q, r, v;
-    piezo_pi_inverse inv_before;
-    piezo_gl creep_before;
+    const double *theta;
     piezo_status st;
     int i, d = c->d, saturated = 0;
 
-    pred_error = rls_update(c, y_meas);
+    memset(&s->out, 0, sizeof s->out);   /* defined padding: FMU states are hashed bytewise */
+    s->k = c->k;
+    s->y_ref = y_ref;
+    s->y_meas = y_meas;
+    s->reaches_window = 0;
+    pred_error = rls_update(c, y_meas, s);
+    theta = s->rls_updated ? s->theta : c->theta;
 
     /* Diophantine with the current estimate; F = B E: f_n = b1 e_n + b2 e_{n-1} */
-    piezo_diophantine(c->theta[0], c->theta[1], d, e, g);
+    piezo_diophantine(theta[0], theta[1], d, e, g);
     for (i = 0; i <= d; ++i)
-        f[i] = c->theta[2] * (i < d ? e[i] : 0.0) + c->theta[3] * (i >= 1 ? e[i - 1] : 0.0);
+        f[i] = theta[2] * (i < d ? e[i] : 0.0) + theta[3] * (i >= 1 ? e[i - 1] : 0.0);
 
     /* MV: y(k+d) = Gd y(k) + F q(k) := y_ref, weighted by lambda_u */
     numerator = y_ref - g[0] * y_meas - g[1] * c->y_prev[0];
@@ -260,64 +283,80 @@ static piezo_status controller_advance(piezo_controller *c, double y_ref, double
     q = f[0] * numerator / (f[0] * f[0] + c->lambda_u);
 
     /* feedforward: inverse creep, then inverse PI */
-    creep_before = c->inv_creep;
-    inv_before = c->inv_pi;
-    st = piezo_gl_step(&c->inv_creep, q, history, capacity, &r);
-    if (st != PIEZO_OK) return st;
-    st = piezo_pi_inverse_step(&c->inv_pi, r, &v);
-    if (st != PIEZO_OK) return st;
+    st = piezo_gl_eval(&c->inv_creep, q, history, capacity, s->creep_next, &r);
+    if (st != PIEZO_OK) return st == PIEZO_ERR_NONFINITE ? PIEZO_ERR_DIVERGED : st;
+    st = piezo_pi_inverse_eval(&c->inv_pi, r, s->inv_z, &v);
+    if (st != PIEZO_OK) return st == PIEZO_ERR_NONFINITE ? PIEZO_ERR_DIVERGED : st;
 
     if (c->sat_enabled && (v > c->sat_v_max || v < c->sat_v_min)) {
         /* Back-calculate what the plant model really receives at the clipped
          * voltage, so the operator memories and the MV past stay consistent:
-         * r_eff = P[v_sat], q_eff from r_eff = gain (q_eff + memory). */
+         * r_eff = P[v_sat], q_eff from r_eff = gain (q_eff + memory). The
+         * operators are re-evaluated from the committed (untouched) state. */
         double r_eff, memory;
-        piezo_gl probe;
         saturated = 1;
         v = v > c->sat_v_max ? c->sat_v_max : c->sat_v_min;
-        piezo_pi_step(&c->fwd_pi, v, &r_eff);
-        c->inv_pi = inv_before;
-        piezo_pi_inverse_step(&c->inv_pi, r_eff, &r);   /* re-sync the inverse states */
-        probe = creep_before;
-        piezo_gl_step(&probe, 0.0, history, capacity, &memory);
-        q = (r_eff - memory) / creep_before.gain;
-        c->inv_creep = creep_before;
-        piezo_gl_step(&c->inv_creep, q, history, capacity, &r);
-        c->sat_hold = d + 1;   /* no adaptation until the clipped sample leaves the regressor */
+        piezo_pi_eval(&c->fwd_pi, v, s->fwd_z, &r_eff);
+        st = piezo_pi_inverse_eval(&c->inv_pi, r_eff, s->inv_z, &r);  /* re-sync the inverse states */
+        if (st != PIEZO_OK) return PIEZO_ERR_DIVERGED;
+        piezo_gl_eval(&c->inv_creep, 0.0, history, capacity, s->creep_next, &memory);
+        q = (r_eff - memory) / c->inv_creep.gain;
+        st = piezo_gl_eval(&c->inv_creep, q, history, capacity, s->creep_next, &r);
+        if (st != PIEZO_OK) return PIEZO_ERR_DIVERGED;
+        s->sat_hold = d + 1;   /* no adaptation until the clipped sample leaves the regressor */
     } else {
-        piezo_pi_step(&c->fwd_pi, v, &r);
-        if (c->sat_hold > 0) c->sat_hold -= 1;
+        piezo_pi_eval(&c->fwd_pi, v, s->fwd_z, &r);
+        s->sat_hold = c->sat_hold > 0 ? c->sat_hold - 1 : c->sat_hold;
     }
 
+    s->large_error = fabs(pred_error) > c->pred_error_max;
+    s->run_large_error = s->large_error ? c->run_large_error + 1 : 0;
+    s->out.v = v;
+    s->out.q = q;
+    memcpy(s->out.theta, theta, sizeof s->out.theta);
+    s->out.pred_error = pred_error;
+    s->out.saturated = saturated;
+    if (!(isfinite(v) && isfinite(q) && isfinite(pred_error)))
+        return PIEZO_ERR_DIVERGED;
+    s->reaches_window = c->divergence_samples > 0 && s->run_large_error >= c->divergence_samples;
+    return PIEZO_OK;
+}
+
+/* Make the evaluated sample k the controller's state (k -> k+1). */
+static void controller_commit(piezo_controller *c, const piezo_controller_sample *s)
+{
+    double q = s->out.q, y_meas = s->y_meas;
+    if (s->rls_updated) {
+        memcpy(c->theta, s->theta, sizeof c->theta);
+        memcpy(c->P, s->P, sizeof c->P);
+    }
+    piezo_gl_commit(&c->inv_creep, q, s->creep_next);
+    memcpy(c->inv_pi.z, s->inv_z, (size_t)c->inv_pi.m * sizeof *s->inv_z);
+    memcpy(c->fwd_pi.z, s->fwd_z, (size_t)c->fwd_pi.m * sizeof *s->fwd_z);
+    c->sat_hold = s->sat_hold;
+
     /* monitor: counts and current runs of clipped samples and large errors */
-    if (saturated) {
+    if (s->out.saturated) {
         if (c->n_saturated == 0) c->k_first_saturated = c->k;
         c->n_saturated += 1;
         c->run_saturated += 1;
     } else {
         c->run_saturated = 0;
     }
-    if (fabs(pred_error) > c->pred_error_max) {
+    if (s->large_error) {
         if (c->n_large_error == 0) c->k_first_large_error = c->k;
         c->n_large_error += 1;
-        c->run_large_error += 1;
-    } else {
-        c->run_large_error = 0;
     }
-    if (fabs(pred_error) > c->max_abs_pred_error) c->max_abs_pred_error = fabs(pred_error);
+    c->run_large_error = s->run_large_error;
+    if (fabs(s->out.pred_error) > c->max_abs_pred_error) c->max_abs_pred_error = fabs(s->out.pred_error);
 
     /* shift the pasts */
-    c->head = (c->head + PIEZO_MV_Q_RING - 1) % PIEZO_MV_Q_RING;
+    c->head = c->head == 0 ? PIEZO_MV_Q_RING - 1 : c->head - 1;
     c->q_ring[c->head] = q;
     c->y_prev[1] = c->y_prev[0];
     c->y_prev[0] = y_meas;
     c->k += 1;
-    c->out.v = v;
-    c->out.q = q;
-    memcpy(c->out.theta, c->theta, sizeof c->theta);
-    c->out.pred_error = pred_error;
-    c->out.saturated = saturated;
-    return PIEZO_OK;
+    c->out = s->out;
 }
 
 /* Refusals that must leave the state untouched, checked before any work. */
@@ -332,35 +371,39 @@ static piezo_status check_step_inputs(const piezo_controller *c, double y_ref, d
     return PIEZO_OK;
 }
 
-/* Advance `scratch` (a copy of the state) by one sample. The inputs are
- * finite, so a non-finite value computed on the way means divergence. With
- * `monitor`, a run of large prediction errors that reaches the divergence
- * window means an unstable loop (a step refuses it; a peek reports values). */
-static piezo_status advance_copy(piezo_controller *scratch, double y_ref, double y_meas,
-                                 double *history, size_t capacity, int monitor)
+piezo_status piezo_controller_evaluate(const piezo_controller *c, double y_ref, double y_meas,
+                                       double *history, size_t capacity, piezo_controller_sample *sample)
 {
-    piezo_status st = controller_advance(scratch, y_ref, y_meas, history, capacity);
-    if (st == PIEZO_ERR_NONFINITE || (st == PIEZO_OK && !(isfinite(scratch->out.v) && isfinite(scratch->out.q)
-                                                          && isfinite(scratch->out.pred_error))))
-        st = PIEZO_ERR_DIVERGED;
-    if (st == PIEZO_OK && monitor && scratch->divergence_samples > 0
-        && scratch->run_large_error >= scratch->divergence_samples)
-        st = PIEZO_ERR_UNSTABLE;
-    return st;
+    piezo_status st;
+    if (!c || !sample) return PIEZO_ERR_NULL;
+    st = check_step_inputs(c, y_ref, y_meas, history, capacity);
+    if (st != PIEZO_OK) return st;
+    return controller_eval(c, y_ref, y_meas, history, capacity, sample);
 }
 
+piezo_status piezo_controller_commit(piezo_controller *c, const piezo_controller_sample *sample,
+                                     piezo_controller_output *out)
+{
+    if (!c || !sample) return PIEZO_ERR_NULL;
+    if (sample->k != c->k) return PIEZO_ERR_PARAM;
+    if (sample->reaches_window) return PIEZO_ERR_UNSTABLE;
+    controller_commit(c, sample);
+    if (out) *out = c->out;
+    return PIEZO_OK;
+}
+
+/* evaluate + commit, without the exported entry points (no PLT in the hot path) */
 piezo_status piezo_controller_step(piezo_controller *c, double y_ref, double y_meas,
                                    double *history, size_t capacity, piezo_controller_output *out)
 {
-    piezo_controller scratch;
+    piezo_controller_sample s;
     piezo_status st;
     if (!c) return PIEZO_ERR_NULL;
     st = check_step_inputs(c, y_ref, y_meas, history, capacity);
+    if (st == PIEZO_OK) st = controller_eval(c, y_ref, y_meas, history, capacity, &s);
     if (st != PIEZO_OK) return st;
-    scratch = *c;
-    st = advance_copy(&scratch, y_ref, y_meas, history, capacity, 1);
-    if (st != PIEZO_OK) return st;
-    *c = scratch;
+    if (s.reaches_window) return PIEZO_ERR_UNSTABLE;
+    controller_commit(c, &s);
     if (out) *out = c->out;
     return PIEZO_OK;
 }
@@ -368,13 +411,10 @@ piezo_status piezo_controller_step(piezo_controller *c, double y_ref, double y_m
 piezo_status piezo_controller_peek(const piezo_controller *c, double y_ref, double y_meas,
                                    double *history, size_t capacity, piezo_controller_output *out)
 {
-    piezo_controller scratch;
+    piezo_controller_sample s;
     piezo_status st;
     if (!c || !out) return PIEZO_ERR_NULL;
-    st = check_step_inputs(c, y_ref, y_meas, history, capacity);
-    if (st != PIEZO_OK) return st;
-    scratch = *c;
-    st = advance_copy(&scratch, y_ref, y_meas, history, capacity, 0);
-    if (st == PIEZO_OK) *out = scratch.out;
+    st = piezo_controller_evaluate(c, y_ref, y_meas, history, capacity, &s);
+    if (st == PIEZO_OK) *out = s.out;
     return st;
 }

@@ -88,6 +88,29 @@ typedef struct {
     piezo_controller_output out; /* result of the last committed sample */
 } piezo_controller;
 
+/*
+ * One evaluated sample, for a caller that computes a sample before it decides
+ * to commit it - e.g. an FMU whose outputs depend directly on its inputs: the
+ * outputs read at a communication point are the very sample its doStep then
+ * commits, computed once. Filled by piezo_controller_evaluate, consumed by
+ * piezo_controller_commit. k, y_ref, y_meas and out say which sample it is
+ * and what it gives; the other fields are the evaluation's next states.
+ */
+typedef struct {
+    uint64_t k;                  /* the sample evaluated (ctrl->k at the evaluation) */
+    double y_ref, y_meas;        /* its inputs */
+    int reaches_window;          /* committing it would complete the divergence window */
+    piezo_controller_output out; /* its outputs */
+    double theta[4], P[16];      /* RLS result (valid when rls_updated) */
+    int rls_updated;
+    double creep_next[PIEZO_GL_MAX_TERMS];   /* inverse creep SOE states of k+1 */
+    double inv_z[PIEZO_PI_MAX_OPERATORS];    /* inverse PI play states of k+1 */
+    double fwd_z[PIEZO_PI_MAX_OPERATORS];    /* forward PI play states of k+1 */
+    int sat_hold;
+    int large_error;             /* |pred_error| > monitor_pred_error_max */
+    uint64_t run_large_error;
+} piezo_controller_sample;
+
 /* DESIGN.md section 5 defaults (nominal plant model). */
 void piezo_controller_default_params(piezo_controller_params *params);
 piezo_status piezo_controller_init(piezo_controller *ctrl, const piezo_controller_params *params,
@@ -110,6 +133,19 @@ piezo_status piezo_controller_step(piezo_controller *ctrl, double y_ref, double 
 piezo_status piezo_controller_peek(const piezo_controller *ctrl, double y_ref, double y_meas,
                                    double *history, size_t history_capacity,
                                    piezo_controller_output *out);
+/*
+ * The two halves of piezo_controller_step: evaluate sample k into *sample
+ * (nothing committed; the checks, refusals and history writes of a peek,
+ * which it equals), then commit it: PIEZO_ERR_PARAM (nothing done) unless
+ * sample->k == ctrl->k, PIEZO_ERR_UNSTABLE (nothing done) when it completes
+ * the divergence window. Commit only the latest evaluation of the sample, with
+ * the state it was evaluated on (exact mode: history[2k..2k+1] are its own).
+ */
+piezo_status piezo_controller_evaluate(const piezo_controller *ctrl, double y_ref, double y_meas,
+                                       double *history, size_t history_capacity,
+                                       piezo_controller_sample *sample);
+piezo_status piezo_controller_commit(piezo_controller *ctrl, const piezo_controller_sample *sample,
+                                     piezo_controller_output *out);
 size_t piezo_controller_history_needed(const piezo_controller *ctrl);
 
 /* Diophantine 1 = A E + z^-d Gd for A = 1 + a1 z^-1 + a2 z^-2, 1 <= d <= 9:

@@ -139,43 +139,76 @@ static double gl_exact_sum(const double *history, size_t k)
 }
 
 /* SOE: y(k) = gain * (sum_{j=0..L0} w_j x(k-j) + sum_i c_i S_i(k)),
- * S_i(k) = e^{-s_i} S_i(k-1) + e^{-s_i (L0+1)} x(k-L0-1). */
-static double gl_soe_sum(piezo_gl *gl, double x)
+ * S_i(k) = e^{-s_i} S_i(k-1) + e^{-s_i (L0+1)} x(k-L0-1).
+ * x_ring holds x(k-1) .. x(k-1-L0), x(k-j) at (oldest + j) mod (L0+1); the
+ * oldest, x(k-L0-1), leaves the head window now, and its slot receives x(k)
+ * at the commit. Each next[i] is written after soe_state[i] is read, so next
+ * may be gl->soe_state (in place).
+ * Both sums are sequential chains of additions (their order fixes the
+ * rounding); one loop advances both, so the CPU overlaps their latencies. */
+static double gl_soe_sum(const piezo_gl *gl, double x, double *next)
 {
-    /* x_ring holds x(k-1) .. x(k-1-L0); the oldest leaves the head window now */
-    int oldest = (gl->head + PIEZO_GL_HEAD) % PIEZO_GL_HEAD_LEN;
+    int oldest = gl->head == 0 ? PIEZO_GL_HEAD : gl->head - 1;
     double x_leaving = gl->x_ring[oldest];   /* x(k-L0-1) */
     double sum = x, tail = 0.0;
-    int i, j;
+    int i, j = 1, pos = oldest + 1;          /* x(k-j) at x_ring[pos] */
+    if (pos == PIEZO_GL_HEAD_LEN) pos = 0;
     for (i = 0; i < gl->n_terms; ++i) {
-        gl->soe_state[i] = gl->soe_decay[i] * gl->soe_state[i] + gl->soe_inject[i] * x_leaving;
-        tail += gl->soe_c[i] * gl->soe_state[i];
+        double s = gl->soe_decay[i] * gl->soe_state[i] + gl->soe_inject[i] * x_leaving;
+        next[i] = s;
+        tail += gl->soe_c[i] * s;
+        if (j <= PIEZO_GL_HEAD) {
+            sum += gl->w_head[j] * gl->x_ring[pos];
+            ++j;
+            if (++pos == PIEZO_GL_HEAD_LEN) pos = 0;
+        }
     }
-    /* push x(k): the slot of x(k-L0-1) becomes the newest */
-    gl->head = oldest;
-    gl->x_ring[gl->head] = x;
-    for (j = 1; j <= PIEZO_GL_HEAD; ++j)
-        sum += gl->w_head[j] * gl->x_ring[(gl->head + j) % PIEZO_GL_HEAD_LEN];
+    for (; j <= PIEZO_GL_HEAD; ++j) {
+        sum += gl->w_head[j] * gl->x_ring[pos];
+        if (++pos == PIEZO_GL_HEAD_LEN) pos = 0;
+    }
     return sum + tail;
 }
 
-piezo_status piezo_gl_step(piezo_gl *gl, double x, double *history, size_t history_capacity, double *y)
+piezo_status piezo_gl_eval(const piezo_gl *gl, double x, double *history, size_t history_capacity,
+                           double *next_state, double *y)
 {
     double sum;
     if (!gl || !y) return PIEZO_ERR_NULL;
     if (!isfinite(x)) return PIEZO_ERR_NONFINITE;
     if (gl->exact) {
-        if (!history) return PIEZO_ERR_NULL;
         size_t k = (size_t)gl->k;
+        if (!history) return PIEZO_ERR_NULL;
         if (history_capacity < piezo_gl_history_needed(gl)) return PIEZO_ERR_CAPACITY;
         history[2 * k] = x;
         /* w_k by eq 14 from w_{k-1} (w_0 = 1) */
         history[2 * k + 1] = k == 0 ? 1.0 : gl_weight_ratio(gl->alpha, k) * history[2 * k - 1];
         sum = gl_exact_sum(history, k);
     } else {
-        sum = gl_soe_sum(gl, x);
+        if (!next_state) return PIEZO_ERR_NULL;
+        sum = gl_soe_sum(gl, x, next_state);
     }
-    gl->k += 1;
     *y = gl->gain * sum;
     return PIEZO_OK;
+}
+
+void piezo_gl_commit(piezo_gl *gl, double x, const double *next_state)
+{
+    if (!gl->exact) {
+        /* the slot of x(k-L0-1) becomes the newest */
+        gl->head = gl->head == 0 ? PIEZO_GL_HEAD : gl->head - 1;
+        gl->x_ring[gl->head] = x;
+        if (next_state != gl->soe_state)
+            memcpy(gl->soe_state, next_state, (size_t)gl->n_terms * sizeof *next_state);
+    }
+    gl->k += 1;
+}
+
+piezo_status piezo_gl_step(piezo_gl *gl, double x, double *history, size_t history_capacity, double *y)
+{
+    piezo_status st;
+    if (!gl) return PIEZO_ERR_NULL;
+    st = piezo_gl_eval(gl, x, history, history_capacity, gl->soe_state, y);
+    if (st == PIEZO_OK) piezo_gl_commit(gl, x, gl->soe_state);
+    return st;
 }

@@ -58,6 +58,16 @@ void piezo_gl_reset(piezo_gl *gl);
  * a too-small history is refused, state unchanged.
  */
 piezo_status piezo_gl_step(piezo_gl *gl, double x, double *history, size_t history_capacity, double *y);
+/*
+ * The same sample without committing it, for callers that can still refuse
+ * the sample afterwards: y(k) and, in SOE mode, the SOE states of k+1 in
+ * next_state[0..n_terms-1] (may be gl->soe_state itself). Exact mode writes
+ * history[2k], history[2k+1] as the step does. piezo_gl_commit(gl, x,
+ * next_state) then makes it the step (next_state unused in exact mode).
+ */
+piezo_status piezo_gl_eval(const piezo_gl *gl, double x, double *history, size_t history_capacity,
+                           double *next_state, double *y);
+void piezo_gl_commit(piezo_gl *gl, double x, const double *next_state);
 /* Doubles of history the next exact-mode step needs, 2(k+1); 0 in SOE mode. */
 size_t piezo_gl_history_needed(const piezo_gl *gl);
 

@@ -3,13 +3,19 @@
 #include <string.h>
 #include "piezo_hysteresis.h"
 
-/* eq 3: z_r(k) = max(v(k) - r, min(v(k) + r, z_r(k-1))) */
-double piezo_play(double v, double r, double z_prev)
+/* eq 3: z_r(k) = max(v(k) - r, min(v(k) + r, z_r(k-1))). Static, so the
+ * model loops inline it (an exported function is called through the PLT). */
+static double play(double v, double r, double z_prev)
 {
     double upper = v + r;
     double lower = v - r;
     double z = z_prev < upper ? z_prev : upper;
     return z > lower ? z : lower;
+}
+
+double piezo_play(double v, double r, double z_prev)
+{
+    return play(v, r, z_prev);
 }
 
 /* Names of the weights as FMU variables, for diagnostics. */
@@ -49,20 +55,28 @@ void piezo_pi_reset(piezo_pi *pi)
     if (pi) memset(pi->z, 0, sizeof pi->z);
 }
 
-/* eq 18: u(k) = w0 v(k) + sum_j w_j z_{r_j}(k) */
-piezo_status piezo_pi_step(piezo_pi *pi, double v, double *u)
+/* eq 18: u(k) = w0 v(k) + sum_j w_j z_{r_j}(k). Each z_next[j] is written after
+ * z[j] is read, so z_next may be pi->z (in place). */
+piezo_status piezo_pi_eval(const piezo_pi *pi, double v, double *z_next, double *u)
 {
     int j;
     double sum;
-    if (!pi || !u) return PIEZO_ERR_NULL;
+    if (!pi || !z_next || !u) return PIEZO_ERR_NULL;
     if (!isfinite(v)) return PIEZO_ERR_NONFINITE;
     sum = pi->w0 * v;
     for (j = 0; j < pi->m; ++j) {
-        pi->z[j] = piezo_play(v, pi->r[j], pi->z[j]);
-        sum += pi->w[j] * pi->z[j];
+        double z = play(v, pi->r[j], pi->z[j]);
+        z_next[j] = z;
+        sum += pi->w[j] * z;
     }
     *u = sum;
     return PIEZO_OK;
+}
+
+piezo_status piezo_pi_step(piezo_pi *pi, double v, double *u)
+{
+    if (!pi) return PIEZO_ERR_NULL;
+    return piezo_pi_eval(pi, v, pi->z, u);
 }
 
 piezo_status piezo_pi_inverse_init(piezo_pi_inverse *inv, const piezo_pi *pi)
@@ -95,18 +109,25 @@ piezo_status piezo_pi_inverse_init(piezo_pi_inverse *inv, const piezo_pi *pi)
     return PIEZO_OK;
 }
 
-/* eq 24: v(k) = w'_0 u(k) + sum_i w'_i z'_{r'_i}(k) */
-piezo_status piezo_pi_inverse_step(piezo_pi_inverse *inv, double u, double *v)
+/* eq 24: v(k) = w'_0 u(k) + sum_i w'_i z'_{r'_i}(k); z_next may be inv->z. */
+piezo_status piezo_pi_inverse_eval(const piezo_pi_inverse *inv, double u, double *z_next, double *v)
 {
     int i;
     double sum;
-    if (!inv || !v) return PIEZO_ERR_NULL;
+    if (!inv || !z_next || !v) return PIEZO_ERR_NULL;
     if (!isfinite(u)) return PIEZO_ERR_NONFINITE;
     sum = inv->w0 * u;
     for (i = 0; i < inv->m; ++i) {
-        inv->z[i] = piezo_play(u, inv->r[i], inv->z[i]);
-        sum += inv->w[i] * inv->z[i];
+        double z = play(u, inv->r[i], inv->z[i]);
+        z_next[i] = z;
+        sum += inv->w[i] * z;
     }
     *v = sum;
     return PIEZO_OK;
+}
+
+piezo_status piezo_pi_inverse_step(piezo_pi_inverse *inv, double u, double *v)
+{
+    if (!inv) return PIEZO_ERR_NULL;
+    return piezo_pi_inverse_eval(inv, u, inv->z, v);
 }

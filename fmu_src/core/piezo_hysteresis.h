@@ -52,10 +52,16 @@ piezo_status piezo_pi_init(piezo_pi *pi, const piezo_pi_params *params, piezo_di
 void piezo_pi_reset(piezo_pi *pi);
 /* u = P[v](k); refuses non-finite v without touching the state. */
 piezo_status piezo_pi_step(piezo_pi *pi, double v, double *u);
+/* The same sample without committing it: u and the play states it leads to
+ * (z_next[0..m-1]; may be pi->z itself, which is then the step). For callers
+ * that can still refuse the sample afterwards; they commit by copying z_next. */
+piezo_status piezo_pi_eval(const piezo_pi *pi, double v, double *z_next, double *u);
 
 /* Derive the inverse of `pi`, with initial states consistent with pi->z (eq 28). */
 piezo_status piezo_pi_inverse_init(piezo_pi_inverse *inv, const piezo_pi *pi);
 /* v = P^-1[u](k); refuses non-finite u without touching the state. */
 piezo_status piezo_pi_inverse_step(piezo_pi_inverse *inv, double u, double *v);
+/* The same sample without committing it (z_next as in piezo_pi_eval). */
+piezo_status piezo_pi_inverse_eval(const piezo_pi_inverse *inv, double u, double *z_next, double *v);
 
 #endif

@@ -148,11 +148,15 @@ size_t piezo_plant_history_needed(const piezo_plant *plant)
     return piezo_gl_history_needed(&plant->creep);
 }
 
+/*
+ * In place, without copying the plant: every stage is first evaluated
+ * without committing (the only refusal after the input checks is an
+ * overflow, PIEZO_ERR_DIVERGED, which shows in u, x or y), then committed.
+ */
 piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_history,
                               size_t history_capacity, piezo_plant_output *out)
 {
-    piezo_plant scratch;
-    piezo_status st;
+    double z_next[PIEZO_PI_MAX_OPERATORS], soe_next[PIEZO_GL_MAX_TERMS];
     double u, x, y;
     if (!plant) return PIEZO_ERR_NULL;
     if (!isfinite(v)) return PIEZO_ERR_NONFINITE;
@@ -160,24 +164,28 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
         if (!creep_history) return PIEZO_ERR_NULL;
         if (history_capacity < piezo_plant_history_needed(plant)) return PIEZO_ERR_CAPACITY;
     }
-    /* Work on a copy so that any refusal leaves *plant untouched. */
-    scratch = *plant;
-    st = piezo_pi_step(&scratch.pi, v, &u);          /* u(k) = P[v](k)        */
-    if (st == PIEZO_OK) st = piezo_tf_step(&scratch.tf, u, &x);   /* x(k+1)    */
-    if (st == PIEZO_OK && scratch.creep_enabled)
-        st = piezo_gl_step(&scratch.creep, x, creep_history, history_capacity, &y); /* y(k+1) */
-    else
+    /* v is finite, so a non-finite value from here on was computed: overflow, not bad input */
+    piezo_pi_eval(&plant->pi, v, z_next, &u);                         /* u(k) = P[v](k) */
+    if (!isfinite(u)) return PIEZO_ERR_DIVERGED;
+    piezo_tf_eval(&plant->tf, u, &x);                                 /* x(k+1)         */
+    if (!isfinite(x)) return PIEZO_ERR_DIVERGED;
+    if (plant->creep_enabled) {
+        piezo_status st = piezo_gl_eval(&plant->creep, x, creep_history, history_capacity,
+                                        soe_next, &y);                /* y(k+1)         */
+        if (st != PIEZO_OK) return st;
+        if (!isfinite(y)) return PIEZO_ERR_DIVERGED;
+    } else {
         y = x;
-    /* v is finite, so a non-finite value here was computed: overflow, not bad input */
-    if (st == PIEZO_ERR_NONFINITE || (st == PIEZO_OK && !(isfinite(u) && isfinite(x) && isfinite(y))))
-        st = PIEZO_ERR_DIVERGED;
-    if (st != PIEZO_OK) return st;
-    scratch.k += 1;
-    scratch.out.u = u;
-    scratch.out.x = x;
-    scratch.out.y = y;
-    scratch.out.y_meas = sense(&scratch, y);
-    *plant = scratch;
+    }
+    /* commit */
+    memcpy(plant->pi.z, z_next, (size_t)plant->pi.m * sizeof *z_next);
+    piezo_tf_commit(&plant->tf, u, x);
+    if (plant->creep_enabled) piezo_gl_commit(&plant->creep, x, soe_next);
+    plant->k += 1;
+    plant->out.u = u;
+    plant->out.x = x;
+    plant->out.y = y;
+    plant->out.y_meas = sense(plant, y);
     if (out) *out = plant->out;
     return PIEZO_OK;
 }

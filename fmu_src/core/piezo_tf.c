@@ -33,23 +33,42 @@ void piezo_tf_reset(piezo_tf *tf)
     tf->head = 0;
 }
 
-piezo_status piezo_tf_step(piezo_tf *tf, double u, double *x_next)
+/* The input ring after pushing u(k) has u(k) at head' = head - 1 and u(k-i) at
+ * head' + i; offsets 1..33 hold the pushed-out past, so x(k+1) can be read
+ * before anything is written. */
+static int ring_index(int head, int offset)
 {
-    double u_d0, u_d1, x;
-    int i0, i1;
+    int i = head + offset;
+    return i >= PIEZO_TF_INPUT_RING ? i - PIEZO_TF_INPUT_RING : i;
+}
+
+piezo_status piezo_tf_eval(const piezo_tf *tf, double u, double *x_next)
+{
+    int head;
+    double u_d0, u_d1;
     if (!tf || !x_next) return PIEZO_ERR_NULL;
     if (!isfinite(u)) return PIEZO_ERR_NONFINITE;
-    /* push u(k): u_ring[head] = u(k), u_ring[head+i] = u(k-i) */
-    tf->head = (tf->head + PIEZO_TF_INPUT_RING - 1) % PIEZO_TF_INPUT_RING;
-    tf->u_ring[tf->head] = u;
-    i0 = (tf->head + tf->delay) % PIEZO_TF_INPUT_RING;
-    i1 = (tf->head + tf->delay + 1) % PIEZO_TF_INPUT_RING;
-    u_d0 = tf->u_ring[i0];  /* u(k-delay)   */
-    u_d1 = tf->u_ring[i1];  /* u(k-1-delay) */
+    head = tf->head == 0 ? PIEZO_TF_INPUT_RING - 1 : tf->head - 1;
+    u_d0 = tf->delay == 0 ? u : tf->u_ring[ring_index(head, tf->delay)];   /* u(k-delay)   */
+    u_d1 = tf->u_ring[ring_index(head, tf->delay + 1)];                     /* u(k-1-delay) */
     /* x(k+1) = -a1 x(k) - a2 x(k-1) + b1 u(k-delay) + b2 u(k-1-delay) */
-    x = -tf->a1 * tf->x1 - tf->a2 * tf->x2 + tf->b1 * u_d0 + tf->b2 * u_d1;
-    tf->x2 = tf->x1;
-    tf->x1 = x;
-    *x_next = x;
+    *x_next = -tf->a1 * tf->x1 - tf->a2 * tf->x2 + tf->b1 * u_d0 + tf->b2 * u_d1;
     return PIEZO_OK;
+}
+
+void piezo_tf_commit(piezo_tf *tf, double u, double x_next)
+{
+    tf->head = tf->head == 0 ? PIEZO_TF_INPUT_RING - 1 : tf->head - 1;
+    tf->u_ring[tf->head] = u;
+    tf->x2 = tf->x1;
+    tf->x1 = x_next;
+}
+
+piezo_status piezo_tf_step(piezo_tf *tf, double u, double *x_next)
+{
+    piezo_status st;
+    if (!tf) return PIEZO_ERR_NULL;
+    st = piezo_tf_eval(tf, u, x_next);
+    if (st == PIEZO_OK) piezo_tf_commit(tf, u, *x_next);
+    return st;
 }

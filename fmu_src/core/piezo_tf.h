@@ -35,5 +35,9 @@ piezo_status piezo_tf_init(piezo_tf *tf, const piezo_tf_params *params, piezo_di
 void piezo_tf_reset(piezo_tf *tf);
 /* Consume u(k), return x(k+1) through *x_next. Non-finite u refused. */
 piezo_status piezo_tf_step(piezo_tf *tf, double u, double *x_next);
+/* x(k+1) for u(k) without committing; piezo_tf_commit(tf, u, x_next) then
+ * makes it the step (for callers that can still refuse the sample). */
+piezo_status piezo_tf_eval(const piezo_tf *tf, double u, double *x_next);
+void piezo_tf_commit(piezo_tf *tf, double u, double x_next);
 
 #endif

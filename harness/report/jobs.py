@@ -154,7 +154,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     fmu_dir : str or Path, optional
     plots : bool
         Draw the figures (PNG and SVG).
-    backend : {"fmpy", "core"}
+    backend : {"auto", "fmpy", "native", "core"}
     registry : dict, optional
         Scenario registry (built-in plus user files); default built-in.
     extra_scenarios : iterable of str
@@ -246,7 +246,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
             seen.add(sc.name)
             unique.append(sc)
     defaults_source = ("the start value in the modelDescription of the FMUs above"
-                       if backend == "fmpy" else "the C core's default")
+                       if backend != "core" else "the C core's default")
     report = _main_document(conditions, tracking, validation, figures, prov, unique,
                             defaults_source, plots, registry)
     (out / "report.md").write_text(doc_.render_markdown(report), encoding="utf-8")

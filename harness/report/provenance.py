@@ -152,7 +152,7 @@ def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None):
 
     Parameters
     ----------
-    backend : {"fmpy", "core"}
+    backend : {"auto", "fmpy", "native", "core"}
     fmu_dir : str or Path, optional
     models : sequence of str, optional
         The FMUs that ran (default: PiezoStage and AdaptiveCompoundController).
@@ -167,7 +167,7 @@ def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None):
 
     models = (PLANT_MODEL, CONTROLLER_MODEL) if models is None else tuple(models)
     prov = Provenance(commit=commit_id(), backend=backend)
-    if backend == "fmpy":
+    if backend != "core":
         prov.fmus = [fmu_info(fmu_path(m, fmu_dir)) for m in models]
     else:
         from .. import core

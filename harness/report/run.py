@@ -27,7 +27,7 @@ __all__ = [
     "validation_series",
 ]
 
-BACKENDS = ("fmpy", "core")
+BACKENDS = ("auto", "fmpy", "native", "core")
 
 
 def _ratio(a, b):
@@ -112,6 +112,11 @@ def simulators(backend):
     if backend == "core":
         from ..core_loop import simulate_closed_loop_core, simulate_open_loop_core
         return simulate_closed_loop_core, simulate_open_loop_core
+    if backend in ("native", "auto"):   # closed loops only; the plant alone runs in fmpy
+        from ..cosim import simulate_open_loop
+        from ..native import simulate_closed_loop_auto, simulate_closed_loop_native
+        return (simulate_closed_loop_native if backend == "native" else simulate_closed_loop_auto,
+                simulate_open_loop)
     raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
 
 
@@ -121,8 +126,8 @@ def parameter_defaults(model, backend="fmpy", fmu_dir=None):
     Parameters
     ----------
     model : {"PiezoStage", "AdaptiveCompoundController"}
-    backend : {"fmpy", "core"}
-        fmpy: the ``start`` of every Real/Integer/Boolean parameter in the FMU's
+    backend : {"auto", "fmpy", "native", "core"}
+        The FMU backends: the ``start`` of every Real/Integer/Boolean parameter in the FMU's
         modelDescription; core: :func:`harness.core.default_plant_params` or
         :func:`harness.core.default_controller_params`.
     fmu_dir : str or Path, optional
@@ -167,7 +172,7 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
         Label stored in the result.
     adaptation, preview, master, fmu_dir, registry
         See :func:`harness.cosim.simulate_closed_loop`.
-    backend : {"fmpy", "core"}
+    backend : {"auto", "fmpy", "native", "core"}
         Run the FMUs (default) or the C core directly.
     keep_data : bool
         Keep the time series in ``result.data``.

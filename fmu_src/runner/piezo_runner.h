@@ -1,0 +1,143 @@
+/*
+ * piezo_runner.h - a native co-simulation master for the closed loop of the
+ * PiezoStage and AdaptiveCompoundController FMUs.
+ *
+ * It loads the two FMU binaries through the FMI 2.0 API (dlopen/dlsym), keeps
+ * one instance of each, and runs the closed loop with the schedule of the
+ * harness's fmpy master (harness/cosim.py), exchanging values at
+ * communication points only, per sample k at t_k = k h:
+ *
+ *   Gauss-Seidel (ModelStructure order):
+ *     plant.get(y, y_meas) -> ctrl.set(y_ref(k), y_meas) -> ctrl.get(outputs)
+ *     -> plant.set(v) -> doStep of both (plant first, or controller first)
+ *   Jacobi (textbook): every output first (plant, then controller), then
+ *     every input (plant.v, then the controller's), then both doSteps.
+ *
+ * y_ref(k) is given by the caller (the harness computes it, with preview).
+ * Each row of the result holds, at t_k: y, y_meas, v, q, est.a1, est.a2,
+ * est.b1, est.b2, pred_error, saturated (0 or 1) - the values the fmpy master
+ * records, bit for bit.
+ *
+ * Errors never end the process: every FMI status above fmi2Warning stops the
+ * run and is returned with the sample, the FMU and the call that failed; the
+ * FMUs' log messages are kept (piezo_runner_log_*). fmi2Warning (e.g. the
+ * controller's first clipped voltage) is a completed call.
+ *
+ * Header rules (read by the harness's cffi binding): only size_t, int,
+ * double, const char * and char * types, integer-literal #defines.
+ */
+#ifndef PIEZO_RUNNER_H
+#define PIEZO_RUNNER_H
+
+#include <stddef.h>
+
+#define PIEZO_RUNNER_PLANT 0
+#define PIEZO_RUNNER_CONTROLLER 1
+
+#define PIEZO_RUNNER_GAUSS_SEIDEL 0
+#define PIEZO_RUNNER_JACOBI 1
+
+#define PIEZO_RUNNER_PLANT_FIRST 0
+#define PIEZO_RUNNER_CONTROLLER_FIRST 1
+
+/* the FMI call that failed */
+#define PIEZO_RUNNER_CALL_NONE 0
+#define PIEZO_RUNNER_CALL_GET_REAL 1
+#define PIEZO_RUNNER_CALL_SET_REAL 2
+#define PIEZO_RUNNER_CALL_GET_BOOLEAN 3
+#define PIEZO_RUNNER_CALL_DO_STEP 4
+#define PIEZO_RUNNER_CALL_SET_INTEGER 5
+#define PIEZO_RUNNER_CALL_SET_BOOLEAN 6
+#define PIEZO_RUNNER_CALL_SETUP_EXPERIMENT 7
+#define PIEZO_RUNNER_CALL_ENTER_INITIALIZATION 8
+#define PIEZO_RUNNER_CALL_EXIT_INITIALIZATION 9
+#define PIEZO_RUNNER_CALL_TERMINATE 10
+#define PIEZO_RUNNER_CALL_RESET 11
+
+/* doubles per row of a recorded run */
+#define PIEZO_RUNNER_ROW 10
+/* controller outputs read as Reals: v, q, est.a1, est.a2, est.b1, est.b2, pred_error */
+#define PIEZO_RUNNER_CTRL_REALS 7
+
+/* One FMU: its binary and identity. */
+typedef struct {
+    const char *library;        /* path of binaries/<platform>/<modelIdentifier>.so */
+    const char *guid;           /* the model description's guid */
+    const char *resource_uri;   /* file URI of the extracted resources folder, or NULL */
+    const char *instance_name;
+} piezo_runner_fmu;
+
+/* Value references of the exchanged variables (from the model descriptions). */
+typedef struct {
+    int plant_y;
+    int plant_y_meas;
+    int plant_v;
+    int ctrl_y_ref;
+    int ctrl_y_meas;
+    int ctrl_reals[PIEZO_RUNNER_CTRL_REALS];
+    int ctrl_saturated;
+} piezo_runner_refs;
+
+/* What a run did. */
+typedef struct {
+    int status;                 /* worst FMI status seen (0 OK, 1 Warning, 2 Discard, 3 Error, 4 Fatal) */
+    size_t samples;             /* samples completed (rows filled) */
+    int failed_role;            /* PIEZO_RUNNER_PLANT / _CONTROLLER, or -1 */
+    int failed_call;            /* PIEZO_RUNNER_CALL_*, 0 when nothing failed */
+} piezo_runner_result;
+
+typedef struct piezo_runner piezo_runner;
+
+/* Load both binaries and instantiate one instance of each (logging of
+ * warnings and errors on, events off). NULL on failure, the reason in
+ * error[0..error_size-1] (including the FMUs' messages). */
+piezo_runner *piezo_runner_new(const piezo_runner_fmu *plant, const piezo_runner_fmu *controller,
+                               const piezo_runner_refs *refs, char *error, size_t error_size);
+/* Free both instances (no fmi2Terminate) and unload. NULL is ignored. */
+void piezo_runner_free(piezo_runner *runner);
+
+/* fmi2Set* on one instance (role); returns the FMI status (3 for a bad role). */
+int piezo_runner_set_real(piezo_runner *runner, int role, const int *refs, const double *values, size_t n);
+int piezo_runner_set_integer(piezo_runner *runner, int role, const int *refs, const int *values, size_t n);
+int piezo_runner_set_boolean(piezo_runner *runner, int role, const int *refs, const int *values, size_t n);
+
+/* fmi2SetupExperiment(start, stop), fmi2EnterInitializationMode and
+ * fmi2ExitInitializationMode on the plant, then on the controller. */
+int piezo_runner_initialize(piezo_runner *runner, double start_time, double stop_time,
+                            piezo_runner_result *result);
+
+/*
+ * Run n samples of h from the current time (start_time + k h, k counted
+ * since initialization) with the given master and doStep order.
+ * rows: n * row_stride doubles, PIEZO_RUNNER_ROW written per row at
+ * rows[k * row_stride]; NULL runs the loop with the minimal exchange
+ * (y_meas and v only, nothing recorded: the cost of the FMI loop itself).
+ * block_ns: when not NULL and timing_block > 0, the thread CPU time [ns] of
+ * every complete block of timing_block samples (n / timing_block values).
+ * Returns result->status.
+ */
+int piezo_runner_run(piezo_runner *runner, size_t n, double h, int master, int step_order,
+                     const double *y_ref, double *rows, size_t row_stride,
+                     size_t timing_block, double *block_ns, piezo_runner_result *result);
+
+/* fmi2Terminate on both (the controller's summary comes as a warning). */
+int piezo_runner_terminate(piezo_runner *runner);
+/* fmi2Reset on both: back to the start values, ready for new parameters. */
+int piezo_runner_reset(piezo_runner *runner);
+
+/* The FMUs' log messages since creation or the last clear (at most 256 kept;
+ * piezo_runner_log_dropped counts the rest). */
+size_t piezo_runner_log_count(const piezo_runner *runner);
+size_t piezo_runner_log_dropped(const piezo_runner *runner);
+const char *piezo_runner_log_text(const piezo_runner *runner, size_t i);
+int piezo_runner_log_status(const piezo_runner *runner, size_t i);
+int piezo_runner_log_role(const piezo_runner *runner, size_t i);
+void piezo_runner_clear_log(piezo_runner *runner);
+
+/* Bytes the FMUs of this process hold through the runners' allocator
+ * (fmi2CallbackFunctions.allocateMemory), all runners together. */
+size_t piezo_runner_live_bytes(void);
+/* Bytes one instance (role) allocated in its fmi2Instantiate. */
+size_t piezo_runner_instance_bytes(const piezo_runner *runner, int role);
+
+#endif

@@ -1,0 +1,342 @@
+"""The native closed-loop master (``fmu_src/runner/``, ``build/libpiezo_runner.so``) through cffi.
+
+A small C co-simulation master loads the binaries of both FMUs through the FMI 2.0
+API and runs the loop of :func:`harness.cosim.simulate_closed_loop` at native speed:
+the same schedule (Gauss-Seidel in ModelStructure order, either doStep order, or
+textbook Jacobi), the same ``y_ref`` (computed here, with preview), the same result,
+bit for bit. The FMUs are the same files the fmpy master runs (extracted once per
+process by :mod:`harness.cosim`).
+
+FMU errors never end the process: a failing call stops the run and comes back with
+the FMU's log messages as the exceptions of the fmpy master
+(:class:`harness.cosim.LoopDivergedError` when the controller's monitor stopped the
+loop or a value diverged, :class:`harness.cosim.FMUError` otherwise,
+:class:`harness.cosim.FMUInitializationError` for refused parameters). A completed
+step with ``fmi2Warning`` (the controller's first clipped voltage) goes on.
+
+:class:`NativeLoop` holds one plant and one controller instance and reuses them for
+run after run through ``fmi2Reset`` (a sweep's worker keeps one per process);
+:func:`simulate_closed_loop_native` is the drop-in function.
+:func:`simulate_closed_loop_auto` picks the native master for long runs
+(``LONG_RUN_SAMPLES``) when the runner is built, else fmpy.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import threading
+
+import numpy as np
+
+from ._common import (
+    BUILD_COMMAND,
+    CLOSED_LOOP_DTYPE,
+    CLOSED_LOOP_FIELDS,
+    REPO_ROOT,
+    as_structured,
+    prepare_closed_loop,
+)
+
+__all__ = [
+    "LONG_RUN_SAMPLES",
+    "NativeLoop",
+    "native_available",
+    "native_loop",
+    "runner_library_path",
+    "simulate_closed_loop_auto",
+    "simulate_closed_loop_native",
+]
+
+#: Runs of at least this many samples (10 s at 2 kHz) use the native master by default.
+LONG_RUN_SAMPLES = 20000
+
+PLANT, CONTROLLER = 0, 1
+_HEADER = REPO_ROOT / "fmu_src" / "runner" / "piezo_runner.h"
+_STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+_CALLS = {1: "fmi2GetReal", 2: "fmi2SetReal", 3: "fmi2GetBoolean", 4: "fmi2DoStep",
+          5: "fmi2SetInteger", 6: "fmi2SetBoolean", 7: "fmi2SetupExperiment",
+          8: "initialization", 9: "initialization", 10: "fmi2Terminate", 11: "fmi2Reset"}
+_CTRL_REALS = ("v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error")
+
+_FFI = None
+_LIB = None
+_LOCK = threading.Lock()
+
+
+def runner_library_path():
+    """Path of the runner library: ``$PIEZO_RUNNER_LIB`` or ``<repo>/build/libpiezo_runner.so``."""
+    env = os.environ.get("PIEZO_RUNNER_LIB")
+    return Path(env) if env else REPO_ROOT / "build" / "libpiezo_runner.so"
+
+
+def native_available():
+    """True when the runner library is built."""
+    return runner_library_path().is_file()
+
+
+def _binding():
+    """(ffi, lib) of the runner, loaded once per process."""
+    global _FFI, _LIB
+    if _LIB is None:
+        with _LOCK:
+            if _LIB is None:
+                from cffi import FFI
+
+                from .core import header_cdef
+
+                path = runner_library_path()
+                if not path.is_file():
+                    raise FileNotFoundError(
+                        f"native runner library not found: {path}; build it with `{BUILD_COMMAND}` "
+                        f"in {REPO_ROOT} (or set PIEZO_RUNNER_LIB), or use the fmpy backend")
+                ffi = FFI()
+                ffi.cdef(header_cdef(_HEADER.parent, (_HEADER.name,)))
+                _LIB = ffi.dlopen(str(path))
+                _FFI = ffi
+    return _FFI, _LIB
+
+
+class NativeLoop:
+    """One PiezoStage and one AdaptiveCompoundController instance in the native runner.
+
+    Parameters
+    ----------
+    fmu_dir : str or Path, optional
+        Folder of the FMUs (default :func:`harness.cosim.default_fmu_dir`).
+
+    Raises
+    ------
+    FileNotFoundError
+        An FMU or the runner library is missing (the message says how to build it).
+    harness.cosim.FMUInitializationError
+        A binary could not be loaded or instantiated (with the FMU's messages).
+
+    Notes
+    -----
+    Each :meth:`run` resets both instances (``fmi2Reset``) unless they are fresh, sets
+    the parameters, initializes, runs and terminates them. Not thread-safe: use one
+    loop per thread (:func:`native_loop` does).
+    """
+
+    _count = 0
+
+    def __init__(self, fmu_dir=None):
+        from fmpy import platform, sharedLibraryExtension
+
+        from .cosim import CONTROLLER_MODEL, PLANT_MODEL, FMUInitializationError, _load, fmu_path
+
+        ffi, lib = _binding()
+        self._ffi, self._lib = ffi, lib
+        self.plant_info = _load(fmu_path(PLANT_MODEL, fmu_dir))
+        self.controller_info = _load(fmu_path(CONTROLLER_MODEL, fmu_dir))
+        NativeLoop._count += 1
+        keep = []
+
+        def fmu(info, role):
+            library = Path(info.unzipdir, "binaries", platform, info.model + sharedLibraryExtension)
+            if not library.is_file():
+                raise FileNotFoundError(f"{info.path.name} has no binary for {platform}: {library}")
+            f = ffi.new("piezo_runner_fmu *")
+            for field, text in (("library", str(library)), ("guid", info.md.guid),
+                                ("resource_uri", Path(info.unzipdir, "resources").as_uri()),
+                                ("instance_name", f"native-{role}-{os.getpid():07d}-{NativeLoop._count:06d}")):
+                c = ffi.new("char[]", text.encode())
+                keep.append(c)
+                setattr(f, field, c)
+            return f
+
+        pi, ci = self.plant_info, self.controller_info
+        refs = ffi.new("piezo_runner_refs *")
+        refs.plant_y, refs.plant_y_meas, refs.plant_v = pi.vr("y"), pi.vr("y_meas"), pi.vr("v")
+        refs.ctrl_y_ref, refs.ctrl_y_meas = ci.vr("y_ref"), ci.vr("y_meas")
+        for i, name in enumerate(_CTRL_REALS):
+            refs.ctrl_reals[i] = ci.vr(name)
+        refs.ctrl_saturated = ci.vr("saturated")
+        error = ffi.new("char[4096]")
+        runner = lib.piezo_runner_new(fmu(pi, "plant"), fmu(ci, "controller"), refs, error, 4096)
+        if runner == ffi.NULL:
+            raise FMUInitializationError(f"native runner: {ffi.string(error).decode(errors='replace')}")
+        self._runner = ffi.gc(runner, lib.piezo_runner_free)
+        self._fresh = True
+        self._result = ffi.new("piezo_runner_result *")
+        #: thread CPU time [ns] of each block of the last run (when timed)
+        self.last_block_ns = None
+
+    # -- logs -------------------------------------------------------------------------
+    def log(self, role=None):
+        """The FMUs' messages of the last run as ``"[Status] text"`` (one role or both)."""
+        lib, ffi, r = self._lib, self._ffi, self._runner
+        lines = []
+        for i in range(lib.piezo_runner_log_count(r)):
+            if role is None or lib.piezo_runner_log_role(r, i) == role:
+                st = lib.piezo_runner_log_status(r, i)
+                label = _STATUS[st] if 0 <= st < len(_STATUS) else str(st)
+                lines.append(f"[{label}] {ffi.string(lib.piezo_runner_log_text(r, i)).decode(errors='replace')}")
+        return lines
+
+    def instance_bytes(self, role):
+        """Bytes the instance (``PLANT`` 0 or ``CONTROLLER`` 1) allocated in fmi2Instantiate."""
+        return int(self._lib.piezo_runner_instance_bytes(self._runner, role))
+
+    def _model(self, role):
+        return (self.plant_info if role == PLANT else self.controller_info).model
+
+    def _message(self, role, what, status):
+        lines = self.log(role)
+        errors = [line for line in lines if line.startswith("[Error]")]
+        detail = "; ".join((errors or lines)[-5:]) or f"status {_STATUS[status] if 0 <= status < 6 else status}"
+        return f"{self._model(role)}: {what} failed: {detail}"
+
+    # -- one run ----------------------------------------------------------------------
+    def _set(self, role, info, params):
+        from .cosim import FMUInitializationError, _typed_parameters
+
+        ffi, lib, r = self._ffi, self._lib, self._runner
+        reals, ints, bools = _typed_parameters(info, params)
+        for (vrs, values), fn, ctype in ((reals, lib.piezo_runner_set_real, "double[]"),
+                                         (ints, lib.piezo_runner_set_integer, "int[]"),
+                                         (bools, lib.piezo_runner_set_boolean, "int[]")):
+            if not vrs:
+                continue
+            if ctype == "int[]":
+                values = [int(v) for v in values]            # Booleans as 0/1
+            st = fn(r, role, ffi.new("int[]", vrs), ffi.new(ctype, values), len(vrs))
+            if st > 1:
+                raise FMUInitializationError(self._message(role, "setting parameters", st))
+
+    def _start(self, setup):
+        from .cosim import FMUInitializationError
+
+        lib, r = self._lib, self._runner
+        if not self._fresh:
+            lib.piezo_runner_reset(r)
+        self._fresh = False
+        lib.piezo_runner_clear_log(r)
+        self._set(PLANT, self.plant_info, setup.plant_params)
+        self._set(CONTROLLER, self.controller_info, setup.controller_params)
+        res = self._result
+        if lib.piezo_runner_initialize(r, 0.0, setup.n * setup.h, res) > 1:
+            raise FMUInitializationError(
+                self._message(res.failed_role, _CALLS.get(res.failed_call, "initialization"), res.status))
+
+    def _run(self, setup, rows_ptr, stride, block):
+        from .cosim import FMUError, LoopDivergedError
+
+        ffi, lib, r, res = self._ffi, self._lib, self._runner, self._result
+        n, h = setup.n, setup.h
+        y_ref = np.ascontiguousarray(setup.y_ref, dtype=np.float64)
+        master = 1 if setup.master == "jacobi" else 0
+        order = 1 if setup.step_order == "controller-first" else 0
+        block_ns = np.zeros(n // block if block > 0 else 0)
+        timing = ffi.from_buffer("double[]", block_ns) if block_ns.size else ffi.NULL
+        st = lib.piezo_runner_run(r, n, h, master, order, ffi.from_buffer("double[]", y_ref),
+                                  rows_ptr, stride, block if block_ns.size else 0, timing, res)
+        self.last_block_ns = block_ns if block_ns.size else None
+        if st > 1:
+            k, role = res.samples, res.failed_role
+            what = f"{_CALLS.get(res.failed_call, 'fmi2 call')} at t = {k * h:.6g} s (sample {k})"
+            message = self._message(role, what, st)
+            diverged = any("[Error]" in line and ("diverged" in line or "unstable" in line)
+                           for line in self.log(role))
+            raise (LoopDivergedError if diverged else FMUError)(message)
+        lib.piezo_runner_terminate(r)
+
+    def run(self, setup, *, block=0):
+        """Run one closed loop.
+
+        Parameters
+        ----------
+        setup : harness._common.ClosedLoopSetup
+            From :func:`harness._common.prepare_closed_loop`.
+        block : int
+            When > 0, the thread CPU time of every complete block of ``block`` samples
+            is kept in :attr:`last_block_ns` (for the benchmark).
+
+        Returns
+        -------
+        ndarray
+            The structured result of :func:`harness.cosim.simulate_closed_loop`.
+        """
+        n = setup.n
+        rows = np.zeros((n, len(CLOSED_LOOP_FIELDS)))
+        rows[:, 0] = setup.time
+        rows[:, 1] = setup.y_d
+        self._start(setup)
+        ptr = self._ffi.from_buffer("double[]", rows) + 2
+        self._run(setup, ptr, rows.shape[1], block)
+        return as_structured(rows, CLOSED_LOOP_DTYPE)
+
+    def run_minimal(self, setup, *, block=0):
+        """Run the loop with the minimal exchange (``y_meas`` and ``v`` only) and record
+        nothing: the cost of the fmi2 calls themselves. Returns :attr:`last_block_ns`."""
+        self._start(setup)
+        self._run(setup, self._ffi.NULL, 0, block)
+        return self.last_block_ns
+
+    def close(self):
+        """Free both instances and unload the binaries (also done when collected)."""
+        if getattr(self, "_runner", None) is not None:
+            self._ffi.release(self._runner)      # runs piezo_runner_free now
+            self._runner = None
+
+
+def live_bytes():
+    """Bytes all FMU instances of the native runners hold (their allocateMemory calls)."""
+    return int(_binding()[1].piezo_runner_live_bytes())
+
+
+_PER_THREAD = threading.local()
+
+
+def native_loop(fmu_dir=None):
+    """This thread's :class:`NativeLoop` for the FMUs in ``fmu_dir``, created on first use and
+    kept (the binaries are loaded and instantiated once per thread and FMU set)."""
+    from .cosim import CONTROLLER_MODEL, PLANT_MODEL, fmu_path
+
+    key = []
+    for model in (PLANT_MODEL, CONTROLLER_MODEL):
+        path = fmu_path(model, fmu_dir)
+        st = path.stat()
+        key.append((str(path.resolve()), st.st_mtime_ns, st.st_size))
+    key = tuple(key)
+    loops = getattr(_PER_THREAD, "loops", None)
+    if loops is None:
+        loops = _PER_THREAD.loops = {}
+    loop = loops.get(key)
+    if loop is None:
+        loop = loops[key] = NativeLoop(fmu_dir)
+    return loop
+
+
+def simulate_closed_loop_native(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
+                                plant_params=None, controller_params=None, fmu_dir=None,
+                                duration=None, registry=None, step_order="plant-first",
+                                progress=None):
+    """Run a tracking scenario through both FMUs with the native master.
+
+    Parameters, Returns and Raises are those of :func:`harness.cosim.simulate_closed_loop`
+    (and the result equals it bit for bit); a missing runner library raises
+    FileNotFoundError with the build command. The run is one C call (about 1000x real
+    time), so ``progress(n, n)`` is called once, at its end.
+    """
+    setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
+                                plant_params=plant_params, controller_params=controller_params,
+                                duration=duration, registry=registry, step_order=step_order)
+    data = native_loop(fmu_dir).run(setup)
+    if progress is not None:
+        progress(setup.n, setup.n)
+    return data
+
+
+def simulate_closed_loop_auto(scenario, *, registry=None, duration=None, **kwargs):
+    """:func:`simulate_closed_loop_native` for runs of at least ``LONG_RUN_SAMPLES`` samples when
+    the runner is built, else :func:`harness.cosim.simulate_closed_loop` (same result either way)."""
+    from .cosim import simulate_closed_loop
+    from .scenarios import get_scenario
+
+    sc = get_scenario(scenario, registry)
+    n = sc.n_samples if duration is None else int(round(float(duration) / float(sc.step_size)))
+    if n >= LONG_RUN_SAMPLES and native_available():
+        return simulate_closed_loop_native(sc, registry=registry, duration=duration, **kwargs)
+    return simulate_closed_loop(sc, registry=registry, duration=duration, **kwargs)
