@@ -62,7 +62,7 @@ class IdentificationInputError(ValueError):
 
 
 def pi_thresholds(m, v_max):
-    """Thresholds ``r_j = (j-1)/m * v_max``, ``j = 1..m`` (eq 5, DESIGN.md section 1).
+    """Thresholds ``r_j = (j-1)/m * v_max``, ``j = 1..m`` (eq 5, docs/model.md, plant).
 
     Parameters
     ----------
@@ -220,7 +220,7 @@ def identify_pi(v, y, m=9, v_max=20.0, w0=None):
     m : int
         Number of play operators.
     v_max : float
-        Threshold scale [V] (frozen, DESIGN.md section 1).
+        Threshold scale [V] (frozen, docs/model.md, plant).
     w0 : float, optional
         Known linear weight.  ``r_1 = 0`` makes ``z_{r_1} = v``, so the data
         only determine ``w0 + w1``; with ``w0`` given, ``w1..wm`` are fitted,

@@ -3,7 +3,7 @@
 Tracking conditions (each on the six references of Tables 4/5):
 
 * ``nominal``: plant = controller model, preview on, adaptation on;
-* ``mismatch``: the DESIGN.md section 4 mismatched plant, adaptation on (headline);
+* ``mismatch``: the docs/model.md, scenarios mismatched plant, adaptation on (headline);
 * ``mismatch_no_adaptation``: same plant, RLS off (nominal model only);
 * ``mismatch_no_preview``: same plant, controller fed ``y_d(k)`` instead of ``y_d(k+d)``.
 

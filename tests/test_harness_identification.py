@@ -1,4 +1,4 @@
-"""harness.identification: the paper's steps 1-2 recover the DESIGN.md section 1 defaults
+"""harness.identification: the paper's steps 1-2 recover the docs/model.md, plant defaults
 from a noise-free run of the core plant (creep disabled, i.e. the Hammerstein model)."""
 
 import numpy as np
@@ -23,7 +23,7 @@ def _run(v):
 
 
 def test_thresholds_and_play_operator():
-    # Reference: DESIGN.md section 1, r_j = (j-1)/m v_max; eq 3 play operator.
+    # Reference: docs/model.md, plant, r_j = (j-1)/m v_max; eq 3 play operator.
     np.testing.assert_allclose(pi_thresholds(9, 20.0), np.arange(9) * 20.0 / 9)
     z = play_operator_outputs([1.0, 3.0, 2.0, -1.0], [1.0])[:, 0]
     np.testing.assert_allclose(z, [0.0, 2.0, 2.0, 0.0])
@@ -81,7 +81,7 @@ from harness.report import generate_identification_records
 
 REPO = Path(__file__).resolve().parents[1]
 
-# Table 1 rows (DESIGN.md section 1): label -> (k_c, alpha, input v(t) of that row)
+# Table 1 rows (docs/model.md, plant): label -> (k_c, alpha, input v(t) of that row)
 TABLE1 = {
     "1 Hz": (1.0463, 0.0002, lambda t: 10 * np.sin(2 * np.pi * t) + 10),
     "10 Hz": (1.0497, -0.0085, lambda t: 10 * np.sin(2 * np.pi * 10 * t) + 10),

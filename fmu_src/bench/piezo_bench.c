@@ -1,7 +1,7 @@
 /*
  * piezo_bench.c - speed and memory figures of the core (printed, not asserted).
  *
- * Targets (DESIGN.md section 1): the default SOE creep costs O(1) per step
+ * Targets (docs/model.md, plant): the default SOE creep costs O(1) per step
  * with fixed-size state; the exact mode costs O(k) per step and O(k) memory.
  * Usage: piezo_bench [seconds_of_signal]   (default 60 s at 2 kHz)
  */
