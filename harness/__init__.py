@@ -1,4 +1,4 @@
-"""Co-simulation harness for the piezo stage FMUs (DESIGN.md sections 3-4).
+"""Co-simulation harness for the piezo stage FMUs (docs/cosimulation.md, docs/model.md).
 
 Public API
 ----------

@@ -95,12 +95,12 @@ def _bench_lib():
     if _BENCH is not None:
         return _BENCH
     core.lib()      # first: the timing loops then bind to this core (same soname), not their RUNPATH's
-    path = core.library_path().parent / "libpiezo_bench.so"
+    from ._paths import bench_include_dir, bench_library, where_to_get_it
+
+    path = bench_library()
     if not path.is_file():
-        raise FileNotFoundError(f"benchmark library not found: {path}; build it with "
-                                f"`{core.BUILD_COMMAND}` in {core.REPO_ROOT}")
-    header = core.REPO_ROOT / "fmu_src" / "bench"
-    core.ffi.cdef(core.header_cdef(header, ("piezo_bench.h",)))
+        raise FileNotFoundError(f"benchmark library not found: {path}; {where_to_get_it()}")
+    core.ffi.cdef(core.header_cdef(bench_include_dir(), ("piezo_bench.h",)))
     _BENCH = (core.ffi, core.ffi.dlopen(str(path)))
     return _BENCH
 

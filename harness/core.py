@@ -3,11 +3,12 @@
 The C declarations are read from the headers in ``fmu_src/core/`` at import
 time (comments, ``#include`` lines and include guards dropped, integer
 ``#define`` constants kept), so the binding cannot drift from the headers.
-The shared library itself is loaded lazily, once per process, from the path in
-the environment variable ``PIEZO_CORE_LIB`` or else ``<repo>/build/libpiezo_core.so``
-(headers: ``$PIEZO_CORE_INCLUDE`` or ``<repo>/fmu_src/core``).
+The shared library itself is loaded lazily, once per process. Both are found by
+:mod:`harness._paths`: ``$PIEZO_CORE_LIB`` / ``$PIEZO_CORE_INCLUDE``, else the copies
+``pip install .`` put inside the package, else ``<repo>/build/libpiezo_core.so`` and
+``<repo>/fmu_src/core`` of a source checkout.
 
-Parameters are addressed by their FMU variable names (DESIGN.md section 5),
+Parameters are addressed by their FMU variable names (docs/fmus.md),
 e.g. ``{"creep.alpha": -0.0085, "pi.w[2]": 0.03}``; defaults come from the core
 (``piezo_plant_default_params`` / ``piezo_controller_default_params``).
 
@@ -20,7 +21,6 @@ from __future__ import annotations
 
 import math
 import numbers
-import os
 import re
 import threading
 from collections import namedtuple
@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 from cffi import FFI
+
+from . import _paths
 
 __all__ = [
     "CoreParameterError", "CoreInputError", "CoreDivergedError", "CoreUnstableError", "Plant",
@@ -41,9 +43,8 @@ __all__ = [
 ]
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-# The headers are read at import; PIEZO_CORE_INCLUDE overrides their directory
-# (e.g. for an installed harness outside the repository).
-CORE_DIR = Path(os.environ.get("PIEZO_CORE_INCLUDE") or REPO_ROOT / "fmu_src" / "core")
+# The headers are read at import (PIEZO_CORE_INCLUDE overrides their directory).
+CORE_DIR = _paths.core_include_dir()
 HEADER_ORDER = ("piezo_status.h", "piezo_hysteresis.h", "piezo_tf.h",
                 "piezo_creep.h", "piezo_plant.h", "piezo_controller.h", "piezo_reference.h")
 BUILD_COMMAND = "cmake -S . -B build && cmake --build build"
@@ -117,9 +118,9 @@ _LIB_LOCK = threading.Lock()
 
 
 def library_path() -> Path:
-    """Path of the shared library: ``$PIEZO_CORE_LIB`` or ``<repo>/build/libpiezo_core.so``."""
-    env = os.environ.get("PIEZO_CORE_LIB")
-    return Path(env) if env else REPO_ROOT / "build" / "libpiezo_core.so"
+    """Path of the shared library: ``$PIEZO_CORE_LIB``, the installed copy, or
+    ``<repo>/build/libpiezo_core.so`` (see :mod:`harness._paths`)."""
+    return _paths.core_library()
 
 
 def lib():
@@ -137,8 +138,8 @@ def lib():
                 path = library_path()
                 if not path.is_file():
                     raise FileNotFoundError(
-                        f"piezo core library not found: {path}. Build it in {REPO_ROOT} with: "
-                        f"{BUILD_COMMAND}  (or set PIEZO_CORE_LIB to the library path)")
+                        f"piezo core library not found: {path}; {_paths.where_to_get_it()} "
+                        f"(or set PIEZO_CORE_LIB to the library path)")
                 _LIB = ffi.dlopen(str(path))
     return _LIB
 

@@ -34,7 +34,6 @@ from __future__ import annotations
 import atexit
 import ctypes
 import difflib
-import os
 from pathlib import Path
 import shutil
 import tempfile
@@ -42,11 +41,9 @@ import tempfile
 import numpy as np
 
 from ._common import (
-    BUILD_COMMAND,
     CLOSED_LOOP_DTYPE,
     CLOSED_LOOP_FIELDS,
     OPEN_LOOP_DTYPE,
-    REPO_ROOT,
     as_structured,
     open_loop_grid,
     prepare_closed_loop,
@@ -96,9 +93,10 @@ class UnknownParameterError(KeyError):
 
 
 def default_fmu_dir():
-    """Folder of the FMUs: ``$PIEZO_FMU_DIR`` or ``<repo>/build/fmus``."""
-    env = os.environ.get("PIEZO_FMU_DIR")
-    return Path(env) if env else REPO_ROOT / "build" / "fmus"
+    """Folder of the FMUs: ``$PIEZO_FMU_DIR``, the copies ``pip install .`` put inside the
+    package, or ``<repo>/build/fmus`` (see :mod:`harness._paths`)."""
+    from . import _paths
+    return _paths.fmu_dir()
 
 
 def fmu_path(model, fmu_dir=None):
@@ -122,8 +120,9 @@ def fmu_path(model, fmu_dir=None):
     """
     path = Path(fmu_dir if fmu_dir is not None else default_fmu_dir()) / f"{model}.fmu"
     if not path.is_file():
-        raise FileNotFoundError(
-            f"FMU not found: {path}; build it with `{BUILD_COMMAND}` in {REPO_ROOT}")
+        from . import _paths
+        raise FileNotFoundError(f"FMU not found: {path}; {_paths.where_to_get_it()} "
+                                f"(or set PIEZO_FMU_DIR to the folder of the FMUs)")
     return path
 
 
@@ -383,7 +382,7 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
         Force the controller's RLS on (True) or off (False); ``None`` keeps the
         scenario's / FMU's setting (on by default).
     preview : bool
-        Feed the controller ``y_ref = y_d(k + d)`` (True, DESIGN.md section 2)
+        Feed the controller ``y_ref = y_d(k + d)`` (True, docs/model.md, controller)
         or ``y_d(k)`` (False; gives a lag error).
     master : {"gauss-seidel", "jacobi"}
         Co-simulation algorithm (see the module docstring); both run the same

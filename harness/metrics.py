@@ -3,7 +3,7 @@
 ``e_rms = sqrt(mean((y_ref - y)^2))`` and
 ``e_r = sqrt(sum((y_ref - y)^2) / sum(y^2))``, evaluated over a time window.
 For tracking, ``y_ref`` is the desired displacement ``y_d`` and ``y`` the
-*true* displacement of the stage (DESIGN.md section 4).  For model validation,
+*true* displacement of the stage (docs/model.md, scenarios).  For model validation,
 ``y_ref`` is the output taken as the truth (the coupled model here) and ``y``
 the model compared with it (the Hammerstein model).
 """

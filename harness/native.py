@@ -52,7 +52,7 @@ __all__ = [
 LONG_RUN_SAMPLES = 20000
 
 PLANT, CONTROLLER = 0, 1
-_HEADER = REPO_ROOT / "fmu_src" / "runner" / "piezo_runner.h"
+_HEADER_NAME = "piezo_runner.h"
 _STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 _CALLS = {1: "fmi2GetReal", 2: "fmi2SetReal", 3: "fmi2GetBoolean", 4: "fmi2DoStep",
           5: "fmi2SetInteger", 6: "fmi2SetBoolean", 7: "fmi2SetupExperiment",
@@ -65,9 +65,10 @@ _LOCK = threading.Lock()
 
 
 def runner_library_path():
-    """Path of the runner library: ``$PIEZO_RUNNER_LIB`` or ``<repo>/build/libpiezo_runner.so``."""
-    env = os.environ.get("PIEZO_RUNNER_LIB")
-    return Path(env) if env else REPO_ROOT / "build" / "libpiezo_runner.so"
+    """Path of the runner library: ``$PIEZO_RUNNER_LIB``, the installed package's, or
+    ``<repo>/build/libpiezo_runner.so`` (see :mod:`harness._paths`)."""
+    from ._paths import runner_library
+    return runner_library()
 
 
 def native_available():
@@ -91,7 +92,8 @@ def _binding():
                         f"native runner library not found: {path}; build it with `{BUILD_COMMAND}` "
                         f"in {REPO_ROOT} (or set PIEZO_RUNNER_LIB), or use the fmpy backend")
                 ffi = FFI()
-                ffi.cdef(header_cdef(_HEADER.parent, (_HEADER.name,)))
+                from ._paths import runner_include_dir
+                ffi.cdef(header_cdef(runner_include_dir(), (_HEADER_NAME,)))
                 _LIB = ffi.dlopen(str(path))
                 _FFI = ffi
     return _FFI, _LIB

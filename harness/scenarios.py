@@ -1,4 +1,4 @@
-"""Scenario definitions: built-in (paper Tables 1-5, DESIGN.md section 4) and user files.
+"""Scenario definitions: built-in (paper Tables 1-5, docs/model.md, scenarios) and user files.
 
 A scenario file is TOML (read with :mod:`tomllib`).  It may define named
 parameter sets and any number of scenarios::

@@ -48,7 +48,7 @@ __all__ = [
 ]
 
 SSP_FILENAME = "PiezoStageClosedLoop.ssp"
-#: The scenario whose parameters the built SSP binds (DESIGN's mismatch case, 1/5/10 Hz).
+#: The scenario whose parameters the built SSP binds (the mismatch case of docs/model.md, 1/5/10 Hz).
 SSP_SCENARIO = "mismatch_1_5_10hz"
 #: component name -> (FMU file, connectors as (name, kind, SSP type, unit))
 SSP_COMPONENTS = {

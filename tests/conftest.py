@@ -30,17 +30,34 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 BUILD_DIR = REPO / "build"
 FMU_DIR = BUILD_DIR / "fmus"
 FMU_NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
-_FMU_SOURCE_SUFFIXES = {".c", ".h", ".xml", ".map", ".txt"}
+_FMU_SOURCE_SUFFIXES = {".c", ".h", ".xml", ".map", ".txt", ".cmake", ".py", ".html", ".png"}
 
 
 def _fmu_sources():
     yield REPO / "CMakeLists.txt"
-    yield REPO / "harness" / "ssp.py"                       # writes the closed-loop SSP
+    yield REPO / "LICENSE"
+    yield REPO / "pyproject.toml"                           # the FMUs' version
+    # the SSP, the reference results and the FMU documentation are written by Python
+    yield from (REPO / "harness").glob("*.py")
     yield from (REPO / "harness" / "scenarios").glob("*.toml")
-    for sub in ("fmu_src", "modelDescription"):
+    for sub in ("fmu_src", "modelDescription", "cmake", "packaging"):
         for path in (REPO / sub).rglob("*"):
             if path.is_file() and path.suffix in _FMU_SOURCE_SUFFIXES:
                 yield path
+
+
+def _commit_date_changed():
+    """The FMUs carry the commit date: a new commit re-stamps them (build/piezo_commit_date.txt
+    holds the date of the last build; packaging/assemble_fmu.py commit_epoch computes it)."""
+    stamp = BUILD_DIR / "piezo_commit_date.txt"
+    if not stamp.is_file():
+        return True
+    sys.path.insert(0, str(REPO / "packaging"))
+    try:
+        from assemble_fmu import commit_epoch
+    finally:
+        sys.path.pop(0)
+    return stamp.read_text().split()[0] != str(commit_epoch(REPO))
 
 
 def _fmus_stale():
@@ -50,7 +67,8 @@ def _fmus_stale():
     if not all(f.exists() for f in fmus):
         return True
     oldest = min(f.stat().st_mtime for f in fmus)
-    return any(src.stat().st_mtime > oldest for src in _fmu_sources())
+    return (any(src.stat().st_mtime > oldest for src in _fmu_sources())
+            or _commit_date_changed())
 
 
 def build_fmus():

@@ -1,9 +1,9 @@
-"""Independent NumPy reference of the plant model and the controller pieces, written from DESIGN.md.
+"""Independent NumPy reference of the plant model and the controller pieces, written from docs/model.md.
 
 Nothing here calls or transcribes the C core: it is the textbook form of the
-equations in DESIGN.md sections 1 and 2, favouring obviousness over speed.
+equations in docs/model.md, plant and controller, favouring obviousness over speed.
 
-Timing convention (DESIGN.md section 1, piezo_plant.h): at sample k the plant
+Timing convention (docs/model.md, plant, piezo_plant.h): at sample k the plant
 shows u(k-1), x(k), y(k); applying v(k) gives u(k) = P[v](k) and
 x(k+1) = -a1 x(k) - a2 x(k-1) + b1 u(k-n) + b2 u(k-1-n) (n = extra delay).
 """
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-# DESIGN.md section 1 / 5 defaults, typed from the document.
-DESIGN_DEFAULTS = {
+# docs/model.md, plant; docs/fmus.md defaults, typed from the document.
+DOC_DEFAULTS = {
     "pi.m": 9, "pi.v_max": 20.0, "pi.w0": 0.3344,
     "pi.w": [0.0714, 0.0322, 0.0072, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     "tf.a1": -1.3767, "tf.a2": 0.3816, "tf.b1": 0.5954, "tf.b2": -0.5907,
@@ -25,7 +25,7 @@ DESIGN_DEFAULTS = {
 # the end of the step that sampled the inputs: no direct feedthrough, loop delay d = 2, so
 # mv.delay 1); voltage limits on at +-150 V (the paper's amplifier range; every paper
 # scenario stays below 62 V); the divergence monitor at 1 um for 200 samples.
-CONTROLLER_DESIGN_DEFAULTS = {
+CONTROLLER_DOC_DEFAULTS = {
     "mv.delay": 1, "mv.feedthrough": False, "mv.lambda_u": 0.0, "rls.enabled": True,
     "rls.forgetting": 0.995, "rls.p0": 1.0, "rls.trace_max": 100.0, "sat.enabled": True,
     "sat.v_min": -150.0, "sat.v_max": 150.0, "monitor.pred_error_max": 1.0,
@@ -66,7 +66,7 @@ def pi_forward(v, w0: float, w, r, z0=None):
 
 
 def pi_inverse_params(w0: float, w, r):
-    """Corrected eqs 25-27 (DESIGN.md section 2): returns (w0', w', r')."""
+    """Corrected eqs 25-27 (docs/model.md, controller): returns (w0', w', r')."""
     w = np.asarray(w, dtype=float)
     r = np.asarray(r, dtype=float)
     n = len(w)
@@ -136,7 +136,7 @@ def gl_exact_fft(x, alpha: float, gain: float = 1.0) -> np.ndarray:
 
 # ---------------------------------------------------------------- plant
 def plant_params(**over) -> dict:
-    p = dict(DESIGN_DEFAULTS)
+    p = dict(DOC_DEFAULTS)
     p["pi.w"] = list(p["pi.w"])
     p.update(over)
     return p
@@ -165,7 +165,7 @@ def plant_simulate(v, params: dict | None = None) -> dict:
 
 
 def validation_inputs(h: float = 0.0005, duration: float = 10.0) -> dict:
-    """DESIGN.md section 4 model-validation voltages, t = k h."""
+    """docs/model.md, scenarios model-validation voltages, t = k h."""
     t = np.arange(int(round(duration / h))) * h
     out = {f"{f} Hz": 10 * np.sin(2 * np.pi * f * t) + 10 for f in (1, 10, 20, 50, 100)}
     out["5/40/80 Hz"] = 6 * (np.sin(2 * np.pi * 5 * t) + np.sin(2 * np.pi * 40 * t)
@@ -174,7 +174,7 @@ def validation_inputs(h: float = 0.0005, duration: float = 10.0) -> dict:
 
 
 def tracking_references():
-    """DESIGN.md section 4 tracking references y_d(t) [um] as functions of t."""
+    """docs/model.md, scenarios tracking references y_d(t) [um] as functions of t."""
     def tone(f):
         return lambda t: 10 * np.sin(2 * np.pi * f * t)
 
@@ -201,7 +201,7 @@ def diophantine(a, d: int):
 
 
 def mv_controller(y_ref, y_meas, theta, d: int, lambda_u: float = 0.0):
-    """Minimum-variance law with fixed model theta = (a1, a2, b1, b2) (DESIGN.md section 2):
+    """Minimum-variance law with fixed model theta = (a1, a2, b1, b2) (docs/model.md, controller):
     predictor y(k+d) = Gd y(k) + F q(k), F = B E; q(k) chosen so the prediction equals
     y_ref(k). With the control weighting lambda_u of the generalised MV law, q(k) minimises
     J(q) = (y(k+d|k) - y_ref(k))^2 + lambda_u q^2, solved here as the least-squares problem
@@ -233,10 +233,10 @@ def controller_feedforward(q, params: dict | None = None):
 
 
 # ---------------------------------------------------------------- RLS (indirect self-tuning)
-# DESIGN.md section 2 ("Adaptation"): RLS with forgetting estimates theta = [a1, a2, b1, b2] of
+# docs/model.md, controller ("Adaptation"): RLS with forgetting estimates theta = [a1, a2, b1, b2] of
 # y(k) = -a1 y(k-1) - a2 y(k-2) + b1 q(k-d) + b2 q(k-d-1), with a bound on trace(P) and a
-# projection that keeps b1 positive and the zero -b2/b1 of B inside the radius 0.999. DESIGN
-# says only "b1 > 0"; the floor 1e-3 x nominal b1 is the documented constant of
+# projection that keeps b1 positive and the zero -b2/b1 of B inside the radius 0.999. The
+# documentation says only "b1 > 0"; the floor 1e-3 x nominal b1 is the documented constant of
 # piezo_controller.c (B1_FLOOR_FRACTION), taken as part of the spec here.
 RLS_B1_FLOOR_FRACTION = 1e-3
 RLS_ZERO_RADIUS_MAX = 0.999
@@ -246,7 +246,7 @@ RLS_A_STABILITY_MARGIN = 1e-4   # stable estimated A, with margin (README, contr
 def rls_project(theta, b1_nominal: float) -> np.ndarray:
     """Projection: the estimated A inside the stability (Jury) triangle shrunk by
     m = 1e-4 (A(1) >= m, A(-1) >= m, |a2| <= 1 - m: a2 clipped first, then a1), then
-    DESIGN.md section 2's b1 >= 1e-3 b1_nominal and |b2| <= 0.999 b1."""
+    b1 >= 1e-3 b1_nominal (docs/model.md, controller) and |b2| <= 0.999 b1."""
     th = np.array(theta, dtype=float)
     m = RLS_A_STABILITY_MARGIN
     th[1] = float(np.clip(th[1], -1.0 + m, 1.0 - m))

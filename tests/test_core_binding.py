@@ -101,13 +101,13 @@ def test_missing_library_message(tmp_path):
 
 
 def test_defaults_match_design():
-    """Reference: DESIGN.md section 5 defaults typed in tests/numpy_reference.py
-    (DESIGN_DEFAULTS for the model, CONTROLLER_DESIGN_DEFAULTS for the controller's own
+    """Reference: docs/fmus.md defaults typed in tests/numpy_reference.py
+    (DOC_DEFAULTS for the model, CONTROLLER_DOC_DEFAULTS for the controller's own
     parameters: rls.forgetting 0.995, rls.trace_max 100, rls.p0 1, mv.delay 1, mv.lambda_u 0,
     limits +-150 V on, monitor 1 um / 200 samples),
     and the parameter name sets of the two modelDescription files."""
     p = core.default_plant_params()
-    d = ref.DESIGN_DEFAULTS
+    d = ref.DOC_DEFAULTS
     for k in ("pi.m", "pi.v_max", "pi.w0", "tf.a1", "tf.a2", "tf.b1", "tf.b2", "tf.delay",
               "creep.k_c", "creep.alpha", "h"):
         assert p[k] == pytest.approx(d[k], abs=0), k
@@ -120,7 +120,7 @@ def test_defaults_match_design():
     for k in ("pi.m", "pi.v_max", "pi.w0", "tf.a1", "tf.a2", "tf.b1", "tf.b2", "creep.k_c",
               "creep.alpha", "h"):
         assert c[k] == p[k], k
-    for k, want in ref.CONTROLLER_DESIGN_DEFAULTS.items():
+    for k, want in ref.CONTROLLER_DOC_DEFAULTS.items():
         assert c[k] == want, (k, c[k], want)
     assert set(core.PLANT_PARAMETER_NAMES) == set(p) == set(_fmu_parameters("PiezoStage"))
     assert (set(core.CONTROLLER_PARAMETER_NAMES) == set(c)
@@ -129,7 +129,7 @@ def test_defaults_match_design():
 
 def _fmu_parameters(model):
     """{name: start value as typed} of the causality="parameter" variables in
-    modelDescription/<model>.xml (the FMU interface of DESIGN.md section 5)."""
+    modelDescription/<model>.xml (the FMU interface of docs/fmus.md)."""
     root = ET.parse(core.REPO_ROOT / "modelDescription" / f"{model}.xml").getroot()
     out = {}
     for var in root.iter("ScalarVariable"):
@@ -154,18 +154,18 @@ def test_core_defaults_equal_model_description_start_values(model):
 
 
 def test_controller_initial_state_uses_p0_and_nominal_model():
-    """Reference: DESIGN.md section 2 ('initialised from the nominal model') and the header
+    """Reference: docs/model.md, controller ('initialised from the nominal model') and the header
     (P = p0 I). A fresh controller holds theta = nominal [a1, a2, b1, b2] and P = p0 I with
     the default p0 = 1 (trace 4 <= trace_max = 100), read through ffi; with rls.p0 = 2.5,
     P = 2.5 I."""
-    d = ref.DESIGN_DEFAULTS
+    d = ref.DOC_DEFAULTS
     for p0 in (None, 2.5):
         c = core.Controller(None if p0 is None else {"rls.p0": p0})
-        want_p0 = ref.CONTROLLER_DESIGN_DEFAULTS["rls.p0"] if p0 is None else p0
+        want_p0 = ref.CONTROLLER_DOC_DEFAULTS["rls.p0"] if p0 is None else p0
         assert list(c.raw.theta) == [d["tf.a1"], d["tf.a2"], d["tf.b1"], d["tf.b2"]]
         assert list(c.raw.P) == [want_p0 if i % 5 == 0 else 0.0 for i in range(16)]
-        assert c.raw.trace_max == ref.CONTROLLER_DESIGN_DEFAULTS["rls.trace_max"]
-        assert c.raw.forgetting == ref.CONTROLLER_DESIGN_DEFAULTS["rls.forgetting"]
+        assert c.raw.trace_max == ref.CONTROLLER_DOC_DEFAULTS["rls.trace_max"]
+        assert c.raw.forgetting == ref.CONTROLLER_DOC_DEFAULTS["rls.forgetting"]
 
 
 def test_unknown_parameter_name_lists_valid_names():

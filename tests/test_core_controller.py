@@ -12,7 +12,7 @@ from harness import core  # noqa: E402
 import numpy_reference as ref  # noqa: E402
 
 H = 0.0005
-D = ref.DESIGN_DEFAULTS
+D = ref.DOC_DEFAULTS
 THETA = np.array([D["tf.a1"], D["tf.a2"], D["tf.b1"], D["tf.b2"]])
 
 # The core algorithm as these tests drive it: v applied in the same sample (loop delay
@@ -90,7 +90,7 @@ def test_inverse_creep_is_identity(row, exact):
 
 
 def test_controller_inverse_creep_wiring():
-    """Reference: DESIGN.md eq 29: the controller's inverse creep is order -alpha with gain
+    """Reference: docs/model.md, eq 29: the controller's inverse creep is order -alpha with gain
     h^alpha / k_c (10 Hz row); read through ffi, tolerance 1e-15 relative."""
     k_c, alpha = ROWS["10 Hz row"]
     c = controller({"creep.k_c": k_c, "creep.alpha": alpha})
@@ -100,7 +100,7 @@ def test_controller_inverse_creep_wiring():
 
 
 def run_closed_loop_core(plant_params, ctrl_params, y_d, n, d):
-    """The Gauss-Seidel loop of DESIGN.md section 3 with reference preview y_d((k+d) h)."""
+    """The Gauss-Seidel loop of docs/cosimulation.md with reference preview y_d((k+d) h)."""
     plant = core.Plant(plant_params)
     ctrl = controller(ctrl_params)
     y = np.zeros(n)
@@ -252,7 +252,7 @@ SCENARIOS = ref.tracking_references()
 @pytest.mark.parametrize("rls", [True, False], ids=["adaptive", "fixed"])
 @pytest.mark.parametrize("scenario", list(SCENARIOS))
 def test_closed_loop_nominal_tracking(scenario, rls, d):
-    """Reference: the desired trajectory y_d (DESIGN.md section 4 tracking scenarios).
+    """Reference: the desired trajectory y_d (docs/model.md, scenarios tracking scenarios).
     Controller model = plant model, no noise, preview y_ref = y_d((k+d) h); 3 s from rest,
     e_rms over t in [1, 3) must be <= 1e-6 um. d = 2, 3: controller mv.delay = d - 1 and plant
     tf.delay = d - 1 (d = 3 exercises a Diophantine with deg E = 2, so F = B E has three
@@ -334,7 +334,7 @@ def test_reset_reproduces_run():
 
 
 def test_saturation_clips_and_freezes_adaptation():
-    """Reference: DESIGN.md section 2 (voltage limits: saturate and stop adaptation while
+    """Reference: docs/model.md, controller (voltage limits: saturate and stop adaptation while
     saturated). Limits [-2, 3] V with a +-10 um reference against a mismatched plant: every
     v lies in [-2, 3], saturated is set exactly when a limit is hit, and while the loop
     stays saturated the estimates do not move."""
@@ -370,7 +370,7 @@ BAD = [
 
 @pytest.mark.parametrize("name,value", BAD, ids=[f"{n}={v}" for n, v in BAD])
 def test_invalid_parameter_refused(name, value):
-    """Reference: piezo_controller.h / DESIGN.md ranges. CoreParameterError naming the FMU
+    """Reference: piezo_controller.h / docs/fmus.md ranges. CoreParameterError naming the FMU
     variable with the value and a range."""
     with pytest.raises(core.CoreParameterError) as ei:
         controller({name: value})
@@ -397,7 +397,7 @@ def test_invalid_combinations_refused():
 
 
 def test_non_minimum_phase_nominal_b_refused():
-    """Reference: DESIGN.md section 2 (eq 35 corrected: the MV law needs the roots of B inside
+    """Reference: docs/model.md, controller (eq 35 corrected: the MV law needs the roots of B inside
     the unit circle). A nominal B = 0.5954 - 0.65 z^-1 (zero at 1.092) or b1 <= 0 makes the
     MV law unstable and should be refused with a CoreParameterError on tf.b1/tf.b2."""
     for over in ({"tf.b2": -0.65}, {"tf.b1": -0.5954}, {"tf.b1": 0.0}):
@@ -411,7 +411,7 @@ SAT_LIMITS = {"sat.enabled": True, "sat.v_min": -15.0, "sat.v_max": 15.0}
 
 
 def _tone_2hz(t):
-    """10 um at 2 Hz: needs about +-22.5 V with the nominal model (DESIGN.md section 2:
+    """10 um at 2 Hz: needs about +-22.5 V with the nominal model (docs/model.md, controller:
     'about +-23 V for one tone'), so +-15 V limits clip around every peak."""
     return 10.0 * np.sin(2 * np.pi * 2 * np.asarray(t))
 
@@ -437,7 +437,7 @@ def _saturated_loop(plant_params, ctrl_params, n, d):
 
 @pytest.mark.parametrize("d", [1, 2])
 def test_saturation_back_calculation_keeps_the_loop_exactly_g(d):
-    """Reference: scipy.signal.lfilter with the nominal G (DESIGN.md section 2, 'why the loop
+    """Reference: scipy.signal.lfilter with the nominal G (docs/model.md, controller, 'why the loop
     only sees G': with exact inverses the path q -> y is G(z) z^-(d-1)) and the desired
     trajectory y_d. Nominal plant = controller model, no noise, +-15 V limits against a
     10 um 2 Hz tone (needs ~+-22.5 V), 1 s, d = 1 and 2 (plant tf.delay = d - 1).
@@ -475,7 +475,7 @@ def test_saturation_back_calculation_keeps_the_loop_exactly_g(d):
 
 @pytest.mark.parametrize("d", [1, 2, 3])
 def test_adaptation_pauses_exactly_while_a_clipped_q_can_be_in_the_regressor(d):
-    """Reference: DESIGN.md section 2 ('saturate and stop adaptation while saturated') and
+    """Reference: docs/model.md, controller ('saturate and stop adaptation while saturated') and
     README ('adaptation pauses while the clipped sample is in the regressor'), made exact:
     if sample k is clipped, the RLS update is skipped at samples k+1 .. k+d+1 (the clipped
     q(k) is in the regressor [q(j-d), q(j-d-1)] up to j = k+d+1) and resumes at k+d+2.
@@ -564,7 +564,7 @@ RLS_CASES = {
 
 @pytest.mark.parametrize("case", list(RLS_CASES))
 def test_rls_matches_textbook_reference(case):
-    """Reference: numpy_reference.rls_reference, a plain textbook RLS written from DESIGN.md
+    """Reference: numpy_reference.rls_reference, a plain textbook RLS written from docs/model.md
     section 2 (a-priori error, K = P phi / (lambda + phi^T P phi), theta += K e,
     P = (P - K phi^T P) / lambda, P scaled down to trace_max when its trace exceeds it, then the
     projection b1 >= 1e-3 nominal b1, |b2| <= 0.999 b1), fed with the recorded effective q and
@@ -584,7 +584,7 @@ def test_rls_matches_textbook_reference(case):
     else:
         d = 1
         q, ym, outs, P = _record_arx_loop(args[0], ctrl_params, n)
-    r = ref.rls_reference(q, ym, d, lam, ref.CONTROLLER_DESIGN_DEFAULTS["rls.p0"], trace_max, THETA)
+    r = ref.rls_reference(q, ym, d, lam, ref.CONTROLLER_DOC_DEFAULTS["rls.p0"], trace_max, THETA)
     theta = np.array([[o.a1, o.a2, o.b1, o.b2] for o in outs])
     pe = np.array([o.pred_error for o in outs])
     e_theta = np.max(np.max(np.abs(r["theta"] - theta), axis=1) / np.max(np.abs(theta), axis=1))
@@ -608,7 +608,7 @@ def test_rls_matches_textbook_reference(case):
 
 
 PROJECTION_CASES = {
-    "DESIGN -10% PI weights, 5 Hz, defaults": "core",
+    "docs/model.md -10% PI weights, 5 Hz, defaults": "core",
     "ARX zero at 0.9995": ARX_ZERO_09995,
     "ARX b1 = 1e-4 (below the floor)": ARX_TINY_GAIN,
 }
@@ -616,9 +616,9 @@ PROJECTION_CASES = {
 
 @pytest.mark.parametrize("case", list(PROJECTION_CASES))
 def test_rls_projection_bounds_hold_and_are_reached(case):
-    """Reference: DESIGN.md section 2 projection (b1 > 0, |b2/b1| < 0.999; the floor
+    """Reference: docs/model.md, controller projection (b1 > 0, |b2/b1| < 0.999; the floor
     b1 >= 1e-3 nominal b1 from piezo_controller.c). Cases that push the estimate out: the
-    DESIGN's -10 % PI-weight error (core plant, 5 Hz tone, default RLS settings, d = 1), a
+    the documented -10 % PI-weight error (core plant, 5 Hz tone, default RLS settings, d = 1), a
     NumPy ARX plant whose zero is at 0.9995, and one whose b1 = 1e-4 is below the floor
     (PRBS +-2 um). At every sample b1 >= 1e-3 * 0.5954 and |b2| <= 0.999 b1 (exact, the core
     clamps onto the bound; slack 1e-15 relative), and the relevant bound is actually reached
@@ -659,7 +659,7 @@ def _diophantine_by_impulse_response(a1, a2, d):
 @pytest.mark.parametrize("d", [1, 2])
 @pytest.mark.parametrize("lambda_u", [0.01, 1.0])
 def test_generalised_mv_minimises_its_cost(lambda_u, d):
-    """Reference: the defining property of the generalised MV law (DESIGN.md section 2,
+    """Reference: the defining property of the generalised MV law (docs/model.md, controller,
     'control weighting lambda_u on q'): q(k) minimises
     J(q) = (Gd y(k) + F q - y_ref)^2 + lambda_u q^2 (F q = f0 q + sum_i f_i q(k-i)), i.e.
     dJ/dq / 2 = f0 (pred(q) - y_ref) + lambda_u q = 0, with Gd and F = B E from an independent
@@ -703,13 +703,13 @@ SIX_REFERENCES = {"1": (1,), "5": (5,), "10": (10,), "20": (20,), "1/5/10": (1, 
 @pytest.mark.parametrize("d", [1, 2])
 @pytest.mark.parametrize("sensor", [False, True], ids=["noise-free", "2nm+1nm"])
 def test_pi_weights_minus_10_percent_stays_stable(d, sensor):
-    """Reference: DESIGN.md section 2's robustness case, PI weights -10 % (the path q -> y is
+    """Reference: the controller section of docs/model.md: robustness case, PI weights -10 % (the path q -> y is
     0.9 G). A single tone lets the RLS estimate wander along unexcited directions; before
     the stable-A projection this loop diverged (a1, a2 -> 1e12) at 1 Hz and on both mixes.
     Now, in all six tracking scenarios (3 s, metrics over [1, 3) s, preview), for d = 1 and
     d = 2 (plant tf.delay 1), noise-free and with the paper's sensor:
     - every estimate keeps A inside the stability triangle shrunk by 1e-4 and B inside the
-      DESIGN projection (b1 >= 1e-3 nominal b1, |b2/b1| <= 0.999), at every sample;
+      documented projection (b1 >= 1e-3 nominal b1, |b2/b1| <= 0.999), at every sample;
     - e_rms <= 3 nm noise-free (measured <= 1.6 nm) and <= 15 nm with the sensor (measured
       <= 6.4 nm over seeds 1-2);
     - the A bound is actually reached in at least one scenario (so the projection acts)."""
@@ -747,7 +747,7 @@ def test_pi_weights_minus_10_percent_stays_stable(d, sensor):
 # ---------------------------------------------------------------- drop-in defaults and monitor
 
 def test_drop_in_defaults():
-    """Reference: the documented defaults (tests/numpy_reference.py CONTROLLER_DESIGN_DEFAULTS):
+    """Reference: the documented defaults (tests/numpy_reference.py CONTROLLER_DOC_DEFAULTS):
     the plain core controller has d = 1 + mv.delay = 2 (the loop delay of the FMU's
     published-at-end timing), limits on at +-150 V, monitor 1 um / 200 samples."""
     c = core.Controller()

@@ -153,7 +153,7 @@ def test_soe_vs_exact_60s(alpha):
     |alpha| <= 0.01 (measured <= 2.9e-6 nm, worst: steps, alpha = -0.01) and <= 0.01 nm
     (1e-5 um) for |alpha| <= 0.5 (measured <= 4.6e-3 nm, worst: steps, alpha = -0.5; 4.1e-4 nm
     at -0.25). Acceptance bound (the issue's, checked too): <= 0.001 nm for |alpha| <= 0.01
-    and <= 1 nm for |alpha| <= 0.5. DESIGN.md section 1 quotes, for its suggested quadrature
+    and <= 1 nm for |alpha| <= 0.5. docs/model.md (plant) quotes, for its suggested quadrature
     (step ~0.7), <= 0.001 nm at |alpha| = 0.01, <= 0.06 nm for |alpha| <= 0.25 and <= 0.4 nm
     at |alpha| = 0.5; the core's finer step (0.5) does better than that."""
     small = abs(alpha) <= 0.01
@@ -199,7 +199,7 @@ def test_history_needed_contract():
 
 @pytest.mark.parametrize("alpha", [1.0000001, -1.5, 2.0, float("nan"), float("inf")])
 def test_alpha_out_of_range_refused(alpha):
-    """Reference: DESIGN.md section 1 (-1 <= alpha <= 1)."""
+    """Reference: docs/model.md, plant (-1 <= alpha <= 1)."""
     with pytest.raises(core.CoreParameterError) as ei:
         core.gl_operator(alpha, 1.0, False)
     assert ei.value.valid_range

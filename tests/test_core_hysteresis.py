@@ -9,7 +9,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from harness import core  # noqa: E402
 import numpy_reference as ref  # noqa: E402
 
-DEF = ref.DESIGN_DEFAULTS
+DEF = ref.DOC_DEFAULTS
 W = np.array(DEF["pi.w"])
 R = ref.pi_thresholds(9, 20.0)
 # A second parameter set exercising all 16 operators with positive weights.
@@ -82,7 +82,7 @@ def test_pi_forward_matches_reference(params, w, r, kind, seed):
 
 
 def test_inverse_design_facts():
-    """Reference: DESIGN.md section 2 printed values w'_0 = 2.99043, w'_1..3 =
+    """Reference: docs/model.md (controller) gives the values w'_0 = 2.99043, w'_1..3 =
     -0.526163, -0.181163, -0.036924, r'_1..3 = 0, 0.901778, 1.875111 (6 significant
     digits, so tolerance 6e-6), and the full inverse parameter set against
     numpy_reference.pi_inverse_params to 1e-14."""

@@ -27,7 +27,7 @@ def max_errs(sim, want):
 @pytest.mark.parametrize("name", list(VALIDATION))
 def test_exact_creep_plant_matches_numpy_reference(name):
     """Reference: numpy_reference.plant_simulate (PI loop, difference equation, direct
-    G-L convolution with gain k_c h^-alpha), each DESIGN.md section 4 validation input
+    G-L convolution with gain k_c h^-alpha), each docs/model.md, scenarios validation input
     for 10 s (20000 samples) with its Table 1 creep row, creep.exact = true.
     Tolerance 1e-9 um on u, x and y."""
     v = VALIDATION[name]
@@ -59,7 +59,7 @@ def test_soe_plant_close_to_exact_reference(name):
     """Reference: numpy_reference.plant_simulate (exact creep, direct G-L convolution), each
     validation input for 10 s with its Table 1 row, default SOE creep mode.
     Regression bound: max |y - y_ref| <= 5e-9 um (measured: 1.7e-11 um at 1 Hz, <= 1.1e-9 um
-    for the other rows, worst 50 Hz). Acceptance bound (DESIGN.md section 1: <= 0.001 nm for
+    for the other rows, worst 50 Hz). Acceptance bound (docs/model.md, plant: <= 0.001 nm for
     |alpha| <= 0.01), checked too: 1e-6 um."""
     v = VALIDATION[name]
     p = row_params(name)
@@ -109,7 +109,7 @@ def test_step_output_semantics():
         o = plant.step(x)
         assert o == plant.output
     assert plant.k == 300
-    assert rows[1].u == pytest.approx(ref.pi_forward(v[:1], 0.3344, ref.DESIGN_DEFAULTS["pi.w"],
+    assert rows[1].u == pytest.approx(ref.pi_forward(v[:1], 0.3344, ref.DOC_DEFAULTS["pi.w"],
                                                      ref.pi_thresholds(9, 20.0))[0][0], abs=1e-15)
     plant.reset()
     assert plant.k == 0
@@ -129,7 +129,7 @@ def test_simulate_continues_from_current_state():
 
 
 def test_defaults_fact_1hz_span():
-    """Reference: DESIGN.md section 4: with the defaults, v = 10 sin(2 pi t) + 10 V gives
+    """Reference: docs/model.md, scenarios: with the defaults, v = 10 sin(2 pi t) + 10 V gives
     y spanning 0.10-8.84 um in the second second (tolerance 0.01 um)."""
     v = VALIDATION["1 Hz"][:4000]
     sim = core.Plant().simulate(v)
@@ -140,7 +140,7 @@ def test_defaults_fact_1hz_span():
 
 
 def test_defaults_fact_mixed_span():
-    """Reference: DESIGN.md section 4: v = 6(sin 2pi5t + sin 2pi40t + sin 2pi80t) + 18 V
+    """Reference: docs/model.md, scenarios: v = 6(sin 2pi5t + sin 2pi40t + sin 2pi80t) + 18 V
     (5/40/80 row) gives y spanning 0.9-14.8 um (after the first second; tolerance 0.05 um)."""
     v = VALIDATION["5/40/80 Hz"]
     sim = core.Plant(row_params("5/40/80 Hz")).simulate(v)
@@ -152,7 +152,7 @@ def test_defaults_fact_mixed_span():
 
 # ------------------------------------------------------------------ sensor
 def test_sensor_quantization():
-    """Reference: quantize(a) = res * round(a / res) (DESIGN.md section 1) applied with NumPy
+    """Reference: quantize(a) = res * round(a / res) (docs/model.md, plant) applied with NumPy
     to the true y; res = 2 nm, no noise, 10 Hz validation input. Tolerance 1e-12 um; every
     reading is an integer multiple of res and within res/2 of y."""
     res = 0.002
@@ -231,7 +231,7 @@ BAD = [
 
 @pytest.mark.parametrize("name,value", BAD, ids=[f"{n}={v}" for n, v in BAD])
 def test_invalid_parameter_refused(name, value):
-    """Reference: DESIGN.md sections 1/5 valid ranges. CoreParameterError naming exactly the
+    """Reference: docs/model.md, plant; docs/fmus.md valid ranges. CoreParameterError naming exactly the
     FMU variable, carrying the value and a range, with the documented message format."""
     with pytest.raises(core.CoreParameterError) as ei:
         core.Plant({name: value})
@@ -396,7 +396,7 @@ def test_plant_noise_is_noise_rms_times_the_python_normals(seed):
 
 
 def test_plant_noise_is_added_before_quantization():
-    """Reference: DESIGN.md section 1, y_meas = quantize(y + noise), quantize(a) =
+    """Reference: docs/model.md, plant, y_meas = quantize(y + noise), quantize(a) =
     res * round(a / res), computed with NumPy from the core's y and the Python generator's
     normals (seed 1). Resolution 2 nm, noise 1 nm rms, 10 Hz validation input, 6000 rows.
     Every y_meas is an integer multiple of res (to 1e-12 relative) and y_meas - quantize(y +

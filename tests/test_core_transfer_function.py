@@ -10,7 +10,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from harness import core  # noqa: E402
 import numpy_reference as ref  # noqa: E402
 
-D = ref.DESIGN_DEFAULTS
+D = ref.DOC_DEFAULTS
 NOMINAL = (D["tf.a1"], D["tf.a2"], D["tf.b1"], D["tf.b2"])
 OTHER = (-1.1, 0.45, 0.3, 0.25)          # poles 0.55 +- 0.38j, different zero
 
@@ -52,7 +52,7 @@ def test_matches_numpy_loop_reference():
 
 
 def test_design_facts_poles_zero_dc_gain():
-    """Reference: DESIGN.md section 1 facts (poles 0.992037 and 0.384663, zero 0.992106,
+    """Reference: docs/model.md, plant facts (poles 0.992037 and 0.384663, zero 0.992106,
     DC gain 0.959) from numpy.roots on the core's default coefficients, and the core's
     step response after 10 s reaching the DC gain (b1+b2)/(1+a1+a2) within 1e-9."""
     p = core.default_plant_params()

@@ -23,7 +23,7 @@ FEEDTHROUGH = {"mv.feedthrough": True, "mv.delay": 0}
 
 
 def y_d(k):
-    """1 Hz reference, 10 um amplitude (DESIGN.md section 4)."""
+    """1 Hz reference, 10 um amplitude (docs/model.md, scenarios)."""
     return 10.0 * math.sin(2.0 * math.pi * k * H)
 
 

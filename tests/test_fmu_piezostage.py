@@ -126,7 +126,7 @@ def test_outputs_at_rest_during_initialization(piezo_stage, make_fmu):
 
 
 def test_default_sine_spans_the_design_range(piezo_stage, make_fmu):
-    """Reference: README/DESIGN.md, "For v = 10 sin(2 pi t) + 10 V, y spans 0.096 to
+    """Reference: README, docs/model.md, "For v = 10 sin(2 pi t) + 10 V, y spans 0.096 to
     8.838 um" (printed to 3 decimals); tolerance 0.01 um on the extremes over the
     second period. The first samples are checked by hand (u0 below), to 1e-14 relative."""
     fmu = make_fmu(piezo_stage)
@@ -201,7 +201,7 @@ def test_delayed_plant_with_another_creep_row_matches_the_numpy_reference(piezo_
                                                                           exact, tolerance):
     """Open loop, tf.delay = 3 and Table 1's 10 Hz creep row (k_c = 1.0497, alpha = -0.0085),
     4000 samples. Reference: tests/numpy_reference.py plant_simulate (plain loops and a direct
-    G-L convolution, written from DESIGN.md). Tolerance on u, x, y and y_meas: 1e-9 um with
+    G-L convolution, written from docs/model.md). Tolerance on u, x, y and y_meas: 1e-9 um with
     the exact creep sum (measured ~9e-14, rounding only); 3e-9 um with the default SOE creep,
     the README's SOE bound (<= 3e-6 nm for |alpha| <= 0.01; measured ~4e-10 um).
     A delay forced to 0 is off by ~4 um in y; the default creep row instead, by ~0.2 um."""

@@ -2,7 +2,7 @@
 
 (a) sources/ holds the <SourceFiles> of the model description and every header they
     include (transitively), byte-identical to the repository's files, nothing else but
-    project headers, and no FMI header (fmi2*.h is the importer's);
+    project headers and buildDescription.xml, and no FMI header (fmi2*.h is the importer's);
 (b) a binary built from the FMU's sources only (cc, C99, -Wall -Wextra -Wpedantic -Werror,
     the FMI headers of fmpy) and re-zipped as a new FMU
 (c) gives exactly the outputs of the shipped binary: PiezoStage open loop through
@@ -61,6 +61,8 @@ def _repo_file(model, name):
 def test_sources_are_the_source_files_and_the_headers_they_include(fmu_paths, name):
     listed = _source_files(fmu_paths[name])
     names, sources = _zipped_sources(fmu_paths[name])
+    # the FMI 2.0.4 build description, checked in test_fmu_build_description.py
+    assert sources.pop("buildDescription.xml").startswith(b"<?xml")
 
     assert listed and len(set(listed)) == len(listed)
     assert all(f.endswith(".c") and "/" not in f for f in listed), listed

@@ -87,7 +87,7 @@ def test_run_with_csv_reference_and_no_plots(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert (out / "csv_ref.csv").is_file() and not (out / "csv_ref.png").exists()
     # nominal model: exact tracking of the interpolated reference after the first d samples
-    # (DESIGN.md section 3: Jacobi master, mv.delay = 1, d = 2)
+    # (docs/cosimulation.md: Jacobi master, mv.delay = 1, d = 2)
     assert float(next(csv.DictReader(open(out / "csv_ref.csv")))["e_rms_um"]) <= 1e-6
 
 

@@ -164,7 +164,7 @@ CASES = [
      "scenario 'wrong_header': field 'reference.file': {d}/volts.csv: line 1: header's second "
      "column is 'v', expected 'y_d'"),
     (["run", "track_1hz", "--fmu-dir", "{d}/empty", "--no-plots", "--out", "{d}/o"], 2,
-     "FMU not found: {d}/empty/PiezoStage.fmu; build it with"),
+     "FMU not found: {d}/empty/PiezoStage.fmu; build them in"),
     (["run", "typo", "--scenario-file", "{d}/param.toml", "--no-plots", "--out", "{d}/o"], 2,
      "'pi.w00' is not a parameter of PiezoStage (did you mean pi.w0"),
     (["run", "alpha_too_big", "--scenario-file", "{d}/value.toml", "--no-plots", "--out",

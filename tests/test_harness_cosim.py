@@ -1,4 +1,4 @@
-"""harness.cosim (fmpy master) against the C core loop and the DESIGN.md section 4 bounds.
+"""harness.cosim (fmpy master) against the C core loop and the docs/model.md, scenarios bounds.
 
 Needs build/fmus/*.fmu and build/libpiezo_core.so (cmake -S . -B build && cmake --build build).
 """
@@ -53,7 +53,7 @@ def test_fmpy_loop_equals_core_loop(name):
 
 @pytest.mark.parametrize("name", TRACKING_SCENARIOS)
 def test_nominal_model_with_preview_tracks_exactly(name):
-    # Reference: DESIGN.md section 4 - a perfect model with preview gives zero error by
+    # Reference: docs/model.md, scenarios - a perfect model with preview gives zero error by
     # construction; bound e_rms <= 1e-6 um over [1, 3) s.
     m = _metrics(name, _run(name))
     assert m.n_samples == 4000
@@ -62,7 +62,7 @@ def test_nominal_model_with_preview_tracks_exactly(name):
 
 @pytest.mark.parametrize("name", MISMATCH_SCENARIOS)
 def test_mismatch_with_adaptation_meets_design_bound(name):
-    # Reference: DESIGN.md section 4 - "a careful MV + RLS design reaches 1.5-3.5 nm rms";
+    # Reference: docs/model.md, scenarios - "a careful MV + RLS design reaches 1.5-3.5 nm rms";
     # the brief's bound: e_rms <= 3 nm and e_r <= 0.05 % in all six tracking scenarios.
     m = _metrics(name, _run(name))
     assert m.e_rms <= 3e-3, f"{name}: e_rms = {m.e_rms * 1e3:.4g} nm"
@@ -70,7 +70,7 @@ def test_mismatch_with_adaptation_meets_design_bound(name):
 
 
 def test_adaptation_helps_on_the_mismatched_plant():
-    # Reference: DESIGN.md section 2 (adaptation can be switched off: the law uses the nominal G).
+    # Reference: docs/model.md, controller (adaptation can be switched off: the law uses the nominal G).
     on = _metrics("mismatch_20hz", _run("mismatch_20hz"))
     off = _metrics("mismatch_20hz", _run("mismatch_20hz", adaptation=False))
     assert off.e_rms > 10 * on.e_rms
@@ -79,7 +79,7 @@ def test_adaptation_helps_on_the_mismatched_plant():
 
 @pytest.mark.parametrize("d", [2, 1])
 def test_preview_off_gives_the_expected_lag_error(d):
-    # Reference: DESIGN.md section 2 - feeding y_d(k) instead of y_d(k+d) gives a lag error.
+    # Reference: docs/model.md, controller - feeding y_d(k) instead of y_d(k+d) gives a lag error.
     # With the nominal model, y(k) = y_d(k - d), so for 10 sin(2 pi t):
     # e_rms = 2 * 10 * sin(pi * f * d h) / sqrt(2) = 44.43 nm for the default d = 2 and
     # 22.21 nm for d = 1 (mv.feedthrough with mv.delay = 0).
@@ -149,7 +149,7 @@ def test_every_master_runs_the_published_at_end_loop(master, order):
 
 
 def test_open_loop_fmu_equals_core_and_u_is_row_aligned():
-    """Reference: tests/numpy_reference.py (pi_forward: the PI model of eq 18 with the DESIGN.md
+    """Reference: tests/numpy_reference.py (pi_forward: the PI model of eq 18 with the docs/model.md
     section 1 defaults, written from the equations), and the core plant through cffi. 10 Hz
     input, 2000 samples, 10 Hz creep row. FMU vs core: 1e-9 on every field; u vs the NumPy PI:
     1e-12 um; x(1) = b1 u(0) (G has one sample of delay, x(0) = 0) to 1e-12 relative."""
@@ -161,7 +161,7 @@ def test_open_loop_fmu_equals_core_and_u_is_row_aligned():
     assert fmu.dtype.names == ("time", "v", "u", "x", "y", "y_meas")
     for field in fmu.dtype.names:
         assert np.max(np.abs(fmu[field] - core[field])) <= 1e-9
-    d = ref.DESIGN_DEFAULTS
+    d = ref.DOC_DEFAULTS
     u_ref, _ = ref.pi_forward(v, d["pi.w0"], d["pi.w"], ref.pi_thresholds(d["pi.m"], d["pi.v_max"]))
     np.testing.assert_allclose(fmu["u"], u_ref, rtol=0, atol=1e-12)
     assert fmu["y"][0] == 0.0 and fmu["x"][1] == pytest.approx(d["tf.b1"] * u_ref[0], rel=1e-12)

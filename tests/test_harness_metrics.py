@@ -1,4 +1,4 @@
-"""harness.metrics: eqs 36-37 of the paper as fixed by DESIGN.md section 4."""
+"""harness.metrics: eqs 36-37 of the paper as fixed by docs/model.md, scenarios."""
 
 import math
 
@@ -21,7 +21,7 @@ def test_rms_and_relative_error_hand_computed():
 
 
 def test_window_is_half_open_on_the_sample_grid():
-    # Reference: DESIGN.md section 4, metrics over t in [1, 3) s: with h = 0.5,
+    # Reference: docs/model.md, scenarios, metrics over t in [1, 3) s: with h = 0.5,
     # the window [0.5, 1.5) keeps samples 1 and 2 only -> errors 0 and 1.
     t = np.arange(4) * 0.5
     m = compute_metrics(t, [1.0, 2.0, 3.0, 4.0], [1.5, 2.0, 2.0, 4.0], window=(0.5, 1.5))

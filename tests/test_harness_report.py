@@ -1,5 +1,5 @@
 """The README's main job (``python -m harness``) and ``run`` end to end, as subprocesses, on the
-C core backend: the files and tables of harness/report/ checked against DESIGN.md section 4's
+C core backend: the files and tables of harness/report/ checked against the scenarios of docs/model.md and their
 bounds, the README's lag formula, the paper's Tables 4/5 and tests/numpy_reference.py; the
 report (headline table, provenance, figures) in tests/test_harness_document.py."""
 
@@ -18,11 +18,11 @@ sys.path.insert(0, str(REPO / "tests"))
 import numpy_reference as ref  # noqa: E402
 
 H = 0.0005
-WINDOW = slice(2000, 6000)          # metric window [1, 3) s of a 3 s run (DESIGN.md section 4)
+WINDOW = slice(2000, 6000)          # metric window [1, 3) s of a 3 s run (docs/model.md, scenarios)
 SCEN = ("1hz", "5hz", "10hz", "20hz", "1_5_10hz", "1_10_20hz")
 FREQS = {"1hz": (1,), "5hz": (5,), "10hz": (10,), "20hz": (20,), "1_5_10hz": (1, 5, 10),
          "1_10_20hz": (1, 10, 20)}
-# DESIGN.md section 4 / paper Tables 4/5: e_rms [nm], e_r [%]
+# docs/model.md, scenarios / paper Tables 4/5: e_rms [nm], e_r [%]
 PAPER = {"1hz": (7.6, 0.11), "5hz": (25.4, 0.36), "10hz": (56.0, 0.80), "20hz": (115.3, 1.63),
          "1_5_10hz": (60.0, 0.49), "1_10_20hz": (178.7, 1.46)}
 # report order: the headline, its two ablations, the nominal-model check
@@ -56,7 +56,7 @@ def lag_rms(freqs, amplitude=10.0, d=2, h=H):
 
 
 def reference_validation(label, row):
-    """tests/numpy_reference.py plant (exact creep) run twice on the DESIGN.md section 4
+    """tests/numpy_reference.py plant (exact creep) run twice on the docs/model.md, scenarios
     validation input: creep on with the Table 1 row, creep off (Hammerstein). Returns the
     metrics of eqs 36-37 over [1, 3) s (coupled taken as the truth, e_r normalised by it) and
     both outputs."""
@@ -86,7 +86,7 @@ def _rows(tracking, condition):
 
 def test_main_job_writes_four_conditions_of_six_scenarios(main_job):
     """Reference: harness/report/'s documented layout (4 conditions x the 6 scenarios of
-    Tables 4/5, headline first, flags as the condition says), the paper's values of DESIGN.md
+    Tables 4/5, headline first, flags as the condition says), the paper's values of docs/model.md
     section 4 in every row (um and fraction, exact), 4000 samples in the [1, 3) s window,
     and the five report files; no figure with --no-plots."""
     _, out, tracking = main_job
@@ -104,7 +104,7 @@ def test_main_job_writes_four_conditions_of_six_scenarios(main_job):
 
 
 def test_main_job_nominal_and_mismatch_rows_meet_the_bounds(main_job):
-    """Reference: DESIGN.md section 4 and the issue's acceptance bounds. Nominal model with
+    """Reference: docs/model.md, scenarios and the issue's acceptance bounds. Nominal model with
     preview: e_rms <= 1e-6 um (exact by construction; measured <= 2e-13 um). Mismatch,
     adaptation on: e_rms <= 3 nm and e_r <= 0.05 % (measured 1.18-1.94 nm, <= 0.018 %).
     Adaptation off must be worse than on in every scenario, by more than 3x (measured
@@ -129,7 +129,7 @@ def test_main_job_preview_off_rows_follow_the_lag_formula(main_job):
 
 
 def test_main_job_prints_the_headline_table_first(main_job):
-    """Reference: the paper's Tables 4/5 (DESIGN.md section 4). The first table printed is the
+    """Reference: the paper's Tables 4/5 (docs/model.md, scenarios). The first table printed is the
     headline (mismatch, adaptation on, preview on): every scenario line shows our e_rms and
     e_r equal to the CSV's to the 4 printed digits (rel. 1e-3), the paper's e_rms (7.6, 25.4,
     56, 115.3, 60.0, 178.7 nm) and e_r (0.11, 0.36, 0.80, 1.63, 0.49, 1.46 %) exactly, and
@@ -180,7 +180,7 @@ def test_main_job_validation_csv_equals_numpy_reference(main_job):
     the six validation inputs. validation.csv has the 6 rows in order with the Table 1 row
     (exact), coupled-minus-Hammerstein e_rms and e_r within 1e-8 relative (measured <= 9.3e-10:
     the core's default SOE creep is within ~1e-9 um of the exact sum, i.e. ~4e-9 relative of
-    a 0.25 um e_rms at most; 1e-8 leaves room for SOE changes that keep DESIGN's accuracy) and the coupled y span
+    a 0.25 um e_rms at most; 1e-8 leaves room for SOE changes that keep the documented accuracy) and the coupled y span
     within 5e-9 um."""
     _, out, _ = main_job
     rows = _csv(out / "validation.csv")
@@ -226,10 +226,10 @@ def _run_tracking(tmp_path, *flags):
 
 
 def test_run_flags_no_adaptation_and_no_preview(tmp_path):
-    """Reference: y_d = 10 sin(2 pi 10 t) computed here, DESIGN.md section 4 bounds and the
+    """Reference: y_d = 10 sin(2 pi 10 t) computed here, docs/model.md, scenarios bounds and the
     README's lag formula, mismatch_10hz (3 s, window [1, 3) s).
     Base run: e_rms <= 3 nm (measured 1.20 nm), flags 1/1.
-    --no-adaptation: flags 0/1, the estimates stay the nominal G of DESIGN.md section 1
+    --no-adaptation: flags 0/1, the estimates stay the nominal G of docs/model.md, plant
     (-1.3767, 0.3816, 0.5954, -0.5907) exactly, e_rms > 3x the base run's (measured 28.3 nm).
     --no-preview: flags 1/0, e_rms within 5 % of 2 pi f A d h / sqrt(2) = 444.3 nm (d = 2), and
     the stage follows y_d two samples late: rms(y(k) - y_d(k-2)) <= 3 nm."""

@@ -1,4 +1,4 @@
-"""harness.scenarios: built-in scenarios (paper Tables 1-5, DESIGN.md section 4) and user files."""
+"""harness.scenarios: built-in scenarios (paper Tables 1-5, docs/model.md, scenarios) and user files."""
 
 import math
 
@@ -18,7 +18,7 @@ from harness.scenarios import (
 
 
 def test_builtin_names_and_paper_values():
-    # Reference: paper Tables 4/5 and DESIGN.md section 4 (e_r "0.76 %" typo -> 0.11 %).
+    # Reference: paper Tables 4/5 and docs/model.md, scenarios (e_r "0.76 %" typo -> 0.11 %).
     reg = load_scenarios()
     assert list(TRACKING_SCENARIOS) + list(VALIDATION_SCENARIOS) + list(MISMATCH_SCENARIOS) == list(reg)
     e_rms = [reg[n].paper["e_rms_um"] for n in TRACKING_SCENARIOS]
@@ -55,7 +55,7 @@ def test_validation_creep_rows_match_table_1():
 
 
 def test_mismatch_parameters_follow_design_section_4():
-    # Reference: DESIGN.md section 4: PI weights +10 %, creep row 10 Hz, numerator x1.05,
+    # Reference: docs/model.md, scenarios: PI weights +10 %, creep row 10 Hz, numerator x1.05,
     # poles 0.992037 and 0.45, sensor 2 nm resolution + 1 nm rms noise; controller nominal.
     sc = get_scenario("mismatch_10hz")
     p = sc.plant

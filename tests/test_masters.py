@@ -1,4 +1,4 @@
-"""The closed loop under every master that installs here, on DESIGN's mismatch case.
+"""The closed loop under every master that installs here, on the mismatch case of docs/model.md.
 
 Masters (their real schedules read in their sources, see harness/importers.py):
   * ours (harness.cosim): Gauss-Seidel in ModelStructure order with either doStep order,

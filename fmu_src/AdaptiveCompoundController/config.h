@@ -1,6 +1,6 @@
 /*
  * AdaptiveCompoundController/config.h - identity, value references and flat
- * data of the AdaptiveCompoundController FMU (DESIGN.md section 5). The value
+ * data of the AdaptiveCompoundController FMU (docs/fmus.md). The value
  * references follow the order of modelDescription/AdaptiveCompoundController.xml.
  */
 #ifndef ADAPTIVECOMPOUNDCONTROLLER_CONFIG_H

@@ -1,6 +1,6 @@
 /*
  * PiezoStage/config.h - identity, value references and flat data of the
- * PiezoStage FMU (DESIGN.md section 5). The value references follow the
+ * PiezoStage FMU (docs/fmus.md). The value references follow the
  * order of modelDescription/PiezoStage.xml (value reference = position - 1).
  */
 #ifndef PIEZOSTAGE_CONFIG_H

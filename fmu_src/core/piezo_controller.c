@@ -4,13 +4,13 @@
 #include "piezo_controller.h"
 #include "piezo_plant.h"
 
-/* Projection bounds (DESIGN.md section 2): b1 stays positive, the zero of B
+/* Projection bounds (docs/model.md, controller): b1 stays positive, the zero of B
  * stays inside the unit circle so that MV, which inverts B, stays stable. */
 #define B1_FLOOR_FRACTION 1e-3  /* b1 >= 1e-3 * nominal b1 */
 #define ZERO_RADIUS_MAX 0.999   /* |b2 / b1| <= 0.999 */
 /* The estimated A stays stable with a margin: A(1) = 1 + a1 + a2 >= m,
  * A(-1) = 1 - a1 + a2 >= m, |a2| <= 1 - m. Without it a single tone lets
- * (a1, a2) wander along the unexcited directions; with DESIGN's -10 % PI
+ * (a1, a2) wander along the unexcited directions; with the documented -10 % PI
  * weights the loop then diverged (a1, a2 -> 1e12 within 0.6 s). m is 50x
  * below the nominal A(1) = 0.0049, so every plausible stage fits inside. */
 #define A_STABILITY_MARGIN 1e-4
@@ -36,7 +36,7 @@ void piezo_controller_default_params(piezo_controller_params *p)
     p->mv_delay = 1;
     p->mv_feedthrough = 0;
     p->mv_lambda_u = 0.0;
-    /* RLS tuning measured on the DESIGN.md mismatch case (1.2-1.9 nm rms in all
+    /* RLS tuning measured on the mismatch case of docs/model.md (1.2-1.9 nm rms in all
      * six tracking scenarios); a trace bound of 1e3 degrades its 1 Hz run to
      * 111 nm and 1e4 makes it diverge. */
     p->rls_enabled = 1;

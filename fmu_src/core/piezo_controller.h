@@ -1,5 +1,5 @@
 /*
- * piezo_controller.h - adaptive compound controller (DESIGN.md section 2):
+ * piezo_controller.h - adaptive compound controller (docs/model.md, controller):
  *
  *     y_meas(k) -> RLS update -> MV law -> q(k) -> inverse creep -> r(k)
  *               -> inverse PI -> v(k) [-> saturation]
@@ -111,7 +111,7 @@ typedef struct {
     uint64_t run_large_error;
 } piezo_controller_sample;
 
-/* DESIGN.md section 5 defaults (nominal plant model). */
+/* Defaults of docs/fmus.md (nominal plant model). */
 void piezo_controller_default_params(piezo_controller_params *params);
 piezo_status piezo_controller_init(piezo_controller *ctrl, const piezo_controller_params *params,
                                    piezo_diag *diag);

@@ -7,20 +7,20 @@
 #define PI_D 3.14159265358979323846
 
 /*
- * SOE quadrature (DESIGN.md section 1; Jiang, Zhang, Zhang & Greengard 2017).
+ * SOE quadrature (docs/model.md, plant; Jiang, Zhang, Zhang & Greengard 2017).
  * Nodes u_i = ln s_i on a uniform grid of step SOE_DU, from ln(SOE_S_MAX)
  * down to ln(SOE_S_LOW). SOE_S_MAX = 40/(L0+1) makes e^{-s j} < e^{-40} for
  * every tail index j > L0. Below SOE_S_LOW the grid continues to -inf, but
- * there s j <= SOE_S_LOW * SOE_N_DESIGN = 1e-4 for every j of a run of up to
- * SOE_N_DESIGN samples, so e^{-s j} ~ 1 and those infinitely many nodes add up
+ * there s j <= SOE_S_LOW * SOE_N_HORIZON = 1e-4 for every j of a run of up to
+ * SOE_N_HORIZON samples, so e^{-s j} ~ 1 and those infinitely many nodes add up
  * to ONE accumulator term (decay 1) whose coefficient is a geometric series.
  * This keeps 58 terms (57 nodes, 1 accumulator) while heavy tails (alpha -> -1) stay accurate. The
  * step 0.5 (trapezoid error ~ e^{-pi^2/du}) makes inverse creep after creep
  * the identity within 2e-10 um over 10 s for the Table 1 rows.
  */
 #define SOE_DU 0.5
-#define SOE_N_DESIGN 67108864.0 /* 2^26 samples = 9.3 h at 2 kHz */
-#define SOE_S_LOW (1e-4 / SOE_N_DESIGN)
+#define SOE_N_HORIZON 67108864.0 /* 2^26 samples = 9.3 h at 2 kHz */
+#define SOE_S_LOW (1e-4 / SOE_N_HORIZON)
 
 /* eq 14: w_0 = 1, w_j = (1 - (alpha+1)/j) w_{j-1}. At j = 1 the ratio is
  * exactly -alpha; computing it as 1 - (1 + alpha) would cancel and cost 1e-12

@@ -1,6 +1,6 @@
 /*
  * piezo_creep.h - Grunwald-Letnikov fractional operator (paper eqs 13-17, 29;
- * DESIGN.md section 1 "Cost of the creep sum").
+ * docs/model.md, "Cost of the creep sum").
  *
  *     y(k) = gain * sum_{j=0..k} w_j x(k-j),
  *     w_0 = 1,  w_j = (1 - (alpha+1)/j) w_{j-1}     (eq 14)

@@ -1,6 +1,6 @@
 /*
  * piezo_hysteresis.h - classical Prandtl-Ishlinskii model and its inverse
- * (paper eqs 1-5, 18, 24-28; DESIGN.md sections 1 and 2).
+ * (paper eqs 1-5, 18, 24-28; docs/model.md, plant and controller).
  *
  * Play operator, threshold r >= 0 (eq 3):
  *     z_r(k) = max(v(k) - r, min(v(k) + r, z_r(k-1)))

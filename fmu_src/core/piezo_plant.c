@@ -10,7 +10,7 @@ void piezo_plant_default_params(piezo_plant_params *p)
 {
     if (!p) return;
     memset(p, 0, sizeof *p);
-    /* PI model identified at 1 Hz (paper section 3.1, DESIGN.md section 1) */
+    /* PI model identified at 1 Hz (paper section 3.1, docs/model.md, plant) */
     p->pi.m = 9;
     p->pi.v_max = 20.0;
     p->pi.w0 = 0.3344;

@@ -1,5 +1,5 @@
 /*
- * piezo_plant.h - the coupled piezo stage model (DESIGN.md section 1):
+ * piezo_plant.h - the coupled piezo stage model (docs/model.md, plant):
  *
  *     v --PI--> u --G(z)--> x --creep--> y,   y_meas = quantize(y + noise)
  *
@@ -59,7 +59,7 @@ typedef struct {
     piezo_plant_output out;     /* outputs at sample k */
 } piezo_plant;
 
-/* DESIGN.md section 5 defaults. */
+/* Defaults of docs/fmus.md. */
 void piezo_plant_default_params(piezo_plant_params *params);
 /* Validate every parameter (diag names the first bad one), derive, reset. */
 piezo_status piezo_plant_init(piezo_plant *plant, const piezo_plant_params *params, piezo_diag *diag);

@@ -1,6 +1,6 @@
 /*
  * piezo_tf.h - second-order discrete transfer function with optional extra
- * input delay (paper eqs 7-10, 21; DESIGN.md section 1).
+ * input delay (paper eqs 7-10, 21; docs/model.md, plant).
  *
  *     G(z) = (b1 z^-1 + b2 z^-2) / (1 + a1 z^-1 + a2 z^-2) * z^-delay
  *     x(k) = -a1 x(k-1) - a2 x(k-2) + b1 u(k-1-delay) + b2 u(k-2-delay)

@@ -1,0 +1,105 @@
+"""Where the built artefacts are: the FMUs, the core library and the core headers.
+
+In order:
+
+1. an environment variable (``PIEZO_FMU_DIR``, ``PIEZO_CORE_LIB``, ``PIEZO_CORE_INCLUDE``);
+2. the package's own ``_data/`` folder, which ``pip install .`` fills (``fmus/``,
+   ``lib/libpiezo_core.so``, ``include/*.h``; see the ``install()`` rules in CMakeLists.txt);
+3. a source checkout: ``<repo>/build/fmus``, ``<repo>/build/libpiezo_core.so``,
+   ``<repo>/fmu_src/core`` (the build of ``cmake -S . -B build && cmake --build build``);
+4. the ``_data/`` of an installed ``harness`` distribution, when this copy of the package is
+   a source checkout without a build (``pip install . && python -m harness`` run from the
+   repository's root imports the checkout's ``harness``).
+
+The first candidate that exists wins; if none does, the checkout's path (or, outside a
+checkout, the package's) is returned, so that the error message names where the file
+was expected.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+__all__ = ["PACKAGE_DIR", "REPO_ROOT", "IN_CHECKOUT", "BUILD_COMMAND", "INSTALL_COMMAND",
+           "fmu_dir", "core_library", "core_include_dir", "runner_library", "runner_include_dir",
+           "bench_library", "bench_include_dir", "where_to_get_it"]
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+REPO_ROOT = PACKAGE_DIR.parent
+#: this package is the ``harness/`` folder of a source checkout (not an installed copy)
+IN_CHECKOUT = (REPO_ROOT / "CMakeLists.txt").is_file() and (REPO_ROOT / "fmu_src").is_dir()
+BUILD_COMMAND = "cmake -S . -B build && cmake --build build"
+INSTALL_COMMAND = "pip install ."
+CORE_LIBRARY_NAME = "libpiezo_core.so"
+
+
+def _installed_data_dir():
+    """``_data/`` of an installed ``harness`` distribution, or None."""
+    try:
+        from importlib.metadata import PackageNotFoundError, distribution
+        dist = distribution("harness")
+    except (ImportError, PackageNotFoundError):
+        return None
+    data = Path(dist.locate_file("harness/_data"))
+    return data if data.is_dir() else None
+
+
+def _first(env, relative, checkout):
+    """The path of the module docstring's rules: env var, package, checkout, installed."""
+    value = os.environ.get(env)
+    if value:
+        return Path(value)
+    candidates = [PACKAGE_DIR / "_data" / relative]
+    if IN_CHECKOUT:
+        candidates.append(REPO_ROOT / checkout)
+        installed = _installed_data_dir()
+        if installed is not None and installed != PACKAGE_DIR / "_data":
+            candidates.append(installed / relative)
+    for path in candidates:
+        if path.exists():
+            return path
+    return REPO_ROOT / checkout if IN_CHECKOUT else candidates[0]
+
+
+def fmu_dir() -> Path:
+    """Folder of the FMUs (``$PIEZO_FMU_DIR`` overrides)."""
+    return _first("PIEZO_FMU_DIR", "fmus", "build/fmus")
+
+
+def core_library() -> Path:
+    """The core shared library (``$PIEZO_CORE_LIB`` overrides)."""
+    return _first("PIEZO_CORE_LIB", f"lib/{CORE_LIBRARY_NAME}", f"build/{CORE_LIBRARY_NAME}")
+
+
+def core_include_dir() -> Path:
+    """Folder of the core's C headers, which the cffi binding reads
+    (``$PIEZO_CORE_INCLUDE`` overrides)."""
+    return _first("PIEZO_CORE_INCLUDE", "include", "fmu_src/core")
+
+
+def runner_library() -> Path:
+    """The native closed-loop master's library (``$PIEZO_RUNNER_LIB`` overrides)."""
+    return _first("PIEZO_RUNNER_LIB", "lib/libpiezo_runner.so", "build/libpiezo_runner.so")
+
+
+def runner_include_dir() -> Path:
+    """Folder of ``piezo_runner.h``, which the native master's cffi binding reads."""
+    return _first("PIEZO_RUNNER_INCLUDE", "include", "fmu_src/runner")
+
+
+def bench_library() -> Path:
+    """The core's timing loops (``python -m harness bench``)."""
+    return _first("PIEZO_BENCH_LIB", "lib/libpiezo_bench.so", "build/libpiezo_bench.so")
+
+
+def bench_include_dir() -> Path:
+    """Folder of ``piezo_bench.h``."""
+    return _first("PIEZO_BENCH_INCLUDE", "include", "fmu_src/bench")
+
+
+def where_to_get_it() -> str:
+    """How to produce the missing artefacts, for error messages."""
+    if IN_CHECKOUT:
+        return f"build them in {REPO_ROOT} with: {BUILD_COMMAND}  (or {INSTALL_COMMAND})"
+    return f"reinstall the package from its source folder with: {INSTALL_COMMAND}"

@@ -1,0 +1,290 @@
+"""The documentation inside an FMU, generated at build time.
+
+``documentation/index.html`` = the hand-written part of the model
+(``packaging/documentation/<id>.html``: what it models, the equations with units)
++ parts generated from the model description, so that they cannot drift from it:
+the identity table, the table of every variable (causality, variability, type, unit,
+default, range, description), how to connect the loop (from ``harness/ssp.py``, the
+same connections the build's SSP uses), how to build from the sources, the reference
+results, the paper and the licence.
+
+``documentation/fmi-ls-ref.html``: what the reference results (FMI-LS-REF) hold, how
+they were computed and how to compare with them, read from the experiments file.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+import sys
+from xml.etree import ElementTree as ET
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+PROJECT = "piezo_fmus"
+CITATION = ('"Coupling Modeling and Adaptive Control for Piezoelectric-Actuated Positioning '
+            'Stage", research article, Modelling and Simulation in Engineering (Hindawi), 2022, '
+            'article ID 2534439')
+CITATION_URL = "https://www.hindawi.com/journals/mse/2022/2534439/"
+LICENSE_NAME = "BSD-3-Clause"
+
+STYLE = """
+body { font-family: sans-serif; max-width: 72em; margin: 2em auto; padding: 0 1em; line-height: 1.45; }
+table { border-collapse: collapse; margin: 0.8em 0; }
+th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; vertical-align: top; text-align: left; }
+th { background: #eee; }
+td.num { text-align: right; white-space: nowrap; }
+code, pre { background: #f4f4f4; }
+pre { padding: 0.6em; overflow-x: auto; }
+h1 img { float: right; width: 96px; }
+"""
+
+
+MINUS_INFINITY = "\u2212\u221e"
+INFINITY = "\u221e"
+
+
+def _e(text):
+    return html.escape(str(text), quote=True)
+
+
+def _type_element(var):
+    (typ,) = [c for c in var if c.tag in ("Real", "Integer", "Boolean", "String", "Enumeration")]
+    return typ
+
+
+def _fmt_number(text):
+    return text.replace("-", "\u2212") if text else text
+
+
+def variable_rows(root):
+    """One dict per ScalarVariable: name, causality, variability, type, unit (its display
+    unit when the model description defines one), start, range, description."""
+    display = {}
+    for unit in root.iter("Unit"):
+        names = [d.get("name") for d in unit.iter("DisplayUnit")]
+        if names:
+            display[unit.get("name")] = names[0]
+    rows = []
+    for var in root.iter("ScalarVariable"):
+        typ = _type_element(var)
+        lo, hi = typ.get("min"), typ.get("max")
+        if typ.tag == "Boolean":
+            rng = "false, true"
+        elif lo is None and hi is None:
+            rng = ""
+        else:
+            low = f"[{_fmt_number(lo)}" if lo is not None else f"({MINUS_INFINITY}"
+            high = f"{_fmt_number(hi)}]" if hi is not None else f"{INFINITY})"
+            rng = f"{low}, {high}"
+        unit = typ.get("displayUnit") or display.get(typ.get("unit"), typ.get("unit") or "")
+        rows.append({"name": var.get("name"), "causality": var.get("causality", "local"),
+                     "variability": var.get("variability", "continuous"), "type": typ.tag,
+                     "unit": unit, "start": _fmt_number(typ.get("start") or ""),
+                     "range": rng, "description": var.get("description", "")})
+    return rows
+
+
+def _variables_table(root):
+    head = ("Name", "Causality", "Variability", "Type", "Unit", "Default", "Range", "Description")
+    out = ['<table class="variables">', "<tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr>"]
+    for r in variable_rows(root):
+        out.append(
+            f'<tr><td><code>{_e(r["name"])}</code></td><td>{_e(r["causality"])}</td>'
+            f'<td>{_e(r["variability"])}</td><td>{_e(r["type"])}</td><td>{_e(r["unit"])}</td>'
+            f'<td class="num">{_e(r["start"])}</td><td class="num">{_e(r["range"])}</td>'
+            f'<td>{_e(r["description"])}</td></tr>')
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def _identity_table(root, platforms):
+    cs = root.find("CoSimulation")
+    exp = root.find("DefaultExperiment")
+    items = [
+        ("Model", root.get("modelName")),
+        ("FMI version", f"{root.get('fmiVersion')}, Co-Simulation"),
+        ("Model identifier", cs.get("modelIdentifier")),
+        ("GUID", root.get("guid")),
+        ("Version", root.get("version")),
+        ("Generated", f"{root.get('generationDateAndTime')} by {root.get('generationTool')}"),
+        ("Author", root.get("author")),
+        ("Copyright", root.get("copyright")),
+        ("Licence", root.get("license")),
+        ("Binaries", ", ".join(f"binaries/{p}" for p in platforms) + ", and C sources in sources/"),
+    ]
+    if exp is not None:
+        items.append(("Default experiment", f"{exp.get('startTime')} s to {exp.get('stopTime')} s, "
+                                            f"step {exp.get('stepSize')} s"))
+    rows = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in items if v)
+    return f"<table>{rows}</table>"
+
+
+def _connection_section(model_identifier):
+    from harness.ssp import SSP_COMPONENTS, SSP_CONNECTIONS
+
+    fmu_of = {comp: fmu for comp, (fmu, _) in SSP_COMPONENTS.items()}
+    units = {(comp, name): unit for comp, (_, conns) in SSP_COMPONENTS.items()
+             for name, _, _, unit in conns}
+    rows = []
+    for a, ac, b, bc in SSP_CONNECTIONS:
+        mine = model_identifier in (fmu_of[a][:-4], fmu_of[b][:-4])
+        style = ' style="font-weight: bold"' if mine else ""
+        rows.append(f"<tr{style}><td>{_e(fmu_of[a][:-4])}.<code>{_e(ac)}</code></td>"
+                    f"<td>{_e(fmu_of[b][:-4])}.<code>{_e(bc)}</code></td>"
+                    f"<td>{_e(units[(a, ac)])}</td></tr>")
+    return f"""
+<h2 id="loop">Connecting the closed loop</h2>
+<p>The three FMUs of this project form the tracking loop of the paper: ReferenceSignal
+feeds the controller the desired displacement with preview, AdaptiveCompoundController
+computes the voltage, PiezoStage moves. The connections (rows of this FMU in bold):</p>
+<table><tr><th>from (output)</th><th>to (input)</th><th>unit</th></tr>
+{''.join(rows)}</table>
+<ul>
+<li>Step all three FMUs with the same fixed communication step <code>h</code> = 0.5 ms
+(the <code>h</code> parameter of each; a communication step may be any whole multiple of
+<code>h</code>, the inputs are then held).</li>
+<li>Exchange values at the communication points: read every output at <code>t_k</code>,
+set every input, then call <code>fmi2DoStep</code> for each FMU, in any order. No output
+depends directly on an input (the ModelStructure says so), so Jacobi, Gauss-Seidel, SSP
+players and container FMUs all run the same loop. The loop delay from the controller's
+virtual input to the displacement is then d = 2 samples, the default
+<code>mv.delay</code> = 1 of the controller and the default <code>lead</code> = 2 of
+ReferenceSignal.</li>
+<li>A master that hands an FMU another FMU's <em>post-step</em> output inside the same
+step runs a loop with one sample less delay: set the controller's <code>mv.delay</code>
+= 0 and ReferenceSignal's <code>lead</code> = 1 there.</li>
+<li>In Simulink (FMU import block), Dymola or any SSP tool: three FMU blocks with the
+sample time <code>h</code>, wired as in the table. The project's repository ships the
+same loop as an SSP 1.0 file (<code>PiezoStageClosedLoop.ssp</code>) with the mismatch
+benchmark's parameters bound.</li>
+</ul>
+"""
+
+
+def _source_section(fmi_version, model_identifier, c_files, defines):
+    files = " ".join(f"sources/{f}" for f in c_files)
+    fmi2 = fmi_version.startswith("2")
+    linux, windows = ("linux64", "win64") if fmi2 else ("x86_64-linux", "x86_64-windows")
+    major = "2" if fmi2 else "3"
+    platform_types = "TypesPlatform" if fmi2 else "PlatformTypes"
+    note = (" (FMI 2.0.4 source-code FMU; the same files are listed in the "
+            "<code>&lt;SourceFiles&gt;</code> element of the model description)") if fmi2 else ""
+    defs = "".join(f"<li><code>{_e(d)}</code> (MinGW only)</li>" for d in defines)
+    optional = f"<p>Optional definitions:</p><ul>{defs}</ul>" if defs else ""
+    return f"""
+<h2 id="sources">Building from the sources</h2>
+<p><code>sources/</code> holds every C file and header the binaries are built from, flat,
+and <code>sources/buildDescription.xml</code> lists the files to compile, the include
+folder and the definitions{note}. Only the FMI {major}.0 headers
+(<code>fmi{major}Functions.h</code>, <code>fmi{major}FunctionTypes.h</code>,
+<code>fmi{major}{platform_types}.h</code>) come from the importer. With GCC or Clang:</p>
+<pre>cc -shared -fPIC -std=c99 -O2 -I sources -I FMI{major}_HEADERS \\
+   {_e(files)} \\
+   -lm -o binaries/{linux}/{_e(model_identifier)}.so</pre>
+<p>For Windows with MinGW-w64, add <code>-D__USE_MINGW_ANSI_STDIO=1 -static-libgcc</code>
+and write <code>binaries/{windows}/{_e(model_identifier)}.dll</code> (the shipped win64
+binary is built this way). The code is plain C99 with no dependency other than the C
+library and its math functions.</p>
+{optional}
+"""
+
+
+def index_html(model_description, fragment, platforms, c_files, defines, reference_files):
+    """The text of ``documentation/index.html``."""
+    root = ET.fromstring(model_description.encode("utf-8"))
+    model = root.get("modelName")
+    ident = root.find("CoSimulation").get("modelIdentifier")
+    refs = ""
+    if reference_files:
+        refs = ("<h2 id=\"references\">Reference results</h2>\n<p>The FMU carries a regression "
+                "experiment in <code>extra/org.fmi-standard.fmi-ls-ref/</code> (FMI-LS-REF): see "
+                "<a href=\"fmi-ls-ref.html\">fmi-ls-ref.html</a>.</p>")
+    return f"""<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<title>{_e(model)}</title>
+<style>{STYLE}</style>
+</head>
+<body>
+<h1><img src="../model.png" alt="">{_e(model)}</h1>
+<p>{_e(root.get("description", ""))}</p>
+{_identity_table(root, platforms)}
+{fragment.strip()}
+<h2 id="variables">Variables</h2>
+<p>Generated from this FMU's <code>modelDescription.xml</code>. Units: displacement in
+µm (<code>um</code>), voltage in V, time in s. Parameters are set before
+<code>fmi2ExitInitializationMode</code>; an invalid value is refused there with a log
+message that names the parameter and its valid range. The ranges are the model
+description's <code>min</code> and <code>max</code>, which FMI 2.0 makes inclusive; where a
+bound is exclusive (a quantity that must be positive, for example) or depends on another
+parameter, the description says so.</p>
+{_variables_table(root)}
+{_connection_section(ident)}
+{_source_section(root.get("fmiVersion"), ident, c_files, defines)}
+{refs}
+<h2 id="paper">Source</h2>
+<p>The model, the controller and their default parameters follow {_e(CITATION)},
+<a href="{CITATION_URL}">{CITATION_URL}</a>. Where the paper's printed equations contain
+typos, the FMU implements the corrected form; the project's documentation (docs/model.md in
+its repository) gives each correction and its reason.</p>
+<h2 id="license">Licence</h2>
+<p>{_e(root.get("copyright", ""))}. Distributed under the {LICENSE_NAME} licence: see
+<a href="licenses/license.txt">licenses/license.txt</a>.</p>
+</body>
+</html>
+"""
+
+
+def ls_ref_html(model_description, ls_ref_dir):
+    """The text of ``documentation/fmi-ls-ref.html`` from the experiments file."""
+    root = ET.fromstring(model_description.encode("utf-8"))
+    model = root.get("modelName")
+    ident = root.find("CoSimulation").get("modelIdentifier")
+    exp_root = ET.parse(Path(ls_ref_dir) / "experiments.exp").getroot()
+    items = []
+    for exp in exp_root.iter("Experiment"):
+        files = "".join(f"<li>{tag}: <code>{_e(el.get('source'))}</code></li>"
+                        for tag in ("Parameters", "Stimuli", "References")
+                        for el in exp.findall(tag))
+        items.append(f"<h2>{_e(exp.get('name'))}</h2><p>{_e(exp.get('description'))}</p>"
+                     f"<p>From {exp.get('startTime')} s to {exp.get('stopTime')} s, "
+                     f"communication step {exp.get('stepSize')} s, tolerance "
+                     f"{exp.get('tolerance')}.</p><ul>{files}</ul>")
+    return f"""<!DOCTYPE html>
+<html lang="en">
+<head><meta charset="utf-8"><title>{_e(model)}: reference results</title>
+<style>{STYLE}</style></head>
+<body>
+<h1>{_e(model)}: reference results (FMI-LS-REF)</h1>
+<p><code>extra/org.fmi-standard.fmi-ls-ref/fmi-ls-manifest.xml</code> lists the files of the
+FMI Layered Standard for References (version 1.0.0-alpha.1); the experiment is in
+<code>experiments.exp</code>. The reference outputs were computed by the project's C core
+(the same code as in <code>sources/</code>) called directly, not through this FMU, on
+64-bit Linux. CSV files: a quoted header, <code>time</code> first, one row per sample
+<code>t_k = k h</code>, numbers written so that they read back exactly.</p>
+<h2>How to use them</h2>
+<ol>
+<li>Instantiate the FMU, set the parameters of the SSV file (names are FMU variable names),
+start at the experiment's start time.</li>
+<li>At every communication point <code>t_k</code>: set the inputs to the row of
+<code>t_k</code> in the stimuli file, then call <code>fmi2DoStep(t_k, h)</code>.</li>
+<li>Record the outputs at every <code>t_k</code> (row 0: after initialization) and
+compare: the result passes when at every sample
+<code>|y − y_ref| ≤ tolerance · (1 + |y_ref|)</code>. On the platform the reference was made
+on the outputs are equal bit for bit; other platforms and compilers differ in the last
+digits of the C library's functions.</li>
+</ol>
+<p>With fmpy:</p>
+<pre>import fmpy
+from fmpy.util import read_csv
+ref = read_csv("{ident}_ref.csv")
+result = fmpy.simulate_fmu("{ident}.fmu", stop_time=0.5, output_interval=0.0005,
+                           input=..., start_values=..., output=list(ref.dtype.names[1:]))</pre>
+{''.join(items)}
+</body>
+</html>
+"""

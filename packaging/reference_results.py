@@ -1,0 +1,317 @@
+"""Reference results of one FMU for regression tests (FMI-LS-REF 1.0.0-alpha.1).
+
+Writes into ``--out`` the files the build puts in the FMU's
+``extra/org.fmi-standard.fmi-ls-ref/``:
+
+* ``fmi-ls-manifest.xml``: the layered standard's manifest (``<fmiReferences>``), one
+  ``<Related>`` per file below;
+* ``experiments.exp``: the experiment (``<Experiments>``, MIME type
+  ``application/x-ma-ls-experiments``): start, stop, step size, tolerance, and the
+  parameters, stimuli and references files;
+* ``<id>_params.ssv``: the experiment's parameter values (SSP 1.0 SSV), if any;
+* ``<id>_in.csv``: the stimuli, one row per sample ``t_k = k h`` (none for ReferenceSignal);
+* ``<id>_ref.csv``: the reference outputs at every ``t_k``.
+
+The reference outputs are computed on the C core through the cffi binding
+(``harness.core``), not through the FMU, so an FMU that re-simulates them checks its
+FMI layer against the core. CSV values are written with Python's shortest round-trip
+``repr``, so they read back bit for bit. The tolerance of an experiment means: at every
+sample, ``|y - y_ref| <= tolerance * (1 + |y_ref|)``.
+
+CMake runs this with ``PIEZO_CORE_LIB`` and ``PIEZO_CORE_INCLUDE`` set to the build's
+core library and headers (cmake/PiezoFmu.cmake, ``piezo_fmu_reference_results``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from pathlib import Path
+import sys
+from xml.etree import ElementTree as ET
+from xml.sax.saxutils import quoteattr
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+LS_REF_VERSION = "1.0.0-alpha.1"
+LS_REF_DESCRIPTION = "Layered Standard providing information on related files included in an FMU."
+EXPERIMENTS_FILE = "experiments.exp"
+#: see the module docstring
+TOLERANCE = 1e-9
+STEP = 0.0005
+DURATION = 0.5
+
+#: what each FMU's experiment is (name, description)
+EXPERIMENTS = {
+    "PiezoStage": (
+        "mismatch_plant_mixed_voltage",
+        "Open loop: the paper's mixed validation voltage v = 6 (sin 2 pi 5 t + sin 2 pi 40 t + "
+        "sin 2 pi 80 t) + 18 V on the mismatched plant of the tracking benchmark (PI weights +10 %, "
+        "creep of Table 1's 10 Hz row, G numerator x1.05 with the fast pole at 0.45, sensor with "
+        "2 nm resolution and 1 nm rms noise, seed 1)."),
+    "AdaptiveCompoundController": (
+        "closed_loop_mismatch_1_5_10hz_d1",
+        "The controller with mv.delay = 0 (d = 1) replaying the inputs it received in a closed "
+        "loop with the mismatched plant tracking 10 um at 1, 5 and 10 Hz, run by a master that "
+        "hands the plant the controller's post-step output: y_ref = y_d(t + h) and the plant's "
+        "noisy y_meas. The RLS adapts; the outputs include the estimates. (The default d = 2 "
+        "is not replayable: without the plant's feedback its law is unstable and a last-bit "
+        "difference grows to volts within 50 samples.)"),
+    "ReferenceSignal": (
+        "sines_1_5_10hz",
+        "Three 10 um tones at 1, 5 and 10 Hz with the preview lead = 2 samples."),
+}
+
+
+# ---------------------------------------------------------------------------
+# the model description: variable types, for typed parameter values
+# ---------------------------------------------------------------------------
+
+def variable_types(model_description):
+    """{name: "Real" | "Integer" | "Boolean" | ...} of a modelDescription.xml."""
+    root = ET.parse(model_description).getroot()
+    types = {}
+    for var in root.iter("ScalarVariable"):
+        (typ,) = [c for c in var if c.tag in ("Real", "Integer", "Boolean", "String", "Enumeration")]
+        types[var.get("name")] = typ.tag
+    return types
+
+
+# ---------------------------------------------------------------------------
+# the experiments, on the C core
+# ---------------------------------------------------------------------------
+
+def _grid(n):
+    return [k * STEP for k in range(n + 1)]
+
+
+def piezo_stage():
+    """(parameters, stimuli columns, reference columns) of the PiezoStage experiment."""
+    from harness import core
+    from harness.scenarios import load_scenarios
+
+    params = dict(load_scenarios()["mismatch_1_5_10hz"].plant)
+    n = int(round(DURATION / STEP))
+    time = _grid(n)
+    v = [6.0 * (math.sin(2 * math.pi * 5 * t) + math.sin(2 * math.pi * 40 * t)
+                + math.sin(2 * math.pi * 80 * t)) + 18.0 for t in time]
+    plant = core.Plant(dict(params, h=STEP))
+    names = ("y", "y_meas", "u", "x")
+    rows = {name: [] for name in names}
+    out = plant.output
+    for k in range(n + 1):
+        for name in names:
+            rows[name].append(getattr(out, name))
+        if k < n:
+            out = plant.step(v[k])
+    return params, {"time": time, "v": v}, {"time": time, **rows}
+
+
+def adaptive_compound_controller():
+    """(parameters, stimuli, references) of the controller experiment: the inputs it saw in a
+    core closed loop of the mismatch 1/5/10 Hz scenario, sample by sample.
+
+    The loop is the one of a master that hands the plant the controller's post-step output
+    (the plant applies over [t_k, t_(k+1)) the v computed from the inputs of t_k), so the
+    controller runs with mv.delay = 0 (d = 1) and y_ref = y_d(t + h). Not the default d = 2:
+    replayed without the plant's feedback, the d = 2 law is unstable (its Diophantine factor
+    E has a root at -a1, about -1.38, outside the unit circle), and a difference in the last
+    bit of an input grows to 150 V within 50 samples, so no tolerance could hold across
+    compilers. With d = 1 the replay's recursion has its pole at the zero of B (0.992) and a
+    relative input change of 1e-15 moves v by about 4e-11 V.
+    """
+    from harness import core
+    from harness.scenarios import load_scenarios
+
+    scenario = load_scenarios()["mismatch_1_5_10hz"]
+    params = {"mv.delay": 0}
+    n = int(round(DURATION / STEP))
+    time = _grid(n)
+    ctrl = core.Controller(dict(params, h=STEP))
+    d = 1 + params["mv.delay"]
+    y_ref = [float(x) for x in scenario.signal.evaluate([(k + d) * STEP for k in range(n + 1)])]
+    plant = core.Plant(dict(scenario.plant, h=STEP))
+    stimuli = {"time": time, "y_ref": y_ref, "y_meas": []}
+    fields = (("v", "v"), ("q", "q"), ("est.a1", "a1"), ("est.a2", "a2"), ("est.b1", "b1"),
+              ("est.b2", "b2"), ("pred_error", "pred_error"), ("saturated", "saturated"))
+    refs = {"time": time, **{name: [] for name, _ in fields}}
+    published, out = ctrl.output, plant.output
+    for k in range(n + 1):
+        stimuli["y_meas"].append(out.y_meas)
+        for name, field in fields:
+            value = getattr(published, field)
+            refs[name].append(int(value) if name == "saturated" else value)
+        if k < n:
+            published = ctrl.step(y_ref[k], out.y_meas)     # published at t_(k+1) ...
+            out = plant.step(published.v)                   # ... applied over [t_k, t_(k+1))
+    return params, stimuli, refs
+
+
+def reference_signal():
+    """(parameters, no stimuli, references) of the ReferenceSignal experiment."""
+    from harness import core
+
+    params = {"lead": 2}
+    for i, f in enumerate((1.0, 5.0, 10.0), start=1):
+        params[f"amplitude[{i}]"] = 10.0
+        params[f"frequency[{i}]"] = f
+    lib, ffi = core.lib(), core.ffi
+    p = ffi.new("piezo_reference_params *")
+    lib.piezo_reference_default_params(p)
+    p.h = STEP
+    p.lead = params["lead"]
+    for i in range(3):
+        p.amplitude[i] = params[f"amplitude[{i + 1}]"]
+        p.frequency[i] = params[f"frequency[{i + 1}]"]
+    ref = ffi.new("piezo_reference *")
+    diag = ffi.new("piezo_diag *")
+    if lib.piezo_reference_init(ref, p, 0.0, diag) != core.PIEZO_OK:
+        raise RuntimeError("piezo_reference_init refused the experiment's parameters")
+    n = int(round(DURATION / STEP))
+    time = _grid(n)
+    refs = {"time": time, "y_d": [], "y_ref": []}
+    for k in range(n + 1):
+        refs["y_d"].append(ref.y_d)
+        refs["y_ref"].append(ref.y_ref)
+        if k < n and lib.piezo_reference_step(ref) != core.PIEZO_OK:
+            raise RuntimeError(f"piezo_reference_step failed at sample {k}")
+    return params, None, refs
+
+
+GENERATORS = {"PiezoStage": piezo_stage,
+              "AdaptiveCompoundController": adaptive_compound_controller,
+              "ReferenceSignal": reference_signal}
+
+
+# ---------------------------------------------------------------------------
+# files
+# ---------------------------------------------------------------------------
+
+def _number(value):
+    if isinstance(value, bool) or isinstance(value, int):
+        return str(int(value))
+    if not math.isfinite(value):
+        raise ValueError(f"non-finite value {value!r} in a reference result")
+    return repr(float(value))
+
+
+def csv_text(columns):
+    """CSV in the FMI cross-check layout: quoted header, ``time`` first."""
+    names = list(columns)
+    assert names[0] == "time"
+    lines = [",".join(f'"{n}"' for n in names)]
+    for row in zip(*(columns[n] for n in names)):
+        lines.append(",".join(_number(x) for x in row))
+    return "\n".join(lines) + "\n"
+
+
+def ssv_text(name, values, types):
+    """An SSP 1.0 parameter set; values typed as the model description declares them."""
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             '<ssv:ParameterSet xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues"'
+             f' version="1.0" name={quoteattr(name)}>',
+             '  <ssv:Parameters>']
+    for key in sorted(values):
+        kind = types[key]
+        value = values[key]
+        if kind == "Boolean":
+            text = "true" if value else "false"
+        elif kind == "Integer":
+            text = str(int(value))
+        else:
+            text = repr(float(value))
+        lines.append(f'    <ssv:Parameter name={quoteattr(key)}>'
+                     f'<ssv:{kind} value="{text}"/></ssv:Parameter>')
+    lines += ['  </ssv:Parameters>', '</ssv:ParameterSet>', '']
+    return "\n".join(lines)
+
+
+def experiments_text(model, experiment, description, has_params, has_stimuli):
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             f'<Experiments name={quoteattr(model + " regression tests")}',
+             '    description="Re-simulate and compare with the reference at every sample: '
+             f'|y - y_ref| &lt;= tolerance (1 + |y_ref|). Reference computed on the C core.">',
+             f'  <Experiment name={quoteattr(experiment)} description={quoteattr(description)}',
+             f'      startTime="0" stopTime="{DURATION!r}" stepSize="{STEP!r}" tolerance="{TOLERANCE!r}">']
+    if has_params:
+        lines.append(f'    <Parameters source="{model}_params.ssv"/>')
+    if has_stimuli:
+        lines.append(f'    <Stimuli source="{model}_in.csv"/>')
+    lines.append(f'    <References source="{model}_ref.csv"/>')
+    lines += ['  </Experiment>', '</Experiments>', '']
+    return "\n".join(lines)
+
+
+def manifest_text(model, has_params, has_stimuli):
+    related = [(EXPERIMENTS_FILE, "application/x-ma-ls-experiments", "experiment/validation",
+                "Regression experiment: parameters, stimuli, reference outputs, tolerance")]
+    if has_params:
+        related.append((f"{model}_params.ssv", "application/x-ssp-parameter-set", "parameter",
+                        "Parameter values of the regression experiment"))
+    if has_stimuli:
+        related.append((f"{model}_in.csv", "text/csv", "other",
+                        "Stimuli (input values at every sample) of the regression experiment"))
+    related.append((f"{model}_ref.csv", "text/csv", "result",
+                    "Reference outputs of the regression experiment, computed on the C core"))
+    related.append(("../../documentation/fmi-ls-ref.html", "text/html", "document",
+                    "How the reference results were made and how to compare with them"))
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             '<fmiReferences',
+             '    xmlns:fmi-ls="http://fmi-standard.org/fmi-ls-manifest"',
+             '    fmi-ls:fmi-ls-name="org.fmi-standard.fmi-ls-ref"',
+             f'    fmi-ls:fmi-ls-version="{LS_REF_VERSION}"',
+             f'    fmi-ls:fmi-ls-description="{LS_REF_DESCRIPTION}">']
+    for source, mime, role, description in related:
+        lines.append(f'  <Related type="{mime}" source="{source}" role="{role}" '
+                     f'description={quoteattr(description)}/>')
+    lines += ['</fmiReferences>', '']
+    return "\n".join(lines)
+
+
+def write_reference_results(model, model_description, out):
+    """Write the reference-result files of `model` into the folder `out`; return their names."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for old in out.iterdir():
+        if old.is_file():
+            old.unlink()
+    types = variable_types(model_description)
+    params, stimuli, refs = GENERATORS[model]()
+    for name in list(params) + list(stimuli or {}) + list(refs):
+        if name != "time" and name not in types:
+            raise KeyError(f"{model} has no variable '{name}'")
+    experiment, description = EXPERIMENTS[model]
+    files = {}
+    if params:
+        files[f"{model}_params.ssv"] = ssv_text(experiment, params, types)
+    if stimuli:
+        files[f"{model}_in.csv"] = csv_text(stimuli)
+    files[f"{model}_ref.csv"] = csv_text(refs)
+    files[EXPERIMENTS_FILE] = experiments_text(model, experiment, description, bool(params),
+                                               bool(stimuli))
+    files["fmi-ls-manifest.xml"] = manifest_text(model, bool(params), bool(stimuli))
+    for name, text in files.items():
+        (out / name).write_text(text, encoding="utf-8", newline="\n")
+    return sorted(files)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--model", required=True, choices=sorted(GENERATORS))
+    p.add_argument("--model-description", required=True, type=Path)
+    p.add_argument("--out", required=True, type=Path)
+    p.add_argument("--stamp", type=Path, help="file touched when done (for the build)")
+    args = p.parse_args(argv)
+    names = write_reference_results(args.model, args.model_description, args.out)
+    if args.stamp:
+        args.stamp.write_text("\n".join(names) + "\n")
+    print(f"{args.model}: wrote {', '.join(names)} in {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    sys.exit(main())

@@ -1,0 +1,214 @@
+"""win64 binaries: built by the one CMake build with MinGW-w64, checked as a Windows
+importer would meet them.
+
+(a) every FMU has binaries/linux64/<id>.so and binaries/win64/<id>.dll and nothing else in
+    binaries/ (no import library, no debug file);
+(b) the DLL exports exactly the FMI 2.0 API, imports only system DLLs (KERNEL32, msvcrt:
+    libgcc is linked statically), carries no debug sections and no time stamp;
+(c) a small C host (tests/wine_host/fmu_host.c), built natively and with MinGW, runs the
+    FMU's own reference experiment on the linux64 .so and, under Debian's wine64, on the
+    win64 .dll. Reference for (c): the linux64 run, which must equal the FMU's reference CSV
+    (computed on the C core, not through the FMU) bit for bit; the win64 run must agree with
+    it within 1e-12 in the outputs' units (um, V), the libm functions of the two C run-times
+    being allowed to differ in their last bits.
+
+The cross compiler and wine64 are installed by .ci/run (Debian: gcc-mingw-w64-x86-64, wine64).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import re
+import shutil
+import subprocess
+import zipfile
+
+import numpy as np
+import pytest
+
+import fmpy
+
+from fmu_experiments import load_experiment, unzip
+
+REPO = Path(__file__).resolve().parents[1]
+HOST_SOURCE = REPO / "tests" / "wine_host" / "fmu_host.c"
+FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
+NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
+MINGW_PREFIX = "x86_64-w64-mingw32-"
+INSTALL_HINT = "install gcc-mingw-w64-x86-64 and wine64 (Debian), as .ci/run does"
+
+FMI2_FUNCTIONS = {
+    "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate",
+    "fmi2FreeInstance", "fmi2SetupExperiment", "fmi2EnterInitializationMode",
+    "fmi2ExitInitializationMode", "fmi2Terminate", "fmi2Reset", "fmi2GetReal", "fmi2GetInteger",
+    "fmi2GetBoolean", "fmi2GetString", "fmi2SetReal", "fmi2SetInteger", "fmi2SetBoolean",
+    "fmi2SetString", "fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate",
+    "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate",
+    "fmi2GetDirectionalDerivative", "fmi2EnterEventMode", "fmi2NewDiscreteStates",
+    "fmi2EnterContinuousTimeMode", "fmi2CompletedIntegratorStep", "fmi2SetTime",
+    "fmi2SetContinuousStates", "fmi2GetDerivatives", "fmi2GetEventIndicators",
+    "fmi2GetContinuousStates", "fmi2GetNominalsOfContinuousStates",
+    "fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives", "fmi2DoStep",
+    "fmi2CancelStep", "fmi2GetStatus", "fmi2GetRealStatus", "fmi2GetIntegerStatus",
+    "fmi2GetBooleanStatus", "fmi2GetStringStatus",
+}
+#: DLLs every 64-bit Windows has
+SYSTEM_DLLS = {"kernel32.dll", "msvcrt.dll"}
+
+
+def _tool(name):
+    path = shutil.which(name)
+    assert path, f"{name} not found: {INSTALL_HINT}"
+    return path
+
+
+def _wine64():
+    path = shutil.which("wine64") or ("/usr/lib/wine/wine64" if os.path.isfile("/usr/lib/wine/wine64")
+                                      else None)
+    assert path, f"wine64 not found: {INSTALL_HINT}"
+    return path
+
+
+@pytest.fixture(scope="module")
+def dlls(fmu_paths, tmp_path_factory):
+    """{modelIdentifier: path of the win64 DLL extracted from the FMU}."""
+    root = tmp_path_factory.mktemp("dlls")
+    out = {}
+    for name in NAMES:
+        with zipfile.ZipFile(fmu_paths[name]) as zf:
+            member = f"binaries/win64/{name}.dll"
+            assert member in zf.namelist(), f"{name}.fmu has no win64 binary: {INSTALL_HINT}"
+            (root / f"{name}.dll").write_bytes(zf.read(member))
+        out[name] = root / f"{name}.dll"
+    return out
+
+
+def _objdump(path, *flags):
+    return subprocess.run([_tool(MINGW_PREFIX + "objdump"), *flags, str(path)],
+                          capture_output=True, text=True, check=True).stdout
+
+
+# ---------------------------------------------------------------------------------------
+# (a) what binaries/ holds
+
+@pytest.mark.parametrize("name", NAMES)
+def test_binaries_are_one_so_and_one_dll(fmu_paths, name):
+    with zipfile.ZipFile(fmu_paths[name]) as zf:
+        files = sorted(n for n in zf.namelist() if n.startswith("binaries/") and not n.endswith("/"))
+    assert files == [f"binaries/linux64/{name}.so", f"binaries/win64/{name}.dll"]
+
+
+# ---------------------------------------------------------------------------------------
+# (b) the DLL as Windows sees it
+
+@pytest.mark.parametrize("name", NAMES)
+def test_dll_exports_exactly_the_fmi2_api(dlls, name):
+    text = _objdump(dlls[name], "-p")
+    table = text.split("[Ordinal/Name Pointer] Table", 1)[1].split("\n\n", 1)[0]
+    exported = set(re.findall(r"\]\s+(\S+)", table))
+    assert exported == FMI2_FUNCTIONS, (sorted(exported - FMI2_FUNCTIONS),
+                                        sorted(FMI2_FUNCTIONS - exported))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_dll_imports_only_system_dlls(dlls, name):
+    text = _objdump(dlls[name], "-p")
+    imported = {m.lower() for m in re.findall(r"DLL Name: (\S+)", text)}
+    assert imported and imported <= SYSTEM_DLLS, imported
+    assert "pe32+" in text.lower() and "x86-64" in _objdump(dlls[name], "-f").lower()
+    # no time stamp in the header: the same commit gives the same bytes
+    assert re.search(r"Time/Date\s+Thu Jan  1 00:00:00 1970", text), "PE time stamp set"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_dll_has_no_debug_information(dlls, name):
+    sections = _objdump(dlls[name], "-h")
+    assert ".text" in sections
+    assert ".debug" not in sections and ".stab" not in sections
+    assert "no symbols" in _objdump(dlls[name], "-t")
+
+
+# ---------------------------------------------------------------------------------------
+# (c) the same experiment on linux64 and, under wine, on win64
+
+@pytest.fixture(scope="module")
+def hosts(tmp_path_factory):
+    """(native host, win64 host.exe), both built from tests/wine_host/fmu_host.c."""
+    root = tmp_path_factory.mktemp("hosts")
+    flags = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-I", str(FMI_HEADERS)]
+    native, exe = root / "fmu_host", root / "fmu_host.exe"
+    cc = os.environ.get("CC") or _tool("cc")
+    subprocess.run([cc, *flags, str(HOST_SOURCE), "-ldl", "-o", str(native)], check=True)
+    subprocess.run([_tool(MINGW_PREFIX + "gcc"), *flags, "-static", str(HOST_SOURCE),
+                    "-o", str(exe)], check=True)
+    return native, exe
+
+
+@pytest.fixture(scope="module")
+def wine_env(tmp_path_factory):
+    """Environment for wine64 with a prefix of its own; its wineserver is stopped at the end."""
+    env = dict(os.environ, WINEPREFIX=str(tmp_path_factory.mktemp("wineprefix")),
+               WINEDEBUG="-all", WINEDLLOVERRIDES="mscoree,mshtml=")
+    yield env
+    server = shutil.which("wineserver") or "/usr/lib/wine/wineserver"
+    subprocess.run([server, "-k"], env=env, check=False, timeout=60)
+    subprocess.run([server, "-w"], env=env, check=False, timeout=60)
+
+
+def _plan(experiment, guid, identifier):
+    """The host's plan for `experiment` (see fmu_host.c)."""
+    v = experiment.variables
+    lines = [f"identifier {identifier}", f"guid {guid}", f"step {experiment.step!r}",
+             f"steps {experiment.steps}"]
+    for name, value in experiment.parameters.items():
+        kind = {"Real": "real", "Integer": "integer", "Boolean": "boolean"}[v[name].type]
+        lines.append(f"{kind} {v[name].valueReference} {float(value)!r}" if kind == "real"
+                     else f"{kind} {v[name].valueReference} {int(value)}")
+    inputs = [] if experiment.stimuli is None else list(experiment.stimuli.dtype.names[1:])
+    lines += [f"input {v[n].valueReference}" for n in inputs]
+    reals = [n for n in experiment.outputs if v[n].type == "Real"]
+    bools = [n for n in experiment.outputs if v[n].type == "Boolean"]
+    lines += [f"output {v[n].valueReference}" for n in reals]
+    lines += [f"boutput {v[n].valueReference}" for n in bools]
+    lines.append("data")
+    for k in range(experiment.steps + 1 if inputs else 0):
+        lines.append(" ".join(repr(float(experiment.stimuli[n][k])) for n in inputs))
+    return "\n".join(lines) + "\n", reals + bools
+
+
+def _run(command, env=None):
+    done = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600)
+    assert done.returncode == 0, f"{command[0]} failed:\n{done.stderr[-3000:]}"
+    return np.array([[float(x) for x in line.split()] for line in done.stdout.splitlines()])
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_win64_under_wine_matches_linux64(fmu_paths, hosts, wine_env, tmp_path, name):
+    native, exe = hosts
+    fmu = fmu_paths[name]
+    experiment = load_experiment(fmu)
+    md = fmpy.read_model_description(str(fmu))
+    plan, columns = _plan(experiment, md.guid, md.coSimulation.modelIdentifier)
+    (tmp_path / "plan.txt").write_text(plan)
+    unzip(fmu, tmp_path / "fmu")
+    so = tmp_path / "fmu" / "binaries" / "linux64" / f"{name}.so"
+    dll = tmp_path / "fmu" / "binaries" / "win64" / f"{name}.dll"
+
+    linux = _run([str(native), str(tmp_path / "plan.txt"), str(so)])
+    windows_path = "Z:" + str(dll).replace("/", "\\")
+    windows = _run([_wine64(), str(exe), "Z:" + str(tmp_path / "plan.txt").replace("/", "\\"),
+                    windows_path], env=wine_env)
+
+    n = experiment.steps + 1
+    assert linux.shape == windows.shape == (n, 1 + len(columns))
+    assert np.array_equal(linux[:, 0], experiment.reference["time"])
+    for j, column in enumerate(columns, start=1):
+        ref = experiment.reference[column]
+        assert np.array_equal(linux[:, j], ref), f"linux64 {column} differs from the reference"
+    moving = [c for c in columns if np.ptp(experiment.reference[c]) > 1.0]
+    assert moving, "the experiment should move at least one output by more than 1 unit"
+    worst = np.max(np.abs(windows[:, 1:] - linux[:, 1:]))
+    print(f"\n{name}: win64 (wine) vs linux64, worst |difference| over {n} samples and "
+          f"{len(columns)} outputs: {worst:.3g}")
+    assert worst <= 1e-12, f"win64 and linux64 differ by {worst:.3g}"

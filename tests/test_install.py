@@ -1,0 +1,84 @@
+"""The harness as a package: ``pip install .`` (not editable) into a fresh virtual environment
+builds the core library and the FMUs through CMake (scikit-build-core) and installs them
+inside the package, so that ``python -m harness`` works from any folder.
+
+Reference: the session's build in build/ (same sources): the installed FMUs must be the same
+bytes (the build is reproducible across build environments), and the run from another folder
+must find the FMUs, the core library and the core headers inside the installed package.
+PIEZO_FMU_DIR still overrides where the FMUs are taken from.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from pathlib import Path
+import subprocess
+import sys
+import time
+import zipfile
+
+REPO = Path(__file__).resolve().parents[1]
+NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
+
+
+def _env():
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith("PIEZO_") and k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
+    env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
+    return env
+
+
+def _run(command, cwd, env, ok=True):
+    done = subprocess.run([str(c) for c in command], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=1800)
+    if ok:
+        assert done.returncode == 0, (f"{' '.join(map(str, command))} failed:\n"
+                                      f"{done.stdout[-3000:]}\n{done.stderr[-3000:]}")
+    return done
+
+
+def test_pip_install_then_run_a_scenario_from_another_folder(fmu_paths, tmp_path):
+    env = _env()
+    venv = tmp_path / "venv"
+    _run([sys.executable, "-m", "venv", venv], tmp_path, env)
+    python = venv / "bin" / "python"
+    start = time.monotonic()
+    _run([python, "-m", "pip", "install", "--quiet", REPO], tmp_path, env)
+    print(f"\npip install . into a fresh venv: {time.monotonic() - start:.0f} s")
+
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    where = _run([python, "-c",
+                  "import harness, harness.cosim as c, harness.core as k; "
+                  "print(harness.__file__); print(c.default_fmu_dir()); print(k.library_path()); "
+                  "print(k.CORE_DIR)"], elsewhere, env).stdout.split()
+    package = Path(where[0]).parent
+    assert venv in package.parents, where
+    data = package / "_data"
+    assert [Path(p) for p in where[1:]] == [data / "fmus", data / "lib" / "libpiezo_core.so",
+                                            data / "include"]
+    for name in NAMES:
+        installed = data / "fmus" / f"{name}.fmu"
+        assert installed.read_bytes() == fmu_paths[name].read_bytes(), name
+        with zipfile.ZipFile(installed) as zf:
+            assert f"binaries/win64/{name}.dll" in zf.namelist()
+    assert (data / "fmus" / "PiezoStageClosedLoop.ssp").is_file()
+
+    assert (data / "lib" / "libpiezo_runner.so").is_file() and (data / "include" / "piezo_runner.h").is_file()
+    e_rms = {}
+    for backend in ("fmpy", "native", "core"):
+        out = _run([python, "-m", "harness", "run", "mismatch_5hz", "--no-plots", "--out",
+                    f"out_{backend}", "--backend", backend], elsewhere, env).stdout
+        assert "mismatch_5hz" in out and "e_rms" in out, out
+        assert any((elsewhere / f"out_{backend}").iterdir())
+        with open(elsewhere / f"out_{backend}" / "mismatch_5hz.csv") as fh:
+            e_rms[backend] = next(csv.DictReader(fh))["e_rms_um"]
+    assert e_rms["fmpy"] == e_rms["native"] == e_rms["core"], e_rms     # one loop, three masters
+
+    empty = tmp_path / "no_fmus"
+    empty.mkdir()
+    done = _run([python, "-m", "harness", "run", "mismatch_5hz", "--no-plots"], elsewhere,
+                dict(env, PIEZO_FMU_DIR=str(empty)), ok=False)
+    assert done.returncode == 2
+    assert f"FMU not found: {empty}" in done.stderr, done.stderr
