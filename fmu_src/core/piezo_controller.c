@@ -340,8 +340,12 @@ static piezo_status advance_copy(piezo_controller *scratch, double y_ref, double
                                  double *history, size_t capacity, int monitor)
 {
     piezo_status st = controller_advance(scratch, y_ref, y_meas, history, capacity);
-    if (st == PIEZO_ERR_NONFINITE || (st == PIEZO_OK && !(isfinite(scratch->out.v) && isfinite(scratch->out.q)
-                                                          && isfinite(scratch->out.pred_error))))
+    const piezo_controller_output *o = &scratch->out;
+    /* every output (the estimates too) is finite, or the sample is refused */
+    if (st == PIEZO_ERR_NONFINITE
+        || (st == PIEZO_OK && !(isfinite(o->v) && isfinite(o->q) && isfinite(o->pred_error)
+                                && isfinite(o->theta[0]) && isfinite(o->theta[1])
+                                && isfinite(o->theta[2]) && isfinite(o->theta[3]))))
         st = PIEZO_ERR_DIVERGED;
     if (st == PIEZO_OK && monitor && scratch->divergence_samples > 0
         && scratch->run_large_error >= scratch->divergence_samples)
@@ -377,4 +381,55 @@ piezo_status piezo_controller_peek(const piezo_controller *c, double y_ref, doub
     st = advance_copy(&scratch, y_ref, y_meas, history, capacity, 0);
     if (st == PIEZO_OK) *out = scratch.out;
     return st;
+}
+
+static int all_finite(const double *x, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        if (!isfinite(x[i])) return 0;
+    return 1;
+}
+
+const char *piezo_controller_check(const piezo_controller *c)
+{
+    const char *fault;
+    const piezo_controller_output *o;
+    if (!c) return "controller missing";
+    if ((fault = piezo_pi_check(&c->fwd_pi)) != NULL) return fault;
+    if ((fault = piezo_pi_inverse_check(&c->inv_pi)) != NULL) return fault;
+    if (c->inv_pi.m != c->fwd_pi.m) return "inverse PI and forward PI differ in m";
+    if ((fault = piezo_gl_check(&c->inv_creep)) != NULL) return fault;
+    if (c->inv_creep.k != c->k) return "inverse creep sample counter differs from the controller's";
+    if (c->d < 1 || c->d > PIEZO_MV_MAX_D) return "loop delay d outside 1..9";
+    if (c->head < 0 || c->head >= PIEZO_MV_Q_RING) return "q ring index out of range";
+    if (c->sat_hold < 0 || c->sat_hold > c->d + 1) return "adaptation pause outside 0..d+1";
+    if ((c->rls_enabled != 0 && c->rls_enabled != 1) || (c->sat_enabled != 0 && c->sat_enabled != 1))
+        return "rls.enabled or sat.enabled is not 0 or 1";
+    if (!(isfinite(c->lambda_u) && c->lambda_u >= 0.0)) return "mv.lambda_u out of range";
+    if (!(isfinite(c->forgetting) && c->forgetting > 0.0 && c->forgetting <= 1.0)) return "rls.forgetting out of range";
+    if (!(isfinite(c->p0) && c->p0 > 0.0 && isfinite(c->trace_max) && c->trace_max >= 4.0 * c->p0))
+        return "rls.p0 or rls.trace_max out of range";
+    if (!(isfinite(c->sat_v_min) && isfinite(c->sat_v_max) && (!c->sat_enabled || c->sat_v_max > c->sat_v_min)))
+        return "sat.v_min or sat.v_max out of range";
+    if (!(isfinite(c->pred_error_max) && c->pred_error_max > 0.0)) return "monitor.pred_error_max out of range";
+    if (c->divergence_samples > 2147483647u) return "monitor.divergence_samples out of range";
+    if (!(all_finite(c->theta_nominal, 4) && c->theta_nominal[2] > 0.0)) return "nominal model not finite or b1 <= 0";
+    if (!all_finite(c->theta, 4) || !all_finite(c->P, 16) || !all_finite(c->y_prev, 2)
+        || !all_finite(c->q_ring, PIEZO_MV_Q_RING))
+        return "estimates, covariance or past values not finite";
+    if (!(isfinite(c->max_abs_pred_error) && c->max_abs_pred_error >= 0.0)) return "largest |pred_error| not finite";
+    if (c->n_saturated > c->k || c->n_large_error > c->k || c->run_saturated > c->n_saturated
+        || c->run_large_error > c->n_large_error)
+        return "monitor counts exceed the sample count";
+    if ((c->n_saturated > 0 && c->k_first_saturated >= c->k) || (c->n_large_error > 0 && c->k_first_large_error >= c->k))
+        return "monitor first-sample index beyond the sample count";
+    /* a run reaching the window would have been refused as unstable */
+    if (c->divergence_samples > 0 && c->run_large_error >= c->divergence_samples)
+        return "monitor run at or beyond the divergence window";
+    o = &c->out;
+    if (!(isfinite(o->v) && isfinite(o->q) && isfinite(o->pred_error) && all_finite(o->theta, 4)))
+        return "controller outputs not finite";
+    if (o->saturated != 0 && o->saturated != 1) return "saturated output is not 0 or 1";
+    return NULL;
 }

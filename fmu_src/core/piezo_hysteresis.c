@@ -110,3 +110,32 @@ piezo_status piezo_pi_inverse_step(piezo_pi_inverse *inv, double u, double *v)
     *v = sum;
     return PIEZO_OK;
 }
+
+static int all_finite(const double *x, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        if (!isfinite(x[i])) return 0;
+    return 1;
+}
+
+const char *piezo_pi_check(const piezo_pi *pi)
+{
+    if (!pi) return "PI model missing";
+    if (pi->m < 1 || pi->m > PIEZO_PI_MAX_OPERATORS) return "pi.m outside 1..16";
+    if (!(isfinite(pi->w0) && pi->w0 > 0.0)) return "pi.w0 not in (0, inf)";
+    if (!all_finite(pi->w, PIEZO_PI_MAX_OPERATORS) || !all_finite(pi->r, PIEZO_PI_MAX_OPERATORS)
+        || !all_finite(pi->z, PIEZO_PI_MAX_OPERATORS))
+        return "PI weights, thresholds or play states not finite";
+    return NULL;
+}
+
+const char *piezo_pi_inverse_check(const piezo_pi_inverse *inv)
+{
+    if (!inv) return "inverse PI model missing";
+    if (inv->m < 1 || inv->m > PIEZO_PI_MAX_OPERATORS) return "inverse PI m outside 1..16";
+    if (!isfinite(inv->w0) || !all_finite(inv->w, PIEZO_PI_MAX_OPERATORS)
+        || !all_finite(inv->r, PIEZO_PI_MAX_OPERATORS) || !all_finite(inv->z, PIEZO_PI_MAX_OPERATORS))
+        return "inverse PI weights, thresholds or play states not finite";
+    return NULL;
+}

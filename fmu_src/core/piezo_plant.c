@@ -5,6 +5,8 @@
 #include "piezo_plant.h"
 
 #define PI_D 3.14159265358979323846
+#define SENSOR_RESOLUTION_MIN 1e-300   /* [um] smallest non-zero sensor.resolution */
+#define SENSOR_NOISE_MAX 1e300         /* [um] largest sensor.noise_rms */
 
 void piezo_plant_default_params(piezo_plant_params *p)
 {
@@ -93,10 +95,14 @@ piezo_status piezo_plant_init(piezo_plant *plant, const piezo_plant_params *p, p
         return piezo_refuse(diag, "creep.k_c", "(0, inf)", p->creep_k_c);
     if (!(isfinite(p->creep_alpha) && p->creep_alpha >= -1.0 && p->creep_alpha <= 1.0))
         return piezo_refuse(diag, "creep.alpha", "[-1, 1]", p->creep_alpha);
-    if (!(isfinite(p->sensor_resolution) && p->sensor_resolution >= 0.0))
-        return piezo_refuse(diag, "sensor.resolution", "[0, inf) um", p->sensor_resolution);
-    if (!(isfinite(p->sensor_noise_rms) && p->sensor_noise_rms >= 0.0))
-        return piezo_refuse(diag, "sensor.noise_rms", "[0, inf) um", p->sensor_noise_rms);
+    /* A resolution below 1e-300 um makes y / resolution overflow for any real
+     * displacement (1e-310 um: every |y| > 0.018 um), so the reading is Inf. */
+    if (!(isfinite(p->sensor_resolution)
+          && (p->sensor_resolution == 0.0 || p->sensor_resolution >= SENSOR_RESOLUTION_MIN)))
+        return piezo_refuse(diag, "sensor.resolution", "0 (off) or [1e-300, inf) um", p->sensor_resolution);
+    /* |N(0, 1)| <= 8.7 from the generator, so noise up to 1e300 um stays finite */
+    if (!(isfinite(p->sensor_noise_rms) && p->sensor_noise_rms >= 0.0 && p->sensor_noise_rms <= SENSOR_NOISE_MAX))
+        return piezo_refuse(diag, "sensor.noise_rms", "[0, 1e300] um", p->sensor_noise_rms);
 
     memset(plant, 0, sizeof *plant);
     st = piezo_pi_init(&plant->pi, &p->pi, diag);
@@ -112,6 +118,11 @@ piezo_status piezo_plant_init(piezo_plant *plant, const piezo_plant_params *p, p
     plant->sensor_noise_rms = p->sensor_noise_rms;
     plant->sensor_seed = p->sensor_seed;
     piezo_plant_reset(plant);
+    /* sample 0 reads quantize(noise): huge noise on a fine grid overflows */
+    if (!isfinite(plant->out.y_meas))
+        return piezo_refuse(diag, "sensor.noise_rms",
+                            "[0, 1e300] um and small enough against sensor.resolution for a finite reading",
+                            p->sensor_noise_rms);
     return PIEZO_OK;
 }
 
@@ -153,7 +164,7 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
 {
     piezo_plant scratch;
     piezo_status st;
-    double u, x, y;
+    double u, x, y, y_meas = 0.0;
     if (!plant) return PIEZO_ERR_NULL;
     if (!isfinite(v)) return PIEZO_ERR_NONFINITE;
     if (plant->creep_enabled && plant->creep.exact) {
@@ -168,16 +179,43 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
         st = piezo_gl_step(&scratch.creep, x, creep_history, history_capacity, &y); /* y(k+1) */
     else
         y = x;
+    /* the reading before the check: quantising a finite y can overflow (y / resolution) */
+    if (st == PIEZO_OK) y_meas = sense(&scratch, y);
     /* v is finite, so a non-finite value here was computed: overflow, not bad input */
-    if (st == PIEZO_ERR_NONFINITE || (st == PIEZO_OK && !(isfinite(u) && isfinite(x) && isfinite(y))))
+    if (st == PIEZO_ERR_NONFINITE
+        || (st == PIEZO_OK && !(isfinite(u) && isfinite(x) && isfinite(y) && isfinite(y_meas))))
         st = PIEZO_ERR_DIVERGED;
     if (st != PIEZO_OK) return st;
     scratch.k += 1;
     scratch.out.u = u;
     scratch.out.x = x;
     scratch.out.y = y;
-    scratch.out.y_meas = sense(&scratch, y);
+    scratch.out.y_meas = y_meas;
     *plant = scratch;
     if (out) *out = plant->out;
     return PIEZO_OK;
+}
+
+const char *piezo_plant_check(const piezo_plant *plant)
+{
+    const char *fault;
+    if (!plant) return "plant missing";
+    if ((fault = piezo_pi_check(&plant->pi)) != NULL) return fault;
+    if ((fault = piezo_tf_check(&plant->tf)) != NULL) return fault;
+    if ((fault = piezo_gl_check(&plant->creep)) != NULL) return fault;
+    if (plant->creep_enabled != 0 && plant->creep_enabled != 1) return "creep.enabled is not 0 or 1";
+    /* the creep consumes one sample per plant step when enabled, none otherwise */
+    if (plant->creep.k != (plant->creep_enabled ? plant->k : 0)) return "creep sample counter differs from the plant's";
+    if (!(isfinite(plant->sensor_resolution)
+          && (plant->sensor_resolution == 0.0 || plant->sensor_resolution >= SENSOR_RESOLUTION_MIN)))
+        return "sensor.resolution out of range";
+    if (!(isfinite(plant->sensor_noise_rms) && plant->sensor_noise_rms >= 0.0
+          && plant->sensor_noise_rms <= SENSOR_NOISE_MAX))
+        return "sensor.noise_rms out of range";
+    /* xoshiro256** never reaches the all-zero state (it would stay there) */
+    if ((plant->rng.s[0] | plant->rng.s[1] | plant->rng.s[2] | plant->rng.s[3]) == 0)
+        return "sensor generator state is all zero";
+    if (!(isfinite(plant->out.u) && isfinite(plant->out.x) && isfinite(plant->out.y) && isfinite(plant->out.y_meas)))
+        return "plant outputs not finite";
+    return NULL;
 }

@@ -35,5 +35,9 @@ piezo_status piezo_tf_init(piezo_tf *tf, const piezo_tf_params *params, piezo_di
 void piezo_tf_reset(piezo_tf *tf);
 /* Consume u(k), return x(k+1) through *x_next. Non-finite u refused. */
 piezo_status piezo_tf_step(piezo_tf *tf, double u, double *x_next);
+/* Invariants of a restored filter (e.g. from a deserialized FMU state): NULL
+ * when delay and ring index are in range and every value is finite, else a
+ * static text naming the first bad field. */
+const char *piezo_tf_check(const piezo_tf *tf);
 
 #endif
