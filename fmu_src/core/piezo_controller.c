@@ -141,6 +141,21 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->theta_nominal[2] = p->tf_b1;
     c->theta_nominal[3] = p->tf_b2;
     piezo_controller_reset(c);
+    /* The inverse PI must exist in doubles: its thresholds grow like
+     * (w0 + sum w_j) v_max, its weights like 1/w0 (and 1/w0^2 inside eq 27). */
+    {
+        int i, thresholds_ok = 1, weights_ok = isfinite(c->inv_pi.w0);
+        for (i = 0; i < PIEZO_PI_MAX_OPERATORS; ++i) {
+            thresholds_ok = thresholds_ok && isfinite(c->inv_pi.r[i]);
+            weights_ok = weights_ok && isfinite(c->inv_pi.w[i]);
+        }
+        if (!thresholds_ok)
+            return piezo_refuse(diag, "pi.v_max",
+                                "(0, inf) V with (pi.w0 + sum of pi.w[j]) pi.v_max finite (thresholds of the inverse PI)",
+                                p->pi.v_max);
+        if (!weights_ok)
+            return piezo_refuse(diag, "pi.w0", "(0, inf) with 1/pi.w0^2 finite (weights of the inverse PI)", p->pi.w0);
+    }
     return PIEZO_OK;
 }
 
@@ -332,8 +347,24 @@ static piezo_status check_step_inputs(const piezo_controller *c, double y_ref, d
     return PIEZO_OK;
 }
 
+/* The part of the state a sample changes beyond the outputs: the RLS
+ * covariance can overflow (phi P phi^T) while theta stays finite, and the
+ * saturation path re-steps the inverse creep without using its result. */
+static int dynamic_state_finite(const piezo_controller *c)
+{
+    int i;
+    for (i = 0; i < 16; ++i)
+        if (!isfinite(c->P[i])) return 0;
+    for (i = 0; i < c->inv_creep.n_terms; ++i)
+        if (!isfinite(c->inv_creep.soe_state[i])) return 0;
+    for (i = 0; i < c->inv_pi.m; ++i)
+        if (!(isfinite(c->inv_pi.z[i]) && isfinite(c->fwd_pi.z[i]))) return 0;
+    return 1;
+}
+
 /* Advance `scratch` (a copy of the state) by one sample. The inputs are
- * finite, so a non-finite value computed on the way means divergence. With
+ * finite, so a non-finite value computed on the way (an output or the state
+ * the sample leaves behind) means divergence. With
  * `monitor`, a run of large prediction errors that reaches the divergence
  * window means an unstable loop (a step refuses it; a peek reports values). */
 static piezo_status advance_copy(piezo_controller *scratch, double y_ref, double y_meas,
@@ -345,7 +376,8 @@ static piezo_status advance_copy(piezo_controller *scratch, double y_ref, double
     if (st == PIEZO_ERR_NONFINITE
         || (st == PIEZO_OK && !(isfinite(o->v) && isfinite(o->q) && isfinite(o->pred_error)
                                 && isfinite(o->theta[0]) && isfinite(o->theta[1])
-                                && isfinite(o->theta[2]) && isfinite(o->theta[3]))))
+                                && isfinite(o->theta[2]) && isfinite(o->theta[3])
+                                && dynamic_state_finite(scratch))))
         st = PIEZO_ERR_DIVERGED;
     if (st == PIEZO_OK && monitor && scratch->divergence_samples > 0
         && scratch->run_large_error >= scratch->divergence_samples)
