@@ -2,7 +2,8 @@
  * fuzz_deserialize.c - libFuzzer target: fmi2DeSerializeFMUstate of the FMU it
  * is compiled with (see fuzz_common.h for the oracle). The input is a
  * serialized state; before it is offered, its size field and its checksum are
- * recomputed, so mutations reach the validation behind them. An accepted state
+ * recomputed, so mutations reach the validation behind them, and an absurd
+ * history length is made to agree with the size modulo 2^64 (a wrap candidate). An accepted state
  * must serialize back to the same bytes, restore, give finite outputs, step
  * (when its mode allows) with finite outputs, and round-trip again.
  */
@@ -25,6 +26,13 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         return 0;
     memcpy(blob, data, size);
     if (size >= BLOB_HEADER + 8u) {
+        /* n_history with any of its top 3 bits set is absurd; make it agree with the
+         * size modulo 2^64 instead, so wrapping size arithmetic is tried:
+         * 128 + data size + 8 n + 8 == size (mod 2^64), n + (top - 1) 2^61 */
+        uint64_t n_history = fuzz_u64(blob + 112), data_size = fuzz_u64(blob + 72);
+        if (n_history >> 61)
+            fuzz_put_u64(blob + 112, ((uint64_t)size - BLOB_HEADER - 8u - data_size) / 8u
+                                         + (((n_history >> 61) - 1u) << 61));
         fuzz_put_u64(blob + 16, (uint64_t)size);
         fuzz_put_u64(blob + size - 8, fuzz_fnv1a(blob, size - 8));
     }
