@@ -100,6 +100,19 @@ def test_plant_check_accepts_runs_and_names_tampered_fields():
     assert "not finite" in check_text(lib.piezo_plant_check(raw))
 
 
+@pytest.mark.parametrize("model", [core.Plant, core.Controller])
+def test_pi_weights_whose_sum_overflows_are_refused(model):
+    """Found by fuzz_run (tests/c/fuzz_crashes/): pi.w[6] = 1e308 and pi.w[9] = DBL_MAX
+    are each finite, but the loading curve's slope w0 + sum w_j is 1e308 + 1.8e308 = Inf:
+    the plant's u overflows for |v| > 1, and the controller's inverse started with a play
+    state of Inf * 0 = NaN. Refused, naming the weight where the sum overflows."""
+    assert 1e308 + 1.7976931348623157e308 == math.inf
+    with pytest.raises(core.CoreParameterError) as info:
+        model({"pi.w[6]": 1e308, "pi.w[9]": 1.7976931348623157e308})
+    assert info.value.parameter == "pi.w[9]" and "sum" in info.value.valid_range
+    model({"pi.w[6]": 1e300})                           # a large but finite slope is a model
+
+
 # ---------------------------------------------------------------------------- creep
 
 def test_exact_history_size_saturates_instead_of_wrapping():

@@ -155,6 +155,8 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
                                 p->pi.v_max);
         if (!weights_ok)
             return piezo_refuse(diag, "pi.w0", "(0, inf) with 1/pi.w0^2 finite (weights of the inverse PI)", p->pi.w0);
+        if (piezo_pi_inverse_check(&c->inv_pi) != NULL)
+            return piezo_refuse(diag, "pi.w0", "(0, inf) with a finite inverse PI (pi.w0, pi.w[j], pi.v_max)", p->pi.w0);
     }
     return PIEZO_OK;
 }

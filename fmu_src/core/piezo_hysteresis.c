@@ -20,6 +20,7 @@ static const char *const weight_names[PIEZO_PI_MAX_OPERATORS] = {
 piezo_status piezo_pi_init(piezo_pi *pi, const piezo_pi_params *params, piezo_diag *diag)
 {
     int j;
+    double slope;
     if (!pi || !params) return PIEZO_ERR_NULL;
     if (params->m < 1 || params->m > PIEZO_PI_MAX_OPERATORS)
         return piezo_refuse(diag, "pi.m", "1..16", (double)params->m);
@@ -32,6 +33,14 @@ piezo_status piezo_pi_init(piezo_pi *pi, const piezo_pi_params *params, piezo_di
     for (j = 0; j < PIEZO_PI_MAX_OPERATORS; ++j)
         if (!(isfinite(params->w[j]) && params->w[j] >= 0.0))
             return piezo_refuse(diag, weight_names[j], "[0, inf)", params->w[j]);
+    /* the steepest slope of the loading curve, w0 + sum w_j, must be a number:
+     * u overflows for any |v| > 1 otherwise, and the inverse's states are Inf * 0 */
+    slope = params->w0;
+    for (j = 0; j < params->m; ++j) {
+        slope += params->w[j];
+        if (!isfinite(slope))
+            return piezo_refuse(diag, weight_names[j], "[0, inf) with pi.w0 + sum of pi.w[1..m] finite", params->w[j]);
+    }
 
     memset(pi, 0, sizeof *pi);
     pi->m = params->m;

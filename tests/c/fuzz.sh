@@ -3,6 +3,9 @@
 # fuzz_run_<FMU>), each seeded with real serialized states and programs written by
 # fuzz_seeds_<FMU> and with the corpus kept from earlier runs.
 #
+# Inputs that once crashed a target are kept in tests/c/fuzz_crashes/<target>/ and
+# replayed at the start of every run.
+#
 # usage: tests/c/fuzz.sh BUILD_DIR SECONDS_PER_TARGET [WORK_DIR]
 #   BUILD_DIR  configured with CC=clang -DPIEZO_FUZZ=ON, built with --target fuzz_targets
 #   WORK_DIR   corpora (kept between runs), logs and crash-* files; default BUILD_DIR/fuzz
@@ -27,9 +30,12 @@ for id in PiezoStage AdaptiveCompoundController ReferenceSignal; do
         corpus="$work/corpus/$target"
         log="$work/$target.log"
         mkdir -p "$corpus"
+        # inputs that once crashed a target (tests/c/fuzz_crashes/<target>/) are run first, as seeds
+        crashes="$(dirname "$0")/fuzz_crashes/$target"
+        [ -d "$crashes" ] || crashes=""
         status=0
         "$bin/$target" -max_total_time="$seconds" -timeout=20 -rss_limit_mb=2048 -print_final_stats=1 \
-            -artifact_prefix="$work/" "$corpus" "$seeds/$kind" >"$log" 2>&1 || status=$?
+            -artifact_prefix="$work/" "$corpus" "$seeds/$kind" $crashes >"$log" 2>&1 || status=$?
         execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
         printf '%-44s %10s executions in %ss, corpus %5d inputs, %s\n' "$target" "${execs:-?}" "$seconds" \
             "$(find "$corpus" -type f | wc -l)" "$([ "$status" = 0 ] && echo ok || echo "CRASH (see $log)")"
