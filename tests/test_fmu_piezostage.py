@@ -647,8 +647,9 @@ def test_log_categories_logall_and_logstatuswarning(piezo_stage, make_fmu):
 
 def test_a_step_the_core_refuses_enters_the_error_state(piezo_stage, make_fmu):
     """v = 1e308 with w0 = 4 overflows u: the core refuses the sample, the glue
-    restores the state of the start of the step and enters Error; getters,
-    SetFMUstate and Reset remain."""
+    restores the state of the start of the step and enters Error; getters, the FMU-state
+    functions (fmi2GetFMUstate too: FMI 2.0 allows it in Error, for debugging) and Reset
+    remain. The state saved in Error brings Error back when set."""
     fmu = make_fmu(piezo_stage)
     fmu.initialize({"pi.w0": 4.0})
     fmu.step()
@@ -659,7 +660,7 @@ def test_a_step_the_core_refuses_enters_the_error_state(piezo_stage, make_fmu):
     assert any("the model diverged" in text for text in fmu.errors()), fmu.errors()
     assert fmu.get_reals(OUTPUTS) == before
     assert_refused(lambda: fmu.slave.doStep(fmu.time, H), fmu, "illegal call sequence", "state Error")
-    assert_refused(lambda: fmu.slave.getFMUstate(), fmu, "illegal call sequence")
+    failed = fmu.slave.getFMUstate()
     fmu.slave.setFMUstate(state)
     fmu.set({"v": 1.0})
     fmu.step()
@@ -668,6 +669,11 @@ def test_a_step_the_core_refuses_enters_the_error_state(piezo_stage, make_fmu):
     # up to one rounding: the restored state is the one before the refused step.
     assert fmu.get("u") == pytest.approx(4.0 + 0.0714, rel=1e-15)
     fmu.slave.freeFMUstate(state)
+    # the state saved in Error: its outputs are those before the refused step, its mode Error
+    fmu.slave.setFMUstate(failed)
+    fmu.slave.freeFMUstate(failed)
+    assert fmu.get_reals(OUTPUTS) == before
+    assert_refused(lambda: fmu.slave.doStep(fmu.time - H, H), fmu, "illegal call sequence", "state Error")
 
 
 @pytest.mark.parametrize("name", ["PiezoStage", "AdaptiveCompoundController"])

@@ -184,24 +184,34 @@ int model_failure_text(const ModelData *data, piezo_status st, char *text, size_
     return 0;
 }
 
-const char *model_check_data(const ModelData *data, int core_initialized)
+const char *model_check_data(const ModelData *data, int core_initialized, double t0, uint64_t k,
+                             const double *history, size_t n_history)
 {
     const piezo_controller *c = &data->ctrl;
+    const piezo_controller_params *q = &data->params;
+    piezo_controller scratch;
+    const char *fault;
+    (void)t0;           /* time-invariant: the controller keeps no time */
+    if ((data->said_saturated != 0 && data->said_saturated != 1)
+        || (data->said_large_error != 0 && data->said_large_error != 1))
+        return "warning flags are not 0 or 1";
     if (!core_initialized)
         return NULL;    /* parameters are validated by model_init later */
-    if (c->fwd_pi.m < 1 || c->fwd_pi.m > PIEZO_PI_MAX_OPERATORS)
-        return "ctrl.fwd_pi.m out of range";
-    if (c->inv_pi.m < 1 || c->inv_pi.m > PIEZO_PI_MAX_OPERATORS)
-        return "ctrl.inv_pi.m out of range";
-    if (c->inv_creep.head < 0 || c->inv_creep.head >= PIEZO_GL_HEAD_LEN)
-        return "ctrl.inv_creep.head out of range";
-    if (c->inv_creep.n_terms < 0 || c->inv_creep.n_terms > PIEZO_GL_MAX_TERMS)
-        return "ctrl.inv_creep.n_terms out of range";
-    if (c->inv_creep.exact != 0 && c->inv_creep.exact != 1)
-        return "ctrl.inv_creep.exact is not a boolean";
-    if (c->d < 1 || c->d > PIEZO_MV_MAX_D)
-        return "ctrl.d out of range";
-    if (c->head < 0 || c->head >= PIEZO_MV_Q_RING)
-        return "ctrl.head out of range";
-    return NULL;
+    /* a live core runs on parameters that passed init ... */
+    if (piezo_controller_init(&scratch, q, NULL) != PIEZO_OK)
+        return "parameters out of range";
+    if ((fault = piezo_controller_check(c)) != NULL)
+        return fault;
+    if (c->k != k)
+        return "controller sample counter differs from the FMU's k";
+    /* ... and on the copies init made of them */
+    if (c->d != 1 + q->mv_delay || c->fwd_pi.m != q->pi.m || c->inv_creep.exact != (q->creep_exact ? 1 : 0)
+        || c->inv_creep.alpha != -q->creep_alpha || c->lambda_u != q->mv_lambda_u
+        || c->rls_enabled != (q->rls_enabled ? 1 : 0) || c->sat_enabled != (q->sat_enabled ? 1 : 0)
+        || c->forgetting != q->rls_forgetting || c->p0 != q->rls_p0 || c->trace_max != q->rls_trace_max
+        || c->pred_error_max != q->monitor_pred_error_max
+        || c->divergence_samples != (uint64_t)q->monitor_divergence_samples
+        || (c->sat_enabled && (c->sat_v_min != q->sat_v_min || c->sat_v_max != q->sat_v_max)))
+        return "controller state does not match its parameters";
+    return piezo_gl_check_history(&c->inv_creep, history, n_history);
 }

@@ -114,22 +114,30 @@ int model_failure_text(const ModelData *data, piezo_status st, char *text, size_
     return 0;
 }
 
-const char *model_check_data(const ModelData *data, int core_initialized)
+const char *model_check_data(const ModelData *data, int core_initialized, double t0, uint64_t k,
+                             const double *history, size_t n_history)
 {
     const piezo_plant *p = &data->plant;
+    const piezo_plant_params *q = &data->params;
+    piezo_plant scratch;
+    const char *fault;
+    (void)t0;           /* time-invariant: the plant keeps no time */
     if (!core_initialized)
         return NULL;    /* parameters are validated by model_init later */
-    if (p->pi.m < 1 || p->pi.m > PIEZO_PI_MAX_OPERATORS)
-        return "plant.pi.m out of range";
-    if (p->tf.delay < 0 || p->tf.delay > PIEZO_TF_MAX_DELAY)
-        return "plant.tf.delay out of range";
-    if (p->tf.head < 0 || p->tf.head >= PIEZO_TF_INPUT_RING)
-        return "plant.tf.head out of range";
-    if (p->creep.head < 0 || p->creep.head >= PIEZO_GL_HEAD_LEN)
-        return "plant.creep.head out of range";
-    if (p->creep.n_terms < 0 || p->creep.n_terms > PIEZO_GL_MAX_TERMS)
-        return "plant.creep.n_terms out of range";
-    if (p->creep.exact != 0 && p->creep.exact != 1)
-        return "plant.creep.exact is not a boolean";
-    return NULL;
+    /* a live core runs on parameters that passed init ... */
+    if (piezo_plant_init(&scratch, q, NULL) != PIEZO_OK)
+        return "parameters out of range";
+    if ((fault = piezo_plant_check(p)) != NULL)
+        return fault;
+    if (p->k != k)
+        return "plant sample counter differs from the FMU's k";
+    /* ... and on the copies init made of them */
+    if (p->pi.m != q->pi.m || p->tf.delay != q->tf.delay || p->creep.exact != (q->creep_exact ? 1 : 0)
+        || p->creep_enabled != (q->creep_enabled ? 1 : 0) || p->creep.alpha != q->creep_alpha
+        || p->sensor_resolution != q->sensor_resolution || p->sensor_noise_rms != q->sensor_noise_rms
+        || p->sensor_seed != q->sensor_seed)
+        return "plant state does not match its parameters";
+    if (!p->creep_enabled)
+        return n_history == 0 ? NULL : "history stored while creep is disabled";
+    return piezo_gl_check_history(&p->creep, history, n_history);
 }

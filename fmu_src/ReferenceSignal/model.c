@@ -106,14 +106,35 @@ int model_failure_text(const ModelData *data, piezo_status st, char *text, size_
     return 0;
 }
 
-const char *model_check_data(const ModelData *data, int core_initialized)
+const char *model_check_data(const ModelData *data, int core_initialized, double t0, uint64_t k,
+                             const double *history, size_t n_history)
 {
     const piezo_reference *r = &data->ref;
+    const piezo_reference_params *q = &data->params;
+    piezo_reference scratch;
+    const char *fault;
+    int i;
+    (void)history;
+    if (n_history != 0)
+        return "history stored for a model without history";
     if (!core_initialized)
         return NULL;    /* parameters are validated by model_init later */
-    if (!(r->p.h > 0.0))
-        return "ref.p.h is not positive";
-    if (r->p.lead < 0 || r->p.lead > PIEZO_REF_MAX_LEAD)
-        return "ref.p.lead out of range";
+    if (piezo_reference_init(&scratch, q, t0, NULL) != PIEZO_OK)
+        return "parameters out of range";
+    if ((fault = piezo_reference_check(r)) != NULL)
+        return fault;
+    if (r->k != k || r->t0 != t0)
+        return "reference time (t0, k) differs from the FMU's";
+    /* the core's parameters are a copy of the FMU's */
+    if (r->p.offset != q->offset || r->p.lead != q->lead || r->p.h != q->h)
+        return "reference state does not match its parameters";
+    for (i = 0; i < PIEZO_REF_MAX_TONES; i++)
+        if (r->p.amplitude[i] != q->amplitude[i] || r->p.frequency[i] != q->frequency[i]
+            || r->p.phase[i] != q->phase[i])
+            return "reference state does not match its parameters";
+    /* the outputs are a function of (parameters, t0, k): they must be that value */
+    if (r->y_d != piezo_reference_value(r, t0 + (double)k * r->p.h)
+        || r->y_ref != piezo_reference_value(r, t0 + (double)(k + (uint64_t)r->p.lead) * r->p.h))
+        return "reference outputs differ from y_d at t0 + k h";
     return NULL;
 }

@@ -141,6 +141,23 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->theta_nominal[2] = p->tf_b1;
     c->theta_nominal[3] = p->tf_b2;
     piezo_controller_reset(c);
+    /* The inverse PI must exist in doubles: its thresholds grow like
+     * (w0 + sum w_j) v_max, its weights like 1/w0 (and 1/w0^2 inside eq 27). */
+    {
+        int i, thresholds_ok = 1, weights_ok = isfinite(c->inv_pi.w0);
+        for (i = 0; i < PIEZO_PI_MAX_OPERATORS; ++i) {
+            thresholds_ok = thresholds_ok && isfinite(c->inv_pi.r[i]);
+            weights_ok = weights_ok && isfinite(c->inv_pi.w[i]);
+        }
+        if (!thresholds_ok)
+            return piezo_refuse(diag, "pi.v_max",
+                                "(0, inf) V with (pi.w0 + sum of pi.w[j]) pi.v_max finite (thresholds of the inverse PI)",
+                                p->pi.v_max);
+        if (!weights_ok)
+            return piezo_refuse(diag, "pi.w0", "(0, inf) with 1/pi.w0^2 finite (weights of the inverse PI)", p->pi.w0);
+        if (piezo_pi_inverse_check(&c->inv_pi) != NULL)
+            return piezo_refuse(diag, "pi.w0", "(0, inf) with a finite inverse PI (pi.w0, pi.w[j], pi.v_max)", p->pi.w0);
+    }
     return PIEZO_OK;
 }
 
@@ -249,6 +266,23 @@ static double rls_update(const piezo_controller *c, double y, piezo_controller_s
     return e;
 }
 
+static int all_finite(const double *x, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        if (!isfinite(x[i])) return 0;
+    return 1;
+}
+
+/* The estimates and the next states of an evaluated sample are finite. */
+static int sample_state_finite(const piezo_controller *c, const piezo_controller_sample *s)
+{
+    if (!all_finite(s->out.theta, 4)) return 0;
+    if (s->rls_updated && !all_finite(s->P, 16)) return 0;
+    if (!c->inv_creep.exact && !all_finite(s->creep_next, c->inv_creep.n_terms)) return 0;
+    return all_finite(s->inv_z, c->inv_pi.m) && all_finite(s->fwd_z, c->fwd_pi.m);
+}
+
 /* Evaluate sample k into *s without changing *c (the caller guarantees
  * finite inputs and enough history). Exact mode writes history[2k],
  * history[2k+1]. The inputs are finite, so a non-finite value computed on
@@ -316,7 +350,10 @@ static piezo_status controller_eval(const piezo_controller *c, double y_ref, dou
     memcpy(s->out.theta, theta, sizeof s->out.theta);
     s->out.pred_error = pred_error;
     s->out.saturated = saturated;
-    if (!(isfinite(v) && isfinite(q) && isfinite(pred_error)))
+    /* every output (the estimates too) and the state the sample leaves behind are finite,
+     * or the sample is refused: the RLS covariance can overflow (phi P phi^T) while theta
+     * stays finite, and the operators' next states are what the next sample starts from */
+    if (!(isfinite(v) && isfinite(q) && isfinite(pred_error)) || !sample_state_finite(c, s))
         return PIEZO_ERR_DIVERGED;
     s->reaches_window = c->divergence_samples > 0 && s->run_large_error >= c->divergence_samples;
     return PIEZO_OK;
@@ -417,4 +454,48 @@ piezo_status piezo_controller_peek(const piezo_controller *c, double y_ref, doub
     st = piezo_controller_evaluate(c, y_ref, y_meas, history, capacity, &s);
     if (st == PIEZO_OK) *out = s.out;
     return st;
+}
+
+
+const char *piezo_controller_check(const piezo_controller *c)
+{
+    const char *fault;
+    const piezo_controller_output *o;
+    if (!c) return "controller missing";
+    if ((fault = piezo_pi_check(&c->fwd_pi)) != NULL) return fault;
+    if ((fault = piezo_pi_inverse_check(&c->inv_pi)) != NULL) return fault;
+    if (c->inv_pi.m != c->fwd_pi.m) return "inverse PI and forward PI differ in m";
+    if ((fault = piezo_gl_check(&c->inv_creep)) != NULL) return fault;
+    if (c->inv_creep.k != c->k) return "inverse creep sample counter differs from the controller's";
+    if (c->d < 1 || c->d > PIEZO_MV_MAX_D) return "loop delay d outside 1..9";
+    if (c->head < 0 || c->head >= PIEZO_MV_Q_RING) return "q ring index out of range";
+    if (c->sat_hold < 0 || c->sat_hold > c->d + 1) return "adaptation pause outside 0..d+1";
+    if ((c->rls_enabled != 0 && c->rls_enabled != 1) || (c->sat_enabled != 0 && c->sat_enabled != 1))
+        return "rls.enabled or sat.enabled is not 0 or 1";
+    if (!(isfinite(c->lambda_u) && c->lambda_u >= 0.0)) return "mv.lambda_u out of range";
+    if (!(isfinite(c->forgetting) && c->forgetting > 0.0 && c->forgetting <= 1.0)) return "rls.forgetting out of range";
+    if (!(isfinite(c->p0) && c->p0 > 0.0 && isfinite(c->trace_max) && c->trace_max >= 4.0 * c->p0))
+        return "rls.p0 or rls.trace_max out of range";
+    if (!(isfinite(c->sat_v_min) && isfinite(c->sat_v_max) && (!c->sat_enabled || c->sat_v_max > c->sat_v_min)))
+        return "sat.v_min or sat.v_max out of range";
+    if (!(isfinite(c->pred_error_max) && c->pred_error_max > 0.0)) return "monitor.pred_error_max out of range";
+    if (c->divergence_samples > 2147483647u) return "monitor.divergence_samples out of range";
+    if (!(all_finite(c->theta_nominal, 4) && c->theta_nominal[2] > 0.0)) return "nominal model not finite or b1 <= 0";
+    if (!all_finite(c->theta, 4) || !all_finite(c->P, 16) || !all_finite(c->y_prev, 2)
+        || !all_finite(c->q_ring, PIEZO_MV_Q_RING))
+        return "estimates, covariance or past values not finite";
+    if (!(isfinite(c->max_abs_pred_error) && c->max_abs_pred_error >= 0.0)) return "largest |pred_error| not finite";
+    if (c->n_saturated > c->k || c->n_large_error > c->k || c->run_saturated > c->n_saturated
+        || c->run_large_error > c->n_large_error)
+        return "monitor counts exceed the sample count";
+    if ((c->n_saturated > 0 && c->k_first_saturated >= c->k) || (c->n_large_error > 0 && c->k_first_large_error >= c->k))
+        return "monitor first-sample index beyond the sample count";
+    /* a run reaching the window would have been refused as unstable */
+    if (c->divergence_samples > 0 && c->run_large_error >= c->divergence_samples)
+        return "monitor run at or beyond the divergence window";
+    o = &c->out;
+    if (!(isfinite(o->v) && isfinite(o->q) && isfinite(o->pred_error) && all_finite(o->theta, 4)))
+        return "controller outputs not finite";
+    if (o->saturated != 0 && o->saturated != 1) return "saturated output is not 0 or 1";
+    return NULL;
 }

@@ -147,6 +147,14 @@ piezo_status piezo_controller_evaluate(const piezo_controller *ctrl, double y_re
 piezo_status piezo_controller_commit(piezo_controller *ctrl, const piezo_controller_sample *sample,
                                      piezo_controller_output *out);
 size_t piezo_controller_history_needed(const piezo_controller *ctrl);
+/*
+ * Invariants of a restored controller (e.g. from a deserialized FMU state):
+ * NULL when every index, count and flag is in range, the sample counters agree,
+ * the monitor counts fit the sample count and every value is finite, else a
+ * static text naming the first bad field. The exact-mode history is checked by
+ * piezo_gl_check_history(&ctrl->inv_creep, ...).
+ */
+const char *piezo_controller_check(const piezo_controller *ctrl);
 
 /* Diophantine 1 = A E + z^-d Gd for A = 1 + a1 z^-1 + a2 z^-2, 1 <= d <= 9:
  * e[0..d-1] (e[0] = 1), g[0..1]. */

@@ -118,7 +118,50 @@ void piezo_gl_reset(piezo_gl *gl)
 size_t piezo_gl_history_needed(const piezo_gl *gl)
 {
     if (!gl || !gl->exact) return 0;
+    /* 2(k+1) without wrapping: a wrapped size would pass a capacity check */
+    if (gl->k >= (uint64_t)(SIZE_MAX / 2 - 1)) return SIZE_MAX;
     return 2 * ((size_t)gl->k + 1);
+}
+
+static int all_finite(const double *x, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; ++i)
+        if (!isfinite(x[i])) return 0;
+    return 1;
+}
+
+const char *piezo_gl_check(const piezo_gl *gl)
+{
+    if (!gl) return "creep operator missing";
+    if (gl->exact != 0 && gl->exact != 1) return "creep.exact is not 0 or 1";
+    if (!(isfinite(gl->alpha) && gl->alpha >= -1.0 && gl->alpha <= 1.0)) return "creep.alpha outside [-1, 1]";
+    if (!isfinite(gl->gain)) return "creep gain not finite";
+    if (gl->head < 0 || gl->head >= PIEZO_GL_HEAD_LEN) return "creep ring index out of range";
+    if (gl->n_terms < 0 || gl->n_terms > PIEZO_GL_MAX_TERMS) return "creep SOE term count out of range";
+    if (gl->exact && gl->n_terms != 0) return "creep SOE terms in exact mode";
+    if (!all_finite(gl->w_head, PIEZO_GL_HEAD_LEN) || !all_finite(gl->x_ring, PIEZO_GL_HEAD_LEN))
+        return "creep head weights or inputs not finite";
+    if (!all_finite(gl->soe_c, PIEZO_GL_MAX_TERMS) || !all_finite(gl->soe_decay, PIEZO_GL_MAX_TERMS)
+        || !all_finite(gl->soe_inject, PIEZO_GL_MAX_TERMS) || !all_finite(gl->soe_state, PIEZO_GL_MAX_TERMS))
+        return "creep SOE values not finite";
+    return NULL;
+}
+
+const char *piezo_gl_check_history(const piezo_gl *gl, const double *history, size_t n)
+{
+    size_t j, k;
+    if (!gl) return "creep operator missing";
+    if (n != piezo_gl_history_needed(gl)) return "creep history length is not 2(k+1)";
+    if (n == 0) return NULL;
+    if (!history) return "creep history missing";
+    k = (size_t)gl->k;
+    for (j = 0; j < k; ++j) {
+        double w = j == 0 ? 1.0 : gl_weight_ratio(gl->alpha, j) * history[2 * j - 1];
+        if (!isfinite(history[2 * j])) return "creep history input not finite";
+        if (history[2 * j + 1] != w) return "creep history weight differs from eq 14";
+    }
+    return NULL;
 }
 
 /* Exact: y(k) = gain * sum_{j=0..k} w_j x(k-j). history[2j] = x(j) and

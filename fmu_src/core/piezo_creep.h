@@ -68,7 +68,20 @@ piezo_status piezo_gl_step(piezo_gl *gl, double x, double *history, size_t histo
 piezo_status piezo_gl_eval(const piezo_gl *gl, double x, double *history, size_t history_capacity,
                            double *next_state, double *y);
 void piezo_gl_commit(piezo_gl *gl, double x, const double *next_state);
-/* Doubles of history the next exact-mode step needs, 2(k+1); 0 in SOE mode. */
+/* Doubles of history the next exact-mode step needs, 2(k+1); 0 in SOE mode.
+ * SIZE_MAX when 2(k+1) does not fit a size_t (no buffer can be that large). */
 size_t piezo_gl_history_needed(const piezo_gl *gl);
+/*
+ * Invariants of a restored operator (e.g. from a deserialized FMU state): NULL
+ * when the flag, the ring index and the term count are in range and every value
+ * is finite, else a static text naming the first bad field.
+ */
+const char *piezo_gl_check(const piezo_gl *gl);
+/*
+ * The exact-mode history of a restored operator: the n doubles must hold the
+ * 2k written entries x(j) (finite) and w_j (equal to eq 14's recursion, bit for
+ * bit), plus the two slots of the next step. NULL when they do, else why not.
+ */
+const char *piezo_gl_check_history(const piezo_gl *gl, const double *history, size_t n);
 
 #endif

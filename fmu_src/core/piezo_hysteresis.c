@@ -26,6 +26,7 @@ static const char *const weight_names[PIEZO_PI_MAX_OPERATORS] = {
 piezo_status piezo_pi_init(piezo_pi *pi, const piezo_pi_params *params, piezo_diag *diag)
 {
     int j;
+    double slope;
     if (!pi || !params) return PIEZO_ERR_NULL;
     if (params->m < 1 || params->m > PIEZO_PI_MAX_OPERATORS)
         return piezo_refuse(diag, "pi.m", "1..16", (double)params->m);
@@ -38,6 +39,14 @@ piezo_status piezo_pi_init(piezo_pi *pi, const piezo_pi_params *params, piezo_di
     for (j = 0; j < PIEZO_PI_MAX_OPERATORS; ++j)
         if (!(isfinite(params->w[j]) && params->w[j] >= 0.0))
             return piezo_refuse(diag, weight_names[j], "[0, inf)", params->w[j]);
+    /* the steepest slope of the loading curve, w0 + sum w_j, must be a number:
+     * u overflows for any |v| > 1 otherwise, and the inverse's states are Inf * 0 */
+    slope = params->w0;
+    for (j = 0; j < params->m; ++j) {
+        slope += params->w[j];
+        if (!isfinite(slope))
+            return piezo_refuse(diag, weight_names[j], "[0, inf) with pi.w0 + sum of pi.w[1..m] finite", params->w[j]);
+    }
 
     memset(pi, 0, sizeof *pi);
     pi->m = params->m;
@@ -130,4 +139,33 @@ piezo_status piezo_pi_inverse_step(piezo_pi_inverse *inv, double u, double *v)
 {
     if (!inv) return PIEZO_ERR_NULL;
     return piezo_pi_inverse_eval(inv, u, inv->z, v);
+}
+
+static int all_finite(const double *x, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        if (!isfinite(x[i])) return 0;
+    return 1;
+}
+
+const char *piezo_pi_check(const piezo_pi *pi)
+{
+    if (!pi) return "PI model missing";
+    if (pi->m < 1 || pi->m > PIEZO_PI_MAX_OPERATORS) return "pi.m outside 1..16";
+    if (!(isfinite(pi->w0) && pi->w0 > 0.0)) return "pi.w0 not in (0, inf)";
+    if (!all_finite(pi->w, PIEZO_PI_MAX_OPERATORS) || !all_finite(pi->r, PIEZO_PI_MAX_OPERATORS)
+        || !all_finite(pi->z, PIEZO_PI_MAX_OPERATORS))
+        return "PI weights, thresholds or play states not finite";
+    return NULL;
+}
+
+const char *piezo_pi_inverse_check(const piezo_pi_inverse *inv)
+{
+    if (!inv) return "inverse PI model missing";
+    if (inv->m < 1 || inv->m > PIEZO_PI_MAX_OPERATORS) return "inverse PI m outside 1..16";
+    if (!isfinite(inv->w0) || !all_finite(inv->w, PIEZO_PI_MAX_OPERATORS)
+        || !all_finite(inv->r, PIEZO_PI_MAX_OPERATORS) || !all_finite(inv->z, PIEZO_PI_MAX_OPERATORS))
+        return "inverse PI weights, thresholds or play states not finite";
+    return NULL;
 }

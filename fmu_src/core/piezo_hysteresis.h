@@ -64,4 +64,10 @@ piezo_status piezo_pi_inverse_step(piezo_pi_inverse *inv, double u, double *v);
 /* The same sample without committing it (z_next as in piezo_pi_eval). */
 piezo_status piezo_pi_inverse_eval(const piezo_pi_inverse *inv, double u, double *z_next, double *v);
 
+/* Invariants of a restored model (e.g. from a deserialized FMU state): NULL
+ * when m is in 1..16 and every weight, threshold and state is finite (w0 > 0
+ * for the forward model), else a static text naming the first bad field. */
+const char *piezo_pi_check(const piezo_pi *pi);
+const char *piezo_pi_inverse_check(const piezo_pi_inverse *inv);
+
 #endif

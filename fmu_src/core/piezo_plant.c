@@ -5,6 +5,8 @@
 #include "piezo_plant.h"
 
 #define PI_D 3.14159265358979323846
+#define SENSOR_RESOLUTION_MIN 1e-300   /* [um] smallest non-zero sensor.resolution */
+#define SENSOR_NOISE_MAX 1e300         /* [um] largest sensor.noise_rms */
 
 void piezo_plant_default_params(piezo_plant_params *p)
 {
@@ -93,10 +95,14 @@ piezo_status piezo_plant_init(piezo_plant *plant, const piezo_plant_params *p, p
         return piezo_refuse(diag, "creep.k_c", "(0, inf)", p->creep_k_c);
     if (!(isfinite(p->creep_alpha) && p->creep_alpha >= -1.0 && p->creep_alpha <= 1.0))
         return piezo_refuse(diag, "creep.alpha", "[-1, 1]", p->creep_alpha);
-    if (!(isfinite(p->sensor_resolution) && p->sensor_resolution >= 0.0))
-        return piezo_refuse(diag, "sensor.resolution", "[0, inf) um", p->sensor_resolution);
-    if (!(isfinite(p->sensor_noise_rms) && p->sensor_noise_rms >= 0.0))
-        return piezo_refuse(diag, "sensor.noise_rms", "[0, inf) um", p->sensor_noise_rms);
+    /* A resolution below 1e-300 um makes y / resolution overflow for any real
+     * displacement (1e-310 um: every |y| > 0.018 um), so the reading is Inf. */
+    if (!(isfinite(p->sensor_resolution)
+          && (p->sensor_resolution == 0.0 || p->sensor_resolution >= SENSOR_RESOLUTION_MIN)))
+        return piezo_refuse(diag, "sensor.resolution", "0 (off) or [1e-300, inf) um", p->sensor_resolution);
+    /* |N(0, 1)| <= 8.7 from the generator, so noise up to 1e300 um stays finite */
+    if (!(isfinite(p->sensor_noise_rms) && p->sensor_noise_rms >= 0.0 && p->sensor_noise_rms <= SENSOR_NOISE_MAX))
+        return piezo_refuse(diag, "sensor.noise_rms", "[0, 1e300] um", p->sensor_noise_rms);
 
     memset(plant, 0, sizeof *plant);
     st = piezo_pi_init(&plant->pi, &p->pi, diag);
@@ -112,14 +118,19 @@ piezo_status piezo_plant_init(piezo_plant *plant, const piezo_plant_params *p, p
     plant->sensor_noise_rms = p->sensor_noise_rms;
     plant->sensor_seed = p->sensor_seed;
     piezo_plant_reset(plant);
+    /* sample 0 reads quantize(noise): huge noise on a fine grid overflows */
+    if (!isfinite(plant->out.y_meas))
+        return piezo_refuse(diag, "sensor.noise_rms",
+                            "[0, 1e300] um and small enough against sensor.resolution for a finite reading",
+                            p->sensor_noise_rms);
     return PIEZO_OK;
 }
 
 /* y_meas = quantize(y + noise), quantize(a) = res * round(a / res) */
-static double sense(piezo_plant *plant, double y)
+static double sense(const piezo_plant *plant, piezo_rng *rng, double y)
 {
     double reading = y;
-    if (plant->sensor_noise_rms > 0.0) reading += plant->sensor_noise_rms * piezo_rng_normal(&plant->rng);
+    if (plant->sensor_noise_rms > 0.0) reading += plant->sensor_noise_rms * piezo_rng_normal(rng);
     if (plant->sensor_resolution > 0.0)
         reading = plant->sensor_resolution * floor(reading / plant->sensor_resolution + 0.5);
     return reading;
@@ -138,7 +149,7 @@ void piezo_plant_reset(piezo_plant *plant)
     plant->out.u = 0.0;
     plant->out.x = 0.0;
     plant->out.y = 0.0;
-    plant->out.y_meas = sense(plant, 0.0);
+    plant->out.y_meas = sense(plant, &plant->rng, 0.0);
 }
 
 size_t piezo_plant_history_needed(const piezo_plant *plant)
@@ -157,7 +168,8 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
                               size_t history_capacity, piezo_plant_output *out)
 {
     double z_next[PIEZO_PI_MAX_OPERATORS], soe_next[PIEZO_GL_MAX_TERMS];
-    double u, x, y;
+    double u, x, y, y_meas;
+    piezo_rng rng;
     if (!plant) return PIEZO_ERR_NULL;
     if (!isfinite(v)) return PIEZO_ERR_NONFINITE;
     if (plant->creep_enabled && plant->creep.exact) {
@@ -177,15 +189,45 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
     } else {
         y = x;
     }
+    /* the reading before the commit: quantising a finite y can overflow (y / resolution);
+     * the generator advances on a copy until the sample is accepted */
+    rng = plant->rng;
+    y_meas = sense(plant, &rng, y);
+    if (!isfinite(y_meas)) return PIEZO_ERR_DIVERGED;
     /* commit */
     memcpy(plant->pi.z, z_next, (size_t)plant->pi.m * sizeof *z_next);
     piezo_tf_commit(&plant->tf, u, x);
     if (plant->creep_enabled) piezo_gl_commit(&plant->creep, x, soe_next);
+    plant->rng = rng;
     plant->k += 1;
     plant->out.u = u;
     plant->out.x = x;
     plant->out.y = y;
-    plant->out.y_meas = sense(plant, y);
+    plant->out.y_meas = y_meas;
     if (out) *out = plant->out;
     return PIEZO_OK;
+}
+
+const char *piezo_plant_check(const piezo_plant *plant)
+{
+    const char *fault;
+    if (!plant) return "plant missing";
+    if ((fault = piezo_pi_check(&plant->pi)) != NULL) return fault;
+    if ((fault = piezo_tf_check(&plant->tf)) != NULL) return fault;
+    if ((fault = piezo_gl_check(&plant->creep)) != NULL) return fault;
+    if (plant->creep_enabled != 0 && plant->creep_enabled != 1) return "creep.enabled is not 0 or 1";
+    /* the creep consumes one sample per plant step when enabled, none otherwise */
+    if (plant->creep.k != (plant->creep_enabled ? plant->k : 0)) return "creep sample counter differs from the plant's";
+    if (!(isfinite(plant->sensor_resolution)
+          && (plant->sensor_resolution == 0.0 || plant->sensor_resolution >= SENSOR_RESOLUTION_MIN)))
+        return "sensor.resolution out of range";
+    if (!(isfinite(plant->sensor_noise_rms) && plant->sensor_noise_rms >= 0.0
+          && plant->sensor_noise_rms <= SENSOR_NOISE_MAX))
+        return "sensor.noise_rms out of range";
+    /* xoshiro256** never reaches the all-zero state (it would stay there) */
+    if ((plant->rng.s[0] | plant->rng.s[1] | plant->rng.s[2] | plant->rng.s[3]) == 0)
+        return "sensor generator state is all zero";
+    if (!(isfinite(plant->out.u) && isfinite(plant->out.x) && isfinite(plant->out.y) && isfinite(plant->out.y_meas)))
+        return "plant outputs not finite";
+    return NULL;
 }

@@ -11,6 +11,8 @@
  * Sensor: quantize(a) = resolution * round(a / resolution) (off when 0);
  * noise ~ N(0, noise_rms^2) from the core's own xoshiro256** generator seeded
  * by splitmix64(seed): reproducible, independent of the C library.
+ * A step whose reading overflows (e.g. y near 1e308) is refused as divergence
+ * like any other non-finite result: every output of an accepted step is finite.
  */
 #ifndef PIEZO_PLANT_H
 #define PIEZO_PLANT_H
@@ -29,8 +31,8 @@ typedef struct {
     double creep_k_c;           /* > 0 */
     double creep_alpha;         /* [-1, 1] */
     int creep_exact;            /* 1: full-memory G-L, 0: SOE */
-    double sensor_resolution;   /* [um], >= 0, 0 = off */
-    double sensor_noise_rms;    /* [um], >= 0 */
+    double sensor_resolution;   /* [um], 0 = off, or >= 1e-300 */
+    double sensor_noise_rms;    /* [um], 0..1e300 */
     int sensor_seed;            /* any integer */
     double h;                   /* sample period [s], > 0 */
 } piezo_plant_params;
@@ -75,6 +77,13 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
                               size_t history_capacity, piezo_plant_output *out);
 /* History doubles the next step needs, 2(k+1) (0 unless exact creep is on). */
 size_t piezo_plant_history_needed(const piezo_plant *plant);
+/*
+ * Invariants of a restored plant (e.g. from a deserialized FMU state): NULL
+ * when every index, count and flag is in range, the sample counters agree and
+ * every value is finite, else a static text naming the first bad field. The
+ * exact-mode history is checked by piezo_gl_check_history(&plant->creep, ...).
+ */
+const char *piezo_plant_check(const piezo_plant *plant);
 
 /* The sensor's generator, exposed for tests. */
 void piezo_rng_seed(piezo_rng *rng, uint64_t seed);

@@ -24,18 +24,23 @@ static const char *const phase_names[PIEZO_REF_MAX_TONES] = {
     "phase[1]", "phase[2]", "phase[3]", "phase[4]",
     "phase[5]", "phase[6]", "phase[7]", "phase[8]"};
 
-piezo_status piezo_reference_init(piezo_reference *ref, const piezo_reference_params *p,
-                                  double t0, piezo_diag *diag)
+/* Every parameter in its range (diag names the first that is not). */
+static piezo_status validate(const piezo_reference_params *p, double t0, piezo_diag *diag)
 {
     int i;
-    double nyquist;
-    if (!ref || !p) return PIEZO_ERR_NULL;
+    double nyquist, bound;
     if (!(isfinite(p->h) && p->h > 0.0)) return piezo_refuse(diag, "h", "(0, inf) s", p->h);
     if (!isfinite(p->offset)) return piezo_refuse(diag, "offset", "finite values (um)", p->offset);
     nyquist = 0.5 / p->h;
+    /* |y_d| <= |offset| + sum |a_i|: finite bound, finite reference at every t */
+    bound = fabs(p->offset);
     for (i = 0; i < PIEZO_REF_MAX_TONES; ++i) {
         if (!isfinite(p->amplitude[i]))
             return piezo_refuse(diag, amplitude_names[i], "finite values (um)", p->amplitude[i]);
+        bound += fabs(p->amplitude[i]);
+        if (!isfinite(bound))
+            return piezo_refuse(diag, amplitude_names[i],
+                                "finite values with |offset| + sum of |amplitude[i]| finite (um)", p->amplitude[i]);
         /* f >= 1/(2h) aliases onto a lower frequency on the sample grid */
         if (!(isfinite(p->frequency[i]) && p->frequency[i] >= 0.0 && p->frequency[i] < nyquist))
             return piezo_refuse(diag, frequency_names[i],
@@ -46,6 +51,36 @@ piezo_status piezo_reference_init(piezo_reference *ref, const piezo_reference_pa
     if (p->lead < 0 || p->lead > PIEZO_REF_MAX_LEAD)
         return piezo_refuse(diag, "lead", "0..1000000 samples", (double)p->lead);
     if (!isfinite(t0)) return piezo_refuse(diag, "startTime", "finite values (s)", t0);
+    return PIEZO_OK;
+}
+
+/* The tone argument 2 pi f t + phi of the first tone for which it overflows at
+ * time t, or -1 when all are finite (sin of a finite argument is finite). */
+static int overflowing_tone(const piezo_reference_params *p, double t)
+{
+    int i;
+    if (!isfinite(t)) return 0;
+    for (i = 0; i < PIEZO_REF_MAX_TONES; ++i)
+        if (p->amplitude[i] != 0.0 && !isfinite(2.0 * PI_D * p->frequency[i] * t + p->phase[i]))
+            return i;
+    return -1;
+}
+
+piezo_status piezo_reference_init(piezo_reference *ref, const piezo_reference_params *p,
+                                  double t0, piezo_diag *diag)
+{
+    int tone;
+    piezo_status st;
+    if (!ref || !p) return PIEZO_ERR_NULL;
+    st = validate(p, t0, diag);
+    if (st != PIEZO_OK) return st;
+    /* sample 0 needs y_d(t0) and y_d(t0 + lead h) */
+    tone = overflowing_tone(p, t0);
+    if (tone < 0) tone = overflowing_tone(p, t0 + (double)p->lead * p->h);
+    if (tone >= 0)
+        return piezo_refuse(diag, frequency_names[tone],
+                            "[0, 1/(2 h)) Hz with 2 pi frequency t finite at t = startTime and startTime + lead h",
+                            p->frequency[tone]);
     memset(ref, 0, sizeof *ref);
     ref->p = *p;
     ref->t0 = t0;
@@ -64,24 +99,41 @@ double piezo_reference_value(const piezo_reference *ref, double t)
     return y;
 }
 
-/* t_k = t0 + k h from the integer counter, never accumulated */
-static void update(piezo_reference *ref)
+/* t_k = t0 + k h from the integer counter, never accumulated; 0 when the
+ * time or a tone's argument overflowed (nothing is written then). */
+static int update(piezo_reference *ref, uint64_t k)
 {
-    ref->y_d = piezo_reference_value(ref, ref->t0 + (double)ref->k * ref->p.h);
-    ref->y_ref = piezo_reference_value(ref, ref->t0 + (double)(ref->k + (uint64_t)ref->p.lead) * ref->p.h);
+    double t = ref->t0 + (double)k * ref->p.h;
+    double t_lead = ref->t0 + (double)(k + (uint64_t)ref->p.lead) * ref->p.h;
+    if (overflowing_tone(&ref->p, t) >= 0 || overflowing_tone(&ref->p, t_lead) >= 0)
+        return 0;
+    ref->y_d = piezo_reference_value(ref, t);
+    ref->y_ref = piezo_reference_value(ref, t_lead);
+    ref->k = k;
+    return 1;
 }
 
 void piezo_reference_reset(piezo_reference *ref)
 {
     if (!ref) return;
-    ref->k = 0;
-    update(ref);
+    /* init checked sample 0; a struct that never passed init gets 0, 0 */
+    if (!update(ref, 0)) {
+        ref->k = 0;
+        ref->y_d = ref->y_ref = 0.0;
+    }
 }
 
 piezo_status piezo_reference_step(piezo_reference *ref)
 {
     if (!ref) return PIEZO_ERR_NULL;
-    ref->k += 1;
-    update(ref);
-    return PIEZO_OK;
+    /* finite parameters and times give a finite reference (|y_d| <= |offset| + sum |a_i|) */
+    return update(ref, ref->k + 1) ? PIEZO_OK : PIEZO_ERR_DIVERGED;
+}
+
+const char *piezo_reference_check(const piezo_reference *ref)
+{
+    if (!ref) return "reference missing";
+    if (validate(&ref->p, ref->t0, NULL) != PIEZO_OK) return "reference parameters out of range";
+    if (!(isfinite(ref->y_d) && isfinite(ref->y_ref))) return "reference outputs not finite";
+    return NULL;
 }

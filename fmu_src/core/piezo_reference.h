@@ -7,7 +7,8 @@
  *     y_ref(k) = y_d(t0 + (k + lead) h)     (lead samples ahead, lead = d)
  *
  * Frequencies must lie in [0, 1/(2h)): a tone at or above the Nyquist
- * frequency aliases on the sample grid and is refused at init.
+ * frequency aliases on the sample grid and is refused at init. So must
+ * |offset| + sum |a_i| be finite, which bounds |y_d| at every t.
  * Time is t0 + k h with an integer k, never accumulated.
  */
 #ifndef PIEZO_REFERENCE_H
@@ -43,8 +44,12 @@ piezo_status piezo_reference_init(piezo_reference *ref, const piezo_reference_pa
                                   double t0, piezo_diag *diag);
 /* Back to sample 0. */
 void piezo_reference_reset(piezo_reference *ref);
-/* Advance to sample k + 1 and update y_d, y_ref. */
+/* Advance to sample k + 1 and update y_d, y_ref. PIEZO_ERR_DIVERGED, state
+ * unchanged, when the time or a tone's phase 2 pi f t overflows. */
 piezo_status piezo_reference_step(piezo_reference *ref);
+/* Invariants of a restored reference (e.g. from a deserialized FMU state):
+ * NULL when its parameters are valid and its outputs finite, else why not. */
+const char *piezo_reference_check(const piezo_reference *ref);
 /* y_d at time t [s]. */
 double piezo_reference_value(const piezo_reference *ref, double t);
 

@@ -72,3 +72,17 @@ piezo_status piezo_tf_step(piezo_tf *tf, double u, double *x_next)
     if (st == PIEZO_OK) piezo_tf_commit(tf, u, *x_next);
     return st;
 }
+
+const char *piezo_tf_check(const piezo_tf *tf)
+{
+    int i;
+    if (!tf) return "transfer function missing";
+    if (tf->delay < 0 || tf->delay > PIEZO_TF_MAX_DELAY) return "tf.delay outside 0..32";
+    if (tf->head < 0 || tf->head >= PIEZO_TF_INPUT_RING) return "tf input ring index out of range";
+    if (!(isfinite(tf->a1) && isfinite(tf->a2) && isfinite(tf->b1) && isfinite(tf->b2)
+          && isfinite(tf->x1) && isfinite(tf->x2)))
+        return "tf coefficients or state not finite";
+    for (i = 0; i < PIEZO_TF_INPUT_RING; ++i)
+        if (!isfinite(tf->u_ring[i])) return "tf input ring not finite";
+    return NULL;
+}

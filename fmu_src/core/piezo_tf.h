@@ -40,4 +40,9 @@ piezo_status piezo_tf_step(piezo_tf *tf, double u, double *x_next);
 piezo_status piezo_tf_eval(const piezo_tf *tf, double u, double *x_next);
 void piezo_tf_commit(piezo_tf *tf, double u, double x_next);
 
+/* Invariants of a restored filter (e.g. from a deserialized FMU state): NULL
+ * when delay and ring index are in range and every value is finite, else a
+ * static text naming the first bad field. */
+const char *piezo_tf_check(const piezo_tf *tf);
+
 #endif

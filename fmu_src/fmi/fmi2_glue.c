@@ -7,9 +7,8 @@
  *
  *   function                         Inst  Init  Step  Term  Err
  *   SetDebugLogging, Reset,            x     x     x     x    x
- *     FreeInstance, SetFMUstate,
+ *     FreeInstance, Get/SetFMUstate,
  *     FreeFMUstate, (De)Serialize*
- *   GetFMUstate                        x     x     x     x    .
  *   SetupExperiment,                   x     .     .     .    .
  *     EnterInitializationMode
  *   ExitInitializationMode             .     x     .     .    .
@@ -29,7 +28,12 @@
  * initialization mode: fix the parameter and call it again). The Error mode
  * is entered only when the core refuses a step the glue had validated (an
  * internal fault): the state is restored to the start of the step and only
- * getters, SetFMUstate, Reset and FreeInstance remain.
+ * getters, the FMU-state functions, Reset and FreeInstance remain.
+ *
+ * Identity: an instance is accepted only by the functions of the FMU binary
+ * that made it (model_guid below), an FMU state only by the instance that made
+ * it; states still allocated at fmi2FreeInstance are freed with it. A NULL
+ * logger callback is refused at fmi2Instantiate (see there).
  *
  * Time is t0 + k h with an integer sample counter k. A communication step H
  * must be n h with n >= 0 (|H - n h| <= 1e-9 max(1, n) h); the n samples are
@@ -62,6 +66,15 @@
 #define INSTANCE_MAGIC 0x50494e53u   /* "PINS" */
 #define STATE_MAGIC    0x50535441u   /* "PSTA" */
 
+/* Which FMU an instance belongs to: the address of this binary's copy of its
+ * GUID. Every FMU binary has its own copy, so one FMU's functions refuse another
+ * FMU's instance (same glue, same magic) even when both are loaded in one
+ * process; the check costs one comparison, no hashing per call. */
+static const char model_guid[] = MODEL_GUID;
+
+/* Most samples since t0: (double)k stays exact and t0 + k h keeps its meaning. */
+#define MAX_SAMPLES 9007199254740992ull     /* 2^53 */
+
 enum {
     MODE_INSTANTIATED = 1,
     MODE_INIT = 2,
@@ -74,8 +87,11 @@ enum {
 
 enum { CAT_EVENTS = 1, CAT_WARNING = 2, CAT_ERROR = 4, CAT_ALL = 7 };
 
+typedef struct fmu_state fmu_state;
+
 typedef struct {
     uint32_t magic;
+    const char *model;          /* model_guid of the binary that made it */
     char *name;
     fmi2CallbackFunctions cb;
     unsigned log_mask;
@@ -90,15 +106,19 @@ typedef struct {
     int warned_read_before_set; /* that warning is given once per instance */
     double *history;            /* exact-mode history, grown by doubling */
     size_t history_capacity;    /* in doubles */
+    fmu_state *states;          /* FMU states not yet freed: fmi2FreeInstance frees them */
     ModelData data;
     ModelData backup;           /* data at the start of a doStep */
     fmu_start_values *start_values;  /* resources/start_values, applied at instantiation and reset */
 } fmu_instance;
 
-/* An FMU state: a copy of everything that defines the instance's future. */
-typedef struct {
+/* An FMU state: a copy of everything that defines the instance's future. It
+ * belongs to the instance that made it (fmi2GetFMUstate, fmi2DeSerializeFMUstate)
+ * and sits in that instance's list until freed. */
+struct fmu_state {
     uint32_t magic;
-    uint64_t model_id;          /* hash of MODEL_GUID */
+    const fmu_instance *owner;
+    fmu_state *prev, *next;     /* the owner's list */
     int mode;
     double t0;
     uint64_t k;
@@ -107,7 +127,7 @@ typedef struct {
     size_t n_history;
     size_t history_capacity;
     double *history;
-} fmu_state;
+};
 
 /* ------------------------------------------------------------------------ */
 /* Logging                                                                   */
@@ -266,7 +286,7 @@ static fmu_instance *get_instance(fmi2Component c, const char *fname, int mask)
 {
     fmu_instance *inst = (fmu_instance *)c;
     char allowed[128];
-    if (inst == NULL || inst->magic != INSTANCE_MAGIC)
+    if (inst == NULL || inst->magic != INSTANCE_MAGIC || inst->model != model_guid)
         return NULL;
     if (!(inst->mode & mask)) {
         mask_names(mask, allowed, sizeof allowed);
@@ -298,12 +318,6 @@ static uint64_t fnv1a(const unsigned char *p, size_t n, uint64_t h)
 
 #define FNV_OFFSET 0xcbf29ce484222325ull
 
-static uint64_t model_id(void)
-{
-    static const char guid[] = MODEL_GUID;
-    return fnv1a((const unsigned char *)guid, sizeof guid - 1, FNV_OFFSET);
-}
-
 /* Make room for `needed` doubles of history (doubling), keeping the content. */
 static int ensure_history(fmu_instance *inst, size_t needed, const char *fname)
 {
@@ -314,14 +328,16 @@ static int ensure_history(fmu_instance *inst, size_t needed, const char *fname)
     cap = inst->history_capacity > 0 ? inst->history_capacity : 4096;
     while (cap < needed) {
         if (cap > SIZE_MAX / 2 / sizeof(double)) {
-            log_error(inst, "%s: exact-mode history of %zu samples is too large", fname, needed);
+            log_error(inst, "%s: exact-mode history of %llu samples is too large", fname,
+                      (unsigned long long)needed);
             return 0;
         }
         cap *= 2;
     }
     p = (double *)inst->cb.allocateMemory(cap, sizeof(double));
     if (p == NULL) {
-        log_error(inst, "%s: out of memory growing the exact-mode history to %zu samples", fname, cap);
+        log_error(inst, "%s: out of memory growing the exact-mode history to %llu samples", fname,
+                  (unsigned long long)cap);
         return 0;
     }
     if (inst->history != NULL) {
@@ -507,7 +523,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     fmu_instance *inst;
     size_t len;
     (void)visible;
-    if (functions == NULL)
+    /* No logger, no instance (as the Modelica Reference FMUs do): every refusal
+     * is explained only through the logger, and a host that cannot hear why a
+     * call failed should learn that at once, not at its first fmi2Error. */
+    if (functions == NULL || functions->logger == NULL)
         return NULL;
     if (instanceName == NULL || instanceName[0] == '\0') {
         log_to(functions, instanceName, fmi2Error, "logStatusError",
@@ -546,6 +565,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     }
     memcpy(inst->name, instanceName, len + 1);
     inst->magic = INSTANCE_MAGIC;
+    inst->model = model_guid;
     inst->cb = *functions;
     inst->log_mask = loggingOn ? CAT_ALL : CAT_ERROR | CAT_WARNING;
     inst->mode = MODE_INSTANTIATED;
@@ -560,19 +580,25 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     return inst;
 }
 
+static void state_free(fmu_instance *inst, fmu_state *st);
+
 void fmi2FreeInstance(fmi2Component c)
 {
-    fmu_instance *inst = (fmu_instance *)c;
+    fmu_instance *inst = get_instance(c, "fmi2FreeInstance", MODE_ALL);
     fmi2CallbackFreeMemory free_memory;
-    if (inst == NULL || inst->magic != INSTANCE_MAGIC)
+    if (inst == NULL)
         return;
     log_event(inst, "fmi2FreeInstance");
+    /* FMU states the host did not free die with their instance */
+    while (inst->states != NULL)
+        state_free(inst, inst->states);
     free_memory = inst->cb.freeMemory;
     if (inst->history != NULL)
         free_memory(inst->history);
     free_memory(inst->name);
     fmu_start_values_free(&inst->start_values, &inst->cb);
     inst->magic = 0;
+    inst->model = NULL;
     free_memory(inst);
 }
 
@@ -838,6 +864,13 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         return fmi2Error;
     }
     n = (uint64_t)n_real;
+    /* the end of the step must be a time: k + n <= 2^53 and t0 + (k + n) h finite */
+    if (n > MAX_SAMPLES - inst->k || !isfinite(inst->t0 + (double)(inst->k + n) * inst->h)) {
+        log_error(inst, "%s: the step from t = %s over %s samples of h = %s ends beyond the FMU's time "
+                  "range (at most 2^53 samples, finite t0 + k h): step refused, state and time unchanged",
+                  fname, real_text(t1, t), real_text(t2, n_real), real_text(t3, inst->h));
+        return fmi2Error;
+    }
     if (inst->stop_time_defined) {
         double t_end = inst->t0 + (double)(inst->k + n) * inst->h;
         double tol_end = fmin(1e-9 * fmax(inst->h, fabs(inst->stop_time)), 1e-3 * inst->h);
@@ -986,14 +1019,15 @@ static fmu_state *checked_state(const fmu_instance *inst, const char *fname, fmi
         log_error(inst, "%s: the FMU state is NULL", fname);
         return NULL;
     }
-    if (st->magic != STATE_MAGIC || st->model_id != model_id()) {
-        log_error(inst, "%s: not an FMU state of %s", fname, MODEL_IDENTIFIER_STRING);
+    if (st->magic != STATE_MAGIC || st->owner != inst) {
+        log_error(inst, "%s: not an FMU state of this %s instance (a state belongs to the instance "
+                  "that made it with fmi2GetFMUstate or fmi2DeSerializeFMUstate)", fname, MODEL_IDENTIFIER_STRING);
         return NULL;
     }
     return st;
 }
 
-/* A state to fill: *slot if it is one of ours, else a new one. */
+/* A state to fill: *slot if it is one of ours, else a new one in the list. */
 static fmu_state *state_slot(fmu_instance *inst, const char *fname, fmi2FMUstate *slot)
 {
     fmu_state *st = (fmu_state *)*slot;
@@ -1006,8 +1040,28 @@ static fmu_state *state_slot(fmu_instance *inst, const char *fname, fmi2FMUstate
     }
     memset(st, 0, sizeof *st);
     st->magic = STATE_MAGIC;
-    st->model_id = model_id();
+    st->owner = inst;
+    st->next = inst->states;
+    if (inst->states != NULL)
+        inst->states->prev = st;
+    inst->states = st;
     return st;
+}
+
+/* Unlink st from its owner's list and free it. */
+static void state_free(fmu_instance *inst, fmu_state *st)
+{
+    if (st->prev != NULL)
+        st->prev->next = st->next;
+    else
+        inst->states = st->next;
+    if (st->next != NULL)
+        st->next->prev = st->prev;
+    if (st->history != NULL)
+        inst->cb.freeMemory(st->history);
+    st->magic = 0;
+    st->owner = NULL;
+    inst->cb.freeMemory(st);
 }
 
 static int state_reserve_history(fmu_instance *inst, const char *fname, fmu_state *st, size_t n)
@@ -1017,7 +1071,7 @@ static int state_reserve_history(fmu_instance *inst, const char *fname, fmu_stat
         return 1;
     p = (double *)inst->cb.allocateMemory(n, sizeof(double));
     if (p == NULL) {
-        log_error(inst, "%s: out of memory for %zu history samples", fname, n);
+        log_error(inst, "%s: out of memory for %llu history samples", fname, (unsigned long long)n);
         return 0;
     }
     if (st->history != NULL)
@@ -1027,20 +1081,18 @@ static int state_reserve_history(fmu_instance *inst, const char *fname, fmu_stat
     return 1;
 }
 
+/* After a failure: a state made by this call goes, a reused one stays. */
 static void state_release(fmu_instance *inst, fmu_state *st, int was_new)
 {
-    if (!was_new)
-        return;
-    if (st->history != NULL)
-        inst->cb.freeMemory(st->history);
-    st->magic = 0;
-    inst->cb.freeMemory(st);
+    if (was_new)
+        state_free(inst, st);
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
 {
     static const char fname[] = "fmi2GetFMUstate";
-    fmu_instance *inst = get_instance(c, fname, MODE_ALL & ~MODE_ERROR);
+    /* allowed in Error too (FMI 2.0): a host may keep the failed state for debugging */
+    fmu_instance *inst = get_instance(c, fname, MODE_ALL);
     fmu_state *st;
     size_t n_hist = 0;
     int was_new;
@@ -1112,7 +1164,7 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
     st = checked_state(inst, fname, *FMUstate);
     if (st == NULL)
         return fmi2Error;
-    state_release(inst, st, 1);
+    state_free(inst, st);
     *FMUstate = NULL;
     return fmi2OK;
 }
@@ -1130,7 +1182,8 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
  *       24    48  model GUID, NUL padded
  *       72     8  sizeof(ModelData)
  *       80     4  byte-order marker 0x01020304 written natively
- *       84     4  FMU mode (1 Instantiated, 2 InitializationMode, 4 StepComplete, 8 Terminated)
+ *       84     4  FMU mode (1 Instantiated, 2 InitializationMode, 4 StepComplete, 8 Terminated,
+ *                 16 Error)
  *       88     8  t0 (IEEE double)
  *       96     8  k, samples since t0
  *      104     8  h (IEEE double)
@@ -1139,6 +1192,15 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)
  *      128     .  ModelData image (sizeof(ModelData) bytes)
  *        .     .  n_history doubles (IEEE, little-endian)
  *    end-8     8  FNV-1a 64 checksum of every preceding byte
+ *
+ * A blob is untrusted input: fmi2DeSerializeFMUstate reads nothing it has not
+ * bounded (sizes compared without arithmetic that can wrap) and accepts only what
+ * a live instance could have saved: the exact GUID field, a known mode, the
+ * time fields of that mode (before initialization k = 0 and h = 0; after it
+ * h = the model's h, k <= 2^53, t0 + k h finite), reserved = 0, finite Reals
+ * and 0/1 Booleans in every variable, and the model's own invariants
+ * (model_check_data: indices, counts, flags, sample counters against k and the
+ * history). Anything else is refused and nothing is changed.
  */
 #define BLOB_MAGIC "PZFMUST1"
 #define BLOB_VERSION 1u
@@ -1193,9 +1255,11 @@ static double get_f64(const unsigned char *p)
     return d;
 }
 
+#define BLOB_MIN_SIZE (BLOB_HEADER + sizeof(ModelData) + 8u)   /* no history */
+
 static size_t blob_size(size_t n_history)
 {
-    return BLOB_HEADER + sizeof(ModelData) + n_history * sizeof(double) + 8u;
+    return BLOB_MIN_SIZE + n_history * sizeof(double);
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size)
@@ -1227,8 +1291,8 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byt
         return fmi2Error;
     total = blob_size(st->n_history);
     if (size < total) {
-        log_error(inst, "%s: buffer of %zu bytes is too small: the state needs %zu (fmi2SerializedFMUstateSize)",
-                  fname, size, total);
+        log_error(inst, "%s: buffer of %llu bytes is too small: the state needs %llu (fmi2SerializedFMUstateSize)",
+                  fname, (unsigned long long)size, (unsigned long long)total);
         return fmi2Error;
     }
     memset(b, 0, total);
@@ -1252,18 +1316,38 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byt
     return fmi2OK;
 }
 
+/* The first variable whose value a live instance could not hold (a non-finite
+ * Real, a Boolean other than 0 or 1), or -1. Outputs count only once the core
+ * is initialized (before that they are recomputed when read). */
+static int invalid_variable(const ModelData *data, int core_ready)
+{
+    int vr;
+    for (vr = 0; vr < (int)MODEL_N_VARIABLES; vr++) {
+        const model_variable *var = &model_variables[vr];
+        const char *p = (const char *)data + var->offset;
+        if (var->causality == MODEL_OUTPUT && !core_ready)
+            continue;
+        if (var->type == MODEL_REAL && !isfinite(*(const double *)p))
+            return vr;
+        if (var->type == MODEL_BOOLEAN && *(const int *)p != 0 && *(const int *)p != 1)
+            return vr;
+    }
+    return -1;
+}
+
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate *FMUstate)
 {
     static const char fname[] = "fmi2DeSerializeFMUstate";
     fmu_instance *inst = get_instance(c, fname, MODE_ALL);
     const unsigned char *b = (const unsigned char *)serializedState;
-    char guid[BLOB_GUID_LEN];
+    char guid[BLOB_GUID_LEN], expected_guid[BLOB_GUID_LEN];
+    char t1[REAL_TEXT_SIZE], t2[REAL_TEXT_SIZE];
     uint32_t bom = BLOB_BOM;
     uint64_t total, n_hist64, k;
     size_t n_hist, i, off;
-    int mode, was_new, core_ready;
-    double t0, h;
+    int mode, core_ready, bad_vr;
+    double t0, h, *history = NULL;
     const char *fault;
     fmu_state *st;
     ModelData *data;
@@ -1272,8 +1356,8 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
         || null_arg(inst, fname, "FMUstate", FMUstate))
         return fmi2Error;
     if (size < BLOB_HEADER + 8u || memcmp(b, BLOB_MAGIC, 8) != 0) {
-        log_error(inst, "%s: refused: not a serialized %s state (bad magic or %zu bytes only)",
-                  fname, MODEL_IDENTIFIER_STRING, size);
+        log_error(inst, "%s: refused: not a serialized %s state (bad magic or %llu bytes only)",
+                  fname, MODEL_IDENTIFIER_STRING, (unsigned long long)size);
         return fmi2Error;
     }
     if (get_u32(b + 8) != BLOB_VERSION || get_u32(b + 12) != BLOB_HEADER) {
@@ -1283,84 +1367,116 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     }
     total = get_u64(b + 16);
     if (total != (uint64_t)size) {
-        log_error(inst, "%s: refused: the blob says %llu bytes but %zu were given (truncated or padded)",
-                  fname, (unsigned long long)total, size);
+        log_error(inst, "%s: refused: the blob says %llu bytes but %llu were given (truncated or padded)",
+                  fname, (unsigned long long)total, (unsigned long long)size);
         return fmi2Error;
     }
-    memcpy(guid, b + 24, BLOB_GUID_LEN);
-    guid[BLOB_GUID_LEN - 1] = '\0';
-    if (strcmp(guid, MODEL_GUID) != 0) {
+    /* the whole field, padding included: serialization writes exactly this */
+    memset(expected_guid, 0, sizeof expected_guid);
+    memcpy(expected_guid, MODEL_GUID, strlen(MODEL_GUID) < BLOB_GUID_LEN ? strlen(MODEL_GUID) : BLOB_GUID_LEN - 1);
+    if (memcmp(b + 24, expected_guid, BLOB_GUID_LEN) != 0) {
+        memcpy(guid, b + 24, BLOB_GUID_LEN);
+        guid[BLOB_GUID_LEN - 1] = '\0';
+        for (i = 0; guid[i] != '\0'; i++)
+            if ((unsigned char)guid[i] < 0x20 || (unsigned char)guid[i] > 0x7e)
+                guid[i] = '?';
         log_error(inst, "%s: refused: the state belongs to GUID %s, not %s %s",
                   fname, guid, MODEL_IDENTIFIER_STRING, MODEL_GUID);
         return fmi2Error;
     }
     if (get_u64(b + 72) != (uint64_t)sizeof(ModelData) || memcmp(b + 80, &bom, 4) != 0) {
-        log_error(inst, "%s: refused: model data layout differs (size %llu vs %zu, or byte order): "
+        log_error(inst, "%s: refused: model data layout differs (size %llu vs %llu, or byte order): "
                   "the state comes from another build or platform",
-                  fname, (unsigned long long)get_u64(b + 72), sizeof(ModelData));
+                  fname, (unsigned long long)get_u64(b + 72), (unsigned long long)sizeof(ModelData));
         return fmi2Error;
     }
+    /* total = BLOB_MIN_SIZE + 8 n_history, compared without arithmetic that can wrap */
     n_hist64 = get_u64(b + 112);
-    if (n_hist64 > (uint64_t)(SIZE_MAX / sizeof(double))
-        || (uint64_t)blob_size(0) + n_hist64 * sizeof(double) != total) {
+    if (total < (uint64_t)BLOB_MIN_SIZE || (total - BLOB_MIN_SIZE) % 8u != 0
+        || (total - BLOB_MIN_SIZE) / 8u != n_hist64) {
         log_error(inst, "%s: refused: history length %llu does not match the blob size %llu",
                   fname, (unsigned long long)n_hist64, (unsigned long long)total);
         return fmi2Error;
     }
-    n_hist = (size_t)n_hist64;
+    n_hist = (size_t)n_hist64;  /* < size, so it fits */
     off = (size_t)total - 8u;
     if (fnv1a(b, off, FNV_OFFSET) != get_u64(b + off)) {
         log_error(inst, "%s: refused: checksum mismatch (the blob is corrupted)", fname);
+        return fmi2Error;
+    }
+    if (get_u64(b + 120) != 0) {
+        log_error(inst, "%s: refused: reserved header field is %llu, not 0", fname,
+                  (unsigned long long)get_u64(b + 120));
         return fmi2Error;
     }
     mode = (int)get_u32(b + 84);
     t0 = get_f64(b + 88);
     k = get_u64(b + 96);
     h = get_f64(b + 104);
-    if (mode != MODE_INSTANTIATED && mode != MODE_INIT && mode != MODE_STEP_COMPLETE && mode != MODE_TERMINATED) {
+    if (mode != MODE_INSTANTIATED && mode != MODE_INIT && mode != MODE_STEP_COMPLETE
+        && mode != MODE_TERMINATED && mode != MODE_ERROR) {
         log_error(inst, "%s: refused: invalid FMU mode %d", fname, mode);
         return fmi2Error;
     }
     core_ready = (mode & MODE_CORE_READY) != 0;
-    if (!isfinite(t0) || !isfinite(h) || (core_ready && !(h > 0.0))) {
-        log_error(inst, "%s: refused: invalid time t0 = %g, h = %g", fname, t0, h);
-        return fmi2Error;
-    }
     data = &inst->backup;   /* the instance's scratch copy (used by fmi2DoStep only) */
     memcpy(data, b + BLOB_HEADER, sizeof *data);
-    fault = model_check_data(data, core_ready);
-    if (fault != NULL) {
-        log_error(inst, "%s: refused: invalid model data (%s)", fname, fault);
+    /* time: before initialization nothing has run (k = 0, h not yet fixed);
+     * after it h is the model's, and t0 + k h is a time on the grid */
+    if (!isfinite(t0)
+        || (!core_ready && (k != 0 || h != 0.0))
+        || (core_ready && !(h > 0.0 && h == model_sample_period(data) && k <= MAX_SAMPLES
+                            && isfinite(t0 + (double)k * h)))) {
+        log_error(inst, "%s: refused: invalid time fields for state %s: t0 = %s, k = %llu, h = %s",
+                  fname, mode_name(mode), real_text(t1, t0), (unsigned long long)k, real_text(t2, h));
         return fmi2Error;
     }
-    if (core_ready) {
-        size_t needed = model_history_needed(data);
-        if (n_hist != needed) {
-            log_error(inst, "%s: refused: %zu history samples stored, the model needs %zu", fname, n_hist, needed);
+    bad_vr = invalid_variable(data, core_ready);
+    if (bad_vr >= 0) {
+        log_error(inst, "%s: refused: variable %s holds a value no instance can have (%s)", fname,
+                  model_variables[bad_vr].name,
+                  model_variables[bad_vr].type == MODEL_REAL ? "not finite" : "Boolean other than 0 or 1");
+        return fmi2Error;
+    }
+    if (core_ready ? n_hist != model_history_needed(data) : n_hist != 0) {
+        log_error(inst, "%s: refused: %llu history samples stored, the model needs %llu", fname,
+                  (unsigned long long)n_hist, (unsigned long long)(core_ready ? model_history_needed(data) : 0));
+        return fmi2Error;
+    }
+    if (n_hist > 0) {
+        history = (double *)inst->cb.allocateMemory(n_hist, sizeof(double));
+        if (history == NULL) {
+            log_error(inst, "%s: out of memory for %llu history samples", fname, (unsigned long long)n_hist);
             return fmi2Error;
         }
-    } else if (n_hist != 0) {
-        log_error(inst, "%s: refused: history stored for a state before initialization", fname);
+        off = BLOB_HEADER + sizeof(ModelData);
+        for (i = 0; i < n_hist; i++, off += 8)
+            history[i] = get_f64(b + off);
+    }
+    fault = model_check_data(data, core_ready, t0, k, history, n_hist);
+    if (fault != NULL) {
+        log_error(inst, "%s: refused: invalid model data (%s)", fname, fault);
+        if (history != NULL)
+            inst->cb.freeMemory(history);
         return fmi2Error;
     }
 
-    was_new = *FMUstate == NULL;
     st = state_slot(inst, fname, FMUstate);
-    if (st == NULL)
-        return fmi2Error;
-    if (!state_reserve_history(inst, fname, st, n_hist)) {
-        state_release(inst, st, was_new);
+    if (st == NULL) {
+        if (history != NULL)
+            inst->cb.freeMemory(history);
         return fmi2Error;
     }
+    if (st->history != NULL)
+        inst->cb.freeMemory(st->history);
+    st->history = history;
+    st->history_capacity = n_hist;
+    st->n_history = n_hist;
     st->mode = mode;
     st->t0 = t0;
     st->k = k;
     st->h = h;
     memcpy(&st->data, data, sizeof *data);
-    off = BLOB_HEADER + sizeof(ModelData);
-    for (i = 0; i < n_hist; i++, off += 8)
-        st->history[i] = get_f64(b + off);
-    st->n_history = n_hist;
     *FMUstate = st;
     return fmi2OK;
 }

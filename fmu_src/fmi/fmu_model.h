@@ -21,6 +21,7 @@
 #define FMU_MODEL_H
 
 #include <stddef.h>
+#include <stdint.h>
 #include "piezo_status.h"
 #include "config.h"
 
@@ -80,9 +81,18 @@ int model_terminate_warning(const ModelData *data, char *text, size_t size);
  * monitor bound was exceeded), 1 if written; else the glue's generic text. */
 int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size);
 
-/* Sanity check of restored (deserialized) data: NULL when every index and
- * count the core uses is in range, else a static description of the fault.
- * core_initialized: the state was saved after fmi2ExitInitializationMode. */
-const char *model_check_data(const ModelData *data, int core_initialized);
+/* Validation of restored (deserialized, untrusted) data against the model's
+ * invariants, the one place that knows them: NULL when data could have been
+ * saved by a live instance, else a static description of the first fault.
+ * The glue has already checked the header, the time fields, that every Real
+ * variable is finite and every Boolean 0 or 1, and that n_history equals
+ * model_history_needed(data). The model checks the rest: every index, count
+ * and flag of its core state, its sample counters against k (and t0 where it
+ * keeps time), that the core agrees with its parameters where it copies them,
+ * and the exact-mode history (history[0..n_history-1], NULL when empty).
+ * core_initialized: the state was saved after fmi2ExitInitializationMode
+ * (before it, only the parameters and inputs matter: model_init validates them). */
+const char *model_check_data(const ModelData *data, int core_initialized, double t0, uint64_t k,
+                             const double *history, size_t n_history);
 
 #endif

@@ -1,0 +1,269 @@
+/*
+ * fuzz_seeds.c - writes the seed corpora of the fuzz targets of the FMU it is
+ * compiled with: real serialized states (every mode: Instantiated,
+ * InitializationMode, StepComplete at several times, exact-mode creep where the
+ * FMU has it, feedthrough where it has it, Terminated, Error) for
+ * fuzz_deserialize, and programs for fuzz_run (defaults, each parameter nudged,
+ * exact creep, state round trips and restores).
+ *
+ * usage: fuzz_seeds DIR   (writes DIR/deserialize/ and DIR/run/, which must exist)
+ */
+#include <stdio.h>
+
+#include "fuzz_common.h"
+
+static const char *out_dir;
+static int n_written;
+
+static void write_seed(const char *kind, const char *name, const void *data, size_t size)
+{
+    char path[4096];
+    FILE *f;
+    snprintf(path, sizeof path, "%s/%s/%s.bin", out_dir, kind, name);
+    f = fopen(path, "wb");
+    if (f == NULL || fwrite(data, 1, size, f) != size) {
+        fprintf(stderr, "cannot write %s\n", path);
+        exit(1);
+    }
+    fclose(f);
+    n_written++;
+}
+
+static int vr_named(const char *name)
+{
+    int vr;
+    for (vr = 0; vr < (int)MODEL_N_VARIABLES; vr++)
+        if (strcmp(model_variables[vr].name, name) == 0)
+            return vr;
+    return -1;
+}
+
+static void set_named(fmi2Component c, const char *name, double value)
+{
+    int vr = vr_named(name);
+    fmi2ValueReference ref = (fmi2ValueReference)vr;
+    if (vr < 0)
+        return;
+    if (model_variables[vr].type == MODEL_REAL)
+        fmi2SetReal(c, &ref, 1, &value);
+    else if (model_variables[vr].type == MODEL_INTEGER) {
+        fmi2Integer i = (fmi2Integer)value;
+        fmi2SetInteger(c, &ref, 1, &i);
+    } else {
+        fmi2Boolean b = value != 0.0;
+        fmi2SetBoolean(c, &ref, 1, &b);
+    }
+}
+
+static void set_inputs(fmi2Component c, int k, double h)
+{
+    int vr, j = 0;
+    for (vr = 0; vr < (int)MODEL_N_VARIABLES; vr++)
+        if (model_variables[vr].causality == MODEL_INPUT) {
+            double u = 3.0 * sin(2.0 * 3.14159265358979323846 * (5.0 + j) * k * h) + 2.0 + j;
+            fmi2ValueReference ref = (fmi2ValueReference)vr;
+            fmi2SetReal(c, &ref, 1, &u);
+            j++;
+        }
+}
+
+static void save_state(fmi2Component c, const char *name, unsigned force_mode)
+{
+    fmi2FMUstate s = NULL;
+    size_t size = 0;
+    uint8_t *blob;
+    if (fmi2GetFMUstate(c, &s) != fmi2OK || fmi2SerializedFMUstateSize(c, s, &size) != fmi2OK)
+        exit(1);
+    blob = (uint8_t *)malloc(size);
+    if (blob == NULL || fmi2SerializeFMUstate(c, s, (fmi2Byte *)blob, size) != fmi2OK)
+        exit(1);
+    if (force_mode != 0) {
+        blob[84] = (uint8_t)force_mode;   /* the mode field; the checksum is the fuzz harness's to fix */
+        fuzz_put_u64(blob + size - 8, fuzz_fnv1a(blob, size - 8));
+    }
+    write_seed("deserialize", name, blob, size);
+    if (strcmp(name, "step300") == 0) {
+        /* the header alone, with the checksum after it: a truncated real state */
+        char header_name[64];
+        memcpy(blob + 128, blob + size - 8, 8);
+        snprintf(header_name, sizeof header_name, "%s_header_only", name);
+        write_seed("deserialize", header_name, blob, 136);
+    }
+    free(blob);
+    fmi2FreeFMUstate(c, &s);
+}
+
+/* An instance initialized with up to two named parameters, stepped n samples. */
+static fmi2Component run(const char *p1, double v1, const char *p2, double v2, int n)
+{
+    fmi2CallbackFunctions cb = fuzz_callbacks();
+    fmi2Component c = fmi2Instantiate("seed", fmi2CoSimulation, MODEL_GUID, "", &cb, fmi2False, fmi2False);
+    double h = 0.0;
+    fmi2ValueReference h_ref = (fmi2ValueReference)vr_named("h");
+    int k;
+    fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0);
+    fmi2EnterInitializationMode(c);
+    if (p1)
+        set_named(c, p1, v1);
+    if (p2)
+        set_named(c, p2, v2);
+    if (fmi2ExitInitializationMode(c) != fmi2OK)
+        exit(1);
+    fmi2GetReal(c, &h_ref, 1, &h);
+    for (k = 0; k < n; k++) {
+        set_inputs(c, k, h);
+        if (fmi2DoStep(c, k * h, h, fmi2True) > fmi2Warning)
+            exit(1);
+    }
+    return c;
+}
+
+static void deserialize_seeds(void)
+{
+    fmi2CallbackFunctions cb = fuzz_callbacks();
+    fmi2Component c = fmi2Instantiate("seed", fmi2CoSimulation, MODEL_GUID, "", &cb, fmi2False, fmi2False);
+    save_state(c, "instantiated", 0);
+    fmi2SetupExperiment(c, fmi2False, 0.0, 1.25, fmi2False, 0.0);
+    fmi2EnterInitializationMode(c);
+    save_state(c, "initialization", 0);
+    fmi2FreeInstance(c);
+
+    c = run(NULL, 0, NULL, 0, 0);
+    save_state(c, "step0", 0);
+    fmi2FreeInstance(c);
+    c = run(NULL, 0, NULL, 0, 300);
+    save_state(c, "step300", 0);
+    fmi2Terminate(c);
+    save_state(c, "terminated", 0);
+    fmi2FreeInstance(c);
+    c = run(NULL, 0, NULL, 0, 40);
+    save_state(c, "error", 16);   /* a state saved in Error has this model data */
+    fmi2FreeInstance(c);
+    if (vr_named("creep.exact") >= 0) {
+        c = run("creep.exact", 1, NULL, 0, 64);
+        save_state(c, "exact64", 0);
+        fmi2FreeInstance(c);
+    }
+    if (vr_named("sensor.noise_rms") >= 0) {
+        c = run("sensor.noise_rms", 0.001, "sensor.resolution", 0.002, 100);
+        save_state(c, "sensor100", 0);
+        fmi2FreeInstance(c);
+    }
+    if (vr_named("mv.feedthrough") >= 0) {
+        c = run("mv.feedthrough", 1, "mv.delay", 0, 100);
+        save_state(c, "feedthrough100", 0);
+        fmi2FreeInstance(c);
+    }
+    if (vr_named("amplitude[1]") >= 0) {
+        c = run("amplitude[1]", 5, "frequency[1]", 10, 100);
+        save_state(c, "tone100", 0);
+        fmi2FreeInstance(c);
+    }
+}
+
+/* fuzz_run programs */
+typedef struct {
+    uint8_t bytes[4096];
+    size_t n;
+} program;
+
+static void put(program *p, uint8_t b)
+{
+    if (p->n < sizeof p->bytes)
+        p->bytes[p->n++] = b;
+}
+
+static void put_value(program *p, uint8_t kind, uint64_t bits)
+{
+    int i;
+    put(p, kind);
+    for (i = 0; i < 8; i++)
+        put(p, (uint8_t)(bits >> (8 * i)));
+}
+
+static int param_index(const char *name)
+{
+    int vr, i = 0;
+    for (vr = 0; vr < (int)MODEL_N_VARIABLES; vr++) {
+        if (model_variables[vr].causality != MODEL_PARAMETER)
+            continue;
+        if (strcmp(model_variables[vr].name, name) == 0)
+            return i;
+        i++;
+    }
+    return -1;
+}
+
+static int count(model_causality causality)
+{
+    int vr, n = 0;
+    for (vr = 0; vr < (int)MODEL_N_VARIABLES; vr++)
+        n += model_variables[vr].causality == causality;
+    return n;
+}
+
+/* steps of `samples` samples each with the inputs at k-dependent small values */
+static void put_steps(program *p, int n_ops, int samples)
+{
+    int i, j, n_inputs = count(MODEL_INPUT);
+    for (i = 0; i < n_ops; i++) {
+        put(p, (uint8_t)(8 * samples));   /* op % 8 == 0: set inputs, then step */
+        for (j = 0; j < n_inputs; j++)
+            put_value(p, 2, (uint64_t)(uint16_t)(int16_t)(64.0 * 3.0 * sin(0.3 * i + j)));
+    }
+}
+
+static void run_seeds(void)
+{
+    program p;
+    char name[64];
+    int i, n_params = count(MODEL_PARAMETER);
+
+    memset(&p, 0, sizeof p);
+    put(&p, 0);
+    put_steps(&p, 120, 1);
+    write_seed("run", "defaults", p.bytes, p.n);
+
+    memset(&p, 0, sizeof p);
+    put(&p, 0);
+    put_steps(&p, 40, 3);
+    put(&p, 6);                 /* round trip */
+    put(&p, 7);                 /* save */
+    put_steps(&p, 20, 2);
+    put(&p, 7);                 /* restore */
+    put_steps(&p, 20, 1);
+    write_seed("run", "states", p.bytes, p.n);
+
+    if (param_index("creep.exact") >= 0) {
+        memset(&p, 0, sizeof p);
+        put(&p, 1);
+        put(&p, (uint8_t)param_index("creep.exact"));
+        put_value(&p, 2, 1);
+        put_steps(&p, 60, 2);
+        put(&p, 6);
+        write_seed("run", "exact", p.bytes, p.n);
+    }
+    /* each parameter nudged from its start value (kind 1: start x 2^(1/16)) */
+    for (i = 0; i < n_params; i++) {
+        memset(&p, 0, sizeof p);
+        put(&p, 1 | (uint8_t)(32 * (i % 8)));
+        put(&p, (uint8_t)i);
+        put_value(&p, 1, 1);
+        put_steps(&p, 30, 1);
+        snprintf(name, sizeof name, "param%02d", i);
+        write_seed("run", name, p.bytes, p.n);
+    }
+}
+
+int main(int argc, char **argv)
+{
+    if (argc != 2) {
+        fprintf(stderr, "usage: %s DIR\n", argv[0]);
+        return 2;
+    }
+    out_dir = argv[1];
+    deserialize_seeds();
+    run_seeds();
+    printf("%s: %d seeds written to %s\n", MODEL_IDENTIFIER_STRING, n_written, out_dir);
+    return 0;
+}
