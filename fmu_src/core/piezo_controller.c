@@ -266,21 +266,31 @@ static double rls_update(const piezo_controller *c, double y, piezo_controller_s
     return e;
 }
 
+/* 1 when every x[i] is finite. Inf and NaN have an exponent field of all ones:
+ * (bits & EXP) + EXP_LSB then carries into the sign bit, and no other double
+ * does, so OR-ing those sums over the array and testing the sign bit needs no
+ * branch per element (the check runs on every sample). */
 static int all_finite(const double *x, int n)
 {
+    const uint64_t exp_mask = 0x7FF0000000000000ull, exp_lsb = 0x0010000000000000ull;
+    uint64_t any = 0, bits;
     int i;
-    for (i = 0; i < n; ++i)
-        if (!isfinite(x[i])) return 0;
-    return 1;
+    for (i = 0; i < n; ++i) {
+        memcpy(&bits, &x[i], sizeof bits);
+        any |= (bits & exp_mask) + exp_lsb;
+    }
+    return (any >> 63) == 0;
 }
 
-/* The estimates and the next states of an evaluated sample are finite. */
-static int sample_state_finite(const piezo_controller *c, const piezo_controller_sample *s)
+/* The estimates and the covariance of an evaluated sample are finite. The
+ * operators' next states need no check of their own: each operator's output
+ * is a finite-coefficient sum over its next states (SOE: sum c_i S_i; PI:
+ * w0 u + sum w_i z_i), and an Inf or NaN state makes that sum Inf or NaN
+ * (0 * Inf is NaN), so a finite output (checked where the operator runs) means
+ * finite states. */
+static int sample_state_finite(const piezo_controller_sample *s)
 {
-    if (!all_finite(s->out.theta, 4)) return 0;
-    if (s->rls_updated && !all_finite(s->P, 16)) return 0;
-    if (!c->inv_creep.exact && !all_finite(s->creep_next, c->inv_creep.n_terms)) return 0;
-    return all_finite(s->inv_z, c->inv_pi.m) && all_finite(s->fwd_z, c->fwd_pi.m);
+    return all_finite(s->out.theta, 4) && (!s->rls_updated || all_finite(s->P, 16));
 }
 
 /* Evaluate sample k into *s without changing *c (the caller guarantees
@@ -296,7 +306,7 @@ static piezo_status controller_eval(const piezo_controller *c, double y_ref, dou
     double pred_error, numerator, q, r, v;
     const double *theta;
     piezo_status st;
-    int i, d = c->d, saturated = 0;
+    int i, d = c->d, saturated = 0, operators_finite;
 
     memset(&s->out, 0, sizeof s->out);   /* defined padding: FMU states are hashed bytewise */
     s->k = c->k;
@@ -327,19 +337,21 @@ static piezo_status controller_eval(const piezo_controller *c, double y_ref, dou
          * voltage, so the operator memories and the MV past stay consistent:
          * r_eff = P[v_sat], q_eff from r_eff = gain (q_eff + memory). The
          * operators are re-evaluated from the committed (untouched) state. */
-        double r_eff, memory;
+        double r_eff, memory, v_resync;
         saturated = 1;
         v = v > c->sat_v_max ? c->sat_v_max : c->sat_v_min;
         piezo_pi_eval(&c->fwd_pi, v, s->fwd_z, &r_eff);
-        st = piezo_pi_inverse_eval(&c->inv_pi, r_eff, s->inv_z, &r);  /* re-sync the inverse states */
+        st = piezo_pi_inverse_eval(&c->inv_pi, r_eff, s->inv_z, &v_resync);  /* re-sync the inverse states */
         if (st != PIEZO_OK) return PIEZO_ERR_DIVERGED;
         piezo_gl_eval(&c->inv_creep, 0.0, history, capacity, s->creep_next, &memory);
         q = (r_eff - memory) / c->inv_creep.gain;
         st = piezo_gl_eval(&c->inv_creep, q, history, capacity, s->creep_next, &r);
         if (st != PIEZO_OK) return PIEZO_ERR_DIVERGED;
+        operators_finite = isfinite(r_eff) && isfinite(v_resync) && isfinite(r);
         s->sat_hold = d + 1;   /* no adaptation until the clipped sample leaves the regressor */
     } else {
         piezo_pi_eval(&c->fwd_pi, v, s->fwd_z, &r);
+        operators_finite = isfinite(r);   /* v is checked below; r of the inverse creep made it */
         s->sat_hold = c->sat_hold > 0 ? c->sat_hold - 1 : c->sat_hold;
     }
 
@@ -353,7 +365,7 @@ static piezo_status controller_eval(const piezo_controller *c, double y_ref, dou
     /* every output (the estimates too) and the state the sample leaves behind are finite,
      * or the sample is refused: the RLS covariance can overflow (phi P phi^T) while theta
      * stays finite, and the operators' next states are what the next sample starts from */
-    if (!(isfinite(v) && isfinite(q) && isfinite(pred_error)) || !sample_state_finite(c, s))
+    if (!(isfinite(v) && isfinite(q) && isfinite(pred_error) && operators_finite) || !sample_state_finite(s))
         return PIEZO_ERR_DIVERGED;
     s->reaches_window = c->divergence_samples > 0 && s->run_large_error >= c->divergence_samples;
     return PIEZO_OK;
