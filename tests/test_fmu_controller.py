@@ -583,3 +583,49 @@ def test_unstable_loop_fails_loudly(controller, piezo_stage, make_fmu):
     ctrl.get("v")                                   # getters stay allowed
     with pytest.raises(FMICallException):
         ctrl.step()
+
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_a_refused_sample_rolls_the_whole_step_back(controller, make_fmu, exact):
+    """The monitor's window (3 samples) completes at the third sample of a 5-sample doStep
+    (open loop, y_meas held at 5 um against a model at rest: |pred_error| > 1 um from the
+    first sample). The step fails and the FMU keeps the state of the step's start: every
+    output equals the one read before the step, and a continuation from there equals a twin
+    that never tried the step (bitwise). Reference for the sample count: the same inputs
+    stepped one sample at a time fail exactly at the third sample."""
+    params = {"monitor.divergence_samples": 3, "rls.enabled": False, "creep.exact": exact}
+    inputs = {"y_ref": 0.0, "y_meas": 5.0}
+    single = make_fmu(controller)
+    single.initialize(params)
+    single.set(inputs)
+    single.step()
+    single.step()
+    with pytest.raises(FMICallException):
+        single.step()                                   # the third sample completes the window
+
+    fmu, twin = make_fmu(controller), make_fmu(controller)
+    for f in (fmu, twin):
+        f.initialize(params)
+        f.set({"y_ref": 1.0, "y_meas": 0.5})
+        f.step()                                        # one ordinary sample first
+    before = fmu.get_reals(OUTPUTS)
+    fmu.set(inputs)
+    with pytest.raises(FMICallException):
+        fmu.slave.doStep(fmu.time, 5 * H)
+    assert "the closed loop is unstable" in " ".join(fmu.errors())
+    assert fmu.get_reals(OUTPUTS) == before             # rolled back to the start of the step
+    state = fmu.slave.getFMUstate()                     # allowed in Error
+    blob = fmu.slave.serializeFMUstate(state)
+    fmu.slave.freeFMUstate(state)
+    restored = twin.slave.deSerializeFMUstate(blob)
+    twin.set(inputs)                                    # the held inputs are part of the state
+    assert twin.get_reals(OUTPUTS) == before            # (and brings its cached outputs up to date)
+    twin_state = twin.slave.getFMUstate()
+    twin_blob = twin.slave.serializeFMUstate(twin_state)
+    twin.slave.freeFMUstate(twin_state)
+    twin.slave.freeFMUstate(restored)
+    # the same model data bytes (sizeof(ModelData) at offset 72, the image from offset 128;
+    # the mode at offset 84 differs: Error 16 vs StepComplete 4). The exact-mode history slots
+    # of the refused samples are written but not committed; the next step rewrites them.
+    size = int.from_bytes(blob[72:80], "little")
+    assert blob[128:128 + size] == twin_blob[128:128 + size]

@@ -9,6 +9,10 @@
 #include "piezo_controller.h"
 
 #define MODEL_IDENTIFIER_STRING "AdaptiveCompoundController"
+/* optional hooks of fmu_model.h: it has direct feedthrough (mv.feedthrough) and messages */
+#define MODEL_HAS_FEEDTHROUGH 1
+#define MODEL_HAS_MESSAGES 1
+
 #define MODEL_GUID "{16db41db-eca1-4957-ad18-19b12743e5cb}"
 
 typedef enum {
@@ -58,6 +62,10 @@ typedef struct {
     piezo_controller ctrl;          /* core state (committed samples only) */
     piezo_controller_output out;    /* outputs: the last committed sample, or with
                                        mv.feedthrough a peek with the held inputs */
+    piezo_controller_sample pending;/* mv.feedthrough: the sample evaluated for the
+                                       outputs, committed by the next doStep when
+                                       nothing changed in between (never trusted
+                                       otherwise, so a restored copy is never used) */
     int said_saturated;             /* the first-clipping warning was logged */
     int said_large_error;           /* the first large-pred_error warning was logged */
 } ModelData;

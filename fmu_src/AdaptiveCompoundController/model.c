@@ -100,17 +100,26 @@ size_t model_history_needed(const ModelData *data)
     return piezo_controller_history_needed(&data->ctrl);
 }
 
-piezo_status model_step(ModelData *data, double *history, size_t history_capacity)
+piezo_status model_step(ModelData *data, double *history, size_t history_capacity,
+                        int outputs_current)
 {
+    /* mv.feedthrough: the sample the outputs were read from is committed as is
+     * (computed once); the commit refuses it if it is not this sample's */
+    if (outputs_current && data->params.mv_feedthrough)
+        return piezo_controller_commit(&data->ctrl, &data->pending, NULL);
     return piezo_controller_step(&data->ctrl, data->y_ref, data->y_meas,
                                  history, history_capacity, NULL);
 }
 
 piezo_status model_update_outputs(ModelData *data, double *history, size_t history_capacity)
 {
-    if (data->params.mv_feedthrough)
-        return piezo_controller_peek(&data->ctrl, data->y_ref, data->y_meas,
-                                     history, history_capacity, &data->out);
+    if (data->params.mv_feedthrough) {
+        piezo_status st = piezo_controller_evaluate(&data->ctrl, data->y_ref, data->y_meas,
+                                                    history, history_capacity, &data->pending);
+        if (st == PIEZO_OK)
+            data->out = data->pending.out;
+        return st;
+    }
     data->out = data->ctrl.out;     /* published at the end of the last step */
     return PIEZO_OK;
 }

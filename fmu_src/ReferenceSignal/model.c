@@ -66,8 +66,10 @@ size_t model_history_needed(const ModelData *data)
     return 0;
 }
 
-piezo_status model_step(ModelData *data, double *history, size_t history_capacity)
+piezo_status model_step(ModelData *data, double *history, size_t history_capacity,
+                        int outputs_current)
 {
+    (void)outputs_current;      /* no direct feedthrough: nothing evaluated ahead */
     (void)history;
     (void)history_capacity;
     return piezo_reference_step(&data->ref);
@@ -80,30 +82,6 @@ piezo_status model_update_outputs(ModelData *data, double *history, size_t histo
     (void)history;
     (void)history_capacity;
     return PIEZO_OK;
-}
-
-int model_direct_feedthrough(const ModelData *data)
-{
-    (void)data;
-    return 0;
-}
-
-int model_step_warning(ModelData *data, double start_time, char *text, size_t size)
-{
-    (void)data; (void)start_time; (void)text; (void)size;
-    return 0;
-}
-
-int model_terminate_warning(const ModelData *data, char *text, size_t size)
-{
-    (void)data; (void)text; (void)size;
-    return 0;
-}
-
-int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size)
-{
-    (void)data; (void)st; (void)text; (void)size;
-    return 0;
 }
 
 const char *model_check_data(const ModelData *data, int core_initialized, double t0, uint64_t k,

@@ -889,19 +889,26 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         return fmi2OK;
     }
 
-    memcpy(&inst->backup, &inst->data, sizeof inst->data);
+    /* A refused sample changes nothing (model_step), so only a step of several
+     * samples needs a copy to roll back the samples before the refused one. */
+    if (n > 1)
+        memcpy(&inst->backup, &inst->data, sizeof inst->data);
     for (i = 0; i < n; i++) {
         piezo_diag diag = { NULL, NULL, 0.0 };
         piezo_status st;
         /* grow the exact-mode history (by doubling) before the core needs it */
         needed = model_history_needed(&inst->data);
         if (needed > inst->history_capacity && !ensure_history(inst, needed, fname)) {
-            memcpy(&inst->data, &inst->backup, sizeof inst->data);
+            if (i > 0)
+                memcpy(&inst->data, &inst->backup, sizeof inst->data);
             return fmi2Error;
         }
-        st = model_step(&inst->data, inst->history, inst->history_capacity);
+        /* the first sample may reuse what the outputs were computed from */
+        st = model_step(&inst->data, inst->history, inst->history_capacity,
+                        i == 0 && inst->outputs_valid);
         if (st != PIEZO_OK) {
-            memcpy(&inst->data, &inst->backup, sizeof inst->data);
+            if (i > 0)
+                memcpy(&inst->data, &inst->backup, sizeof inst->data);
             log_core_failure(inst, fname, st, &diag);
             log_error(inst, "%s: the model refused sample %llu of the step from t = %s; the state "
                       "is restored to that time and the FMU enters state Error (use fmi2SetFMUstate "

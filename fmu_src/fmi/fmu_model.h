@@ -57,18 +57,40 @@ double model_sample_period(const ModelData *data);
  * 0 when the model keeps no history. Grows by two per step (x and w_j). */
 size_t model_history_needed(const ModelData *data);
 
-/* Advance one sample with the held inputs. May leave data modified on
- * failure: the glue restores its own copy. */
-piezo_status model_step(ModelData *data, double *history, size_t history_capacity);
+/* Advance one sample with the held inputs. A refusal changes nothing in
+ * data (the core steps validate and evaluate before they commit), so the
+ * glue copies the data only to roll back a step of several samples.
+ * outputs_current: the output values were computed by model_update_outputs
+ * from this very data and nothing changed since (no set, no step, no state
+ * restored); a model with direct feedthrough then commits the sample it
+ * evaluated for them instead of computing it again. */
+piezo_status model_step(ModelData *data, double *history, size_t history_capacity,
+                        int outputs_current);
 
 /* Fill the output values of the current sample from the core and the held
  * inputs, committing nothing (direct feedthrough is computed here). */
 piezo_status model_update_outputs(ModelData *data, double *history, size_t history_capacity);
 
+/*
+ * Optional hooks. A model that has them defines in its config.h
+ *   MODEL_HAS_FEEDTHROUGH  model_direct_feedthrough
+ *   MODEL_HAS_MESSAGES     model_step_warning, model_terminate_warning, model_failure_text
+ * and implements them; otherwise the inline defaults below apply (no
+ * feedthrough, nothing to say).
+ */
+#ifdef MODEL_HAS_FEEDTHROUGH
 /* 1 when the outputs currently depend directly on the inputs (the glue then
  * warns if a master reads them before setting the inputs of a step). */
 int model_direct_feedthrough(const ModelData *data);
+#else
+static inline int model_direct_feedthrough(const ModelData *data)
+{
+    (void)data;
+    return 0;
+}
+#endif
 
+#ifdef MODEL_HAS_MESSAGES
 /* After a successful doStep: write at most one warning into text (the model
  * keeps its "already said" flags in ModelData, so each thing is said once,
  * also across FMU state restores) and return 1, else return 0. */
@@ -80,6 +102,25 @@ int model_terminate_warning(const ModelData *data, char *text, size_t size);
 /* Why the model refused a step with status st, in its own terms (e.g. which
  * monitor bound was exceeded), 1 if written; else the glue's generic text. */
 int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size);
+#else
+static inline int model_step_warning(ModelData *data, double start_time, char *text, size_t size)
+{
+    (void)data; (void)start_time; (void)text; (void)size;
+    return 0;
+}
+
+static inline int model_terminate_warning(const ModelData *data, char *text, size_t size)
+{
+    (void)data; (void)text; (void)size;
+    return 0;
+}
+
+static inline int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size)
+{
+    (void)data; (void)st; (void)text; (void)size;
+    return 0;
+}
+#endif
 
 /* Validation of restored (deserialized, untrusted) data against the model's
  * invariants, the one place that knows them: NULL when data could have been
