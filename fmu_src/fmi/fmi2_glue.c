@@ -72,7 +72,8 @@ static const glue_version fmi2 = {
     "fmi2SetupExperiment",
     "fmi2DoStep",
     "fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2DeSerializeFMUstate", "fmi2SerializedFMUstateSize", "fmi2Reset",
-    0       /* no arrays: every variable is a scalar, value reference = model table index */
+    0,      /* no arrays: every variable is a scalar, value reference = model table index */
+    0       /* no time variable (FMI 2.0 has none) */
 };
 
 /* The host's logger takes a format: the text goes through "%s". */

@@ -268,10 +268,30 @@ static const char *variable_name(const glue_instance *inst, uint32_t vr, char *b
     return buf;
 }
 
+/* The independent variable time (FMI 3.0): read only, the FMU's t0 + k h. */
+static int is_time(const glue_instance *inst, uint32_t vr)
+{
+    return vr == GLUE_VR_TIME && inst->version->time_variable;
+}
+
+/* The values behind a checked value reference (past the table: time). */
+static size_t values_of(const glue_instance *inst, uint32_t vr)
+{
+    return vr < (uint32_t)MODEL_N_VARIABLES ? inst->n_values[vr] : 1u;
+}
+
 static int check_vr(const glue_instance *inst, const char *fname, uint32_t vr, model_type type)
 {
     const char *const *names = inst->version->type_names;
     char buf[64];
+    if (is_time(inst, vr)) {
+        if (type != MODEL_REAL) {
+            glue_log_error(inst, "%s: variable time (value reference %u) is of type %s, not %s", fname,
+                           (unsigned)vr, names[MODEL_REAL], names[type]);
+            return 0;
+        }
+        return 1;
+    }
     if (vr >= (uint32_t)MODEL_N_VARIABLES || inst->n_values[vr] == 0) {
         glue_log_error(inst, "%s: unknown value reference %u", fname, (unsigned)vr);
         return 0;
@@ -330,8 +350,8 @@ static int check_references(const glue_instance *inst, const char *fname, const 
     for (i = 0; i < nvr; i++) {
         if (!check_vr(inst, fname, vr[i], type))
             return 0;
-        total += inst->n_values[vr[i]];
-        if (model_variables[vr[i]].causality == MODEL_OUTPUT)
+        total += values_of(inst, vr[i]);
+        if (!is_time(inst, vr[i]) && model_variables[vr[i]].causality == MODEL_OUTPUT)
             *any_output = 1;
     }
     if (total != n_values) {
@@ -602,6 +622,10 @@ glue_status glue_get(void *c, const char *fname, const uint32_t vr[], size_t nvr
     if (need_outputs)
         inst->outputs_read = 1;
     for (i = 0, j = 0; i < nvr; i++) {
+        if (is_time(inst, vr[i])) {
+            ((double *)values)[j++] = glue_time(inst);
+            continue;
+        }
         for (e = 0; e < inst->n_values[vr[i]]; e++, j++) {
             const void *p = value_ptr(inst, vr[i] + (uint32_t)e);
             switch (kind) {
@@ -633,6 +657,10 @@ glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr
         const model_variable *var;
         if (!check_vr(inst, fname, vr[i], kind_type(kind)))
             return GLUE_ERROR;
+        if (is_time(inst, vr[i])) {
+            glue_log_error(inst, "%s: time is the independent variable: it cannot be set", fname);
+            return GLUE_ERROR;
+        }
         var = &model_variables[vr[i]];
         if (var->causality == MODEL_OUTPUT) {
             glue_log_error(inst, "%s: %s is an output: it cannot be set", fname, var->name);
@@ -707,7 +735,10 @@ glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
     names = inst->version->type_names;
-    if (vr[0] >= (uint32_t)MODEL_N_VARIABLES || inst->n_values[vr[0]] == 0)
+    if (is_time(inst, vr[0]))
+        glue_log_error(inst, "%s: variable time (value reference %u) is of type %s, not %s (the FMU has "
+                       "no %s variable)", fname, (unsigned)vr[0], names[MODEL_REAL], type_name, type_name);
+    else if (vr[0] >= (uint32_t)MODEL_N_VARIABLES || inst->n_values[vr[0]] == 0)
         glue_log_error(inst, "%s: unknown value reference %u", fname, (unsigned)vr[0]);
     else
         glue_log_error(inst, "%s: variable %s (value reference %u) is of type %s, not %s (the FMU has "

@@ -83,7 +83,11 @@ typedef struct {
     const char *get_fmu_state, *set_fmu_state, *deserialize, *serialized_size, *reset;
     int arrays;                     /* variables name[1]..name[n] (n >= 2) form one array variable
                                        whose value reference is that of name[1] */
+    int time_variable;              /* GLUE_VR_TIME is the independent variable time (read only) */
 } glue_version;
+
+/* The value reference of the independent variable (FMI 3.0): the first after the model's. */
+#define GLUE_VR_TIME ((uint32_t)MODEL_N_VARIABLES)
 
 typedef struct glue_state glue_state;
 
