@@ -17,7 +17,8 @@
 ``--backend`` of ``all`` and ``run``: ``auto`` (default) runs long closed loops
 (``harness.native.LONG_RUN_SAMPLES``) on the native C master and the rest with
 fmpy; ``fmpy``, ``native`` (closed loops; the plant alone still runs in fmpy) and
-``core`` (the C core without FMI) force one.
+``core`` (the C core without FMI) force one. ``--fmi 3`` runs the FMI 3.0 editions of
+the FMUs (with fmpy; ``auto`` then means fmpy, ``native`` and ``core`` refuse it).
 
 Each subcommand lives in one place: a function that declares its parser and
 options (``_add_<name>_parser``, built from the shared option groups it
@@ -84,6 +85,11 @@ def _backend_options(p, closed_loop=False):
     p.add_argument("--fmu-dir", metavar="DIR",
                    help="folder of PiezoStage.fmu and AdaptiveCompoundController.fmu "
                         "(default: build/fmus or $PIEZO_FMU_DIR)")
+    if closed_loop:
+        p.add_argument("--fmi", type=int, choices=(2, 3), default=2, metavar="{2,3}",
+                       help="run the FMUs' FMI 2.0 editions (default) or their FMI 3.0 editions "
+                            "(the fmi3/ folder beside them, run with fmpy: --backend auto or "
+                            "fmpy); both give the same samples")
 
 
 def _scenario_file_option(p):
@@ -114,6 +120,16 @@ def _out_dir(args):
         return check_out_dir(args.out)
     except OSError as exc:
         raise UsageError(f"--out: {exc}") from None
+
+
+def _fmi_version(args):
+    """The --fmi version, checked against --backend before any run."""
+    if args.fmi == 3 and args.backend in ("native", "core"):
+        why = ("the native master calls the fmi2 functions" if args.backend == "native"
+               else "the core backend runs no FMU")
+        raise UsageError(f"--fmi 3 does not apply to --backend {args.backend} ({why}); use "
+                         f"--backend fmpy or auto")
+    return args.fmi
 
 
 def _loop_settings(args):
@@ -153,9 +169,11 @@ def _cmd_all(args, command):
     adaptation, preview, master = _loop_settings(args)
     _out_dir(args)
     registry = apply_param_files(args, registry)
+    fmi_version = _fmi_version(args)
     report.run_all(args.out, adaptation=adaptation, preview=preview, master=master,
                    fmu_dir=args.fmu_dir, plots=not args.no_plots, backend=args.backend,
-                   registry=registry, extra_scenarios=extra, command=command)
+                   registry=registry, extra_scenarios=extra, command=command,
+                   fmi_version=fmi_version)
     return EXIT_OK
 
 
@@ -197,11 +215,12 @@ def _cmd_run(args, command):
             raise UsageError(f"{given[0]} does not apply to '{sc.name}', a {sc.kind} scenario "
                              f"(the plant runs alone: no controller, no reference)")
     adaptation, preview, master = _loop_settings(args)
+    fmi_version = _fmi_version(args)
     _out_dir(args)
     registry = apply_param_files(args, registry)
     report.run_scenario(sc.name, args.out, adaptation=adaptation, preview=preview, master=master,
                         fmu_dir=args.fmu_dir, plots=not args.no_plots, registry=registry,
-                        backend=args.backend,
+                        backend=args.backend, fmi_version=fmi_version,
                         timeseries=None if args.no_timeseries else args.timeseries_format)
     return EXIT_OK
 

@@ -1,4 +1,6 @@
-"""FMI 2.0 co-simulation master for the PiezoStage and AdaptiveCompoundController FMUs (fmpy).
+"""Co-simulation master for the PiezoStage and AdaptiveCompoundController FMUs (fmpy), on their
+FMI 2.0 editions (default) or their FMI 3.0 editions (``fmi_version=3``: the FMUs in the
+``fmi3/`` folder beside the FMI 2.0 ones, run through fmpy's FMU3Slave).
 
 Semantics: both FMUs step on the grid ``t_k = k h``.  PiezoStage has no
 direct feedthrough: at ``t_k`` it reports ``y(k)``, ``y_meas(k)``, ``x(k)``
@@ -24,6 +26,12 @@ on an input, so the order of reads and writes does not matter).  With
 master is sound: it reads ``v`` after setting the controller's inputs; a
 Jacobi master reads a ``v`` computed from the previous inputs, which the
 controller then never commits (the FMU logs a warning).
+
+Both editions compile the same model code; the FMI 3.0 edition has array variables where
+the FMI 2.0 one has numbered scalars (``pi.w`` for ``pi.w[1]`` .. ``pi.w[16]``). Parameters
+are given by the FMI 2.0 names in either case: ``pi.w[3]`` sets element 3 of the array
+``pi.w`` (the array is read in initialization mode, the element replaced, the array set).
+The two editions give the same samples bit for bit.
 
 Each FMU file is extracted once per process (cache keyed by path, mtime and
 size); instances are always terminated and freed, also when a run fails.
@@ -58,6 +66,7 @@ __all__ = [
     "FMUInitializationError",
     "LoopDivergedError",
     "UnknownParameterError",
+    "FMI_VERSIONS",
     "default_fmu_dir",
     "fmu_path",
     "simulate_closed_loop",
@@ -67,6 +76,9 @@ __all__ = [
 PLANT_MODEL = "PiezoStage"
 CONTROLLER_MODEL = "AdaptiveCompoundController"
 REFERENCE_MODEL = "ReferenceSignal"
+
+#: the FMI versions the FMUs come in (the FMI 3.0 editions in the ``fmi3/`` subfolder)
+FMI_VERSIONS = (2, 3)
 
 _PLANT_OUTPUTS = ("u", "x", "y", "y_meas")
 _CTRL_OUTPUTS = ("v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error")
@@ -99,7 +111,13 @@ def default_fmu_dir():
     return _paths.fmu_dir()
 
 
-def fmu_path(model, fmu_dir=None):
+def _check_fmi_version(fmi_version):
+    if fmi_version not in FMI_VERSIONS:
+        raise ValueError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
+    return fmi_version
+
+
+def fmu_path(model, fmu_dir=None, fmi_version=2):
     """Path of a model's FMU, checked to exist.
 
     Parameters
@@ -108,6 +126,10 @@ def fmu_path(model, fmu_dir=None):
         ``"PiezoStage"``, ``"AdaptiveCompoundController"`` or ``"ReferenceSignal"``.
     fmu_dir : str or Path, optional
         Defaults to :func:`default_fmu_dir`.
+    fmi_version : {2, 3}
+        2: ``<fmu_dir>/<model>.fmu``; 3: the FMI 3.0 edition ``<fmu_dir>/fmi3/<model>.fmu``
+        (or ``<fmu_dir>/<model>.fmu`` when ``fmu_dir`` is itself a folder of FMI 3.0
+        editions without an ``fmi3/`` subfolder).
 
     Returns
     -------
@@ -118,7 +140,12 @@ def fmu_path(model, fmu_dir=None):
     FileNotFoundError
         With the command that builds the FMUs.
     """
-    path = Path(fmu_dir if fmu_dir is not None else default_fmu_dir()) / f"{model}.fmu"
+    _check_fmi_version(fmi_version)
+    folder = Path(fmu_dir if fmu_dir is not None else default_fmu_dir())
+    path = folder / f"{model}.fmu"
+    if fmi_version == 3:
+        nested = folder / "fmi3" / f"{model}.fmu"
+        path = nested if nested.is_file() or not path.is_file() else path
     if not path.is_file():
         from . import _paths
         raise FileNotFoundError(f"FMU not found: {path}; {_paths.where_to_get_it()} "
@@ -131,9 +158,13 @@ def fmu_path(model, fmu_dir=None):
 # ---------------------------------------------------------------------------
 
 class _FMUInfo:
-    """An extracted FMU: model description, unzip folder, variables by name."""
+    """An extracted FMU: model description, unzip folder, variables by name.
 
-    __slots__ = ("path", "md", "unzipdir", "variables", "model")
+    ``elements`` maps the FMI 2.0 name of every element of an FMI 3.0 array variable
+    (``pi.w[3]``) to ``(array variable, index from 0)``.
+    """
+
+    __slots__ = ("path", "md", "unzipdir", "variables", "model", "fmi_version", "elements")
 
     def __init__(self, path, md, unzipdir):
         self.path = path
@@ -141,12 +172,38 @@ class _FMUInfo:
         self.unzipdir = unzipdir
         self.variables = {v.name: v for v in md.modelVariables}
         self.model = md.coSimulation.modelIdentifier
+        self.fmi_version = 3 if md.fmiVersion.startswith("3") else 2
+        self.elements = {}
+        for v in md.modelVariables:
+            for i in range(_array_size(v) or 0):
+                self.elements[f"{v.name}[{i + 1}]"] = (v, i)
 
     def vr(self, name):
         try:
             return self.variables[name].valueReference
         except KeyError:
             raise FMUError(f"{self.path.name} has no variable '{name}'") from None
+
+    def parameter_names(self):
+        """The parameters by their FMI 2.0 names (array elements one by one)."""
+        names = []
+        for name, v in self.variables.items():
+            if v.causality != "parameter":
+                continue
+            size = _array_size(v)
+            names += [name] if size is None else [f"{name}[{i + 1}]" for i in range(size)]
+        return names
+
+
+def _array_size(var):
+    """The number of elements of an FMI 3.0 array variable, None for a scalar."""
+    dims = getattr(var, "dimensions", None) or []
+    if not dims:
+        return None
+    size = 1
+    for d in dims:
+        size *= int(d.start)
+    return size
 
 
 _EXTRACTED = {}
@@ -161,7 +218,7 @@ def _cleanup():
 atexit.register(_cleanup)
 
 
-def _load(path):
+def _load(path, fmi_version=2):
     import fmpy
 
     st = path.stat()
@@ -169,13 +226,19 @@ def _load(path):
     info = _EXTRACTED.get(key)
     if info is None:
         md = fmpy.read_model_description(str(path))
-        if md.fmiVersion != "2.0" or md.coSimulation is None:
-            raise FMUError(f"{path} is not an FMI 2.0 Co-Simulation FMU")
+        want = f"{fmi_version}.0"
+        if md.fmiVersion != want or md.coSimulation is None:
+            hint = (" (the FMI 3.0 editions are in the fmi3/ folder beside the FMI 2.0 FMUs)"
+                    if fmi_version == 3 else "")
+            raise FMUError(f"{path} is not an FMI {want} Co-Simulation FMU (it is FMI "
+                           f"{md.fmiVersion}){hint}")
         unzipdir = tempfile.mkdtemp(prefix=f"harness_{path.stem}_")
         _TEMP_DIRS.append(unzipdir)
         fmpy.extract(str(path), unzipdir=unzipdir)
         info = _FMUInfo(path, md, unzipdir)
         _EXTRACTED[key] = info
+    if info.fmi_version != fmi_version:
+        raise FMUError(f"{path} is an FMI {info.fmi_version}.0 FMU, not FMI {fmi_version}.0")
     return info
 
 
@@ -232,8 +295,14 @@ def _callbacks():
 # one FMU instance
 # ---------------------------------------------------------------------------
 
-def _typed_parameters(info, params):
-    """Parameters by FMU variable name as ``(reals, ints, bools)``, each ``([vr], [value])``.
+_REAL_TYPES = ("Real", "Float64", "Float32")
+_INTEGER_TYPES = ("Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")
+
+
+def _sorted_parameters(info, params):
+    """Parameters by FMI 2.0 variable name as ``(reals, ints, bools, arrays)``: each of the first
+    three ``([vr], [value])``, ``arrays`` ``{array variable: {index from 0: value}}`` for the
+    elements of FMI 3.0 array variables.
 
     Raises
     ------
@@ -242,54 +311,87 @@ def _typed_parameters(info, params):
     TypeError
         A value does not fit the variable's type.
     """
-    reals, ints, bools = ([], []), ([], []), ([], [])
+    reals, ints, bools, arrays = ([], []), ([], []), ([], []), {}
     for name, value in params.items():
-        var = info.variables.get(name)
-        if var is None or var.causality != "parameter":
-            valid = [n for n, v in info.variables.items() if v.causality == "parameter"]
+        var, index = info.variables.get(name), None
+        if var is None and name in info.elements:
+            var, index = info.elements[name]
+        if var is None or var.causality != "parameter" or (index is None and _array_size(var)):
+            valid = info.parameter_names()
             close = difflib.get_close_matches(name, valid, n=3)
             hint = f" (did you mean {', '.join(close)}?)" if close else ""
             raise UnknownParameterError(
                 f"'{name}' is not a parameter of {info.model}{hint}; "
                 f"parameters: {', '.join(valid)}")
-        if var.type == "Real":
+        if var.type in _REAL_TYPES:
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
                 raise TypeError(f"{info.model} parameter {name} is Real, got {value!r}")
-            reals[0].append(var.valueReference)
-            reals[1].append(float(value))
-        elif var.type == "Integer":
+            typed, target = float(value), reals
+        elif var.type in _INTEGER_TYPES:
             if isinstance(value, (bool, np.bool_)) or not float(value).is_integer():
                 raise TypeError(f"{info.model} parameter {name} is Integer, got {value!r}")
-            ints[0].append(var.valueReference)
-            ints[1].append(int(value))
+            typed, target = int(value), ints
         elif var.type == "Boolean":
             if not (isinstance(value, (bool, np.bool_)) or value in (0, 1)):
                 raise TypeError(f"{info.model} parameter {name} is Boolean, got {value!r}")
-            bools[0].append(var.valueReference)
-            bools[1].append(bool(value))
+            typed, target = bool(value), bools
         else:
             raise TypeError(f"{info.model} parameter {name} has unsupported type {var.type}")
+        if index is not None:
+            arrays.setdefault(var, {})[index] = typed
+        else:
+            target[0].append(var.valueReference)
+            target[1].append(typed)
+    return reals, ints, bools, arrays
+
+
+def _typed_parameters(info, params):
+    """Parameters of an FMI 2.0 FMU by variable name as ``(reals, ints, bools)``, each
+    ``([vr], [value])`` (see :func:`_sorted_parameters`)."""
+    reals, ints, bools, arrays = _sorted_parameters(info, params)
+    if arrays:
+        raise TypeError(f"{info.model}: array elements need the FMI 3.0 path")
     return reals, ints, bools
 
 
+def _fmi3_logger(sink):
+    """An fmpy logMessage callback appending ``[Status] text`` to the list ``sink``."""
+    labels = ("OK", "Warning", "Discard", "Error", "Fatal")
+
+    def log_message(env, status, category, message):
+        text = message.decode("utf-8", "replace") if message else ""
+        label = labels[status] if 0 <= status < len(labels) else str(status)
+        if len(sink) < 200:
+            sink.append(f"[{label}] {text}")
+    return log_message
+
+
 class _Instance:
-    """Thin lifetime wrapper of an fmpy FMU2Slave."""
+    """Thin lifetime wrapper of an fmpy FMU2Slave or FMU3Slave (by the FMU's version)."""
 
     def __init__(self, info, role):
-        from fmpy.fmi2 import FMU2Slave
-
         _COUNTER[0] += 1
         self.info = info
+        self.fmi3 = info.fmi_version == 3
         self.name = f"harness-{role}-{_COUNTER[0]}"
         self.log = _LOGS.setdefault(self.name, [])
         self.fmu = None
         self.instantiated = False
         self.initialized = False
-        self.fmu = FMU2Slave(guid=info.md.guid, unzipDirectory=info.unzipdir,
-                             modelIdentifier=info.model, instanceName=self.name)
+        if self.fmi3:
+            from fmpy.fmi3 import FMU3Slave
+            self.fmu = FMU3Slave(guid=info.md.guid, unzipDirectory=info.unzipdir,
+                                 modelIdentifier=info.model, instanceName=self.name)
+        else:
+            from fmpy.fmi2 import FMU2Slave
+            self.fmu = FMU2Slave(guid=info.md.guid, unzipDirectory=info.unzipdir,
+                                 modelIdentifier=info.model, instanceName=self.name)
         try:
-            self.callbacks = _callbacks()   # kept alive with the instance
-            self.fmu.instantiate(callbacks=self.callbacks, loggingOn=False)
+            if self.fmi3:
+                self.fmu.instantiate(loggingOn=False, logMessage=_fmi3_logger(self.log))
+            else:
+                self.callbacks = _callbacks()   # kept alive with the instance
+                self.fmu.instantiate(callbacks=self.callbacks, loggingOn=False)
         except Exception as exc:
             self._release_library()
             raise FMUInitializationError(self._message(f"instantiating {info.path.name}", exc)) from None
@@ -301,19 +403,49 @@ class _Instance:
         return f"{self.info.model}: {what} failed: {detail}"
 
     def set_parameters(self, params):
-        """Set parameters by name, typed from the model description."""
-        reals, ints, bools = _typed_parameters(self.info, params)
+        """Set parameters by name, typed from the model description (FMI 3.0: array elements
+        by their FMI 2.0 names, in initialization mode, where the array can be read)."""
+        reals, ints, bools, arrays = _sorted_parameters(self.info, params)
+        f = self.fmu
         try:
-            if reals[0]:
-                self.fmu.setReal(*reals)
-            if ints[0]:
-                self.fmu.setInteger(*ints)
-            if bools[0]:
-                self.fmu.setBoolean(*bools)
+            if self.fmi3:
+                for var, elements in arrays.items():
+                    size = _array_size(var)
+                    get = f.getFloat64 if var.type in _REAL_TYPES else f.getInt32
+                    put = f.setFloat64 if var.type in _REAL_TYPES else f.setInt32
+                    values = list(get([var.valueReference], nValues=size))
+                    for index, value in elements.items():
+                        values[index] = value
+                    put([var.valueReference], values)
+                if reals[0]:
+                    f.setFloat64(*reals)
+                if ints[0]:
+                    f.setInt32(*ints)
+                if bools[0]:
+                    f.setBoolean(*bools)
+            else:
+                if reals[0]:
+                    f.setReal(*reals)
+                if ints[0]:
+                    f.setInteger(*ints)
+                if bools[0]:
+                    f.setBoolean(*bools)
         except Exception as exc:
             raise FMUInitializationError(self._message("setting parameters", exc)) from None
 
     def initialize(self, params, stop_time):
+        if self.fmi3:
+            try:
+                self.fmu.enterInitializationMode(startTime=0.0, stopTime=stop_time)
+            except Exception as exc:
+                raise FMUInitializationError(self._message("fmi3EnterInitializationMode", exc)) from None
+            self.set_parameters(params)
+            try:
+                self.fmu.exitInitializationMode()
+            except Exception as exc:
+                raise FMUInitializationError(self._message("initialization", exc)) from None
+            self.initialized = True
+            return
         try:
             self.fmu.setupExperiment(startTime=0.0, stopTime=stop_time)
         except Exception as exc:
@@ -371,7 +503,8 @@ def _step_error(inst, what, k, h, exc):
 
 def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
                          plant_params=None, controller_params=None, fmu_dir=None,
-                         duration=None, registry=None, step_order="plant-first", progress=None):
+                         duration=None, registry=None, step_order="plant-first", progress=None,
+                         fmi_version=2):
     """Run a tracking scenario through both FMUs with fmpy.
 
     Parameters
@@ -400,6 +533,9 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
         Order of the two doStep calls of the Gauss-Seidel master.
     progress : callable, optional
         Called as ``progress(done, n)`` after every simulated second and at the end.
+    fmi_version : {2, 3}
+        Run the FMI 2.0 editions (default) or the FMI 3.0 editions (``fmi3/`` in the FMU
+        folder, fmpy's FMU3Slave); both give the same samples bit for bit.
 
     Returns
     -------
@@ -425,14 +561,14 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
     setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
                                 plant_params=plant_params, controller_params=controller_params,
                                 duration=duration, registry=registry, step_order=step_order)
-    return _simulate(setup, fmu_dir, progress=progress)
+    return _simulate(setup, fmu_dir, progress=progress, fmi_version=_check_fmi_version(fmi_version))
 
 
-def _simulate(setup, fmu_dir=None, block=0, block_ns=None, progress=None):
+def _simulate(setup, fmu_dir=None, block=0, block_ns=None, progress=None, fmi_version=2):
     """Run a prepared closed loop (see :func:`_run_closed_loop` for the timing and progress
     arguments)."""
-    p_info = _load(fmu_path(PLANT_MODEL, fmu_dir))
-    c_info = _load(fmu_path(CONTROLLER_MODEL, fmu_dir))
+    p_info = _load(fmu_path(PLANT_MODEL, fmu_dir, fmi_version), fmi_version)
+    c_info = _load(fmu_path(CONTROLLER_MODEL, fmu_dir, fmi_version), fmi_version)
     n, h = setup.n, setup.h
     rows = np.zeros((n, len(CLOSED_LOOP_FIELDS)))
     rows[:, 0] = setup.time
@@ -467,19 +603,42 @@ def _raw_function(fmu, name, *argtypes):
 
 
 class _LoopFunctions:
-    """The fmi2 functions of the closed loop for one plant and one controller instance."""
+    """The functions of the closed loop for one plant and one controller instance, called
+    the FMI 2.0 way (``get(c, vr, n, values)``, ``step(c, t, h, flag)``) for either edition:
+    for FMI 3.0 they pass ``nValues = n`` (the loop reads scalars only) and the doStep's
+    out-arguments. ``names`` are the FMI functions behind get, set, get_bool, step."""
 
     def __init__(self, plant, ctrl):
         vp, sz, dbl, i32 = ctypes.c_void_p, ctypes.c_size_t, ctypes.c_double, ctypes.c_int
         pf, cf = plant.fmu, ctrl.fmu
         self.pc, self.cc = pf.component, cf.component
-        self.p_get = _raw_function(pf, "fmi2GetReal", vp, vp, sz, vp)
-        self.p_set = _raw_function(pf, "fmi2SetReal", vp, vp, sz, vp)
-        self.p_step = _raw_function(pf, "fmi2DoStep", vp, dbl, dbl, i32)
-        self.c_get = _raw_function(cf, "fmi2GetReal", vp, vp, sz, vp)
-        self.c_set = _raw_function(cf, "fmi2SetReal", vp, vp, sz, vp)
-        self.c_get_bool = _raw_function(cf, "fmi2GetBoolean", vp, vp, sz, vp)
-        self.c_step = _raw_function(cf, "fmi2DoStep", vp, dbl, dbl, i32)
+        if not plant.fmi3:
+            self.names = ("fmi2GetReal", "fmi2SetReal", "fmi2GetBoolean", "fmi2DoStep")
+            self.p_get = _raw_function(pf, "fmi2GetReal", vp, vp, sz, vp)
+            self.p_set = _raw_function(pf, "fmi2SetReal", vp, vp, sz, vp)
+            self.p_step = _raw_function(pf, "fmi2DoStep", vp, dbl, dbl, i32)
+            self.c_get = _raw_function(cf, "fmi2GetReal", vp, vp, sz, vp)
+            self.c_set = _raw_function(cf, "fmi2SetReal", vp, vp, sz, vp)
+            self.c_get_bool = _raw_function(cf, "fmi2GetBoolean", vp, vp, sz, vp)
+            self.c_step = _raw_function(cf, "fmi2DoStep", vp, dbl, dbl, i32)
+            return
+        self.names = ("fmi3GetFloat64", "fmi3SetFloat64", "fmi3GetBoolean", "fmi3DoStep")
+        flag = ctypes.c_bool
+        self._out = [flag(), flag(), flag(), dbl()]         # doStep's out-arguments, kept alive
+        out = [ctypes.addressof(x) for x in self._out]
+
+        def values(fmu, name):
+            raw = _raw_function(fmu, name, vp, vp, sz, vp, sz)
+            return lambda c, vr, n, addr: raw(c, vr, n, addr, n)
+
+        def step(fmu):
+            raw = _raw_function(fmu, "fmi3DoStep", vp, dbl, dbl, flag, vp, vp, vp, vp)
+            return lambda c, t, h, no_set: raw(c, t, h, bool(no_set), *out)
+
+        self.p_get, self.p_set = values(pf, "fmi3GetFloat64"), values(pf, "fmi3SetFloat64")
+        self.c_get, self.c_set = values(cf, "fmi3GetFloat64"), values(cf, "fmi3SetFloat64")
+        self.c_get_bool = values(cf, "fmi3GetBoolean")
+        self.p_step, self.c_step = step(pf), step(cf)
 
 
 def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=None):
@@ -499,6 +658,7 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
     from fmpy.fmi2 import fmi2Boolean
 
     fn = _LoopFunctions(plant, ctrl)
+    GET, SET, GET_BOOL, DO_STEP = fn.names
     pc, cc = fn.pc, fn.cc
     p_get, p_set, p_step = fn.p_get, fn.p_set, fn.p_step
     c_get, c_set, c_get_bool, c_step = fn.c_get, fn.c_set, fn.c_get_bool, fn.c_step
@@ -521,7 +681,8 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
     n, h = setup.n, setup.h
     exchange = np.zeros((n, 3))          # y_ref(k), y_meas(k), y(k)
     exchange[:, 0] = setup.y_ref
-    saturated = np.zeros(n, dtype=np.dtype(fmi2Boolean))
+    # fmi2Boolean is an int, fmi3Boolean a C bool (one byte)
+    saturated = np.zeros(n, dtype=np.uint8 if plant.fmi3 else np.dtype(fmi2Boolean))
     row_bytes, ex_bytes, sat_bytes = rows.strides[0], exchange.strides[0], saturated.strides[0]
     rows_v = rows.ctypes.data + 4 * rows.strides[1]          # &rows[0, 4]: v, q, a1..pred_error
     ex0 = exchange.ctypes.data
@@ -536,7 +697,7 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
     else:
         block = n
 
-    k, stage, inst, status = 0, "fmi2GetReal", plant, 0
+    k, stage, inst, status = 0, GET, plant, 0
     for k0 in range(0, n, block):
         t_block = time.thread_time_ns()
         for k in range(k0, min(k0 + block, n)):
@@ -544,62 +705,62 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
             out = rows_v + k * row_bytes
             status = p_get(pc, vr_p_out, 2, ex + 8)                    # y_meas(k), y(k)
             if status > 1:
-                inst, stage = plant, "fmi2GetReal"
+                inst, stage = plant, GET
                 break
             if jacobi:
                 # textbook Jacobi: every output first, then every input
                 status = c_get(cc, vr_c_out, n_c, out)
                 if status > 1:
-                    inst, stage = ctrl, "fmi2GetReal"
+                    inst, stage = ctrl, GET
                     break
                 status = c_get_bool(cc, vr_c_sat, 1, sat0 + k * sat_bytes)
                 if status > 1:
-                    inst, stage = ctrl, "fmi2GetBoolean"
+                    inst, stage = ctrl, GET_BOOL
                     break
                 status = p_set(pc, vr_p_in, 1, out)                     # v
                 if status > 1:
-                    inst, stage = plant, "fmi2SetReal"
+                    inst, stage = plant, SET
                     break
                 status = c_set(cc, vr_c_in, 2, ex)                      # y_ref(k), y_meas(k)
                 if status > 1:
-                    inst, stage = ctrl, "fmi2SetReal"
+                    inst, stage = ctrl, SET
                     break
             else:
                 # Gauss-Seidel in ModelStructure order: plant -> controller -> plant
                 status = c_set(cc, vr_c_in, 2, ex)
                 if status > 1:
-                    inst, stage = ctrl, "fmi2SetReal"
+                    inst, stage = ctrl, SET
                     break
                 status = c_get(cc, vr_c_out, n_c, out)
                 if status > 1:
-                    inst, stage = ctrl, "fmi2GetReal"
+                    inst, stage = ctrl, GET
                     break
                 status = c_get_bool(cc, vr_c_sat, 1, sat0 + k * sat_bytes)
                 if status > 1:
-                    inst, stage = ctrl, "fmi2GetBoolean"
+                    inst, stage = ctrl, GET_BOOL
                     break
                 status = p_set(pc, vr_p_in, 1, out)
                 if status > 1:
-                    inst, stage = plant, "fmi2SetReal"
+                    inst, stage = plant, SET
                     break
             t = times[k]
             if controller_first:
                 status = c_step(cc, t, h, 1)
                 if status > 1:
-                    inst, stage = ctrl, "fmi2DoStep"
+                    inst, stage = ctrl, DO_STEP
                     break
                 status = p_step(pc, t, h, 1)
                 if status > 1:
-                    inst, stage = plant, "fmi2DoStep"
+                    inst, stage = plant, DO_STEP
                     break
             else:
                 status = p_step(pc, t, h, 1)
                 if status > 1:
-                    inst, stage = plant, "fmi2DoStep"
+                    inst, stage = plant, DO_STEP
                     break
                 status = c_step(cc, t, h, 1)
                 if status > 1:
-                    inst, stage = ctrl, "fmi2DoStep"
+                    inst, stage = ctrl, DO_STEP
                     break
         if status > 1:
             break
@@ -615,7 +776,8 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
         raise _step_error(inst, stage, k, h, FMUError(f"{stage} returned status {status}"))
 
 
-def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None, progress=None):
+def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None, progress=None,
+                       fmi_version=2):
     """Drive the PiezoStage FMU alone with a voltage sequence.
 
     Parameters
@@ -630,6 +792,8 @@ def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None
         Folder holding ``PiezoStage.fmu``.
     progress : callable, optional
         Called as ``progress(done, n)`` after every simulated second and at the end.
+    fmi_version : {2, 3}
+        The FMI 2.0 (default) or FMI 3.0 edition of PiezoStage.
 
     Returns
     -------
@@ -649,7 +813,7 @@ def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None
     v, time = open_loop_grid(v_signal, step_size)
     params = dict(plant_params or {})
     params.setdefault("h", float(step_size))
-    info = _load(fmu_path(PLANT_MODEL, fmu_dir))
+    info = _load(fmu_path(PLANT_MODEL, fmu_dir, fmi_version), _check_fmi_version(fmi_version))
     n, h = v.size, float(step_size)
     rows = np.zeros((n, len(OPEN_LOOP_DTYPE.names)))
     rows[:, 0] = time
@@ -659,28 +823,44 @@ def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None
         plant = _Instance(info, "plant")
         plant.initialize(params, n * h)
         f, comp = plant.fmu, plant.fmu.component
-        get, set_, step = f.fmi2GetReal, f.fmi2SetReal, f.fmi2DoStep
         vr_out = _vr_array([info.vr(nm) for nm in _PLANT_OUTPUTS])
         vr_in = _vr_array([info.vr("v")])
         out = (fmi2Real * 4)()
         vin = (fmi2Real * 1)()
+        if plant.fmi3:
+            names = ("fmi3GetFloat64", "fmi3SetFloat64", "fmi3DoStep")
+            flags = [ctypes.c_bool() for _ in range(3)]
+            last = ctypes.c_double()
+
+            def get(c, vr, nvr, values):
+                return f.fmi3GetFloat64(c, vr, nvr, values, nvr)
+
+            def set_(c, vr, nvr, values):
+                return f.fmi3SetFloat64(c, vr, nvr, values, nvr)
+
+            def step(c, t, dt, no_set):
+                return f.fmi3DoStep(c, t, dt, bool(no_set), *[ctypes.byref(x) for x in flags],
+                                    ctypes.byref(last))
+        else:
+            names = ("fmi2GetReal", "fmi2SetReal", "fmi2DoStep")
+            get, set_, step = f.fmi2GetReal, f.fmi2SetReal, f.fmi2DoStep
         np_out = np.ctypeslib.as_array(out)
         vl = v.tolist()
         times = time.tolist()
-        k, stage = 0, "fmi2GetReal"
+        k, stage = 0, names[0]
         try:
             for k in sample_range(n, h, progress):
-                stage = "fmi2GetReal"
+                stage = names[0]
                 get(comp, vr_out, 4, out)        # u(k-1), x(k), y(k), y_meas(k)
                 rows[k, 3:6] = np_out[1:4]
                 if k:
                     rows[k - 1, 2] = out[0]
                 vin[0] = vl[k]
-                stage = "fmi2SetReal"
+                stage = names[1]
                 set_(comp, vr_in, 1, vin)
-                stage = "fmi2DoStep"
+                stage = names[2]
                 step(comp, times[k], h, 1)
-            k, stage = n, "fmi2GetReal"
+            k, stage = n, names[0]
             get(comp, vr_out, 4, out)
             rows[n - 1, 2] = out[0]
         except Exception as exc:

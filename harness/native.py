@@ -311,17 +311,29 @@ def native_loop(fmu_dir=None):
     return loop
 
 
+#: why the native master refuses the FMI 3.0 editions (one line, for the command line too)
+FMI3_REFUSAL = ("the native master (--backend native) runs the FMI 2.0 editions only; for the "
+                "FMI 3.0 editions use --backend fmpy or auto (auto runs them with fmpy)")
+
+
+class NativeFMIVersionError(ValueError):
+    """The native master was asked to run the FMI 3.0 editions."""
+
+
 def simulate_closed_loop_native(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
                                 plant_params=None, controller_params=None, fmu_dir=None,
                                 duration=None, registry=None, step_order="plant-first",
-                                progress=None):
+                                progress=None, fmi_version=2):
     """Run a tracking scenario through both FMUs with the native master.
 
     Parameters, Returns and Raises are those of :func:`harness.cosim.simulate_closed_loop`
     (and the result equals it bit for bit); a missing runner library raises
     FileNotFoundError with the build command. The run is one C call (about 1000x real
-    time), so ``progress(n, n)`` is called once, at its end.
+    time), so ``progress(n, n)`` is called once, at its end. The native master calls the
+    fmi2 functions: ``fmi_version=3`` raises :class:`NativeFMIVersionError`.
     """
+    if fmi_version != 2:
+        raise NativeFMIVersionError(FMI3_REFUSAL)
     setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
                                 plant_params=plant_params, controller_params=controller_params,
                                 duration=duration, registry=registry, step_order=step_order)
@@ -331,14 +343,16 @@ def simulate_closed_loop_native(scenario, *, adaptation=None, preview=True, mast
     return data
 
 
-def simulate_closed_loop_auto(scenario, *, registry=None, duration=None, **kwargs):
+def simulate_closed_loop_auto(scenario, *, registry=None, duration=None, fmi_version=2, **kwargs):
     """:func:`simulate_closed_loop_native` for runs of at least ``LONG_RUN_SAMPLES`` samples when
-    the runner is built, else :func:`harness.cosim.simulate_closed_loop` (same result either way)."""
+    the runner is built, else :func:`harness.cosim.simulate_closed_loop` (same result either way);
+    the FMI 3.0 editions (``fmi_version=3``) always run with fmpy."""
     from .cosim import simulate_closed_loop
     from .scenarios import get_scenario
 
     sc = get_scenario(scenario, registry)
     n = sc.n_samples if duration is None else int(round(float(duration) / float(sc.step_size)))
-    if n >= LONG_RUN_SAMPLES and native_available():
+    if fmi_version == 2 and n >= LONG_RUN_SAMPLES and native_available():
         return simulate_closed_loop_native(sc, registry=registry, duration=duration, **kwargs)
-    return simulate_closed_loop(sc, registry=registry, duration=duration, **kwargs)
+    return simulate_closed_loop(sc, registry=registry, duration=duration, fmi_version=fmi_version,
+                                **kwargs)

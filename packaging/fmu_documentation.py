@@ -55,23 +55,58 @@ def _type_element(var):
     return typ
 
 
+def _is_fmi3(root):
+    return root.get("fmiVersion", "").startswith("3")
+
+
+def _fmi(root, name):
+    """The function ``fmi2<name>`` or ``fmi3<name>`` of the model description's FMI version."""
+    return ("fmi3" if _is_fmi3(root) else "fmi2") + name
+
+
+#: FMI 3.0 variable elements (the types of the variables table)
+FMI3_TYPE_TAGS = ("Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32",
+                  "Int64", "UInt64", "Boolean", "String", "Binary", "Enumeration", "Clock")
+
+
+def _variables(root):
+    """(variable element, element holding the type attributes, type name, array size or None)
+    for every variable: FMI 2.0 ScalarVariable and its type child, FMI 3.0 typed elements
+    (an array's size from its Dimension)."""
+    if not _is_fmi3(root):
+        for var in root.iter("ScalarVariable"):
+            typ = _type_element(var)
+            yield var, typ, typ.tag, None
+        return
+    for var in root.find("ModelVariables"):
+        if var.tag not in FMI3_TYPE_TAGS:
+            continue
+        dims = var.findall("Dimension")
+        size = None
+        if dims:
+            size = 1
+            for d in dims:
+                size *= int(d.get("start"))
+        yield var, var, var.tag, size
+
+
 def _fmt_number(text):
     return text.replace("-", "\u2212") if text else text
 
 
 def variable_rows(root):
-    """One dict per ScalarVariable: name, causality, variability, type, unit (its display
-    unit when the model description defines one), start, range, description."""
+    """One dict per variable (FMI 2.0 ScalarVariable, FMI 3.0 variable, an array as one row
+    with type ``Float64[n]`` and its start values): name, causality, variability, type, unit
+    (its display unit when the model description defines one), start, range, description."""
     display = {}
     for unit in root.iter("Unit"):
         names = [d.get("name") for d in unit.iter("DisplayUnit")]
         if names:
             display[unit.get("name")] = names[0]
     rows = []
-    for var in root.iter("ScalarVariable"):
-        typ = _type_element(var)
+    for var, typ, type_name, size in _variables(root):
         lo, hi = typ.get("min"), typ.get("max")
-        if typ.tag == "Boolean":
+        if type_name == "Boolean":
             rng = "false, true"
         elif lo is None and hi is None:
             rng = ""
@@ -81,7 +116,8 @@ def variable_rows(root):
             rng = f"{low}, {high}"
         unit = typ.get("displayUnit") or display.get(typ.get("unit"), typ.get("unit") or "")
         rows.append({"name": var.get("name"), "causality": var.get("causality", "local"),
-                     "variability": var.get("variability", "continuous"), "type": typ.tag,
+                     "variability": var.get("variability", "continuous"),
+                     "type": type_name if size is None else f"{type_name}[{size}]",
                      "unit": unit, "start": _fmt_number(typ.get("start") or ""),
                      "range": rng, "description": var.get("description", "")})
     return rows
@@ -108,6 +144,7 @@ def _identity_table(root, platforms):
         ("FMI version", f"{root.get('fmiVersion')}, Co-Simulation"),
         ("Model identifier", cs.get("modelIdentifier")),
         ("GUID", root.get("guid")),
+        ("Instantiation token", root.get("instantiationToken")),
         ("Version", root.get("version")),
         ("Generated", f"{root.get('generationDateAndTime')} by {root.get('generationTool')}"),
         ("Author", root.get("author")),
@@ -122,7 +159,7 @@ def _identity_table(root, platforms):
     return f"<table>{rows}</table>"
 
 
-def _connection_section(model_identifier):
+def _connection_section(model_identifier, do_step="fmi2DoStep"):
     from harness.ssp import SSP_COMPONENTS, SSP_CONNECTIONS
 
     fmu_of = {comp: fmu for comp, (fmu, _) in SSP_COMPONENTS.items()}
@@ -147,7 +184,7 @@ computes the voltage, PiezoStage moves. The connections (rows of this FMU in bol
 (the <code>h</code> parameter of each; a communication step may be any whole multiple of
 <code>h</code>, the inputs are then held).</li>
 <li>Exchange values at the communication points: read every output at <code>t_k</code>,
-set every input, then call <code>fmi2DoStep</code> for each FMU, in any order. No output
+set every input, then call <code>{do_step}</code> for each FMU, in any order. No output
 depends directly on an input (the ModelStructure says so), so Jacobi, Gauss-Seidel, SSP
 players and container FMUs all run the same loop. The loop delay from the controller's
 virtual input to the displacement is then d = 2 samples, the default
@@ -161,6 +198,28 @@ sample time <code>h</code>, wired as in the table. The project's repository ship
 same loop as an SSP 1.0 file (<code>PiezoStageClosedLoop.ssp</code>) with the mismatch
 benchmark's parameters bound.</li>
 </ul>
+"""
+
+
+def _arrays_note(root):
+    """FMI 3.0: how the array variables are addressed (nothing for FMI 2.0)."""
+    if not _is_fmi3(root):
+        return ""
+    arrays = [(var.get("name"), var.get("valueReference"), size)
+              for var, _, _, size in _variables(root) if size is not None]
+    if not arrays:
+        return ""
+    items = "".join(f"<li><code>{_e(name)}</code>: value reference {_e(vr)}, {size} values</li>"
+                    for name, vr, size in arrays)
+    return f"""
+<h2 id="arrays">Array variables</h2>
+<p>This FMI 3.0 edition has array variables where the FMI 2.0 edition has numbered
+scalars (<code>name[1]</code> .. <code>name[n]</code>). An array is read and set whole: one
+value reference, n values in element order (<code>nValues</code> counts the values). Element
+j is the FMI 2.0 edition's <code>name[j]</code>; the array's value reference is that of
+<code>name[1]</code>, every scalar keeps its FMI 2.0 value reference, and the references of
+the other elements are not used.</p>
+<ul>{items}</ul>
 """
 
 
@@ -197,6 +256,9 @@ def index_html(model_description, fragment, platforms, c_files, defines, referen
     root = ET.fromstring(model_description.encode("utf-8"))
     model = root.get("modelName")
     ident = root.find("CoSimulation").get("modelIdentifier")
+    if _is_fmi3(root):
+        # the hand-written part names the FMI 2.0 functions; this edition has the fmi3 ones
+        fragment = fragment.replace("fmi2DoStep", "fmi3DoStep")
     refs = ""
     if reference_files:
         refs = ("<h2 id=\"references\">Reference results</h2>\n<p>The FMU carries a regression "
@@ -217,13 +279,14 @@ def index_html(model_description, fragment, platforms, c_files, defines, referen
 <h2 id="variables">Variables</h2>
 <p>Generated from this FMU's <code>modelDescription.xml</code>. Units: displacement in
 µm (<code>um</code>), voltage in V, time in s. Parameters are set before
-<code>fmi2ExitInitializationMode</code>; an invalid value is refused there with a log
+<code>{_fmi(root, "ExitInitializationMode")}</code>; an invalid value is refused there with a log
 message that names the parameter and its valid range. The ranges are the model
-description's <code>min</code> and <code>max</code>, which FMI 2.0 makes inclusive; where a
+description's <code>min</code> and <code>max</code>, which FMI {"3.0" if _is_fmi3(root) else "2.0"} makes inclusive; where a
 bound is exclusive (a quantity that must be positive, for example) or depends on another
 parameter, the description says so.</p>
 {_variables_table(root)}
-{_connection_section(ident)}
+{_connection_section(ident, _fmi(root, "DoStep"))}
+{_arrays_note(root)}
 {_source_section(root.get("fmiVersion"), ident, c_files, defines)}
 {refs}
 <h2 id="paper">Source</h2>
@@ -268,10 +331,11 @@ FMI Layered Standard for References (version 1.0.0-alpha.1); the experiment is i
 <code>t_k = k h</code>, numbers written so that they read back exactly.</p>
 <h2>How to use them</h2>
 <ol>
-<li>Instantiate the FMU, set the parameters of the SSV file (names are FMU variable names),
+<li>Instantiate the FMU, set the parameters of the SSV file (names are FMU variable names{
+"; <code>name[j]</code> is element j of the array variable <code>name</code>" if _is_fmi3(root) else ""}),
 start at the experiment's start time.</li>
 <li>At every communication point <code>t_k</code>: set the inputs to the row of
-<code>t_k</code> in the stimuli file, then call <code>fmi2DoStep(t_k, h)</code>.</li>
+<code>t_k</code> in the stimuli file, then call <code>{_fmi(root, "DoStep")}(t_k, h)</code>.</li>
 <li>Record the outputs at every <code>t_k</code> (row 0: after initialization) and
 compare: the result passes when at every sample
 <code>|y − y_ref| ≤ tolerance · (1 + |y_ref|)</code>. On the platform the reference was made

@@ -70,10 +70,34 @@ EXPERIMENTS = {
 # the model description: variable types, for typed parameter values
 # ---------------------------------------------------------------------------
 
+#: FMI 3.0 type elements -> the SSP 1.0 type of their values
+FMI3_TYPES = {"Float64": "Real", "Float32": "Real", "Int8": "Integer", "UInt8": "Integer",
+              "Int16": "Integer", "UInt16": "Integer", "Int32": "Integer", "UInt32": "Integer",
+              "Int64": "Integer", "UInt64": "Integer", "Boolean": "Boolean", "String": "String"}
+
+
 def variable_types(model_description):
-    """{name: "Real" | "Integer" | "Boolean" | ...} of a modelDescription.xml."""
+    """{name: "Real" | "Integer" | "Boolean" | ...} of a modelDescription.xml.
+
+    FMI 3.0: the types are named as in SSP 1.0 (Float64 -> Real, Int32 -> Integer), and an
+    array variable ``name`` of n elements gives its elements ``name[1]`` .. ``name[n]``, the
+    names the experiment's parameter file uses (FMI 3.0 structured names of the elements).
+    """
     root = ET.parse(model_description).getroot()
     types = {}
+    if root.get("fmiVersion", "").startswith("3"):
+        for var in root.find("ModelVariables"):
+            kind = FMI3_TYPES.get(var.tag)
+            if kind is None:
+                continue
+            dims = var.findall("Dimension")
+            if not dims:
+                types[var.get("name")] = kind
+                continue
+            (dim,) = dims                           # our arrays are one-dimensional
+            for i in range(1, int(dim.get("start")) + 1):
+                types[f"{var.get('name')}[{i}]"] = kind
+        return types
     for var in root.iter("ScalarVariable"):
         (typ,) = [c for c in var if c.tag in ("Real", "Integer", "Boolean", "String", "Enumeration")]
         types[var.get("name")] = typ.tag

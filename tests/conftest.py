@@ -29,6 +29,7 @@ import pytest
 REPO = pathlib.Path(__file__).resolve().parents[1]
 BUILD_DIR = REPO / "build"
 FMU_DIR = BUILD_DIR / "fmus"
+FMU3_DIR = FMU_DIR / "fmi3"
 FMU_NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
 _FMU_SOURCE_SUFFIXES = {".c", ".h", ".xml", ".map", ".txt", ".cmake", ".py", ".html", ".png"}
 
@@ -62,6 +63,7 @@ def _commit_date_changed():
 
 def _fmus_stale():
     fmus = ([FMU_DIR / f"{name}.fmu" for name in FMU_NAMES] + [BUILD_DIR / "libpiezo_core.so"]
+            + [FMU3_DIR / f"{name}.fmu" for name in FMU_NAMES]        # the FMI 3.0 editions
             + [FMU_DIR / "PiezoStageClosedLoop.ssp"]
             + [BUILD_DIR / "libpiezo_runner.so", BUILD_DIR / "libpiezo_bench.so"])   # native master, bench
     if not all(f.exists() for f in fmus):
@@ -91,6 +93,12 @@ def pytest_sessionstart(session):
 @pytest.fixture(scope="session")
 def fmu_paths():
     return build_fmus()
+
+
+@pytest.fixture(scope="session")
+def fmu3_paths(fmu_paths):
+    """{modelIdentifier: path of the FMI 3.0 edition's .fmu} (built with the FMI 2.0 ones)."""
+    return {name: FMU3_DIR / f"{name}.fmu" for name in FMU_NAMES}
 
 
 class FmuPackage:

@@ -143,3 +143,68 @@ def test_state_serialized_in_one_process_continues_in_another(hosts, fmu_args):
     passed, failed = summary(proc.stdout)
     assert failed == 0, report
     assert proc.stdout.count("another process continued") == 2 * len(FMU_NAMES), report
+
+
+# ---------------------------------------------------------------------------------------
+# the FMI 3.0 editions (tests/c/fmu3_*.c through fmu3_host.h; the same references)
+
+@pytest.fixture(scope="module")
+def fmu3_args(fmu3_paths, tmp_path_factory):
+    """MODEL.xml MODEL.so for each FMI 3.0 edition, from the unzipped .fmu files."""
+    args = []
+    for name in FMU_NAMES:
+        unzipdir = tmp_path_factory.mktemp(f"{name}_fmi3")
+        with zipfile.ZipFile(fmu3_paths[name]) as z:
+            z.extractall(unzipdir)
+        args += [str(unzipdir / "modelDescription.xml"),
+                 str(unzipdir / "binaries" / "x86_64-linux" / f"{name}.so")]
+    return args
+
+
+def test_fmi3_each_defect_stays_fixed_and_editions_refuse_each_other(hosts, fmu3_args, fmu_args):
+    prefix = valgrind_prefix()
+    proc, report = run_host(prefix + [str(hosts / "fmu3_regressions")] + fmu3_args + fmu_args)
+    assert proc.returncode == 0, report
+    if prefix:
+        assert memcheck_clean(proc.stderr), proc.stderr[-5000:]
+    passed, failed = summary(proc.stdout)
+    assert failed == 0 and "FAIL" not in proc.stdout, report
+    for defect in range(1, 8):          # defect 8 (NULL logger) is fmu3_negative's: FMI 3.0 allows it
+        assert re.search(rf"^ok   defect {defect}\b", proc.stdout, flags=re.M), (defect, report)
+    assert passed >= 100, report
+
+
+def test_fmi3_negative_suite_under_memcheck(hosts, fmu3_args):
+    prefix = valgrind_prefix()
+    proc, report = run_host(prefix + [str(hosts / "fmu3_negative")] + fmu3_args)
+    assert proc.returncode == 0, report
+    passed, failed = summary(proc.stdout)
+    assert failed == 0, report
+    groups = re.findall(r"^group (\S+)\s+(.+?)\s+(\d+) cases, (\d+) failed$", proc.stdout, flags=re.M)
+    for group in ("matrix", "null", "vr", "instantiate", "extreme", "free"):
+        assert {what for g, what, _, _ in groups if g == group} == set(FMU_NAMES), (group, report)
+    assert sum(1 for g, *_ in groups if g == "foreign") == len(FMU_NAMES) * (len(FMU_NAMES) - 1)
+    assert passed > 5000, report
+    print(f"FMI 3.0 negative cases: {passed}")
+    if prefix:
+        assert memcheck_clean(proc.stderr), proc.stderr[-5000:]
+
+
+def test_fmi3_eight_threads_equal_the_sequential_runs(hosts, fmu3_args):
+    proc, report = run_host([str(hosts / "fmu3_threads")] + fmu3_args)
+    assert proc.returncode == 0, report
+    assert summary(proc.stdout)[1] == 0, report
+    assert proc.stdout.count("bitwise equal to the sequential run") == 8 * (len(FMU_NAMES) + 1), report
+
+
+def test_fmi3_state_continues_in_another_process_and_edition(hosts, fmu3_args, fmu_args):
+    pairs = []
+    for i in range(len(FMU_NAMES)):
+        pairs += fmu3_args[2 * i:2 * i + 2] + fmu_args[2 * i:2 * i + 2]
+    proc, report = run_host([str(hosts / "fmu3_xproc")] + pairs)
+    assert proc.returncode == 0, report
+    assert summary(proc.stdout)[1] == 0, report
+    for direction in ("FMI 3.0 -> FMI 3.0", "FMI 2.0 -> FMI 3.0", "FMI 3.0 -> FMI 2.0"):
+        hits = [line for line in proc.stdout.splitlines()
+                if direction in line and "another process continued" in line and "bitwise equal" in line]
+        assert len(hits) >= len(FMU_NAMES), (direction, report)

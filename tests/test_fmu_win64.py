@@ -12,6 +12,11 @@ importer would meet them.
     it within 1e-12 in the outputs' units (um, V), the libm functions of the two C run-times
     being allowed to differ in their last bits.
 
+(d) the same for the FMI 3.0 editions (binaries/x86_64-linux, binaries/x86_64-windows): the
+    DLL exports exactly the functions of fmi3Functions.h (fmpy's copy), imports only system
+    DLLs, and the same host compiled with -DFMU_HOST_FMI3 runs the FMI 3.0 edition's reference
+    experiment on both binaries with the same tolerances.
+
 The cross compiler and wine64 are installed by .ci/run (Debian: gcc-mingw-w64-x86-64, wine64).
 """
 
@@ -132,17 +137,26 @@ def test_dll_has_no_debug_information(dlls, name):
 # ---------------------------------------------------------------------------------------
 # (c) the same experiment on linux64 and, under wine, on win64
 
-@pytest.fixture(scope="module")
-def hosts(tmp_path_factory):
+def _build_hosts(root, *defines):
     """(native host, win64 host.exe), both built from tests/wine_host/fmu_host.c."""
-    root = tmp_path_factory.mktemp("hosts")
-    flags = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-I", str(FMI_HEADERS)]
+    flags = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-I", str(FMI_HEADERS),
+             *defines]
     native, exe = root / "fmu_host", root / "fmu_host.exe"
     cc = os.environ.get("CC") or _tool("cc")
     subprocess.run([cc, *flags, str(HOST_SOURCE), "-ldl", "-o", str(native)], check=True)
     subprocess.run([_tool(MINGW_PREFIX + "gcc"), *flags, "-static", str(HOST_SOURCE),
                     "-o", str(exe)], check=True)
     return native, exe
+
+
+@pytest.fixture(scope="module")
+def hosts(tmp_path_factory):
+    return _build_hosts(tmp_path_factory.mktemp("hosts"))
+
+
+@pytest.fixture(scope="module")
+def hosts3(tmp_path_factory):
+    return _build_hosts(tmp_path_factory.mktemp("hosts3"), "-DFMU_HOST_FMI3")
 
 
 @pytest.fixture(scope="module")
@@ -211,4 +225,88 @@ def test_win64_under_wine_matches_linux64(fmu_paths, hosts, wine_env, tmp_path, 
     worst = np.max(np.abs(windows[:, 1:] - linux[:, 1:]))
     print(f"\n{name}: win64 (wine) vs linux64, worst |difference| over {n} samples and "
           f"{len(columns)} outputs: {worst:.3g}")
+    assert worst <= 1e-12, f"win64 and linux64 differ by {worst:.3g}"
+
+
+# ---------------------------------------------------------------------------------------
+# (d) the FMI 3.0 editions
+
+FMI3_HEADER = FMI_HEADERS / "fmi3Functions.h"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fmi3_binaries_and_dll_exports(fmu3_paths, tmp_path, name):
+    with zipfile.ZipFile(fmu3_paths[name]) as zf:
+        files = sorted(n for n in zf.namelist() if n.startswith("binaries/") and not n.endswith("/"))
+        assert files == [f"binaries/x86_64-linux/{name}.so", f"binaries/x86_64-windows/{name}.dll"]
+        dll = tmp_path / f"{name}.dll"
+        dll.write_bytes(zf.read(f"binaries/x86_64-windows/{name}.dll"))
+    api = set(re.findall(r"#define\s+(fmi3\w+)\s+fmi3FullName", FMI3_HEADER.read_text()))
+    assert len(api) > 70
+    text = _objdump(dll, "-p")
+    table = text.split("[Ordinal/Name Pointer] Table", 1)[1].split("\n\n", 1)[0]
+    exported = set(re.findall(r"\]\s+(\S+)", table))
+    assert exported == api, (sorted(exported - api), sorted(api - exported))
+    imported = {m.lower() for m in re.findall(r"DLL Name: (\S+)", text)}
+    assert imported and imported <= SYSTEM_DLLS, imported
+    assert re.search(r"Time/Date\s+Thu Jan  1 00:00:00 1970", text), "PE time stamp set"
+    assert ".debug" not in _objdump(dll, "-h")
+
+
+def _plan3(experiment, md3):
+    """The plan of the FMI 2.0 edition's experiment for the FMI 3.0 edition: scalars by name,
+    the elements ``name[j]`` gathered into their array variable (set whole, "reals")."""
+    v3 = {v.name: v for v in md3.modelVariables}
+    lines = [f"identifier {md3.coSimulation.modelIdentifier}", f"guid {md3.instantiationToken}",
+             f"step {experiment.step!r}", f"steps {experiment.steps}"]
+    arrays = {}
+    for name, value in experiment.parameters.items():
+        if name not in v3:
+            base, index = name[:-1].split("[")
+            values = arrays.setdefault(base, [float(x) for x in str(v3[base].start).split()])
+            values[int(index) - 1] = float(value)
+            continue
+        kind = {"Float64": "real", "Int32": "integer", "Boolean": "boolean"}[v3[name].type]
+        lines.append(f"{kind} {v3[name].valueReference} {float(value)!r}" if kind == "real"
+                     else f"{kind} {v3[name].valueReference} {int(value)}")
+    for base, values in arrays.items():
+        lines.append(f"reals {v3[base].valueReference} {len(values)} "
+                     + " ".join(repr(x) for x in values))
+    inputs = [] if experiment.stimuli is None else list(experiment.stimuli.dtype.names[1:])
+    lines += [f"input {v3[n].valueReference}" for n in inputs]
+    reals = [n for n in experiment.outputs if v3[n].type == "Float64"]
+    bools = [n for n in experiment.outputs if v3[n].type == "Boolean"]
+    lines += [f"output {v3[n].valueReference}" for n in reals]
+    lines += [f"boutput {v3[n].valueReference}" for n in bools]
+    lines.append("data")
+    for k in range(experiment.steps + 1 if inputs else 0):
+        lines.append(" ".join(repr(float(experiment.stimuli[n][k])) for n in inputs))
+    return "\n".join(lines) + "\n", reals + bools
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fmi3_win64_under_wine_matches_linux64(fmu_paths, fmu3_paths, hosts3, wine_env, tmp_path, name):
+    """Reference: the FMI 2.0 edition's experiment and reference CSV (the FMI 3.0 edition
+    carries the same, tests/test_fmi3_editions.py), equal bit for bit on x86_64-linux."""
+    native, exe = hosts3
+    experiment = load_experiment(fmu_paths[name])
+    md3 = fmpy.read_model_description(str(fmu3_paths[name]))
+    plan, columns = _plan3(experiment, md3)
+    if name != "AdaptiveCompoundController" and experiment.parameters:
+        assert "reals " in plan, "the experiment should set an array parameter"
+    (tmp_path / "plan.txt").write_text(plan)
+    unzip(fmu3_paths[name], tmp_path / "fmu")
+    so = tmp_path / "fmu" / "binaries" / "x86_64-linux" / f"{name}.so"
+    dll = tmp_path / "fmu" / "binaries" / "x86_64-windows" / f"{name}.dll"
+
+    linux = _run([str(native), str(tmp_path / "plan.txt"), str(so)])
+    windows = _run([_wine64(), str(exe), "Z:" + str(tmp_path / "plan.txt").replace("/", "\\"),
+                    "Z:" + str(dll).replace("/", "\\")], env=wine_env)
+    n = experiment.steps + 1
+    assert linux.shape == windows.shape == (n, 1 + len(columns))
+    for j, column in enumerate(columns, start=1):
+        assert np.array_equal(linux[:, j], experiment.reference[column]), column
+    worst = np.max(np.abs(windows[:, 1:] - linux[:, 1:]))
+    print(f"\n{name} FMI 3.0: x86_64-windows (wine) vs x86_64-linux, worst |difference| "
+          f"over {n} samples: {worst:.3g}")
     assert worst <= 1e-12, f"win64 and linux64 differ by {worst:.3g}"

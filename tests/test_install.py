@@ -64,17 +64,22 @@ def test_pip_install_then_run_a_scenario_from_another_folder(fmu_paths, tmp_path
         with zipfile.ZipFile(installed) as zf:
             assert f"binaries/win64/{name}.dll" in zf.namelist()
     assert (data / "fmus" / "PiezoStageClosedLoop.ssp").is_file()
+    for name in NAMES:                          # the FMI 3.0 editions beside them
+        installed = data / "fmus" / "fmi3" / f"{name}.fmu"
+        assert installed.read_bytes() == (fmu_paths[name].parent / "fmi3" / f"{name}.fmu").read_bytes()
 
     assert (data / "lib" / "libpiezo_runner.so").is_file() and (data / "include" / "piezo_runner.h").is_file()
     e_rms = {}
-    for backend in ("fmpy", "native", "core"):
+    for backend, fmi in (("fmpy", "2"), ("native", "2"), ("core", "2"), ("fmpy", "3")):
+        label = f"{backend}{fmi}"
         out = _run([python, "-m", "harness", "run", "mismatch_5hz", "--no-plots", "--out",
-                    f"out_{backend}", "--backend", backend], elsewhere, env).stdout
+                    f"out_{label}", "--backend", backend, "--fmi", fmi], elsewhere, env).stdout
         assert "mismatch_5hz" in out and "e_rms" in out, out
-        assert any((elsewhere / f"out_{backend}").iterdir())
-        with open(elsewhere / f"out_{backend}" / "mismatch_5hz.csv") as fh:
-            e_rms[backend] = next(csv.DictReader(fh))["e_rms_um"]
-    assert e_rms["fmpy"] == e_rms["native"] == e_rms["core"], e_rms     # one loop, three masters
+        assert any((elsewhere / f"out_{label}").iterdir())
+        with open(elsewhere / f"out_{label}" / "mismatch_5hz.csv") as fh:
+            e_rms[label] = next(csv.DictReader(fh))["e_rms_um"]
+    # one loop, three masters, two FMI versions
+    assert e_rms["fmpy2"] == e_rms["native2"] == e_rms["core2"] == e_rms["fmpy3"], e_rms
 
     empty = tmp_path / "no_fmus"
     empty.mkdir()

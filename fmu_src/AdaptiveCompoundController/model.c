@@ -1,7 +1,8 @@
 /*
  * AdaptiveCompoundController/model.c - the controller FMU's model: variable
  * table, start values and calls into the core controller (piezo_controller.h).
- * Everything FMI lives in the shared glue (fmu_src/fmi/fmi2_glue.c).
+ * Everything FMI lives in the glues (fmu_src/fmi/: fmu_glue_core.c shared by
+ * fmi2_glue.c and fmi3_glue.c), so this file serves both FMI versions.
  *
  * Timing (default, mv.feedthrough = false): a doStep from t_k samples the
  * held inputs y_ref = y_d(k+d), y_meas(k), computes and commits sample k,
@@ -141,7 +142,7 @@ int model_step_warning(ModelData *data, double start_time, char *text, size_t si
         data->said_saturated = 1;
         snprintf(text, size, "v was clipped to [sat.v_min, sat.v_max] = [%g, %g] V, first at "
                  "t = %.9g s (adaptation pauses while a clipped sample is in the regressor); "
-                 "further clipping is counted, not logged: fmi2Terminate reports the count",
+                 "further clipping is counted, not logged: the terminate call reports the count",
                  c->sat_v_min, c->sat_v_max, sample_time(data, start_time, c->k_first_saturated));
         return 1;
     }
@@ -150,7 +151,7 @@ int model_step_warning(ModelData *data, double start_time, char *text, size_t si
         snprintf(text, size, "|pred_error| exceeded monitor.pred_error_max = %g um, first at t = %.9g s: "
                  "the model of G no longer predicts the measurement. If it stays above for "
                  "monitor.divergence_samples = %llu consecutive samples the loop is declared unstable "
-                 "and fmi2DoStep fails; further exceedances are counted, not logged",
+                 "and the doStep fails; further exceedances are counted, not logged",
                  c->pred_error_max, sample_time(data, start_time, c->k_first_large_error),
                  (unsigned long long)c->divergence_samples);
         return 1;

@@ -1,7 +1,8 @@
 /*
  * PiezoStage/model.c - the PiezoStage FMU's model: variable table, start
  * values and calls into the core plant (piezo_plant.h). Everything FMI lives
- * in the shared glue (fmu_src/fmi/fmi2_glue.c).
+ * in the shared glue (fmu_src/fmi/: fmu_glue_core.c
+ * shared by fmi2_glue.c and fmi3_glue.c), so this file serves both FMI versions.
  *
  * Semantics: at t_k = t0 + k h the outputs are plant.out (u(k-1), x(k), y(k),
  * y_meas(k)); one model_step applies the held v as v(k) and advances to k+1.

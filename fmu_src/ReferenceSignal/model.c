@@ -1,7 +1,8 @@
 /*
  * ReferenceSignal/model.c - the ReferenceSignal FMU's model: variable table,
  * start values and calls into the core (piezo_reference.h). Everything FMI
- * lives in the shared glue (fmu_src/fmi/fmi2_glue.c).
+ * lives in the shared glue (fmu_src/fmi/: fmu_glue_core.c
+ * shared by fmi2_glue.c and fmi3_glue.c), so this file serves both FMI versions.
  *
  * At t_k = t0 + k h the outputs are y_d(t_k) and y_ref = y_d(t_(k+lead)), the
  * preview the controller's y_ref input needs (lead = d of the controller).

@@ -1,12 +1,18 @@
 /*
- * fmu_model.h - the contract between the shared FMI 2.0 Co-Simulation glue
- * (fmi2_glue.c) and one model (fmu_src/<Model>/model.c + config.h).
+ * fmu_model.h - the contract between the FMI Co-Simulation glue (the shared
+ * fmu_glue_core.c under fmi2_glue.c or fmi3_glue.c) and one model
+ * (fmu_src/<Model>/model.c + config.h). The same model files serve the FMI 2.0
+ * and the FMI 3.0 edition; nothing here depends on the FMI version (messages a
+ * model writes say "doStep", "terminate", not a version's function names).
  *
  * The glue is compiled into every FMU with the model's directory first on the
  * include path, so "config.h" is that model's. config.h provides:
  *   MODEL_IDENTIFIER_STRING  the modelIdentifier (e.g. "PiezoStage")
- *   MODEL_GUID               the guid of modelDescription.xml
- *   an enum of value references 0..MODEL_N_VARIABLES-1 in XML order
+ *   MODEL_GUID               the guid of modelDescription.xml (FMI 3.0: its
+ *                            instantiationToken, the same string)
+ *   an enum of value references 0..MODEL_N_VARIABLES-1 in XML order (FMI 3.0:
+ *                            scalars keep them; a run name[1]..name[n] is one
+ *                            array variable with the reference of name[1])
  *   ModelData                flat, pointer-free model data (parameters,
  *                            held inputs, core state, output values)
  *
@@ -27,8 +33,8 @@
 
 typedef enum { MODEL_REAL = 0, MODEL_INTEGER = 1, MODEL_BOOLEAN = 2 } model_type;
 
-/* parameter: causality parameter, variability fixed (settable before
- * fmi2ExitInitializationMode only); input: settable until terminate;
+/* parameter: causality parameter, variability fixed (settable before the end
+ * of initialization mode only); input: settable until terminate;
  * output: read only, computed by model_update_outputs. */
 typedef enum { MODEL_PARAMETER = 0, MODEL_INPUT = 1, MODEL_OUTPUT = 2 } model_causality;
 
@@ -46,7 +52,7 @@ extern const model_variable model_variables[MODEL_N_VARIABLES];
 void model_set_start_values(ModelData *data);
 
 /* Validate the parameters and (re)initialize the core state to sample 0 at
- * time start_time (fmi2SetupExperiment). On PIEZO_ERR_PARAM, diag names the
+ * time start_time (fmi2SetupExperiment, fmi3EnterInitializationMode). On PIEZO_ERR_PARAM, diag names the
  * parameter. */
 piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag);
 
@@ -96,7 +102,7 @@ static inline int model_direct_feedthrough(const ModelData *data)
  * also across FMU state restores) and return 1, else return 0. */
 int model_step_warning(ModelData *data, double start_time, char *text, size_t size);
 
-/* At fmi2Terminate: a summary worth a warning (e.g. counts), 1 if written. */
+/* At terminate: a summary worth a warning (e.g. counts), 1 if written. */
 int model_terminate_warning(const ModelData *data, char *text, size_t size);
 
 /* Why the model refused a step with status st, in its own terms (e.g. which
@@ -131,7 +137,7 @@ static inline int model_failure_text(const ModelData *data, piezo_status st, cha
  * and flag of its core state, its sample counters against k (and t0 where it
  * keeps time), that the core agrees with its parameters where it copies them,
  * and the exact-mode history (history[0..n_history-1], NULL when empty).
- * core_initialized: the state was saved after fmi2ExitInitializationMode
+ * core_initialized: the state was saved after the end of initialization
  * (before it, only the parameters and inputs matter: model_init validates them). */
 const char *model_check_data(const ModelData *data, int core_initialized, double t0, uint64_t k,
                              const double *history, size_t n_history);

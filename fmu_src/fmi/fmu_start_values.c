@@ -16,6 +16,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fmu_glue_core.h"
 #include "fmu_start_values.h"
 
 typedef struct {
@@ -30,26 +31,7 @@ struct fmu_start_values {
     start_value entries[MODEL_N_VARIABLES];
 };
 
-static void log_msg(const fmi2CallbackFunctions *cb, const char *name, fmi2Status status,
-                    const char *fmt, ...)
-#if defined(__GNUC__)
-    __attribute__((format(printf, 4, 5)))
-#endif
-    ;
-
-static void log_msg(const fmi2CallbackFunctions *cb, const char *name, fmi2Status status,
-                    const char *fmt, ...)
-{
-    char text[1024];
-    va_list ap;
-    if (cb == NULL || cb->logger == NULL)
-        return;
-    va_start(ap, fmt);
-    vsnprintf(text, sizeof text, fmt, ap);
-    va_end(ap);
-    cb->logger(cb->componentEnvironment, name != NULL ? name : "?", status,
-               status == fmi2Warning ? "logStatusWarning" : "logStatusError", "%s", text);
-}
+#define log_msg glue_host_log
 
 /* ------------------------------------------------------------------------ */
 /* file URI -> local path                                                    */
@@ -234,9 +216,8 @@ static const char *causality_name(model_causality c)
 
 /* Parse the open file into sv; 0 after logging the first problem. */
 static int parse_file(FILE *f, const char *path, fmu_start_values *sv,
-                      const fmi2CallbackFunctions *cb, const char *name)
+                      const glue_host *cb, const char *name, const char *where)
 {
-    static const char where[] = "fmi2Instantiate: start values";
     char buf[FMU_START_VALUES_LINE_MAX + 1];
     int line = 0, seen[MODEL_N_VARIABLES];
     size_t i;
@@ -250,17 +231,17 @@ static int parse_file(FILE *f, const char *path, fmu_start_values *sv,
         start_value e;
         line++;
         if (st == LINE_READ_ERROR) {
-            log_msg(cb, name, fmi2Error, "%s: %s line %d: cannot be read: %s", where, path, line,
+            log_msg(cb, name, GLUE_ERROR, "%s: %s line %d: cannot be read: %s", where, path, line,
                     strerror(errno));
             return 0;
         }
         if (st == LINE_NUL) {
-            log_msg(cb, name, fmi2Error, "%s: %s line %d: contains a NUL byte (not a text file?)",
+            log_msg(cb, name, GLUE_ERROR, "%s: %s line %d: contains a NUL byte (not a text file?)",
                     where, path, line);
             return 0;
         }
         if (st == LINE_TOO_LONG) {
-            log_msg(cb, name, fmi2Error, "%s: %s line %d: longer than %d characters", where, path,
+            log_msg(cb, name, GLUE_ERROR, "%s: %s line %d: longer than %d characters", where, path,
                     line, FMU_START_VALUES_LINE_MAX);
             return 0;
         }
@@ -269,7 +250,7 @@ static int parse_file(FILE *f, const char *path, fmu_start_values *sv,
             continue;
         eq = strchr(text, '=');
         if (eq == NULL) {
-            log_msg(cb, name, fmi2Error, "%s: %s line %d: expected 'name = value', got '%s'",
+            log_msg(cb, name, GLUE_ERROR, "%s: %s line %d: expected 'name = value', got '%s'",
                     where, path, line, text);
             return 0;
         }
@@ -277,24 +258,24 @@ static int parse_file(FILE *f, const char *path, fmu_start_values *sv,
         key = trim(text);
         value = trim(eq + 1);
         if (key[0] == '\0' || value[0] == '\0') {
-            log_msg(cb, name, fmi2Error, "%s: %s line %d: expected 'name = value', the %s is empty",
+            log_msg(cb, name, GLUE_ERROR, "%s: %s line %d: expected 'name = value', the %s is empty",
                     where, path, line, key[0] == '\0' ? "name" : "value");
             return 0;
         }
         vr = find_variable(key);
         if (vr < 0) {
-            log_msg(cb, name, fmi2Error, "%s: %s line %d: '%s' is not a variable of %s",
+            log_msg(cb, name, GLUE_ERROR, "%s: %s line %d: '%s' is not a variable of %s",
                     where, path, line, key, MODEL_IDENTIFIER_STRING);
             return 0;
         }
         if (model_variables[vr].causality != MODEL_PARAMETER) {
-            log_msg(cb, name, fmi2Error, "%s: %s line %d: '%s' is %s, only parameters may be "
+            log_msg(cb, name, GLUE_ERROR, "%s: %s line %d: '%s' is %s, only parameters may be "
                     "given start values here", where, path, line, key,
                     causality_name(model_variables[vr].causality));
             return 0;
         }
         if (seen[vr]) {
-            log_msg(cb, name, fmi2Error, "%s: %s line %d: '%s' was already set on line %d",
+            log_msg(cb, name, GLUE_ERROR, "%s: %s line %d: '%s' was already set on line %d",
                     where, path, line, key, seen[vr]);
             return 0;
         }
@@ -303,7 +284,7 @@ static int parse_file(FILE *f, const char *path, fmu_start_values *sv,
         e.integer = 0;
         e.line = line;
         if (!parse_value(value, model_variables[vr].type, &e, &why)) {
-            log_msg(cb, name, fmi2Error, "%s: %s line %d: %s = '%s' %s", where, path, line, key,
+            log_msg(cb, name, GLUE_ERROR, "%s: %s line %d: %s = '%s' %s", where, path, line, key,
                     value, why);
             return 0;
         }
@@ -316,11 +297,11 @@ static int parse_file(FILE *f, const char *path, fmu_start_values *sv,
 /* ------------------------------------------------------------------------ */
 /* public                                                                    */
 
-int fmu_start_values_init(fmu_start_values **sv, const char *resource_location,
-                          const fmi2CallbackFunctions *cb, const char *instance_name,
-                          ModelData *data)
+int fmu_start_values_init(fmu_start_values **sv, const char *resource_location, int is_uri,
+                          const char *fname, const char *location_arg, const glue_host *cb,
+                          const char *instance_name, ModelData *data)
 {
-    static const char where[] = "fmi2Instantiate: start values";
+    char where[96];
     const char *why = NULL;
     char *path;
     size_t size;
@@ -331,19 +312,28 @@ int fmu_start_values_init(fmu_start_values **sv, const char *resource_location,
     *sv = NULL;
     if (resource_location == NULL || resource_location[0] == '\0')
         return 1;                               /* no resources: the compiled defaults stand */
+    snprintf(where, sizeof where, "%s: start values", fname);
     size = strlen(resource_location) + sizeof "/" FMU_START_VALUES_FILE;
-    path = (char *)cb->allocateMemory(size, 1);
+    path = (char *)cb->alloc(size, 1);
     if (path == NULL) {
-        log_msg(cb, instance_name, fmi2Error, "%s: out of memory", where);
+        log_msg(cb, instance_name, GLUE_ERROR, "%s: out of memory", where);
         return 0;
     }
-    /* the decoded path is never longer than the URI: room is left for the file name */
-    if (!uri_to_path(resource_location, path, size - (sizeof "/" FMU_START_VALUES_FILE - 1), &why)) {
-        /* Cannot tell whether the FMU has a start_values file: warn, keep the defaults. */
-        log_msg(cb, instance_name, fmi2Warning, "%s: fmuResourceLocation '%s' is not read (%s); "
-                "the compiled start values are used", where, resource_location, why);
-        cb->freeMemory(path);
-        return 1;
+    if (is_uri) {
+        /* the decoded path is never longer than the URI: room is left for the file name */
+        if (!uri_to_path(resource_location, path, size - (sizeof "/" FMU_START_VALUES_FILE - 1), &why)) {
+            /* Cannot tell whether the FMU has a start_values file: warn, keep the defaults. */
+            log_msg(cb, instance_name, GLUE_WARNING, "%s: %s '%s' is not read (%s); "
+                    "the compiled start values are used", where, location_arg, resource_location, why);
+            cb->release(path);
+            return 1;
+        }
+    } else {
+        /* a folder path; FMI 3.0 ends it with a separator */
+        size_t n = strlen(resource_location);
+        memcpy(path, resource_location, n + 1);
+        while (n > 1 && (path[n - 1] == '/' || path[n - 1] == '\\'))
+            path[--n] = '\0';
     }
     strcat(path, "/" FMU_START_VALUES_FILE);
     errno = 0;
@@ -352,24 +342,24 @@ int fmu_start_values_init(fmu_start_values **sv, const char *resource_location,
         int err = errno;
         ok = err == ENOENT || err == ENOTDIR;   /* no file: nothing to apply */
         if (!ok)
-            log_msg(cb, instance_name, fmi2Error, "%s: cannot open %s: %s", where, path,
+            log_msg(cb, instance_name, GLUE_ERROR, "%s: cannot open %s: %s", where, path,
                     strerror(err));
-        cb->freeMemory(path);
+        cb->release(path);
         return ok;
     }
-    out = (fmu_start_values *)cb->allocateMemory(1, sizeof *out);
+    out = (fmu_start_values *)cb->alloc(1, sizeof *out);
     if (out == NULL) {
         fclose(f);
-        log_msg(cb, instance_name, fmi2Error, "%s: out of memory", where);
-        cb->freeMemory(path);
+        log_msg(cb, instance_name, GLUE_ERROR, "%s: out of memory", where);
+        cb->release(path);
         return 0;
     }
     out->count = 0;
-    ok = parse_file(f, path, out, cb, instance_name);
+    ok = parse_file(f, path, out, cb, instance_name, where);
     fclose(f);
-    cb->freeMemory(path);
+    cb->release(path);
     if (!ok) {
-        cb->freeMemory(out);
+        cb->release(out);
         return 0;
     }
     fmu_start_values_apply(out, data);
@@ -392,9 +382,9 @@ void fmu_start_values_apply(const fmu_start_values *sv, ModelData *data)
     }
 }
 
-void fmu_start_values_free(fmu_start_values **sv, const fmi2CallbackFunctions *cb)
+void fmu_start_values_free(fmu_start_values **sv, const glue_host *cb)
 {
     if (*sv != NULL)
-        cb->freeMemory(*sv);
+        cb->release(*sv);
     *sv = NULL;
 }

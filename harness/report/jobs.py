@@ -29,7 +29,8 @@ from .conditions import (
     user_condition,
 )
 from .progress import Progress
-from .run import evaluate_tracking, evaluate_validation, parameter_defaults, validation_series
+from .run import (evaluate_tracking, evaluate_validation, parameter_defaults, simulators,
+                  validation_series)
 
 __all__ = ["run_all", "run_scenario", "check_out_dir", "prepare_out_dir", "VALIDATION_NOTES",
            "REPORT_WIDTH"]
@@ -105,6 +106,8 @@ def _provenance_blocks(prov, scenarios, defaults_source):
     D = doc_
     rows = [["commit", prov.commit], ["date", prov.date], ["machine", prov.machine],
             ["command", f"`{prov.command}`"], ["backend", prov.backend]]
+    if prov.fmi_version is not None:
+        rows.append(["FMI version", f"{prov.fmi_version}.0"])
     rows += [[name, version] for name, version in prov.versions.items()]
     blocks = [D.Heading("Provenance"), D.Table(("item", "value"), tuple(map(tuple, rows)))]
     if prov.fmus:
@@ -142,7 +145,8 @@ def _effective(defaults, overrides):
 
 def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seidel",
             fmu_dir=None, plots=True, backend="fmpy", registry=None, extra_scenarios=(),
-            stream=sys.stdout, progress=sys.stderr, command=None, progress_interval=2.0):
+            stream=sys.stdout, progress=sys.stderr, command=None, progress_interval=2.0,
+            fmi_version=2):
     """Run every tracking condition and the validation inputs; write the report.
 
     Parameters
@@ -168,6 +172,8 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
         The command line, for the provenance (default: ``sys.argv``).
     progress_interval : float
         Least wall time [s] between two progress lines within one run.
+    fmi_version : {2, 3}
+        Run the FMI 2.0 (default) or the FMI 3.0 editions of the FMUs.
 
     Returns
     -------
@@ -189,9 +195,10 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     if extra_track:
         conditions.append(user_condition(extra_track, adaptation, preview, master))
     # provenance first: a missing FMU fails here, before minutes of runs
-    prov = collect_provenance(backend, fmu_dir, command=command)
-    plant_def = parameter_defaults(PLANT_MODEL, backend, fmu_dir)
-    ctrl_def = parameter_defaults(CONTROLLER_MODEL, backend, fmu_dir)
+    simulators(backend, fmi_version)        # an impossible backend/version pair fails now
+    prov = collect_provenance(backend, fmu_dir, command=command, fmi_version=fmi_version)
+    plant_def = parameter_defaults(PLANT_MODEL, backend, fmu_dir, fmi_version)
+    ctrl_def = parameter_defaults(CONTROLLER_MODEL, backend, fmu_dir, fmi_version)
 
     total = sum(len(c.scenarios) for c in conditions) + len(validation_names)
     prog = Progress(total, progress, progress_interval)
@@ -203,7 +210,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
             sc = get_scenario(name, registry)
             r = evaluate_tracking(sc, condition=cond.key, adaptation=cond.adaptation,
                                   preview=cond.preview, master=cond.master, fmu_dir=fmu_dir,
-                                  registry=registry, backend=backend,
+                                  registry=registry, backend=backend, fmi_version=fmi_version,
                                   keep_data=plots and cond.role != "check",
                                   progress=prog.within(what, sc.step_size))
             prog.done(f"{what}: e_rms {r.e_rms_um * 1e3:.4g} nm", r.elapsed_s)
@@ -213,7 +220,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     for name in validation_names:
         sc = get_scenario(name, registry)
         r = evaluate_validation(sc, fmu_dir=fmu_dir, registry=registry, backend=backend,
-                                keep_data=plots,
+                                fmi_version=fmi_version, keep_data=plots,
                                 progress=prog.within(f"validation / {name}", sc.step_size))
         prog.done(f"validation / {name}: C − H e_rms {r.diff_e_rms_um:.4f} µm", r.elapsed_s)
         validation.append(r)
@@ -391,7 +398,7 @@ LARGE_FILE_BYTES = 50e6
 
 def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="gauss-seidel",
                  fmu_dir=None, plots=True, registry=None, backend="fmpy", stream=sys.stdout,
-                 progress=sys.stderr, timeseries="csv", progress_interval=2.0):
+                 progress=sys.stderr, timeseries="csv", progress_interval=2.0, fmi_version=2):
     """Run one scenario (tracking or validation), print its table, write its files.
 
     Files: ``<name>.csv`` (metrics, same columns as ``tracking.csv`` or
@@ -402,6 +409,8 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
     ----------
     timeseries : {"csv", "npz", None}
         Format of the time series file, or ``None`` for none.
+    fmi_version : {2, 3}
+        Run the FMI 2.0 (default) or the FMI 3.0 editions of the FMUs.
 
     Returns
     -------
@@ -423,6 +432,7 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
                                     or master != "gauss-seidel"):
         raise ValueError(f"scenario '{sc.name}' is a validation scenario (the plant runs alone): "
                          f"adaptation, preview and master do not apply")
+    simulators(backend, fmi_version)        # an impossible backend/version pair fails now
     out = prepare_out_dir(out_dir)
     prog = Progress(1, progress, progress_interval)
     keep = plots or timeseries is not None
@@ -430,14 +440,16 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
         label = condition_label("run", adaptation, preview, master)
         r = evaluate_tracking(sc, condition="run", adaptation=adaptation, preview=preview,
                               master=master, fmu_dir=fmu_dir, registry=registry, backend=backend,
-                              keep_data=keep, progress=prog.within(sc.name, sc.step_size))
+                              fmi_version=fmi_version, keep_data=keep,
+                              progress=prog.within(sc.name, sc.step_size))
         prog.done(f"{sc.name}: e_rms {r.e_rms_um * 1e3:.4g} nm", r.elapsed_s)
         tables.write_tracking_csv([r], out / f"{sc.name}.csv")
         series = r.data
         table = tables.format_tracking_table([r], f"Tracking: {sc.name} ({label})")
     else:
         r = evaluate_validation(sc, fmu_dir=fmu_dir, registry=registry, backend=backend,
-                                keep_data=keep, progress=prog.within(sc.name, sc.step_size))
+                                fmi_version=fmi_version, keep_data=keep,
+                                progress=prog.within(sc.name, sc.step_size))
         prog.done(f"{sc.name}: C − H e_rms {r.diff_e_rms_um:.4f} µm", r.elapsed_s)
         tables.write_validation_csv([r], out / f"{sc.name}.csv")
         series = validation_series(r) if keep else None
@@ -453,9 +465,11 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
         tables.write_timeseries(series, out / f"{sc.name}_timeseries", timeseries)
     if plots:
         if sc.kind == "tracking":
-            nominal = _effective(parameter_defaults(CONTROLLER_MODEL, backend, fmu_dir),
+            nominal = _effective(parameter_defaults(CONTROLLER_MODEL, backend, fmu_dir,
+                                                    fmi_version),
                                  sc.controller)
-            plant = _effective(parameter_defaults(PLANT_MODEL, backend, fmu_dir), sc.plant)
+            plant = _effective(parameter_defaults(PLANT_MODEL, backend, fmu_dir, fmi_version),
+                               sc.plant)
             draw_scenario_figure(r, out, nominal_g=nominal, plant=plant, label=label)
         else:
             draw_scenario_figure(r, out)

@@ -80,6 +80,8 @@ class Provenance:
         Commit hash of the harness's repository, with `` (uncommitted changes)``
         when the tracked files differ from it; ``unknown`` outside a git checkout.
     backend : str
+    fmi_version : int or None
+        The FMI version of the FMUs that ran (None with the core backend, which runs no FMU).
     fmus : list of FMUInfo
         The FMUs that ran (empty with the core backend).
     core_library : dict
@@ -94,6 +96,7 @@ class Provenance:
 
     commit: str
     backend: str
+    fmi_version: object = 2
     fmus: list = field(default_factory=list)
     core_library: dict = field(default_factory=dict)
     versions: dict = field(default_factory=dict)
@@ -147,7 +150,7 @@ def machine_description():
             f"{platform.machine()}, {_cpu_model()}, {os.cpu_count()} CPUs")
 
 
-def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None):
+def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None, fmi_version=2):
     """Gather the provenance of a run.
 
     Parameters
@@ -158,6 +161,8 @@ def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None):
         The FMUs that ran (default: PiezoStage and AdaptiveCompoundController).
     command : str, optional
         The command line (default: ``sys.argv``).
+    fmi_version : {2, 3}
+        The edition of the FMUs that ran.
 
     Returns
     -------
@@ -166,9 +171,10 @@ def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None):
     from ..cosim import CONTROLLER_MODEL, PLANT_MODEL, fmu_path
 
     models = (PLANT_MODEL, CONTROLLER_MODEL) if models is None else tuple(models)
-    prov = Provenance(commit=commit_id(), backend=backend)
+    prov = Provenance(commit=commit_id(), backend=backend,
+                      fmi_version=None if backend == "core" else int(fmi_version))
     if backend != "core":
-        prov.fmus = [fmu_info(fmu_path(m, fmu_dir)) for m in models]
+        prov.fmus = [fmu_info(fmu_path(m, fmu_dir, fmi_version)) for m in models]
     else:
         from .. import core
         lib = core.library_path()

@@ -104,8 +104,14 @@ class ValidationResult:
         return math.isfinite(self.paper_coupled_e_rms_um)
 
 
-def simulators(backend):
-    """The (closed-loop, open-loop) simulation functions of a backend."""
+def simulators(backend, fmi_version=2):
+    """The (closed-loop, open-loop) simulation functions of a backend.
+
+    ``fmi_version=3`` runs the FMI 3.0 editions of the FMUs (fmpy; ``auto`` then runs every
+    loop with fmpy); the core and native backends have no FMI 3.0 path and raise ValueError.
+    """
+    if fmi_version != 2:
+        return _fmi3_simulators(backend, fmi_version)
     if backend == "fmpy":
         from ..cosim import simulate_closed_loop, simulate_open_loop
         return simulate_closed_loop, simulate_open_loop
@@ -120,7 +126,26 @@ def simulators(backend):
     raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
 
 
-def parameter_defaults(model, backend="fmpy", fmu_dir=None):
+def _fmi3_simulators(backend, fmi_version):
+    import functools
+
+    from ..cosim import FMI_VERSIONS, simulate_closed_loop, simulate_open_loop
+    from ..native import FMI3_REFUSAL
+
+    if fmi_version not in FMI_VERSIONS:
+        raise ValueError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
+    if backend == "core":
+        raise ValueError("the core backend runs the C core without FMI: an FMI version does "
+                         "not apply to it")
+    if backend == "native":
+        raise ValueError(FMI3_REFUSAL)
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    return (functools.partial(simulate_closed_loop, fmi_version=fmi_version),
+            functools.partial(simulate_open_loop, fmi_version=fmi_version))
+
+
+def parameter_defaults(model, backend="fmpy", fmu_dir=None, fmi_version=2):
     """A model's default parameters (its start values) on a backend, by FMU variable name.
 
     Parameters
@@ -131,6 +156,10 @@ def parameter_defaults(model, backend="fmpy", fmu_dir=None):
         modelDescription; core: :func:`harness.core.default_plant_params` or
         :func:`harness.core.default_controller_params`.
     fmu_dir : str or Path, optional
+    fmi_version : {2, 3}
+        The edition whose modelDescription is read; the elements of an FMI 3.0 array variable
+        are returned by their FMI 2.0 names (``pi.w[1]`` ..), so both editions give the same
+        dictionary.
 
     Returns
     -------
@@ -146,23 +175,32 @@ def parameter_defaults(model, backend="fmpy", fmu_dir=None):
                     else core.default_controller_params())
     from .provenance import model_description
 
-    md = model_description(fmu_path(model, fmu_dir))
+    md = model_description(fmu_path(model, fmu_dir, fmi_version))
     out = {}
     for v in md.modelVariables:
         if v.causality != "parameter" or v.start is None:
             continue
-        if v.type == "Real":
-            out[v.name] = float(v.start)
-        elif v.type == "Integer":
-            out[v.name] = int(v.start)
+        if v.type in ("Real", "Float64"):
+            convert = float
+        elif v.type in ("Integer", "Int32"):
+            convert = int
         elif v.type == "Boolean":
-            out[v.name] = str(v.start).lower() in ("true", "1")
+            def convert(text):
+                return text.lower() in ("true", "1")
+        else:
+            continue
+        starts = str(v.start).split()
+        if getattr(v, "dimensions", None):          # an FMI 3.0 array: one start per element
+            for i, text in enumerate(starts):
+                out[f"{v.name}[{i + 1}]"] = convert(text)
+        else:
+            out[v.name] = convert(str(v.start))
     return out
 
 
 def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=True,
                       master="gauss-seidel", fmu_dir=None, registry=None, backend="fmpy",
-                      keep_data=True, progress=None):
+                      keep_data=True, progress=None, fmi_version=2):
     """Run one tracking scenario and compute its metrics.
 
     Parameters
@@ -174,6 +212,8 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
         See :func:`harness.cosim.simulate_closed_loop`.
     backend : {"auto", "fmpy", "native", "core"}
         Run the FMUs (default) or the C core directly.
+    fmi_version : {2, 3}
+        The FMUs' FMI 2.0 (default) or FMI 3.0 editions (see :func:`simulators`).
     keep_data : bool
         Keep the time series in ``result.data``.
     progress : callable, optional
@@ -194,7 +234,7 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
     from ..cosim import LoopDivergedError
 
     sc = get_scenario(scenario, registry)
-    closed, _ = simulators(backend)
+    closed, _ = simulators(backend, fmi_version)
     label = f"{condition} / {sc.name}"
     t0 = _time.perf_counter()
     try:
@@ -216,14 +256,14 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
 
 
 def evaluate_validation(scenario, *, fmu_dir=None, registry=None, backend="fmpy",
-                        keep_data=True, progress=None):
+                        keep_data=True, progress=None, fmi_version=2):
     """Run a validation input through the coupled and the Hammerstein model.
 
     Parameters
     ----------
     scenario : str or Scenario
         A validation scenario (signal = input voltage).
-    fmu_dir, registry, backend, keep_data
+    fmu_dir, registry, backend, keep_data, fmi_version
         As :func:`evaluate_tracking`.
     progress : callable, optional
         ``progress(done, n, model)`` after every simulated second, ``model`` being
@@ -238,7 +278,7 @@ def evaluate_validation(scenario, *, fmu_dir=None, registry=None, backend="fmpy"
     sc = get_scenario(scenario, registry)
     if sc.kind != "validation":
         raise ValueError(f"scenario '{sc.name}' is a {sc.kind} scenario, not a validation input")
-    _, open_loop = simulators(backend)
+    _, open_loop = simulators(backend, fmi_version)
     t0 = _time.perf_counter()
     v = sc.signal.evaluate(sc.time_grid())
     params = dict(sc.plant)

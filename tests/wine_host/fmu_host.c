@@ -2,12 +2,15 @@
  * fmu_host.c - a minimal FMI 2.0 Co-Simulation host that builds for Linux (dlopen) and
  * for Windows (LoadLibrary, with MinGW-w64), so that the same experiment runs the linux64
  * .so natively and the win64 .dll under wine. Used by tests/test_fmu_win64.py.
+ * Compiled with -DFMU_HOST_FMI3 it is the same host for FMI 3.0 Co-Simulation binaries
+ * (x86_64-linux, x86_64-windows): the plan and the output are the same, the calls fmi3.
  *
  * usage: fmu_host PLAN BINARY
  *
  * PLAN is a text file of whitespace-separated tokens:
  *     identifier ID   guid GUID   step H   steps N
  *     real VR VALUE | integer VR VALUE | boolean VR 0|1     (parameters, set before init)
+ *     reals VR N VALUE...   (FMI 3.0 only: a Float64 array parameter, all N elements)
  *     input VR ...          (Real inputs, one column each in the data)
  *     output VR ...         (Real outputs)   boutput VR ...   (Boolean outputs)
  *     data                  followed by N + 1 rows of input values (row k applies at t_k)
@@ -38,9 +41,23 @@ static void (*lib_sym(void *lib, const char *name))(void)
 #define LIB_SYM(lib, name) lib_sym((lib), (name))
 #endif
 
+#ifdef FMU_HOST_FMI3
+#include "fmi3Functions.h"
+#else
 #include "fmi2Functions.h"
+#endif
 
 #define MAX_VARS 64
+#define MAX_ARRAY_VALUES 256
+
+#ifdef FMU_HOST_FMI3
+static void log_message(fmi3InstanceEnvironment env, fmi3Status status, fmi3String category,
+                        fmi3String message)
+{
+    (void)env;
+    fprintf(stderr, "[host] %d %s: %s\n", (int)status, category ? category : "?", message ? message : "");
+}
+#else
 
 static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
                    fmi2String category, fmi2String message, ...)
@@ -53,6 +70,7 @@ static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status
     fputc('\n', stderr);
     va_end(args);
 }
+#endif
 
 static int fail(const char *what)
 {
@@ -69,8 +87,10 @@ int main(int argc, char **argv)
     char token[256], id[256] = "", guid[256] = "";
     double h = 0.0, params_r[MAX_VARS];
     int steps = -1, params_i[MAX_VARS], params_b[MAX_VARS];
-    fmi2ValueReference vr_r[MAX_VARS], vr_i[MAX_VARS], vr_b[MAX_VARS];
-    fmi2ValueReference in[MAX_VARS], out[MAX_VARS], bout[MAX_VARS];
+    unsigned vr_r[MAX_VARS], vr_i[MAX_VARS], vr_b[MAX_VARS], vr_a[MAX_VARS];
+    unsigned in[MAX_VARS], out[MAX_VARS], bout[MAX_VARS];
+    double array_values[MAX_ARRAY_VALUES];
+    size_t array_len[MAX_VARS], n_values = 0, n_a = 0;
     size_t n_r = 0, n_i = 0, n_b = 0, n_in = 0, n_out = 0, n_bout = 0, i;
     double *data;
     FILE *plan;
@@ -99,6 +119,15 @@ int main(int argc, char **argv)
         } else if (!strcmp(token, "boolean") && n_b < MAX_VARS) {
             if (fscanf(plan, "%u %d", &vr, &params_b[n_b]) != 2) return fail("bad boolean");
             vr_b[n_b++] = vr;
+        } else if (!strcmp(token, "reals") && n_a < MAX_VARS) {
+            unsigned long count;
+            if (fscanf(plan, "%u %lu", &vr, &count) != 2 || count > MAX_ARRAY_VALUES - n_values)
+                return fail("bad reals");
+            for (i = 0; i < count; ++i)
+                if (fscanf(plan, "%lf", &array_values[n_values + i]) != 1) return fail("bad reals value");
+            vr_a[n_a] = vr;
+            array_len[n_a++] = count;
+            n_values += count;
         } else if (!strcmp(token, "input") && n_in < MAX_VARS) {
             if (fscanf(plan, "%u", &vr) != 1) return fail("bad input");
             in[n_in++] = vr;
@@ -121,6 +150,65 @@ int main(int argc, char **argv)
         if (fscanf(plan, "%lf", &data[i]) != 1) return fail("short data");
     fclose(plan);
 
+#ifdef FMU_HOST_FMI3
+    lib = LIB_OPEN(argv[2]);
+    if (!lib) return fail("cannot load the binary");
+    {
+        LOAD(fmi3GetVersionTYPE, get_version, "fmi3GetVersion");
+        LOAD(fmi3InstantiateCoSimulationTYPE, instantiate, "fmi3InstantiateCoSimulation");
+        LOAD(fmi3EnterInitializationModeTYPE, enter_init, "fmi3EnterInitializationMode");
+        LOAD(fmi3ExitInitializationModeTYPE, exit_init, "fmi3ExitInitializationMode");
+        LOAD(fmi3SetFloat64TYPE, set_float64, "fmi3SetFloat64");
+        LOAD(fmi3SetInt32TYPE, set_int32, "fmi3SetInt32");
+        LOAD(fmi3SetBooleanTYPE, set_boolean, "fmi3SetBoolean");
+        LOAD(fmi3GetFloat64TYPE, get_float64, "fmi3GetFloat64");
+        LOAD(fmi3GetBooleanTYPE, get_boolean, "fmi3GetBoolean");
+        LOAD(fmi3DoStepTYPE, do_step, "fmi3DoStep");
+        LOAD(fmi3TerminateTYPE, terminate, "fmi3Terminate");
+        LOAD(fmi3FreeInstanceTYPE, free_instance, "fmi3FreeInstance");
+        fmi3Instance c;
+        fmi3Float64 values[MAX_VARS];
+        fmi3Boolean flags[MAX_VARS], event, stop, early;
+        fmi3Int32 ints[MAX_VARS];
+        fmi3Float64 last;
+        size_t offset = 0;
+
+        if (strcmp(get_version(), "3.0")) return fail("not an FMI 3.0 binary");
+        c = instantiate("host", guid, NULL, fmi3False, fmi3False, fmi3False, fmi3False, NULL, 0, NULL,
+                        log_message, NULL);
+        if (!c) return fail("fmi3InstantiateCoSimulation failed");
+        if (enter_init(c, fmi3False, 0.0, 0.0, fmi3False, 0.0) > fmi3Warning)
+            return fail("fmi3EnterInitializationMode failed");
+        if (n_r && set_float64(c, vr_r, n_r, params_r, n_r) > fmi3Warning) return fail("set Float64 parameters");
+        for (i = 0; i < n_a; offset += array_len[i], ++i)
+            if (set_float64(c, &vr_a[i], 1, &array_values[offset], array_len[i]) > fmi3Warning)
+                return fail("set a Float64 array parameter");
+        for (i = 0; i < n_i; ++i) ints[i] = params_i[i];
+        if (n_i && set_int32(c, vr_i, n_i, ints, n_i) > fmi3Warning) return fail("set Int32 parameters");
+        for (i = 0; i < n_b; ++i) flags[i] = params_b[i] ? fmi3True : fmi3False;
+        if (n_b && set_boolean(c, vr_b, n_b, flags, n_b) > fmi3Warning) return fail("set Boolean parameters");
+        if (n_in && set_float64(c, in, n_in, data, n_in) > fmi3Warning) return fail("set inputs");
+        if (exit_init(c) > fmi3Warning) return fail("fmi3ExitInitializationMode failed");
+        for (k = 0; k <= steps; ++k) {
+            const double t = k * h;     /* the grid t0 + k h, never accumulated */
+            if (n_in && set_float64(c, in, n_in, &data[(size_t)k * n_in], n_in) > fmi3Warning)
+                return fail("fmi3SetFloat64 (inputs) failed");
+            if (get_float64(c, out, n_out, values, n_out) > fmi3Warning) return fail("fmi3GetFloat64 failed");
+            if (n_bout && get_boolean(c, bout, n_bout, flags, n_bout) > fmi3Warning)
+                return fail("fmi3GetBoolean failed");
+            printf("%.17g", t);
+            for (i = 0; i < n_out; ++i) printf(" %.17g", values[i]);
+            for (i = 0; i < n_bout; ++i) printf(" %d", flags[i] ? 1 : 0);
+            printf("\n");
+            if (k < steps && do_step(c, t, h, fmi3True, &event, &stop, &early, &last) > fmi3Warning)
+                return fail("fmi3DoStep failed");
+        }
+        terminate(c);
+        free_instance(c);
+    }
+#else
+    (void)vr_a; (void)array_len;
+    if (n_a) return fail("reals (array parameters) need FMI 3.0");
     lib = LIB_OPEN(argv[2]);
     if (!lib) return fail("cannot load the binary");
     {
@@ -174,6 +262,7 @@ int main(int argc, char **argv)
         terminate(c);
         free_instance(c);
     }
+#endif
     free(data);
     return 0;
 }

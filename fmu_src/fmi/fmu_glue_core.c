@@ -1,0 +1,1379 @@
+/*
+ * fmu_glue_core.c - the FMI layer without the FMI version (see fmu_glue_core.h
+ * for what lives here, fmi2_glue.c for the modes and calls, the time grid and
+ * the serialized-state format, which both versions share).
+ */
+#include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmu_glue_core.h"
+
+/* ------------------------------------------------------------------------ */
+/* Instance                                                                  */
+
+#define INSTANCE_MAGIC 0x50494e53u   /* "PINS" */
+#define STATE_MAGIC    0x50535441u   /* "PSTA" */
+
+/* Which FMU an instance belongs to: the address of this binary's copy of its
+ * GUID. Every FMU binary has its own copy, so one FMU's functions refuse another
+ * FMU's instance (same glue, same magic) even when both are loaded in one
+ * process; the check costs one comparison, no hashing per call. */
+static const char model_guid[] = MODEL_GUID;
+
+/* Most samples since t0: (double)k stays exact and t0 + k h keeps its meaning. */
+#define MAX_SAMPLES 9007199254740992ull     /* 2^53 */
+
+enum { CAT_EVENTS = 1, CAT_WARNING = 2, CAT_ERROR = 4, CAT_ALL = 7 };
+
+/* An FMU state: a copy of everything that defines the instance's future. It
+ * belongs to the instance that made it (get or deserialize) and sits in that
+ * instance's list until freed. */
+struct glue_state {
+    uint32_t magic;
+    const glue_instance *owner;
+    glue_state *prev, *next;    /* the owner's list */
+    int mode;
+    double t0;
+    uint64_t k;
+    double h;
+    ModelData data;
+    size_t n_history;
+    size_t history_capacity;
+    double *history;
+};
+
+/* ------------------------------------------------------------------------ */
+/* Logging                                                                   */
+
+static const char *const category_names[] = { "logEvents", "logStatusWarning", "logStatusError", "logAll" };
+static const unsigned category_bits[] = { CAT_EVENTS, CAT_WARNING, CAT_ERROR, CAT_ALL };
+#define N_CATEGORIES (sizeof category_bits / sizeof category_bits[0])
+
+const char *glue_real_text(char buf[GLUE_REAL_TEXT_SIZE], double x)
+{
+    int digits;
+    for (digits = 15; digits <= 17; digits++) {
+        snprintf(buf, GLUE_REAL_TEXT_SIZE, "%.*g", digits, x);
+        if (strtod(buf, NULL) == x || x != x)
+            break;
+    }
+    return buf;
+}
+
+static void vlog_to(const glue_host *host, const char *name, glue_status status, const char *category,
+                    const char *fmt, va_list ap) GLUE_PRINTF(5, 0);
+static void vlog_to(const glue_host *host, const char *name, glue_status status, const char *category,
+                    const char *fmt, va_list ap)
+{
+    char text[1024];
+    if (host == NULL || host->logger == NULL || host->deliver == NULL)
+        return;
+    vsnprintf(text, sizeof text, fmt, ap);
+    host->deliver(host, name != NULL ? name : "?", status, category, text);
+}
+
+void glue_host_log(const glue_host *host, const char *instance_name, glue_status status, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vlog_to(host, instance_name, status,
+            status == GLUE_ERROR ? "logStatusError" : status == GLUE_WARNING ? "logStatusWarning" : "logEvents",
+            fmt, ap);
+    va_end(ap);
+}
+
+void glue_log_error(const glue_instance *inst, const char *fmt, ...)
+{
+    va_list ap;
+    if (!(inst->log_mask & CAT_ERROR))
+        return;
+    va_start(ap, fmt);
+    vlog_to(&inst->host, inst->name, GLUE_ERROR, "logStatusError", fmt, ap);
+    va_end(ap);
+}
+
+void glue_log_warning(const glue_instance *inst, const char *fmt, ...)
+{
+    va_list ap;
+    if (!(inst->log_mask & CAT_WARNING))
+        return;
+    va_start(ap, fmt);
+    vlog_to(&inst->host, inst->name, GLUE_WARNING, "logStatusWarning", fmt, ap);
+    va_end(ap);
+}
+
+void glue_log_event(const glue_instance *inst, const char *fmt, ...)
+{
+    va_list ap;
+    if (!(inst->log_mask & CAT_EVENTS))
+        return;
+    va_start(ap, fmt);
+    vlog_to(&inst->host, inst->name, GLUE_OK, "logEvents", fmt, ap);
+    va_end(ap);
+}
+
+static const char *mode_name(const glue_instance *inst, int mode)
+{
+    switch (mode) {
+    case GLUE_MODE_INSTANTIATED: return inst->version->mode_names[0];
+    case GLUE_MODE_INIT: return inst->version->mode_names[1];
+    case GLUE_MODE_STEP: return inst->version->mode_names[2];
+    case GLUE_MODE_TERMINATED: return inst->version->mode_names[3];
+    case GLUE_MODE_ERROR: return inst->version->mode_names[4];
+    default: return "?";
+    }
+}
+
+static void mask_names(const glue_instance *inst, int mask, char *buf, size_t size)
+{
+    static const int modes[] = { GLUE_MODE_INSTANTIATED, GLUE_MODE_INIT, GLUE_MODE_STEP,
+                                 GLUE_MODE_TERMINATED, GLUE_MODE_ERROR };
+    size_t i, used = 0;
+    buf[0] = '\0';
+    for (i = 0; i < sizeof modes / sizeof modes[0]; i++) {
+        if (mask & modes[i]) {
+            int w = snprintf(buf + used, size - used, "%s%s", used ? ", " : "", mode_name(inst, modes[i]));
+            if (w < 0 || (size_t)w >= size - used)
+                return;
+            used += (size_t)w;
+        }
+    }
+    if (used == 0)
+        snprintf(buf, size, "none");
+}
+
+static void log_core_failure(const glue_instance *inst, const char *fname, piezo_status st,
+                             const piezo_diag *diag)
+{
+    char text[512];
+    if (st != PIEZO_ERR_PARAM && model_failure_text(&inst->data, st, text, sizeof text)) {
+        glue_log_error(inst, "%s: %s", fname, text);
+        return;
+    }
+    switch (st) {
+    case PIEZO_ERR_PARAM:
+        glue_log_error(inst, "%s: %s = %.16g is out of range: valid range %s", fname,
+                       diag->parameter != NULL ? diag->parameter : "(unknown parameter)", diag->value,
+                       diag->valid_range != NULL ? diag->valid_range : "(unknown)");
+        break;
+    case PIEZO_ERR_NONFINITE:
+        glue_log_error(inst, "%s: the model refused a non-finite value", fname);
+        break;
+    case PIEZO_ERR_DIVERGED:
+        glue_log_error(inst, "%s: the model diverged: a computed value is not finite although the inputs "
+                       "are (e.g. a voltage far outside the model's range, or an unstable loop)", fname);
+        break;
+    case PIEZO_ERR_CAPACITY:
+        glue_log_error(inst, "%s: internal error: exact-mode history buffer too small", fname);
+        break;
+    case PIEZO_ERR_NULL:
+        glue_log_error(inst, "%s: internal error: NULL pointer passed to the model", fname);
+        break;
+    case PIEZO_ERR_UNSTABLE:
+        glue_log_error(inst, "%s: the model's monitor found the loop unstable", fname);
+        break;
+    default:
+        glue_log_error(inst, "%s: the model failed with status %d", fname, (int)st);
+        break;
+    }
+}
+
+/* ------------------------------------------------------------------------ */
+/* Helpers                                                                   */
+
+glue_instance *glue_instance_of(void *c, const char *fname, int mask)
+{
+    glue_instance *inst = (glue_instance *)c;
+    char allowed[128];
+    if (inst == NULL || inst->magic != INSTANCE_MAGIC || inst->model != model_guid)
+        return NULL;
+    if (!(inst->mode & mask)) {
+        mask_names(inst, mask, allowed, sizeof allowed);
+        glue_log_error(inst, "%s: illegal call sequence: the FMU is in state %s (allowed in: %s)",
+                       fname, mode_name(inst, inst->mode), allowed);
+        return NULL;
+    }
+    return inst;
+}
+
+int glue_null_arg(const glue_instance *inst, const char *fname, const char *arg, const void *p)
+{
+    if (p == NULL) {
+        glue_log_error(inst, "%s: argument %s is NULL", fname, arg);
+        return 1;
+    }
+    return 0;
+}
+
+static uint64_t fnv1a(const unsigned char *p, size_t n, uint64_t h)
+{
+    size_t i;
+    for (i = 0; i < n; i++) {
+        h ^= p[i];
+        h *= 0x100000001b3ull;
+    }
+    return h;
+}
+
+#define FNV_OFFSET 0xcbf29ce484222325ull
+
+/* Make room for `needed` doubles of history (doubling), keeping the content. */
+static int ensure_history(glue_instance *inst, size_t needed, const char *fname)
+{
+    size_t cap;
+    double *p;
+    if (needed <= inst->history_capacity)
+        return 1;
+    cap = inst->history_capacity > 0 ? inst->history_capacity : 4096;
+    while (cap < needed) {
+        if (cap > SIZE_MAX / 2 / sizeof(double)) {
+            glue_log_error(inst, "%s: exact-mode history of %llu samples is too large", fname,
+                           (unsigned long long)needed);
+            return 0;
+        }
+        cap *= 2;
+    }
+    p = (double *)inst->host.alloc(cap, sizeof(double));
+    if (p == NULL) {
+        glue_log_error(inst, "%s: out of memory growing the exact-mode history to %llu samples", fname,
+                       (unsigned long long)cap);
+        return 0;
+    }
+    if (inst->history != NULL) {
+        memcpy(p, inst->history, inst->history_capacity * sizeof(double));
+        inst->host.release(inst->history);
+    }
+    inst->history = p;
+    inst->history_capacity = cap;
+    return 1;
+}
+
+static void *value_ptr(glue_instance *inst, uint32_t index)
+{
+    return (char *)&inst->data + model_variables[index].offset;
+}
+
+/* The name of the variable at value reference vr: an array's without "[1]". */
+static const char *variable_name(const glue_instance *inst, uint32_t vr, char *buf, size_t size)
+{
+    const char *name = model_variables[vr].name, *bracket = strchr(name, '[');
+    if (inst->n_values[vr] <= 1 || bracket == NULL || (size_t)(bracket - name) >= size)
+        return name;
+    memcpy(buf, name, (size_t)(bracket - name));
+    buf[bracket - name] = '\0';
+    return buf;
+}
+
+/* The independent variable time (FMI 3.0): read only, the FMU's t0 + k h. */
+static int is_time(const glue_instance *inst, uint32_t vr)
+{
+    return vr == GLUE_VR_TIME && inst->version->time_variable;
+}
+
+/* The values behind a checked value reference (past the table: time). */
+static size_t values_of(const glue_instance *inst, uint32_t vr)
+{
+    return vr < (uint32_t)MODEL_N_VARIABLES ? inst->n_values[vr] : 1u;
+}
+
+static int check_vr(const glue_instance *inst, const char *fname, uint32_t vr, model_type type)
+{
+    const char *const *names = inst->version->type_names;
+    char buf[64];
+    if (is_time(inst, vr)) {
+        if (type != MODEL_REAL) {
+            glue_log_error(inst, "%s: variable time (value reference %u) is of type %s, not %s", fname,
+                           (unsigned)vr, names[MODEL_REAL], names[type]);
+            return 0;
+        }
+        return 1;
+    }
+    if (vr >= (uint32_t)MODEL_N_VARIABLES || inst->n_values[vr] == 0) {
+        glue_log_error(inst, "%s: unknown value reference %u", fname, (unsigned)vr);
+        return 0;
+    }
+    if (model_variables[vr].type != type) {
+        glue_log_error(inst, "%s: variable %s (value reference %u) is of type %s, not %s", fname,
+                       variable_name(inst, vr, buf, sizeof buf), (unsigned)vr, names[model_variables[vr].type],
+                       names[type]);
+        return 0;
+    }
+    return 1;
+}
+
+/* Bring the output values up to date with the parameters, inputs and state. */
+static int refresh_outputs(glue_instance *inst, const char *fname)
+{
+    piezo_diag diag = { NULL, NULL, 0.0 };
+    piezo_status st;
+    if (inst->outputs_valid || inst->mode == GLUE_MODE_ERROR)
+        return 1;
+    if (inst->mode == GLUE_MODE_INIT) {
+        /* Outputs during initialization: sample 0 of the current parameters. */
+        st = model_init(&inst->data, inst->t0, &diag);
+        if (st != PIEZO_OK) {
+            log_core_failure(inst, fname, st, &diag);
+            return 0;
+        }
+    }
+    if (!ensure_history(inst, model_history_needed(&inst->data), fname))
+        return 0;
+    st = model_update_outputs(&inst->data, inst->history, inst->history_capacity);
+    if (st != PIEZO_OK) {
+        log_core_failure(inst, fname, st, &diag);
+        return 0;
+    }
+    inst->outputs_valid = 1;
+    return 1;
+}
+
+static model_type kind_type(glue_values kind)
+{
+    switch (kind) {
+    case GLUE_VALUES_DOUBLE: return MODEL_REAL;
+    case GLUE_VALUES_INT:
+    case GLUE_VALUES_INT32: return MODEL_INTEGER;
+    default: return MODEL_BOOLEAN;
+    }
+}
+
+/* Check the references of a get/set and count their values; 0 when refused. */
+static int check_references(const glue_instance *inst, const char *fname, const uint32_t vr[], size_t nvr,
+                            model_type type, size_t n_values, int *any_output)
+{
+    size_t i, total = 0;
+    *any_output = 0;
+    for (i = 0; i < nvr; i++) {
+        if (!check_vr(inst, fname, vr[i], type))
+            return 0;
+        total += values_of(inst, vr[i]);
+        if (!is_time(inst, vr[i]) && model_variables[vr[i]].causality == MODEL_OUTPUT)
+            *any_output = 1;
+    }
+    if (total != n_values) {
+        glue_log_error(inst, "%s: nValues = %llu, but the %llu value references given hold %llu values",
+                       fname, (unsigned long long)n_values, (unsigned long long)nvr,
+                       (unsigned long long)total);
+        return 0;
+    }
+    return 1;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Instantiation, logging control                                            */
+
+/* Which value references a version has (see glue_instance.n_values). */
+static void map_variables(glue_instance *inst)
+{
+    size_t i, j;
+    memset(inst->n_values, 1, sizeof inst->n_values);
+    if (!inst->version->arrays)
+        return;
+    /* a run name[1], name[2], ..., name[n] of one type and causality is one array */
+    for (i = 0; i < (size_t)MODEL_N_VARIABLES; i++) {
+        const char *first = model_variables[i].name, *bracket = strchr(first, '[');
+        size_t base;
+        if (bracket == NULL || strcmp(bracket, "[1]") != 0)
+            continue;
+        base = (size_t)(bracket - first);
+        for (j = i + 1; j < (size_t)MODEL_N_VARIABLES && j - i < 255; j++) {
+            const char *name = model_variables[j].name;
+            char *end;
+            if (strncmp(name, first, base) != 0 || name[base] != '['
+                || strtoul(name + base + 1, &end, 10) != j - i + 1 || strcmp(end, "]") != 0
+                || model_variables[j].type != model_variables[i].type
+                || model_variables[j].causality != model_variables[i].causality)
+                break;
+        }
+        if (j - i >= 2) {
+            inst->n_values[i] = (unsigned char)(j - i);
+            memset(inst->n_values + i + 1, 0, j - i - 1);
+            i = j - 1;
+        }
+    }
+}
+
+glue_instance *glue_instantiate(const glue_host *host, const glue_version *version, const char *fname,
+                                const char *name, const char *resource_location, int location_is_uri,
+                                const char *location_arg, int logging_on)
+{
+    glue_instance *inst;
+    size_t len;
+    inst = (glue_instance *)host->alloc(1, sizeof(glue_instance));
+    if (inst == NULL) {
+        glue_host_log(host, name, GLUE_ERROR, "%s: out of memory", fname);
+        return NULL;
+    }
+    memset(inst, 0, sizeof *inst);
+    len = strlen(name);
+    inst->name = (char *)host->alloc(len + 1, 1);
+    if (inst->name == NULL) {
+        host->release(inst);
+        glue_host_log(host, name, GLUE_ERROR, "%s: out of memory", fname);
+        return NULL;
+    }
+    memcpy(inst->name, name, len + 1);
+    inst->magic = INSTANCE_MAGIC;
+    inst->model = model_guid;
+    inst->version = version;
+    inst->host = *host;
+    inst->log_mask = logging_on ? CAT_ALL : CAT_ERROR | CAT_WARNING;
+    inst->mode = GLUE_MODE_INSTANTIATED;
+    map_variables(inst);
+    model_set_start_values(&inst->data);
+    /* resources/start_values of a parameterised FMU (harness export), over the defaults */
+    if (!fmu_start_values_init(&inst->start_values, resource_location, location_is_uri, fname,
+                               location_arg, host, name, &inst->data)) {
+        glue_free_instance(inst, fname);
+        return NULL;
+    }
+    glue_log_event(inst, "%s: %s instantiated (%s %s)", fname, MODEL_IDENTIFIER_STRING,
+                   version->token_name, MODEL_GUID);
+    return inst;
+}
+
+static void state_free(glue_instance *inst, glue_state *st);
+
+void glue_free_instance(void *c, const char *fname)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
+    void (*release)(void *);
+    if (inst == NULL)
+        return;
+    glue_log_event(inst, "%s", fname);
+    /* FMU states the host did not free die with their instance */
+    while (inst->states != NULL)
+        state_free(inst, inst->states);
+    release = inst->host.release;
+    if (inst->history != NULL)
+        release(inst->history);
+    release(inst->name);
+    fmu_start_values_free(&inst->start_values, &inst->host);
+    inst->magic = 0;
+    inst->model = NULL;
+    release(inst);
+}
+
+glue_status glue_set_debug_logging(void *c, const char *fname, int logging_on, size_t n_categories,
+                                   const char *const categories[])
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
+    unsigned bits = 0;
+    size_t i, j;
+    if (inst == NULL)
+        return GLUE_ERROR;
+    if (n_categories == 0) {
+        inst->log_mask = logging_on ? CAT_ALL : CAT_ERROR | CAT_WARNING;
+        return GLUE_OK;
+    }
+    if (glue_null_arg(inst, fname, "categories", categories))
+        return GLUE_ERROR;
+    for (i = 0; i < n_categories; i++) {
+        int found = 0;
+        if (categories[i] != NULL) {
+            for (j = 0; j < N_CATEGORIES; j++) {
+                if (strcmp(categories[i], category_names[j]) == 0) {
+                    bits |= category_bits[j];
+                    found = 1;
+                }
+            }
+        }
+        if (!found) {
+            glue_log_error(inst, "%s: unknown log category %s (known: logEvents, "
+                           "logStatusWarning, logStatusError, logAll)", fname,
+                           categories[i] != NULL ? categories[i] : "(NULL)");
+            return GLUE_ERROR;
+        }
+    }
+    if (logging_on)
+        inst->log_mask |= bits;
+    else
+        inst->log_mask &= ~bits;
+    return GLUE_OK;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Experiment, initialization, termination                                   */
+
+glue_status glue_setup(void *c, const char *fname, double start_time, int stop_time_defined,
+                       double stop_time, int enter_init)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_INSTANTIATED);
+    if (inst == NULL)
+        return GLUE_ERROR;
+    if (!isfinite(start_time)) {
+        glue_log_error(inst, "%s: startTime = %g refused: valid range: finite values", fname, start_time);
+        return GLUE_ERROR;
+    }
+    if (stop_time_defined && !(stop_time >= start_time)) {
+        glue_log_error(inst, "%s: stopTime = %.16g refused: valid range [startTime = %.16g, inf)",
+                       fname, stop_time, start_time);
+        return GLUE_ERROR;
+    }
+    inst->t0 = start_time;
+    inst->stop_time_defined = stop_time_defined ? 1 : 0;
+    inst->stop_time = stop_time_defined ? stop_time : 0.0;
+    if (enter_init) {
+        inst->mode = GLUE_MODE_INIT;
+        inst->outputs_valid = 0;
+    }
+    glue_log_event(inst, "%s: t0 = %.16g%s", fname, start_time,
+                   stop_time_defined ? " (stopTime enforced)" : "");
+    return GLUE_OK;
+}
+
+glue_status glue_enter_init(void *c, const char *fname)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_INSTANTIATED);
+    if (inst == NULL)
+        return GLUE_ERROR;
+    inst->mode = GLUE_MODE_INIT;
+    inst->outputs_valid = 0;
+    glue_log_event(inst, "%s", fname);
+    return GLUE_OK;
+}
+
+glue_status glue_exit_init(void *c, const char *fname)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_INIT);
+    piezo_diag diag = { NULL, NULL, 0.0 };
+    piezo_status st;
+    double h;
+    if (inst == NULL)
+        return GLUE_ERROR;
+    st = model_init(&inst->data, inst->t0, &diag);
+    if (st != PIEZO_OK) {
+        log_core_failure(inst, fname, st, &diag);
+        inst->outputs_valid = 0;
+        return GLUE_ERROR;      /* stays in initialization mode */
+    }
+    h = model_sample_period(&inst->data);
+    if (!(h > 0.0) || !isfinite(h)) {
+        glue_log_error(inst, "%s: h = %.16g is out of range: valid range (0, inf)", fname, h);
+        return GLUE_ERROR;
+    }
+    inst->h = h;
+    inst->k = 0;
+    inst->mode = GLUE_MODE_STEP;
+    inst->outputs_valid = 0;
+    glue_log_event(inst, "%s: initialized, t0 = %.16g, h = %.16g", fname, inst->t0, h);
+    return GLUE_OK;
+}
+
+glue_status glue_terminate(void *c, const char *fname)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_STEP);
+    char text[512];
+    glue_status status = GLUE_OK;
+    if (inst == NULL)
+        return GLUE_ERROR;
+    inst->mode = GLUE_MODE_TERMINATED;
+    glue_log_event(inst, "%s at t = %.16g", fname, glue_time(inst));
+    if (model_terminate_warning(&inst->data, text, sizeof text)) {
+        glue_log_warning(inst, "%s: %s", fname, text);
+        status = GLUE_WARNING;
+    }
+    return status;
+}
+
+glue_status glue_reset(void *c, const char *fname)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
+    if (inst == NULL)
+        return GLUE_ERROR;
+    memset(&inst->data, 0, sizeof inst->data);
+    model_set_start_values(&inst->data);
+    fmu_start_values_apply(inst->start_values, &inst->data);
+    inst->mode = GLUE_MODE_INSTANTIATED;
+    inst->t0 = 0.0;
+    inst->k = 0;
+    inst->h = 0.0;
+    inst->stop_time_defined = 0;
+    inst->stop_time = 0.0;
+    inst->outputs_valid = 0;
+    inst->outputs_read = 0;
+    glue_log_event(inst, "%s: back to %s with the start values", fname, mode_name(inst, GLUE_MODE_INSTANTIATED));
+    return GLUE_OK;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Getting and setting variables                                             */
+
+glue_status glue_get(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
+                     void *values, size_t n_values)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MASK_GET);
+    size_t i, j, e;
+    int need_outputs;
+    if (inst == NULL)
+        return GLUE_ERROR;
+    if (nvr == 0)
+        return GLUE_OK;
+    if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
+        return GLUE_ERROR;
+    if (!check_references(inst, fname, vr, nvr, kind_type(kind), n_values, &need_outputs))
+        return GLUE_ERROR;
+    if (need_outputs && !refresh_outputs(inst, fname))
+        return GLUE_ERROR;
+    if (need_outputs)
+        inst->outputs_read = 1;
+    for (i = 0, j = 0; i < nvr; i++) {
+        if (is_time(inst, vr[i])) {
+            ((double *)values)[j++] = glue_time(inst);
+            continue;
+        }
+        for (e = 0; e < inst->n_values[vr[i]]; e++, j++) {
+            const void *p = value_ptr(inst, vr[i] + (uint32_t)e);
+            switch (kind) {
+            case GLUE_VALUES_DOUBLE: ((double *)values)[j] = *(const double *)p; break;
+            case GLUE_VALUES_INT: ((int *)values)[j] = *(const int *)p; break;
+            case GLUE_VALUES_INT32: ((int32_t *)values)[j] = (int32_t)*(const int *)p; break;
+            case GLUE_VALUES_BOOL_INT: ((int *)values)[j] = *(const int *)p; break;     /* 0 or 1 */
+            case GLUE_VALUES_BOOL_BYTE: ((unsigned char *)values)[j] = *(const int *)p != 0; break;
+            }
+        }
+    }
+    return GLUE_OK;
+}
+
+glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
+                     const void *values, size_t n_values)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MASK_SET);
+    size_t i, j, e;
+    int any_output;
+    if (inst == NULL)
+        return GLUE_ERROR;
+    if (nvr == 0)
+        return GLUE_OK;
+    if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
+        return GLUE_ERROR;
+    /* Check everything first: a refused call changes nothing. */
+    for (i = 0, j = 0; i < nvr; i++) {
+        const model_variable *var;
+        if (!check_vr(inst, fname, vr[i], kind_type(kind)))
+            return GLUE_ERROR;
+        if (is_time(inst, vr[i])) {
+            glue_log_error(inst, "%s: time is the independent variable: it cannot be set", fname);
+            return GLUE_ERROR;
+        }
+        var = &model_variables[vr[i]];
+        if (var->causality == MODEL_OUTPUT) {
+            glue_log_error(inst, "%s: %s is an output: it cannot be set", fname, var->name);
+            return GLUE_ERROR;
+        }
+        if (var->causality == MODEL_PARAMETER && inst->mode == GLUE_MODE_STEP) {
+            glue_log_error(inst, "%s: illegal call sequence: %s is a fixed parameter, settable only "
+                           "before %s (the FMU is in state %s)",
+                           fname, var->name, inst->version->exit_init, mode_name(inst, inst->mode));
+            return GLUE_ERROR;
+        }
+        for (e = 0; e < inst->n_values[vr[i]]; e++, j++) {
+            if (j < n_values && kind == GLUE_VALUES_DOUBLE && !isfinite(((const double *)values)[j])) {
+                const model_variable *elem = &model_variables[vr[i] + e];
+                glue_log_error(inst, "%s: %s = %g refused: valid range: finite values (%s keeps %.16g)",
+                               fname, elem->name, ((const double *)values)[j], elem->name,
+                               *(const double *)value_ptr(inst, vr[i] + (uint32_t)e));
+                return GLUE_ERROR;
+            }
+        }
+    }
+    if (!check_references(inst, fname, vr, nvr, kind_type(kind), n_values, &any_output))
+        return GLUE_ERROR;
+    if (inst->outputs_read && inst->mode == GLUE_MODE_STEP && !inst->warned_read_before_set
+        && kind == GLUE_VALUES_DOUBLE && model_direct_feedthrough(&inst->data)) {
+        for (i = 0, j = 0; i < nvr; i++) {
+            for (e = 0; e < inst->n_values[vr[i]]; e++, j++) {
+                const model_variable *var = &model_variables[vr[i] + e];
+                if (var->causality == MODEL_INPUT
+                    && *(const double *)value_ptr(inst, vr[i] + (uint32_t)e) != ((const double *)values)[j]) {
+                    glue_log_warning(inst, "%s: %s changed after the outputs were read at this communication "
+                                     "point: the outputs depend directly on the inputs (direct feedthrough), so "
+                                     "the values read were computed from the previous inputs and are not what "
+                                     "%s commits. Read outputs after setting the inputs (Gauss-Seidel "
+                                     "ordered by ModelStructure); a Jacobi master needs the no-feedthrough "
+                                     "configuration. This warning is given once.", fname, var->name,
+                                     inst->version->do_step);
+                    inst->warned_read_before_set = 1;
+                    break;
+                }
+            }
+            if (inst->warned_read_before_set)
+                break;
+        }
+    }
+    for (i = 0, j = 0; i < nvr; i++) {
+        for (e = 0; e < inst->n_values[vr[i]]; e++, j++) {
+            void *p = value_ptr(inst, vr[i] + (uint32_t)e);
+            switch (kind) {
+            case GLUE_VALUES_DOUBLE: *(double *)p = ((const double *)values)[j]; break;
+            case GLUE_VALUES_INT: *(int *)p = ((const int *)values)[j]; break;
+            case GLUE_VALUES_INT32: *(int *)p = (int)((const int32_t *)values)[j]; break;
+            case GLUE_VALUES_BOOL_INT: *(int *)p = ((const int *)values)[j] != 0 ? 1 : 0; break;
+            case GLUE_VALUES_BOOL_BYTE: *(int *)p = ((const unsigned char *)values)[j] != 0 ? 1 : 0; break;
+            }
+        }
+    }
+    inst->outputs_valid = 0;
+    return GLUE_OK;
+}
+
+glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32_t vr[], size_t nvr,
+                              const void *values, const char *type_name)
+{
+    glue_instance *inst = glue_instance_of(c, fname, mask);
+    const char *const *names;
+    char buf[64];
+    if (inst == NULL)
+        return GLUE_ERROR;
+    if (nvr == 0)
+        return GLUE_OK;
+    if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
+        return GLUE_ERROR;
+    names = inst->version->type_names;
+    if (is_time(inst, vr[0]))
+        glue_log_error(inst, "%s: variable time (value reference %u) is of type %s, not %s (the FMU has "
+                       "no %s variable)", fname, (unsigned)vr[0], names[MODEL_REAL], type_name, type_name);
+    else if (vr[0] >= (uint32_t)MODEL_N_VARIABLES || inst->n_values[vr[0]] == 0)
+        glue_log_error(inst, "%s: unknown value reference %u", fname, (unsigned)vr[0]);
+    else
+        glue_log_error(inst, "%s: variable %s (value reference %u) is of type %s, not %s (the FMU has "
+                       "no %s variable)", fname, variable_name(inst, vr[0], buf, sizeof buf),
+                       (unsigned)vr[0], names[model_variables[vr[0]].type], type_name, type_name);
+    return GLUE_ERROR;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Stepping                                                                  */
+
+double glue_time(const glue_instance *inst)
+{
+    return inst->t0 + (double)inst->k * inst->h;
+}
+
+/* Log what the model asks to say after a step; a warning if anything. */
+static glue_status step_warnings(glue_instance *inst, const char *fname)
+{
+    char text[512];
+    glue_status status = GLUE_OK;
+    int i;
+    for (i = 0; i < 4 && model_step_warning(&inst->data, inst->t0, text, sizeof text); i++) {
+        glue_log_warning(inst, "%s: %s", fname, text);
+        status = GLUE_WARNING;
+    }
+    return status;
+}
+
+static glue_status do_step(glue_instance *inst, const char *fname, double currentCommunicationPoint,
+                           double communicationStepSize)
+{
+    double t, tol, ratio, n_real;
+    char t1[GLUE_REAL_TEXT_SIZE], t2[GLUE_REAL_TEXT_SIZE], t3[GLUE_REAL_TEXT_SIZE];
+    uint64_t n, i;
+    size_t needed;
+
+    t = glue_time(inst);
+    tol = 1e-9 * fmax(inst->h, fabs(t));
+    if (tol > 1e-3 * inst->h)
+        tol = 1e-3 * inst->h;
+    if (!isfinite(currentCommunicationPoint) || fabs(currentCommunicationPoint - t) > tol) {
+        glue_log_error(inst, "%s: currentCommunicationPoint = %s does not match the FMU time "
+                       "t0 + k h = %s (k = %llu, h = %s): step refused, state and time unchanged",
+                       fname, glue_real_text(t1, currentCommunicationPoint), glue_real_text(t2, t),
+                       (unsigned long long)inst->k, glue_real_text(t3, inst->h));
+        return GLUE_ERROR;
+    }
+    if (!isfinite(communicationStepSize) || communicationStepSize < 0.0) {
+        glue_log_error(inst, "%s: communicationStepSize = %s refused: it must be a whole multiple "
+                       "n >= 0 of h = %s; state and time unchanged", fname,
+                       glue_real_text(t1, communicationStepSize), glue_real_text(t2, inst->h));
+        return GLUE_ERROR;
+    }
+    ratio = communicationStepSize / inst->h;
+    n_real = floor(ratio + 0.5);
+    if (ratio > 4.0e15) {
+        glue_log_error(inst, "%s: communicationStepSize = %s is too large: %s samples of h = %s", fname,
+                       glue_real_text(t1, communicationStepSize), glue_real_text(t2, ratio),
+                       glue_real_text(t3, inst->h));
+        return GLUE_ERROR;
+    }
+    if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * fmax(1.0, n_real) * inst->h) {
+        glue_log_error(inst, "%s: communicationStepSize = %s is not a whole multiple of h = %s "
+                       "(H/h = %s; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
+                       "time unchanged", fname, glue_real_text(t1, communicationStepSize),
+                       glue_real_text(t2, inst->h), glue_real_text(t3, ratio));
+        return GLUE_ERROR;
+    }
+    n = (uint64_t)n_real;
+    /* the end of the step must be a time: k + n <= 2^53 and t0 + (k + n) h finite */
+    if (n > MAX_SAMPLES - inst->k || !isfinite(inst->t0 + (double)(inst->k + n) * inst->h)) {
+        glue_log_error(inst, "%s: the step from t = %s over %s samples of h = %s ends beyond the FMU's time "
+                       "range (at most 2^53 samples, finite t0 + k h): step refused, state and time unchanged",
+                       fname, glue_real_text(t1, t), glue_real_text(t2, n_real), glue_real_text(t3, inst->h));
+        return GLUE_ERROR;
+    }
+    if (inst->stop_time_defined) {
+        double t_end = inst->t0 + (double)(inst->k + n) * inst->h;
+        double tol_end = fmin(1e-9 * fmax(inst->h, fabs(inst->stop_time)), 1e-3 * inst->h);
+        if (t_end > inst->stop_time + tol_end) {
+            glue_log_error(inst, "%s: the step from t = %s to t = %s passes stopTime = %s of "
+                           "%s: step refused, state and time unchanged", fname,
+                           glue_real_text(t1, t), glue_real_text(t2, t_end), glue_real_text(t3, inst->stop_time),
+                           inst->version->stop_time_source);
+            return GLUE_ERROR;
+        }
+    }
+    inst->outputs_read = 0;
+    if (n == 0) {
+        /* |H| < 1e-9 h: the step ends on the sample it starts from */
+        glue_log_event(inst, "%s: communicationStepSize = %s holds no sample of h = %s: nothing to do",
+                       fname, glue_real_text(t1, communicationStepSize), glue_real_text(t2, inst->h));
+        return GLUE_OK;
+    }
+
+    /* A refused sample changes nothing (model_step), so only a step of several
+     * samples needs a copy to roll back the samples before the refused one. */
+    if (n > 1)
+        memcpy(&inst->backup, &inst->data, sizeof inst->data);
+    for (i = 0; i < n; i++) {
+        piezo_diag diag = { NULL, NULL, 0.0 };
+        piezo_status st;
+        /* grow the exact-mode history (by doubling) before the core needs it */
+        needed = model_history_needed(&inst->data);
+        if (needed > inst->history_capacity && !ensure_history(inst, needed, fname)) {
+            if (i > 0)
+                memcpy(&inst->data, &inst->backup, sizeof inst->data);
+            return GLUE_ERROR;
+        }
+        /* the first sample may reuse what the outputs were computed from */
+        st = model_step(&inst->data, inst->history, inst->history_capacity,
+                        i == 0 && inst->outputs_valid);
+        if (st != PIEZO_OK) {
+            if (i > 0)
+                memcpy(&inst->data, &inst->backup, sizeof inst->data);
+            log_core_failure(inst, fname, st, &diag);
+            glue_log_error(inst, "%s: the model refused sample %llu of the step from t = %s; the state "
+                           "is restored to that time and the FMU enters state Error (use %s "
+                           "or %s)", fname, (unsigned long long)(inst->k + i), glue_real_text(t1, t),
+                           inst->version->set_fmu_state, inst->version->reset);
+            inst->outputs_valid = 0;
+            inst->mode = GLUE_MODE_ERROR;
+            return GLUE_ERROR;
+        }
+    }
+    inst->k += n;
+    inst->outputs_valid = 0;
+    return step_warnings(inst, fname);
+}
+
+glue_status glue_do_step(void *c, const char *fname, double t, double H, double *t_end)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_STEP);
+    glue_status status;
+    if (inst == NULL)
+        return GLUE_ERROR;
+    status = do_step(inst, fname, t, H);
+    if (t_end != NULL)
+        *t_end = glue_time(inst);
+    return status;
+}
+
+/* ------------------------------------------------------------------------ */
+/* FMU states                                                                */
+
+static glue_state *checked_state(const glue_instance *inst, const char *fname, void *s)
+{
+    glue_state *st = (glue_state *)s;
+    if (st == NULL) {
+        glue_log_error(inst, "%s: the FMU state is NULL", fname);
+        return NULL;
+    }
+    if (st->magic != STATE_MAGIC || st->owner != inst) {
+        glue_log_error(inst, "%s: not an FMU state of this %s instance (a state belongs to the instance "
+                       "that made it with %s or %s)", fname, MODEL_IDENTIFIER_STRING,
+                       inst->version->get_fmu_state, inst->version->deserialize);
+        return NULL;
+    }
+    return st;
+}
+
+/* A state to fill: *slot if it is one of ours, else a new one in the list. */
+static glue_state *state_slot(glue_instance *inst, const char *fname, void **slot)
+{
+    glue_state *st = (glue_state *)*slot;
+    if (st != NULL)
+        return checked_state(inst, fname, st);
+    st = (glue_state *)inst->host.alloc(1, sizeof(glue_state));
+    if (st == NULL) {
+        glue_log_error(inst, "%s: out of memory", fname);
+        return NULL;
+    }
+    memset(st, 0, sizeof *st);
+    st->magic = STATE_MAGIC;
+    st->owner = inst;
+    st->next = inst->states;
+    if (inst->states != NULL)
+        inst->states->prev = st;
+    inst->states = st;
+    return st;
+}
+
+/* Unlink st from its owner's list and free it. */
+static void state_free(glue_instance *inst, glue_state *st)
+{
+    if (st->prev != NULL)
+        st->prev->next = st->next;
+    else
+        inst->states = st->next;
+    if (st->next != NULL)
+        st->next->prev = st->prev;
+    if (st->history != NULL)
+        inst->host.release(st->history);
+    st->magic = 0;
+    st->owner = NULL;
+    inst->host.release(st);
+}
+
+static int state_reserve_history(glue_instance *inst, const char *fname, glue_state *st, size_t n)
+{
+    double *p;
+    if (n <= st->history_capacity)
+        return 1;
+    p = (double *)inst->host.alloc(n, sizeof(double));
+    if (p == NULL) {
+        glue_log_error(inst, "%s: out of memory for %llu history samples", fname, (unsigned long long)n);
+        return 0;
+    }
+    if (st->history != NULL)
+        inst->host.release(st->history);
+    st->history = p;
+    st->history_capacity = n;
+    return 1;
+}
+
+/* After a failure: a state made by this call goes, a reused one stays. */
+static void state_release(glue_instance *inst, glue_state *st, int was_new)
+{
+    if (was_new)
+        state_free(inst, st);
+}
+
+glue_status glue_get_state(void *c, const char *fname, void **state)
+{
+    /* allowed in Error too: a host may keep the failed state for debugging */
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
+    glue_state *st;
+    size_t n_hist = 0;
+    int was_new;
+    if (inst == NULL || glue_null_arg(inst, fname, "FMUstate", state))
+        return GLUE_ERROR;
+    was_new = *state == NULL;
+    st = state_slot(inst, fname, state);
+    if (st == NULL)
+        return GLUE_ERROR;
+    if (inst->mode & GLUE_MODE_CORE_READY) {
+        /* the whole buffer the next step needs (slots not yet written are
+         * rewritten before they are read) */
+        n_hist = model_history_needed(&inst->data);
+        if (!ensure_history(inst, n_hist, fname)) {
+            state_release(inst, st, was_new);
+            return GLUE_ERROR;
+        }
+    }
+    if (!state_reserve_history(inst, fname, st, n_hist)) {
+        state_release(inst, st, was_new);
+        return GLUE_ERROR;
+    }
+    st->mode = inst->mode;
+    st->t0 = inst->t0;
+    st->k = inst->k;
+    st->h = inst->h;
+    memcpy(&st->data, &inst->data, sizeof st->data);
+    if (n_hist > 0)
+        memcpy(st->history, inst->history, n_hist * sizeof(double));
+    st->n_history = n_hist;
+    *state = st;
+    return GLUE_OK;
+}
+
+glue_status glue_set_state(void *c, const char *fname, void *state)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
+    glue_state *st;
+    if (inst == NULL)
+        return GLUE_ERROR;
+    st = checked_state(inst, fname, state);
+    if (st == NULL)
+        return GLUE_ERROR;
+    if (!ensure_history(inst, st->n_history, fname))
+        return GLUE_ERROR;
+    if (st->n_history > 0)
+        memcpy(inst->history, st->history, st->n_history * sizeof(double));
+    memcpy(&inst->data, &st->data, sizeof inst->data);
+    inst->mode = st->mode;
+    inst->t0 = st->t0;
+    inst->k = st->k;
+    inst->h = st->h;
+    inst->outputs_valid = 0;
+    glue_log_event(inst, "%s: restored a state in %s at t = %.16g", fname, mode_name(inst, inst->mode),
+                   glue_time(inst));
+    return GLUE_OK;
+}
+
+glue_status glue_free_state(void *c, const char *fname, void **state)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
+    glue_state *st;
+    if (inst == NULL || glue_null_arg(inst, fname, "FMUstate", state))
+        return GLUE_ERROR;
+    if (*state == NULL)
+        return GLUE_OK;
+    st = checked_state(inst, fname, *state);
+    if (st == NULL)
+        return GLUE_ERROR;
+    state_free(inst, st);
+    *state = NULL;
+    return GLUE_OK;
+}
+
+/*
+ * Serialized FMU state (format version 1), the same in both FMI versions.
+ * Header integers and doubles are little-endian whatever the host; the
+ * ModelData image is the host's native layout, guarded by its size and a
+ * byte-order marker.
+ *
+ *   offset  size  field
+ *        0     8  magic "PZFMUST1"
+ *        8     4  format version (1)
+ *       12     4  header size (128)
+ *       16     8  total size of the blob, checksum included
+ *       24    48  model GUID (the FMI 3.0 instantiationToken is the same string), NUL padded
+ *       72     8  sizeof(ModelData)
+ *       80     4  byte-order marker 0x01020304 written natively
+ *       84     4  FMU mode (1 Instantiated, 2 InitializationMode, 4 StepComplete/StepMode,
+ *                 8 Terminated, 16 Error)
+ *       88     8  t0 (IEEE double)
+ *       96     8  k, samples since t0
+ *      104     8  h (IEEE double)
+ *      112     8  n_history, doubles of exact-mode history
+ *      120     8  reserved (0)
+ *      128     .  ModelData image (sizeof(ModelData) bytes)
+ *        .     .  n_history doubles (IEEE, little-endian)
+ *    end-8     8  FNV-1a 64 checksum of every preceding byte
+ *
+ * Because the modes, the GUID and the model data are the same, a state
+ * serialized by the FMI 2.0 edition of a model restores in its FMI 3.0 edition
+ * and the other way round.
+ *
+ * A blob is untrusted input: deserialization reads nothing it has not bounded
+ * (sizes compared without arithmetic that can wrap) and accepts only what
+ * a live instance could have saved: the exact GUID field, a known mode, the
+ * time fields of that mode (before initialization k = 0 and h = 0; after it
+ * h = the model's h, k <= 2^53, t0 + k h finite), reserved = 0, finite Reals
+ * and 0/1 Booleans in every variable, and the model's own invariants
+ * (model_check_data: indices, counts, flags, sample counters against k and the
+ * history). Anything else is refused and nothing is changed.
+ */
+#define BLOB_MAGIC "PZFMUST1"
+#define BLOB_VERSION 1u
+#define BLOB_HEADER 128u
+#define BLOB_GUID_LEN 48u
+#define BLOB_BOM 0x01020304u
+
+static void put_u32(unsigned char *p, uint32_t v)
+{
+    int i;
+    for (i = 0; i < 4; i++)
+        p[i] = (unsigned char)(v >> (8 * i));
+}
+
+static void put_u64(unsigned char *p, uint64_t v)
+{
+    int i;
+    for (i = 0; i < 8; i++)
+        p[i] = (unsigned char)(v >> (8 * i));
+}
+
+static uint32_t get_u32(const unsigned char *p)
+{
+    uint32_t v = 0;
+    int i;
+    for (i = 3; i >= 0; i--)
+        v = (v << 8) | p[i];
+    return v;
+}
+
+static uint64_t get_u64(const unsigned char *p)
+{
+    uint64_t v = 0;
+    int i;
+    for (i = 7; i >= 0; i--)
+        v = (v << 8) | p[i];
+    return v;
+}
+
+static void put_f64(unsigned char *p, double d)
+{
+    uint64_t v;
+    memcpy(&v, &d, sizeof v);
+    put_u64(p, v);
+}
+
+static double get_f64(const unsigned char *p)
+{
+    uint64_t v = get_u64(p);
+    double d;
+    memcpy(&d, &v, sizeof d);
+    return d;
+}
+
+#define BLOB_MIN_SIZE (BLOB_HEADER + sizeof(ModelData) + 8u)   /* no history */
+
+static size_t blob_size(size_t n_history)
+{
+    return BLOB_MIN_SIZE + n_history * sizeof(double);
+}
+
+glue_status glue_state_size(void *c, const char *fname, void *state, size_t *size)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
+    glue_state *st;
+    if (inst == NULL || glue_null_arg(inst, fname, "size", size))
+        return GLUE_ERROR;
+    st = checked_state(inst, fname, state);
+    if (st == NULL)
+        return GLUE_ERROR;
+    *size = blob_size(st->n_history);
+    return GLUE_OK;
+}
+
+glue_status glue_serialize(void *c, const char *fname, void *state, unsigned char *b, size_t size)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
+    glue_state *st;
+    uint32_t bom = BLOB_BOM;
+    size_t total, i, off;
+    if (inst == NULL || glue_null_arg(inst, fname, "serializedState", b))
+        return GLUE_ERROR;
+    st = checked_state(inst, fname, state);
+    if (st == NULL)
+        return GLUE_ERROR;
+    total = blob_size(st->n_history);
+    if (size < total) {
+        glue_log_error(inst, "%s: buffer of %llu bytes is too small: the state needs %llu (%s)",
+                       fname, (unsigned long long)size, (unsigned long long)total,
+                       inst->version->serialized_size);
+        return GLUE_ERROR;
+    }
+    memset(b, 0, total);
+    memcpy(b, BLOB_MAGIC, 8);
+    put_u32(b + 8, BLOB_VERSION);
+    put_u32(b + 12, BLOB_HEADER);
+    put_u64(b + 16, (uint64_t)total);
+    memcpy(b + 24, MODEL_GUID, strlen(MODEL_GUID) < BLOB_GUID_LEN ? strlen(MODEL_GUID) : BLOB_GUID_LEN - 1);
+    put_u64(b + 72, (uint64_t)sizeof(ModelData));
+    memcpy(b + 80, &bom, 4);
+    put_u32(b + 84, (uint32_t)st->mode);
+    put_f64(b + 88, st->t0);
+    put_u64(b + 96, st->k);
+    put_f64(b + 104, st->h);
+    put_u64(b + 112, (uint64_t)st->n_history);
+    memcpy(b + BLOB_HEADER, &st->data, sizeof(ModelData));
+    off = BLOB_HEADER + sizeof(ModelData);
+    for (i = 0; i < st->n_history; i++, off += 8)
+        put_f64(b + off, st->history[i]);
+    put_u64(b + off, fnv1a(b, off, FNV_OFFSET));
+    return GLUE_OK;
+}
+
+/* The first variable whose value a live instance could not hold (a non-finite
+ * Real, a Boolean other than 0 or 1), or -1. Outputs count only once the core
+ * is initialized (before that they are recomputed when read). */
+static int invalid_variable(const ModelData *data, int core_ready)
+{
+    int vr;
+    for (vr = 0; vr < (int)MODEL_N_VARIABLES; vr++) {
+        const model_variable *var = &model_variables[vr];
+        const char *p = (const char *)data + var->offset;
+        if (var->causality == MODEL_OUTPUT && !core_ready)
+            continue;
+        if (var->type == MODEL_REAL && !isfinite(*(const double *)p))
+            return vr;
+        if (var->type == MODEL_BOOLEAN && *(const int *)p != 0 && *(const int *)p != 1)
+            return vr;
+    }
+    return -1;
+}
+
+glue_status glue_deserialize(void *c, const char *fname, const unsigned char *b, size_t size, void **state)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
+    char guid[BLOB_GUID_LEN], expected_guid[BLOB_GUID_LEN];
+    char t1[GLUE_REAL_TEXT_SIZE], t2[GLUE_REAL_TEXT_SIZE];
+    uint32_t bom = BLOB_BOM;
+    uint64_t total, n_hist64, k;
+    size_t n_hist, i, off;
+    int mode, core_ready, bad_vr;
+    double t0, h, *history = NULL;
+    const char *fault;
+    glue_state *st;
+    ModelData *data;
+
+    if (inst == NULL || glue_null_arg(inst, fname, "serializedState", b)
+        || glue_null_arg(inst, fname, "FMUstate", state))
+        return GLUE_ERROR;
+    if (size < BLOB_HEADER + 8u || memcmp(b, BLOB_MAGIC, 8) != 0) {
+        glue_log_error(inst, "%s: refused: not a serialized %s state (bad magic or %llu bytes only)",
+                       fname, MODEL_IDENTIFIER_STRING, (unsigned long long)size);
+        return GLUE_ERROR;
+    }
+    if (get_u32(b + 8) != BLOB_VERSION || get_u32(b + 12) != BLOB_HEADER) {
+        glue_log_error(inst, "%s: refused: format version %u (header %u bytes) is not the supported version %u",
+                       fname, (unsigned)get_u32(b + 8), (unsigned)get_u32(b + 12), (unsigned)BLOB_VERSION);
+        return GLUE_ERROR;
+    }
+    total = get_u64(b + 16);
+    if (total != (uint64_t)size) {
+        glue_log_error(inst, "%s: refused: the blob says %llu bytes but %llu were given (truncated or padded)",
+                       fname, (unsigned long long)total, (unsigned long long)size);
+        return GLUE_ERROR;
+    }
+    /* the whole field, padding included: serialization writes exactly this */
+    memset(expected_guid, 0, sizeof expected_guid);
+    memcpy(expected_guid, MODEL_GUID, strlen(MODEL_GUID) < BLOB_GUID_LEN ? strlen(MODEL_GUID) : BLOB_GUID_LEN - 1);
+    if (memcmp(b + 24, expected_guid, BLOB_GUID_LEN) != 0) {
+        memcpy(guid, b + 24, BLOB_GUID_LEN);
+        guid[BLOB_GUID_LEN - 1] = '\0';
+        for (i = 0; guid[i] != '\0'; i++)
+            if ((unsigned char)guid[i] < 0x20 || (unsigned char)guid[i] > 0x7e)
+                guid[i] = '?';
+        glue_log_error(inst, "%s: refused: the state belongs to %s %s, not %s %s",
+                       fname, inst->version->token_name, guid, MODEL_IDENTIFIER_STRING, MODEL_GUID);
+        return GLUE_ERROR;
+    }
+    if (get_u64(b + 72) != (uint64_t)sizeof(ModelData) || memcmp(b + 80, &bom, 4) != 0) {
+        glue_log_error(inst, "%s: refused: model data layout differs (size %llu vs %llu, or byte order): "
+                       "the state comes from another build or platform",
+                       fname, (unsigned long long)get_u64(b + 72), (unsigned long long)sizeof(ModelData));
+        return GLUE_ERROR;
+    }
+    /* total = BLOB_MIN_SIZE + 8 n_history, compared without arithmetic that can wrap */
+    n_hist64 = get_u64(b + 112);
+    if (total < (uint64_t)BLOB_MIN_SIZE || (total - BLOB_MIN_SIZE) % 8u != 0
+        || (total - BLOB_MIN_SIZE) / 8u != n_hist64) {
+        glue_log_error(inst, "%s: refused: history length %llu does not match the blob size %llu",
+                       fname, (unsigned long long)n_hist64, (unsigned long long)total);
+        return GLUE_ERROR;
+    }
+    n_hist = (size_t)n_hist64;  /* < size, so it fits */
+    off = (size_t)total - 8u;
+    if (fnv1a(b, off, FNV_OFFSET) != get_u64(b + off)) {
+        glue_log_error(inst, "%s: refused: checksum mismatch (the blob is corrupted)", fname);
+        return GLUE_ERROR;
+    }
+    if (get_u64(b + 120) != 0) {
+        glue_log_error(inst, "%s: refused: reserved header field is %llu, not 0", fname,
+                       (unsigned long long)get_u64(b + 120));
+        return GLUE_ERROR;
+    }
+    mode = (int)get_u32(b + 84);
+    t0 = get_f64(b + 88);
+    k = get_u64(b + 96);
+    h = get_f64(b + 104);
+    if (mode != GLUE_MODE_INSTANTIATED && mode != GLUE_MODE_INIT && mode != GLUE_MODE_STEP
+        && mode != GLUE_MODE_TERMINATED && mode != GLUE_MODE_ERROR) {
+        glue_log_error(inst, "%s: refused: invalid FMU mode %d", fname, mode);
+        return GLUE_ERROR;
+    }
+    core_ready = (mode & GLUE_MODE_CORE_READY) != 0;
+    data = &inst->backup;   /* the instance's scratch copy (used by the doStep only) */
+    memcpy(data, b + BLOB_HEADER, sizeof *data);
+    /* time: before initialization nothing has run (k = 0, h not yet fixed);
+     * after it h is the model's, and t0 + k h is a time on the grid */
+    if (!isfinite(t0)
+        || (!core_ready && (k != 0 || h != 0.0))
+        || (core_ready && !(h > 0.0 && h == model_sample_period(data) && k <= MAX_SAMPLES
+                            && isfinite(t0 + (double)k * h)))) {
+        glue_log_error(inst, "%s: refused: invalid time fields for state %s: t0 = %s, k = %llu, h = %s",
+                       fname, mode_name(inst, mode), glue_real_text(t1, t0), (unsigned long long)k,
+                       glue_real_text(t2, h));
+        return GLUE_ERROR;
+    }
+    bad_vr = invalid_variable(data, core_ready);
+    if (bad_vr >= 0) {
+        glue_log_error(inst, "%s: refused: variable %s holds a value no instance can have (%s)", fname,
+                       model_variables[bad_vr].name,
+                       model_variables[bad_vr].type == MODEL_REAL ? "not finite" : "Boolean other than 0 or 1");
+        return GLUE_ERROR;
+    }
+    if (core_ready ? n_hist != model_history_needed(data) : n_hist != 0) {
+        glue_log_error(inst, "%s: refused: %llu history samples stored, the model needs %llu", fname,
+                       (unsigned long long)n_hist, (unsigned long long)(core_ready ? model_history_needed(data) : 0));
+        return GLUE_ERROR;
+    }
+    if (n_hist > 0) {
+        history = (double *)inst->host.alloc(n_hist, sizeof(double));
+        if (history == NULL) {
+            glue_log_error(inst, "%s: out of memory for %llu history samples", fname, (unsigned long long)n_hist);
+            return GLUE_ERROR;
+        }
+        off = BLOB_HEADER + sizeof(ModelData);
+        for (i = 0; i < n_hist; i++, off += 8)
+            history[i] = get_f64(b + off);
+    }
+    fault = model_check_data(data, core_ready, t0, k, history, n_hist);
+    if (fault != NULL) {
+        glue_log_error(inst, "%s: refused: invalid model data (%s)", fname, fault);
+        if (history != NULL)
+            inst->host.release(history);
+        return GLUE_ERROR;
+    }
+
+    st = state_slot(inst, fname, state);
+    if (st == NULL) {
+        if (history != NULL)
+            inst->host.release(history);
+        return GLUE_ERROR;
+    }
+    if (st->history != NULL)
+        inst->host.release(st->history);
+    st->history = history;
+    st->history_capacity = n_hist;
+    st->n_history = n_hist;
+    st->mode = mode;
+    st->t0 = t0;
+    st->k = k;
+    st->h = h;
+    memcpy(&st->data, data, sizeof *data);
+    *state = st;
+    return GLUE_OK;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Refusals                                                                  */
+
+glue_status glue_unsupported(void *c, const char *fname, const char *why)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
+    if (inst != NULL)
+        glue_log_error(inst, "%s: not supported: %s", fname, why);
+    return GLUE_ERROR;
+}
+
+glue_status glue_refuse(void *c, const char *fname, int mask, const char *fmt, ...)
+{
+    glue_instance *inst = glue_instance_of(c, fname, mask);
+    char text[512];
+    va_list ap;
+    if (inst == NULL)
+        return GLUE_ERROR;
+    va_start(ap, fmt);
+    vsnprintf(text, sizeof text, fmt, ap);
+    va_end(ap);
+    glue_log_error(inst, "%s: %s", fname, text);
+    return GLUE_ERROR;
+}

@@ -1,0 +1,1376 @@
+/*
+ * fmu3_negative.c - the negative test suite of the FMI 3.0 editions: what
+ * fmu_negative.c does for FMI 2.0, through the FMI 3.0 API, for every FMU given,
+ * each case one check line.
+ *
+ *   matrix     every fmi3 function that takes an instance, in each reachable
+ *              state of the FMI 3.0 Co-Simulation state machine without event
+ *              mode (Instantiated, InitializationMode, StepMode, Terminated,
+ *              Error): a call the state machine forbids (or the FMU does not
+ *              support: event mode, configuration mode, clocks, dependencies,
+ *              derivatives, Model Exchange, Scheduled Execution) returns
+ *              fmi3Error, is explained through the logger and changes nothing
+ *              (the instance serializes to the same bytes); an allowed call
+ *              succeeds
+ *   null       NULL for each pointer argument (the doStep's out-arguments
+ *              included), a NULL instance for every function, garbage
+ *              instances, another FMU's instance, another instance's FMU state
+ *   vr         out-of-range value references and the unused references of an
+ *              array's other elements, wrong types (all 14 FMI 3.0 types),
+ *              nValues that does not match the references, outputs, time and
+ *              fixed parameters set, a bad reference after good ones
+ *   instantiate  wrong instantiation tokens (another FMU's too), eventModeUsed,
+ *              missing name, NULL intermediate-variable list, Model Exchange and
+ *              Scheduled Execution: NULL, explained, nothing allocated; a NULL
+ *              logMessage is accepted (FMI 3.0: no logging)
+ *   extreme    extreme finite values for every parameter (each array element
+ *              alone) and input, step sizes and communication points, start and
+ *              stop times: refused with a message, or run with every output
+ *              finite; a refused step leaves the outputs as they were
+ *   free       fmi3FreeInstance in every state, with and without FMU states
+ *              still allocated: the bytes in use are back where they were
+ *
+ * The FMU allocates with calloc/free (FMI 3.0 has no memory callbacks): the
+ * "nothing allocated/everything freed" oracle is the C library's count of bytes
+ * in use (glibc's mallinfo2, exact with GLIBC_TUNABLES=glibc.malloc.tcache_count=0,
+ * which CTest and pytest set; the first line says whether it was compared), and
+ * valgrind or LeakSanitizer over the whole run.
+ *
+ * usage: fmu3_negative MODEL.xml MODEL.so [MODEL.xml MODEL.so ...]   (FMI 3.0 editions)
+ * Prints failures and one summary line per group, then "N passed, M failed".
+ */
+#include "fmu3_host.h"
+
+#include <float.h>
+#include <limits.h>
+
+#define MAX_FMUS 4
+static host3_fmu fmus[MAX_FMUS];
+static int n_fmus;
+
+enum { S_INST, S_INIT, S_STEP, S_TERM, S_ERR, N_STATES };
+static const char *const state_names[N_STATES] = {
+    "Instantiated", "InitializationMode", "StepMode", "Terminated", "Error"};
+#define M(s) (1 << (s))
+#define ALL_STATES (M(S_INST) | M(S_INIT) | M(S_STEP) | M(S_TERM) | M(S_ERR))
+#define NEVER 0
+#define GETTERS (M(S_INIT) | M(S_STEP) | M(S_TERM) | M(S_ERR))
+#define SETTERS_PARAMETER (M(S_INST) | M(S_INIT))
+#define SETTERS_INPUT (M(S_INST) | M(S_INIT) | M(S_STEP))
+
+#define MODE_ERROR 16u          /* the mode field of a serialized state in Error */
+
+typedef struct {
+    const host3_fmu *f;
+    fmi3Instance c;
+    host_log log;
+    int k;                      /* samples since t0 = 0 */
+} inst_t;
+
+static fmi3Instance instantiate(const host3_fmu *f, inst_t *in, const char *name)
+{
+    memset(in, 0, sizeof *in);
+    in->f = f;
+    in->c = host3_instantiate(f, name, &in->log);
+    return in->c;
+}
+
+/* A fresh instance in state s (2 samples done for the states after initialization);
+ * Error by restoring the serialized StepMode state with its mode field set to Error. */
+static int enter_state(const host3_fmu *f, inst_t *in, int s)
+{
+    if (instantiate(f, in, state_names[s]) == NULL)
+        return 0;
+    if (s == S_INST)
+        return 1;
+    if (f->api.EnterInitializationMode(in->c, fmi3False, 0.0, 0.0, fmi3False, 0.0) != fmi3OK)
+        return 0;
+    if (s == S_INIT)
+        return 1;
+    if (f->api.ExitInitializationMode(in->c) != fmi3OK || host3_step(f, in->c, 0.0, 2 * f->h) > fmi3Warning)
+        return 0;
+    in->k = 2;
+    if (s == S_STEP)
+        return 1;
+    if (s == S_TERM)
+        return f->api.Terminate(in->c) <= fmi3Warning;
+    {
+        size_t size;
+        unsigned char *blob = host3_snapshot(f, in->c, &size);
+        fmi3FMUState st = NULL;
+        int ok;
+        if (blob == NULL)
+            return 0;
+        blob[BLOB_OFF_MODE] = MODE_ERROR;
+        blob_reseal(blob, size);
+        ok = f->api.DeserializeFMUState(in->c, blob, size, &st) == fmi3OK
+             && f->api.SetFMUState(in->c, st) == fmi3OK && f->api.FreeFMUState(in->c, &st) == fmi3OK
+             && host3_step(f, in->c, 2 * f->h, f->h) == fmi3Error && strstr(in->log.last_error, "state Error") != NULL;
+        free(blob);
+        host_log_clear(&in->log);
+        return ok;
+    }
+}
+
+static void leave(inst_t *in)
+{
+    if (in->c != NULL)
+        in->f->api.FreeInstance(in->c);
+    in->c = NULL;
+}
+
+static int group_passed, group_failed;
+
+static int case_check(int condition, const char *fmt, ...)
+{
+    va_list ap;
+    char text[1200];
+    va_start(ap, fmt);
+    vsnprintf(text, sizeof text, fmt, ap);
+    va_end(ap);
+    if (condition)
+        group_passed++;
+    else
+        group_failed++;
+    return check(condition, "%s", text);
+}
+
+static void group_start(void)
+{
+    group_passed = group_failed = 0;
+}
+
+static void group_end(const char *group, const char *what)
+{
+    printf("group %-12s %-50s %d cases, %d failed\n", group, what, group_passed + group_failed, group_failed);
+}
+
+/* ------------------------------------------------------------------------ */
+/* the call matrix                                                           */
+
+typedef struct {
+    fmi3FMUState state;
+    unsigned char *blob;
+    size_t blob_size;
+} call_ctx;
+
+typedef fmi3Status (*call_fn)(inst_t *in, call_ctx *x);
+
+typedef struct {
+    const char *name;
+    int allowed;
+    call_fn call;
+    int needs;
+} call_case;
+
+enum { NEEDS_NONE, NEEDS_INPUT, NEEDS_SET_INT, NEEDS_SET_BOOL, NEEDS_BOOL, NEEDS_ARRAY };
+
+static double scratch_real[64];
+static fmi3Int32 scratch_int[64];
+static fmi3Boolean scratch_bool[64];
+static fmi3String scratch_str[64];
+static fmi3Binary scratch_bin[64];
+static size_t scratch_size[64];
+static fmi3ValueReference scratch_vr[64];
+static fmi3UInt64 scratch_u64[64];
+static fmi3IntervalQualifier scratch_qual[64];
+static fmi3DependencyKind scratch_kind[64];
+
+static const host3_var *first(const host3_fmu *f, int causality, int type)
+{
+    return host3_find(f, causality, type);
+}
+
+/* The first array variable (all three FMUs have one), or NULL. */
+static const host3_var *first_array(const host3_fmu *f)
+{
+    int i;
+    for (i = 0; i < f->n_vars; i++)
+        if (f->vars[i].n > 1)
+            return &f->vars[i];
+    return NULL;
+}
+
+static const host3_var *time_var(const host3_fmu *f)
+{
+    return host3_find(f, VAR_INDEPENDENT, VAR_REAL);
+}
+
+#define CALL(fn) static fmi3Status fn(inst_t *in, call_ctx *x)
+
+CALL(c_set_debug_logging) { (void)x; return in->f->api.SetDebugLogging(in->c, fmi3False, 0, NULL); }
+CALL(c_enter_init) { (void)x; return in->f->api.EnterInitializationMode(in->c, fmi3False, 0.0, 0.0, fmi3False, 0.0); }
+CALL(c_exit_init) { (void)x; return in->f->api.ExitInitializationMode(in->c); }
+CALL(c_enter_event_mode) { (void)x; return in->f->api.EnterEventMode(in->c); }
+CALL(c_terminate) { (void)x; return in->f->api.Terminate(in->c); }
+CALL(c_reset) { (void)x; return in->f->api.Reset(in->c); }
+CALL(c_get_output)
+{
+    const host3_var *v = first(in->f, VAR_OUTPUT, VAR_REAL);
+    (void)x;
+    return in->f->api.GetFloat64(in->c, &v->vr, 1, scratch_real, 1);
+}
+CALL(c_get_time)
+{
+    const host3_var *v = time_var(in->f);
+    (void)x;
+    return in->f->api.GetFloat64(in->c, &v->vr, 1, scratch_real, 1);
+}
+CALL(c_get_array)
+{
+    const host3_var *v = first_array(in->f);
+    (void)x;
+    return in->f->api.GetFloat64(in->c, &v->vr, 1, scratch_real, (size_t)v->n);
+}
+CALL(c_get_int32)
+{
+    const host3_var *v = first(in->f, VAR_PARAMETER, VAR_INTEGER);
+    (void)x;
+    return in->f->api.GetInt32(in->c, v ? &v->vr : scratch_vr, v ? 1 : 0, scratch_int, v ? 1 : 0);
+}
+CALL(c_get_boolean)
+{
+    const host3_var *v = first(in->f, VAR_PARAMETER, VAR_BOOLEAN);
+    (void)x;
+    return in->f->api.GetBoolean(in->c, v ? &v->vr : scratch_vr, v ? 1 : 0, scratch_bool, v ? 1 : 0);
+}
+CALL(c_set_real_parameter)
+{
+    const host3_var *v = first(in->f, VAR_PARAMETER, VAR_REAL);
+    (void)x;
+    return in->f->api.SetFloat64(in->c, &v->vr, 1, v->start, 1);
+}
+CALL(c_set_array)
+{
+    const host3_var *v = first_array(in->f);
+    (void)x;
+    return in->f->api.SetFloat64(in->c, &v->vr, 1, v->start, (size_t)v->n);
+}
+CALL(c_set_input)
+{
+    const host3_var *v = first(in->f, VAR_INPUT, VAR_REAL);
+    double value = 0.5;
+    (void)x;
+    return in->f->api.SetFloat64(in->c, &v->vr, 1, &value, 1);
+}
+CALL(c_set_int32)
+{
+    const host3_var *v = first(in->f, VAR_PARAMETER, VAR_INTEGER);
+    fmi3Int32 value = v ? (fmi3Int32)v->start[0] : 0;
+    (void)x;
+    return in->f->api.SetInt32(in->c, v ? &v->vr : scratch_vr, v ? 1 : 0, &value, v ? 1 : 0);
+}
+CALL(c_set_boolean)
+{
+    const host3_var *v = first(in->f, VAR_PARAMETER, VAR_BOOLEAN);
+    fmi3Boolean value = v && v->start[0] != 0.0;
+    (void)x;
+    return in->f->api.SetBoolean(in->c, v ? &v->vr : scratch_vr, v ? 1 : 0, &value, v ? 1 : 0);
+}
+/* the types without variables, nvr = 0: only the state is tested */
+CALL(c_get_float32) { (void)x; return in->f->api.GetFloat32(in->c, scratch_vr, 0, (fmi3Float32 *)scratch_real, 0); }
+CALL(c_get_int8) { (void)x; return in->f->api.GetInt8(in->c, scratch_vr, 0, (fmi3Int8 *)scratch_real, 0); }
+CALL(c_get_uint8) { (void)x; return in->f->api.GetUInt8(in->c, scratch_vr, 0, (fmi3UInt8 *)scratch_real, 0); }
+CALL(c_get_int16) { (void)x; return in->f->api.GetInt16(in->c, scratch_vr, 0, (fmi3Int16 *)scratch_real, 0); }
+CALL(c_get_uint16) { (void)x; return in->f->api.GetUInt16(in->c, scratch_vr, 0, (fmi3UInt16 *)scratch_real, 0); }
+CALL(c_get_uint32) { (void)x; return in->f->api.GetUInt32(in->c, scratch_vr, 0, (fmi3UInt32 *)scratch_real, 0); }
+CALL(c_get_int64) { (void)x; return in->f->api.GetInt64(in->c, scratch_vr, 0, (fmi3Int64 *)scratch_real, 0); }
+CALL(c_get_uint64) { (void)x; return in->f->api.GetUInt64(in->c, scratch_vr, 0, scratch_u64, 0); }
+CALL(c_get_string) { (void)x; return in->f->api.GetString(in->c, scratch_vr, 0, scratch_str, 0); }
+CALL(c_get_binary) { (void)x; return in->f->api.GetBinary(in->c, scratch_vr, 0, scratch_size, scratch_bin, 0); }
+CALL(c_get_clock) { (void)x; return in->f->api.GetClock(in->c, scratch_vr, 0, scratch_bool); }
+CALL(c_set_float32) { (void)x; return in->f->api.SetFloat32(in->c, scratch_vr, 0, (const fmi3Float32 *)scratch_real, 0); }
+CALL(c_set_int8) { (void)x; return in->f->api.SetInt8(in->c, scratch_vr, 0, (const fmi3Int8 *)scratch_real, 0); }
+CALL(c_set_uint8) { (void)x; return in->f->api.SetUInt8(in->c, scratch_vr, 0, (const fmi3UInt8 *)scratch_real, 0); }
+CALL(c_set_int16) { (void)x; return in->f->api.SetInt16(in->c, scratch_vr, 0, (const fmi3Int16 *)scratch_real, 0); }
+CALL(c_set_uint16) { (void)x; return in->f->api.SetUInt16(in->c, scratch_vr, 0, (const fmi3UInt16 *)scratch_real, 0); }
+CALL(c_set_uint32) { (void)x; return in->f->api.SetUInt32(in->c, scratch_vr, 0, (const fmi3UInt32 *)scratch_real, 0); }
+CALL(c_set_int64) { (void)x; return in->f->api.SetInt64(in->c, scratch_vr, 0, (const fmi3Int64 *)scratch_real, 0); }
+CALL(c_set_uint64) { (void)x; return in->f->api.SetUInt64(in->c, scratch_vr, 0, scratch_u64, 0); }
+CALL(c_set_string) { (void)x; return in->f->api.SetString(in->c, scratch_vr, 0, scratch_str, 0); }
+CALL(c_set_binary) { (void)x; return in->f->api.SetBinary(in->c, scratch_vr, 0, scratch_size, scratch_bin, 0); }
+CALL(c_set_clock) { (void)x; return in->f->api.SetClock(in->c, scratch_vr, 0, scratch_bool); }
+CALL(c_n_dependencies)
+{
+    size_t n = 0;
+    (void)x;
+    return in->f->api.GetNumberOfVariableDependencies(in->c, first(in->f, VAR_OUTPUT, VAR_REAL)->vr, &n);
+}
+CALL(c_dependencies)
+{
+    (void)x;
+    return in->f->api.GetVariableDependencies(in->c, first(in->f, VAR_OUTPUT, VAR_REAL)->vr, scratch_size,
+                                              scratch_vr, scratch_size, scratch_kind, 0);
+}
+CALL(c_get_fmu_state)
+{
+    fmi3FMUState s = NULL;
+    fmi3Status st = in->f->api.GetFMUState(in->c, &s);
+    (void)x;
+    if (s != NULL)
+        in->f->api.FreeFMUState(in->c, &s);
+    return st;
+}
+CALL(c_set_fmu_state) { return in->f->api.SetFMUState(in->c, x->state); }
+CALL(c_free_fmu_state) { return in->f->api.FreeFMUState(in->c, &x->state); }
+CALL(c_state_size)
+{
+    size_t size = 0;
+    return in->f->api.SerializedFMUStateSize(in->c, x->state, &size);
+}
+CALL(c_serialize)
+{
+    static unsigned char buf[1 << 14];
+    size_t size = 0;
+    if (in->f->api.SerializedFMUStateSize(in->c, x->state, &size) != fmi3OK || size > sizeof buf)
+        size = sizeof buf;
+    return in->f->api.SerializeFMUState(in->c, x->state, buf, size);
+}
+CALL(c_deserialize)
+{
+    fmi3FMUState s = NULL;
+    fmi3Status st = in->f->api.DeserializeFMUState(in->c, x->blob, x->blob_size, &s);
+    if (s != NULL)
+        in->f->api.FreeFMUState(in->c, &s);
+    return st;
+}
+CALL(c_directional)
+{
+    fmi3ValueReference u = first(in->f, VAR_OUTPUT, VAR_REAL)->vr, k = 0;
+    double seed = 1.0, sens = 0.0;
+    (void)x;
+    return in->f->api.GetDirectionalDerivative(in->c, &u, 1, &k, 1, &seed, 1, &sens, 1);
+}
+CALL(c_adjoint)
+{
+    fmi3ValueReference u = first(in->f, VAR_OUTPUT, VAR_REAL)->vr, k = 0;
+    double seed = 1.0, sens = 0.0;
+    (void)x;
+    return in->f->api.GetAdjointDerivative(in->c, &u, 1, &k, 1, &seed, 1, &sens, 1);
+}
+CALL(c_enter_configuration) { (void)x; return in->f->api.EnterConfigurationMode(in->c); }
+CALL(c_exit_configuration) { (void)x; return in->f->api.ExitConfigurationMode(in->c); }
+CALL(c_get_interval_decimal) { (void)x; return in->f->api.GetIntervalDecimal(in->c, scratch_vr, 1, scratch_real, scratch_qual); }
+CALL(c_get_interval_fraction)
+{
+    (void)x;
+    return in->f->api.GetIntervalFraction(in->c, scratch_vr, 1, scratch_u64, scratch_u64 + 1, scratch_qual);
+}
+CALL(c_get_shift_decimal) { (void)x; return in->f->api.GetShiftDecimal(in->c, scratch_vr, 1, scratch_real); }
+CALL(c_get_shift_fraction) { (void)x; return in->f->api.GetShiftFraction(in->c, scratch_vr, 1, scratch_u64, scratch_u64 + 1); }
+CALL(c_set_interval_decimal) { (void)x; return in->f->api.SetIntervalDecimal(in->c, scratch_vr, 1, scratch_real); }
+CALL(c_set_interval_fraction)
+{
+    (void)x;
+    return in->f->api.SetIntervalFraction(in->c, scratch_vr, 1, scratch_u64, scratch_u64 + 1);
+}
+CALL(c_set_shift_decimal) { (void)x; return in->f->api.SetShiftDecimal(in->c, scratch_vr, 1, scratch_real); }
+CALL(c_set_shift_fraction) { (void)x; return in->f->api.SetShiftFraction(in->c, scratch_vr, 1, scratch_u64, scratch_u64 + 1); }
+CALL(c_evaluate_discrete) { (void)x; return in->f->api.EvaluateDiscreteStates(in->c); }
+CALL(c_update_discrete)
+{
+    fmi3Boolean a, b, c, d, e;
+    fmi3Float64 t;
+    (void)x;
+    return in->f->api.UpdateDiscreteStates(in->c, &a, &b, &c, &d, &e, &t);
+}
+CALL(c_enter_continuous) { (void)x; return in->f->api.EnterContinuousTimeMode(in->c); }
+CALL(c_completed_integrator_step)
+{
+    fmi3Boolean event = fmi3False, terminate = fmi3False;
+    (void)x;
+    return in->f->api.CompletedIntegratorStep(in->c, fmi3True, &event, &terminate);
+}
+CALL(c_set_time) { (void)x; return in->f->api.SetTime(in->c, 0.0); }
+CALL(c_set_continuous_states) { (void)x; return in->f->api.SetContinuousStates(in->c, scratch_real, 1); }
+CALL(c_get_derivatives) { (void)x; return in->f->api.GetContinuousStateDerivatives(in->c, scratch_real, 1); }
+CALL(c_get_event_indicators) { (void)x; return in->f->api.GetEventIndicators(in->c, scratch_real, 1); }
+CALL(c_get_continuous_states) { (void)x; return in->f->api.GetContinuousStates(in->c, scratch_real, 1); }
+CALL(c_get_nominals) { (void)x; return in->f->api.GetNominalsOfContinuousStates(in->c, scratch_real, 1); }
+CALL(c_n_event_indicators)
+{
+    size_t n = 0;
+    (void)x;
+    return in->f->api.GetNumberOfEventIndicators(in->c, &n);
+}
+CALL(c_n_continuous_states)
+{
+    size_t n = 0;
+    (void)x;
+    return in->f->api.GetNumberOfContinuousStates(in->c, &n);
+}
+CALL(c_enter_step_mode) { (void)x; return in->f->api.EnterStepMode(in->c); }
+CALL(c_output_derivatives)
+{
+    fmi3ValueReference vr = first(in->f, VAR_OUTPUT, VAR_REAL)->vr;
+    fmi3Int32 order = 1;
+    double value = 0.0;
+    (void)x;
+    return in->f->api.GetOutputDerivatives(in->c, &vr, 1, &order, &value, 1);
+}
+CALL(c_do_step) { (void)x; return host3_step(in->f, in->c, in->k * in->f->h, in->f->h); }
+CALL(c_activate_partition) { (void)x; return in->f->api.ActivateModelPartition(in->c, 0, 0.0); }
+
+/* FMI 3.0 Co-Simulation (section 4.2) with this FMU's capabilities: no event
+ * mode, no configuration mode, no clocks, no derivatives, no dependency
+ * functions; not Model Exchange or Scheduled Execution. Get/Set of the types the
+ * FMU has no variable of, with nvr = 0, only test the state. */
+static const call_case calls[] = {
+    {"fmi3SetDebugLogging", ALL_STATES, c_set_debug_logging, NEEDS_NONE},
+    {"fmi3EnterInitializationMode", M(S_INST), c_enter_init, NEEDS_NONE},
+    {"fmi3ExitInitializationMode", M(S_INIT), c_exit_init, NEEDS_NONE},
+    {"fmi3EnterEventMode", NEVER, c_enter_event_mode, NEEDS_NONE},
+    {"fmi3Terminate", M(S_STEP), c_terminate, NEEDS_NONE},
+    {"fmi3Reset", ALL_STATES, c_reset, NEEDS_NONE},
+    {"fmi3GetFloat64(output)", GETTERS, c_get_output, NEEDS_NONE},
+    {"fmi3GetFloat64(time)", GETTERS, c_get_time, NEEDS_NONE},
+    {"fmi3GetFloat64(array)", GETTERS, c_get_array, NEEDS_ARRAY},
+    {"fmi3GetInt32", GETTERS, c_get_int32, NEEDS_NONE},
+    {"fmi3GetBoolean", GETTERS, c_get_boolean, NEEDS_NONE},
+    {"fmi3SetFloat64(parameter)", SETTERS_PARAMETER, c_set_real_parameter, NEEDS_NONE},
+    {"fmi3SetFloat64(array)", SETTERS_PARAMETER, c_set_array, NEEDS_ARRAY},
+    {"fmi3SetFloat64(input)", SETTERS_INPUT, c_set_input, NEEDS_INPUT},
+    {"fmi3SetInt32(parameter)", SETTERS_PARAMETER, c_set_int32, NEEDS_SET_INT},
+    {"fmi3SetBoolean(parameter)", SETTERS_PARAMETER, c_set_boolean, NEEDS_SET_BOOL},
+    {"fmi3GetFloat32(nvr = 0)", GETTERS, c_get_float32, NEEDS_NONE},
+    {"fmi3GetInt8(nvr = 0)", GETTERS, c_get_int8, NEEDS_NONE},
+    {"fmi3GetUInt8(nvr = 0)", GETTERS, c_get_uint8, NEEDS_NONE},
+    {"fmi3GetInt16(nvr = 0)", GETTERS, c_get_int16, NEEDS_NONE},
+    {"fmi3GetUInt16(nvr = 0)", GETTERS, c_get_uint16, NEEDS_NONE},
+    {"fmi3GetUInt32(nvr = 0)", GETTERS, c_get_uint32, NEEDS_NONE},
+    {"fmi3GetInt64(nvr = 0)", GETTERS, c_get_int64, NEEDS_NONE},
+    {"fmi3GetUInt64(nvr = 0)", GETTERS, c_get_uint64, NEEDS_NONE},
+    {"fmi3GetString(nvr = 0)", GETTERS, c_get_string, NEEDS_NONE},
+    {"fmi3GetBinary(nvr = 0)", GETTERS, c_get_binary, NEEDS_NONE},
+    {"fmi3GetClock(nvr = 0)", GETTERS, c_get_clock, NEEDS_NONE},
+    {"fmi3SetFloat32(nvr = 0)", SETTERS_INPUT, c_set_float32, NEEDS_NONE},
+    {"fmi3SetInt8(nvr = 0)", SETTERS_INPUT, c_set_int8, NEEDS_NONE},
+    {"fmi3SetUInt8(nvr = 0)", SETTERS_INPUT, c_set_uint8, NEEDS_NONE},
+    {"fmi3SetInt16(nvr = 0)", SETTERS_INPUT, c_set_int16, NEEDS_NONE},
+    {"fmi3SetUInt16(nvr = 0)", SETTERS_INPUT, c_set_uint16, NEEDS_NONE},
+    {"fmi3SetUInt32(nvr = 0)", SETTERS_INPUT, c_set_uint32, NEEDS_NONE},
+    {"fmi3SetInt64(nvr = 0)", SETTERS_INPUT, c_set_int64, NEEDS_NONE},
+    {"fmi3SetUInt64(nvr = 0)", SETTERS_INPUT, c_set_uint64, NEEDS_NONE},
+    {"fmi3SetString(nvr = 0)", SETTERS_INPUT, c_set_string, NEEDS_NONE},
+    {"fmi3SetBinary(nvr = 0)", SETTERS_INPUT, c_set_binary, NEEDS_NONE},
+    {"fmi3SetClock(nvr = 0)", SETTERS_INPUT, c_set_clock, NEEDS_NONE},
+    {"fmi3GetNumberOfVariableDependencies", NEVER, c_n_dependencies, NEEDS_NONE},
+    {"fmi3GetVariableDependencies", NEVER, c_dependencies, NEEDS_NONE},
+    {"fmi3GetFMUState", ALL_STATES, c_get_fmu_state, NEEDS_NONE},
+    {"fmi3SetFMUState", ALL_STATES, c_set_fmu_state, NEEDS_NONE},
+    {"fmi3FreeFMUState", ALL_STATES, c_free_fmu_state, NEEDS_NONE},
+    {"fmi3SerializedFMUStateSize", ALL_STATES, c_state_size, NEEDS_NONE},
+    {"fmi3SerializeFMUState", ALL_STATES, c_serialize, NEEDS_NONE},
+    {"fmi3DeserializeFMUState", ALL_STATES, c_deserialize, NEEDS_NONE},
+    {"fmi3GetDirectionalDerivative", NEVER, c_directional, NEEDS_NONE},
+    {"fmi3GetAdjointDerivative", NEVER, c_adjoint, NEEDS_NONE},
+    {"fmi3EnterConfigurationMode", NEVER, c_enter_configuration, NEEDS_NONE},
+    {"fmi3ExitConfigurationMode", NEVER, c_exit_configuration, NEEDS_NONE},
+    {"fmi3GetIntervalDecimal", NEVER, c_get_interval_decimal, NEEDS_NONE},
+    {"fmi3GetIntervalFraction", NEVER, c_get_interval_fraction, NEEDS_NONE},
+    {"fmi3GetShiftDecimal", NEVER, c_get_shift_decimal, NEEDS_NONE},
+    {"fmi3GetShiftFraction", NEVER, c_get_shift_fraction, NEEDS_NONE},
+    {"fmi3SetIntervalDecimal", NEVER, c_set_interval_decimal, NEEDS_NONE},
+    {"fmi3SetIntervalFraction", NEVER, c_set_interval_fraction, NEEDS_NONE},
+    {"fmi3SetShiftDecimal", NEVER, c_set_shift_decimal, NEEDS_NONE},
+    {"fmi3SetShiftFraction", NEVER, c_set_shift_fraction, NEEDS_NONE},
+    {"fmi3EvaluateDiscreteStates", NEVER, c_evaluate_discrete, NEEDS_NONE},
+    {"fmi3UpdateDiscreteStates", NEVER, c_update_discrete, NEEDS_NONE},
+    {"fmi3EnterContinuousTimeMode", NEVER, c_enter_continuous, NEEDS_NONE},
+    {"fmi3CompletedIntegratorStep", NEVER, c_completed_integrator_step, NEEDS_NONE},
+    {"fmi3SetTime", NEVER, c_set_time, NEEDS_NONE},
+    {"fmi3SetContinuousStates", NEVER, c_set_continuous_states, NEEDS_NONE},
+    {"fmi3GetContinuousStateDerivatives", NEVER, c_get_derivatives, NEEDS_NONE},
+    {"fmi3GetEventIndicators", NEVER, c_get_event_indicators, NEEDS_NONE},
+    {"fmi3GetContinuousStates", NEVER, c_get_continuous_states, NEEDS_NONE},
+    {"fmi3GetNominalsOfContinuousStates", NEVER, c_get_nominals, NEEDS_NONE},
+    {"fmi3GetNumberOfEventIndicators", NEVER, c_n_event_indicators, NEEDS_NONE},
+    {"fmi3GetNumberOfContinuousStates", NEVER, c_n_continuous_states, NEEDS_NONE},
+    {"fmi3EnterStepMode", NEVER, c_enter_step_mode, NEEDS_NONE},
+    {"fmi3GetOutputDerivatives", NEVER, c_output_derivatives, NEEDS_NONE},
+    {"fmi3DoStep", M(S_STEP), c_do_step, NEEDS_NONE},
+    {"fmi3ActivateModelPartition", NEVER, c_activate_partition, NEEDS_NONE},
+};
+#define N_CALLS ((int)(sizeof calls / sizeof calls[0]))
+
+static void matrix(const host3_fmu *f)
+{
+    int s, i;
+    group_start();
+    for (s = 0; s < N_STATES; s++) {
+        for (i = 0; i < N_CALLS; i++) {
+            const call_case *cc = &calls[i];
+            inst_t in;
+            call_ctx x;
+            unsigned char *before;
+            size_t before_size;
+            fmi3Status st;
+            int allowed_mask = cc->allowed, allowed;
+            if ((cc->needs == NEEDS_INPUT && first(f, VAR_INPUT, VAR_REAL) == NULL)
+                || (cc->needs == NEEDS_ARRAY && first_array(f) == NULL))
+                continue;
+            if ((cc->needs == NEEDS_SET_INT && first(f, VAR_PARAMETER, VAR_INTEGER) == NULL)
+                || (cc->needs == NEEDS_SET_BOOL && first(f, VAR_PARAMETER, VAR_BOOLEAN) == NULL))
+                allowed_mask = SETTERS_INPUT;       /* nvr = 0: any state a setter is allowed in */
+            allowed = (allowed_mask & M(s)) != 0;
+            memset(&x, 0, sizeof x);
+            if (!case_check(enter_state(f, &in, s), "%s: reach %s", f->id, state_names[s])) {
+                leave(&in);
+                continue;
+            }
+            f->api.GetFMUState(in.c, &x.state);
+            x.blob = host3_snapshot(f, in.c, &x.blob_size);
+            before = host3_snapshot(f, in.c, &before_size);
+            host_log_clear(&in.log);
+            st = cc->call(&in, &x);
+            if (allowed)
+                case_check(st == fmi3OK || st == fmi3Warning, "%s in %s: %s is allowed (status %d: %s)", f->id,
+                           state_names[s], cc->name, (int)st, in.log.last_error);
+            else
+                case_check(st == fmi3Error && in.log.n_errors > 0 && host3_same_state(f, in.c, before, before_size),
+                           "%s in %s: %s returns fmi3Error, says why, changes nothing (status %d: %s)", f->id,
+                           state_names[s], cc->name, (int)st, in.log.last_error);
+            if (x.state != NULL)
+                f->api.FreeFMUState(in.c, &x.state);
+            free(x.blob);
+            free(before);
+            leave(&in);
+        }
+    }
+    group_end("matrix", f->id);
+}
+
+/* ------------------------------------------------------------------------ */
+/* NULL and foreign arguments                                                */
+
+/* Every function that takes an instance, on c with harmless other arguments:
+ * each must return fmi3Error (FreeInstance must not crash). */
+static void every_function_refuses(const host3_fmu *f, fmi3Instance c, const char *what)
+{
+    fmi3ValueReference vr = 0;
+    double real = 0.0;
+    fmi3Int32 integer = 0;
+    fmi3Boolean boolean = fmi3False, b2 = fmi3False, b3 = fmi3False, b4 = fmi3False, b5 = fmi3False;
+    fmi3Float32 f32 = 0.0f;
+    fmi3Int8 i8 = 0;
+    fmi3UInt8 u8 = 0;
+    fmi3Int16 i16 = 0;
+    fmi3UInt16 u16 = 0;
+    fmi3UInt32 u32 = 0;
+    fmi3Int64 i64 = 0;
+    fmi3UInt64 u64 = 0, u64b = 0;
+    fmi3String string = "";
+    fmi3Binary binary = NULL;
+    fmi3IntervalQualifier qualifier;
+    fmi3DependencyKind kind;
+    fmi3FMUState state = NULL;
+    size_t size = 0, index = 0;
+    unsigned char buf[256];
+    memset(buf, 0, sizeof buf);
+#define REFUSES(call) case_check((call) == fmi3Error, "%s: %s refuses %s", f->id, #call, what)
+    REFUSES(f->api.SetDebugLogging(c, fmi3True, 0, NULL));
+    REFUSES(f->api.EnterInitializationMode(c, fmi3False, 0.0, 0.0, fmi3False, 0.0));
+    REFUSES(f->api.ExitInitializationMode(c));
+    REFUSES(f->api.EnterEventMode(c));
+    REFUSES(f->api.Terminate(c));
+    REFUSES(f->api.Reset(c));
+    REFUSES(f->api.GetFloat32(c, &vr, 1, &f32, 1));
+    REFUSES(f->api.GetFloat64(c, &vr, 1, &real, 1));
+    REFUSES(f->api.GetInt8(c, &vr, 1, &i8, 1));
+    REFUSES(f->api.GetUInt8(c, &vr, 1, &u8, 1));
+    REFUSES(f->api.GetInt16(c, &vr, 1, &i16, 1));
+    REFUSES(f->api.GetUInt16(c, &vr, 1, &u16, 1));
+    REFUSES(f->api.GetInt32(c, &vr, 1, &integer, 1));
+    REFUSES(f->api.GetUInt32(c, &vr, 1, &u32, 1));
+    REFUSES(f->api.GetInt64(c, &vr, 1, &i64, 1));
+    REFUSES(f->api.GetUInt64(c, &vr, 1, &u64, 1));
+    REFUSES(f->api.GetBoolean(c, &vr, 1, &boolean, 1));
+    REFUSES(f->api.GetString(c, &vr, 1, &string, 1));
+    REFUSES(f->api.GetBinary(c, &vr, 1, &size, &binary, 1));
+    REFUSES(f->api.GetClock(c, &vr, 1, &boolean));
+    REFUSES(f->api.SetFloat32(c, &vr, 1, &f32, 1));
+    REFUSES(f->api.SetFloat64(c, &vr, 1, &real, 1));
+    REFUSES(f->api.SetInt8(c, &vr, 1, &i8, 1));
+    REFUSES(f->api.SetUInt8(c, &vr, 1, &u8, 1));
+    REFUSES(f->api.SetInt16(c, &vr, 1, &i16, 1));
+    REFUSES(f->api.SetUInt16(c, &vr, 1, &u16, 1));
+    REFUSES(f->api.SetInt32(c, &vr, 1, &integer, 1));
+    REFUSES(f->api.SetUInt32(c, &vr, 1, &u32, 1));
+    REFUSES(f->api.SetInt64(c, &vr, 1, &i64, 1));
+    REFUSES(f->api.SetUInt64(c, &vr, 1, &u64, 1));
+    REFUSES(f->api.SetBoolean(c, &vr, 1, &boolean, 1));
+    REFUSES(f->api.SetString(c, &vr, 1, &string, 1));
+    REFUSES(f->api.SetBinary(c, &vr, 1, &size, &binary, 1));
+    REFUSES(f->api.SetClock(c, &vr, 1, &boolean));
+    REFUSES(f->api.GetNumberOfVariableDependencies(c, vr, &size));
+    REFUSES(f->api.GetVariableDependencies(c, vr, &index, &vr, &index, &kind, 0));
+    REFUSES(f->api.GetFMUState(c, &state));
+    REFUSES(f->api.SetFMUState(c, state));
+    REFUSES(f->api.FreeFMUState(c, &state));
+    REFUSES(f->api.SerializedFMUStateSize(c, state, &size));
+    REFUSES(f->api.SerializeFMUState(c, state, buf, sizeof buf));
+    REFUSES(f->api.DeserializeFMUState(c, buf, sizeof buf, &state));
+    REFUSES(f->api.GetDirectionalDerivative(c, &vr, 1, &vr, 1, &real, 1, &real, 1));
+    REFUSES(f->api.GetAdjointDerivative(c, &vr, 1, &vr, 1, &real, 1, &real, 1));
+    REFUSES(f->api.EnterConfigurationMode(c));
+    REFUSES(f->api.ExitConfigurationMode(c));
+    REFUSES(f->api.GetIntervalDecimal(c, &vr, 1, &real, &qualifier));
+    REFUSES(f->api.GetIntervalFraction(c, &vr, 1, &u64, &u64b, &qualifier));
+    REFUSES(f->api.GetShiftDecimal(c, &vr, 1, &real));
+    REFUSES(f->api.GetShiftFraction(c, &vr, 1, &u64, &u64b));
+    REFUSES(f->api.SetIntervalDecimal(c, &vr, 1, &real));
+    REFUSES(f->api.SetIntervalFraction(c, &vr, 1, &u64, &u64b));
+    REFUSES(f->api.SetShiftDecimal(c, &vr, 1, &real));
+    REFUSES(f->api.SetShiftFraction(c, &vr, 1, &u64, &u64b));
+    REFUSES(f->api.EvaluateDiscreteStates(c));
+    REFUSES(f->api.UpdateDiscreteStates(c, &boolean, &b2, &b3, &b4, &b5, &real));
+    REFUSES(f->api.EnterContinuousTimeMode(c));
+    REFUSES(f->api.CompletedIntegratorStep(c, fmi3True, &boolean, &b2));
+    REFUSES(f->api.SetTime(c, 0.0));
+    REFUSES(f->api.SetContinuousStates(c, &real, 1));
+    REFUSES(f->api.GetContinuousStateDerivatives(c, &real, 1));
+    REFUSES(f->api.GetEventIndicators(c, &real, 1));
+    REFUSES(f->api.GetContinuousStates(c, &real, 1));
+    REFUSES(f->api.GetNominalsOfContinuousStates(c, &real, 1));
+    REFUSES(f->api.GetNumberOfEventIndicators(c, &size));
+    REFUSES(f->api.GetNumberOfContinuousStates(c, &size));
+    REFUSES(f->api.EnterStepMode(c));
+    REFUSES(f->api.GetOutputDerivatives(c, &vr, 1, &integer, &real, 1));
+    REFUSES(host3_step(f, c, 0.0, f->h));
+    REFUSES(f->api.ActivateModelPartition(c, vr, 0.0));
+#undef REFUSES
+    f->api.FreeInstance(c);
+    case_check(state == NULL, "%s: no FMU state came out of %s", f->id, what);
+}
+
+/* Each NULL pointer argument of a call allowed in StepMode: fmi3Error, a message, no change. */
+static void null_arguments(const host3_fmu *f)
+{
+    inst_t in;
+    fmi3FMUState state = NULL, null_state = NULL;
+    unsigned char *blob, *before;
+    size_t blob_size = 0, before_size = 0, size = 0;
+    const host3_var *out = first(f, VAR_OUTPUT, VAR_REAL);
+    fmi3ValueReference vr = out->vr;
+    double real[4] = {0};
+    fmi3Int32 integer[4] = {0};
+    fmi3Boolean boolean[4] = {0};
+    fmi3Float32 f32[4] = {0};
+    fmi3UInt64 u64[4] = {0};
+    fmi3String strings[4] = {NULL};
+    fmi3String null_category[1] = {NULL};
+    fmi3Boolean event = fmi3False, terminate = fmi3False, early = fmi3False;
+    fmi3Float64 last = 0.0;
+    static unsigned char buf[1 << 14];
+    group_start();
+    if (!case_check(enter_state(f, &in, S_STEP), "%s: reach StepMode", f->id))
+        return;
+    f->api.GetFMUState(in.c, &state);
+    blob = host3_snapshot(f, in.c, &blob_size);
+    before = host3_snapshot(f, in.c, &before_size);
+#define NULL_REFUSED(call)                                                                      \
+    do {                                                                                        \
+        host_log_clear(&in.log);                                                                \
+        case_check((call) == fmi3Error && in.log.n_errors > 0 && host3_same_state(f, in.c, before, before_size), \
+                   "%s: %s is refused with a message, nothing changed (%s)", f->id, #call, in.log.last_error); \
+    } while (0)
+    NULL_REFUSED(f->api.GetFloat64(in.c, NULL, 1, real, 1));
+    NULL_REFUSED(f->api.GetFloat64(in.c, &vr, 1, NULL, 1));
+    NULL_REFUSED(f->api.GetInt32(in.c, NULL, 1, integer, 1));
+    NULL_REFUSED(f->api.GetInt32(in.c, &vr, 1, NULL, 1));
+    NULL_REFUSED(f->api.GetBoolean(in.c, NULL, 1, boolean, 1));
+    NULL_REFUSED(f->api.GetBoolean(in.c, &vr, 1, NULL, 1));
+    NULL_REFUSED(f->api.GetFloat32(in.c, NULL, 1, f32, 1));
+    NULL_REFUSED(f->api.GetFloat32(in.c, &vr, 1, NULL, 1));
+    NULL_REFUSED(f->api.GetUInt64(in.c, NULL, 1, u64, 1));
+    NULL_REFUSED(f->api.GetString(in.c, &vr, 1, NULL, 1));
+    NULL_REFUSED(f->api.GetBinary(in.c, &vr, 1, NULL, NULL, 1));
+    NULL_REFUSED(f->api.GetClock(in.c, NULL, 1, boolean));
+    NULL_REFUSED(f->api.SetFloat64(in.c, NULL, 1, real, 1));
+    NULL_REFUSED(f->api.SetFloat64(in.c, &vr, 1, NULL, 1));
+    NULL_REFUSED(f->api.SetInt32(in.c, NULL, 1, integer, 1));
+    NULL_REFUSED(f->api.SetInt32(in.c, &vr, 1, NULL, 1));
+    NULL_REFUSED(f->api.SetBoolean(in.c, NULL, 1, boolean, 1));
+    NULL_REFUSED(f->api.SetBoolean(in.c, &vr, 1, NULL, 1));
+    NULL_REFUSED(f->api.SetFloat32(in.c, &vr, 1, NULL, 1));
+    NULL_REFUSED(f->api.SetString(in.c, NULL, 1, strings, 1));
+    NULL_REFUSED(f->api.SetBinary(in.c, &vr, 1, NULL, NULL, 1));
+    NULL_REFUSED(f->api.SetClock(in.c, &vr, 1, NULL));
+    NULL_REFUSED(f->api.GetFMUState(in.c, NULL));
+    NULL_REFUSED(f->api.SetFMUState(in.c, NULL));
+    NULL_REFUSED(f->api.FreeFMUState(in.c, NULL));
+    NULL_REFUSED(f->api.SerializedFMUStateSize(in.c, NULL, &size));
+    NULL_REFUSED(f->api.SerializedFMUStateSize(in.c, state, NULL));
+    NULL_REFUSED(f->api.SerializeFMUState(in.c, NULL, buf, sizeof buf));
+    NULL_REFUSED(f->api.SerializeFMUState(in.c, state, NULL, sizeof buf));
+    NULL_REFUSED(f->api.SerializeFMUState(in.c, state, buf, 0));
+    NULL_REFUSED(f->api.DeserializeFMUState(in.c, NULL, blob_size, &null_state));
+    NULL_REFUSED(f->api.DeserializeFMUState(in.c, blob, blob_size, NULL));
+    NULL_REFUSED(f->api.DeserializeFMUState(in.c, blob, 0, &null_state));
+    NULL_REFUSED(f->api.SetDebugLogging(in.c, fmi3True, 1, NULL));
+    NULL_REFUSED(f->api.SetDebugLogging(in.c, fmi3True, 1, null_category));
+    NULL_REFUSED(f->api.DoStep(in.c, in.k * f->h, f->h, fmi3True, NULL, &terminate, &early, &last));
+    NULL_REFUSED(f->api.DoStep(in.c, in.k * f->h, f->h, fmi3True, &event, NULL, &early, &last));
+    NULL_REFUSED(f->api.DoStep(in.c, in.k * f->h, f->h, fmi3True, &event, &terminate, NULL, &last));
+    NULL_REFUSED(f->api.DoStep(in.c, in.k * f->h, f->h, fmi3True, &event, &terminate, &early, NULL));
+    NULL_REFUSED(f->api.GetNumberOfVariableDependencies(in.c, vr, NULL));
+    NULL_REFUSED(f->api.GetVariableDependencies(in.c, vr, NULL, NULL, NULL, NULL, 1));
+    NULL_REFUSED(f->api.GetDirectionalDerivative(in.c, NULL, 1, NULL, 1, NULL, 1, NULL, 1));
+    NULL_REFUSED(f->api.GetAdjointDerivative(in.c, NULL, 1, NULL, 1, NULL, 1, NULL, 1));
+    NULL_REFUSED(f->api.GetOutputDerivatives(in.c, NULL, 1, NULL, NULL, 1));
+    NULL_REFUSED(f->api.UpdateDiscreteStates(in.c, NULL, NULL, NULL, NULL, NULL, NULL));
+    NULL_REFUSED(f->api.CompletedIntegratorStep(in.c, fmi3True, NULL, NULL));
+    NULL_REFUSED(f->api.SetContinuousStates(in.c, NULL, 1));
+    NULL_REFUSED(f->api.GetContinuousStateDerivatives(in.c, NULL, 1));
+    NULL_REFUSED(f->api.GetEventIndicators(in.c, NULL, 1));
+    NULL_REFUSED(f->api.GetContinuousStates(in.c, NULL, 1));
+    NULL_REFUSED(f->api.GetNominalsOfContinuousStates(in.c, NULL, 1));
+    NULL_REFUSED(f->api.GetNumberOfEventIndicators(in.c, NULL));
+    NULL_REFUSED(f->api.GetNumberOfContinuousStates(in.c, NULL));
+    NULL_REFUSED(f->api.GetIntervalDecimal(in.c, NULL, 1, NULL, NULL));
+#undef NULL_REFUSED
+    case_check(null_state == NULL, "%s: no FMU state came out of the refused deserializations", f->id);
+    case_check(f->api.FreeFMUState(in.c, &null_state) == fmi3OK, "%s: fmi3FreeFMUState of a NULL state is a no-op",
+               f->id);
+    case_check(f->api.FreeFMUState(in.c, &state) == fmi3OK && state == NULL
+                   && f->api.FreeFMUState(in.c, &state) == fmi3OK,
+               "%s: fmi3FreeFMUState clears the handle, so freeing twice through it is harmless", f->id);
+    free(blob);
+    free(before);
+    leave(&in);
+
+    every_function_refuses(f, NULL, "a NULL instance");
+    {
+        unsigned char *zeros = calloc(1, 1 << 16), *pattern = malloc(1 << 16);
+        if (zeros && pattern) {
+            memset(pattern, 0xa5, 1 << 16);
+            every_function_refuses(f, zeros, "a zeroed block as instance");
+            every_function_refuses(f, pattern, "a 0xa5-filled block as instance");
+        }
+        free(zeros);
+        free(pattern);
+    }
+    group_end("null", f->id);
+}
+
+/* Another FMU's instance through f's functions, and FMU states across instances. */
+static void foreign(const host3_fmu *f, const host3_fmu *g)
+{
+    inst_t other, mine, second;
+    unsigned char *before;
+    size_t before_size;
+    fmi3FMUState theirs = NULL, state = NULL;
+    char what[160];
+    group_start();
+    if (!case_check(enter_state(g, &other, S_STEP), "%s: reach StepMode", g->id))
+        return;
+    before = host3_snapshot(g, other.c, &before_size);
+    snprintf(what, sizeof what, "a %s instance", g->id);
+    every_function_refuses(f, other.c, what);   /* FreeInstance included: it must not free it */
+    case_check(host3_same_state(g, other.c, before, before_size) && host3_step(g, other.c, 2 * g->h, g->h) <= fmi3Warning,
+               "%s: the %s instance is unchanged and still runs after %s's functions refused it", f->id, g->id, f->id);
+    g->api.GetFMUState(other.c, &theirs);
+    free(before);
+
+    if (enter_state(f, &mine, S_STEP) && enter_state(f, &second, S_STEP)) {
+        static unsigned char buf[1 << 14];
+        size_t size;
+        f->api.GetFMUState(second.c, &state);
+        case_check(f->api.SetFMUState(mine.c, theirs) == fmi3Error, "%s: fmi3SetFMUState refuses a %s state", f->id,
+                   g->id);
+        case_check(f->api.SetFMUState(mine.c, state) == fmi3Error,
+                   "%s: fmi3SetFMUState refuses a state of another %s instance", f->id, f->id);
+        case_check(f->api.SerializedFMUStateSize(mine.c, state, &size) == fmi3Error
+                       && f->api.SerializeFMUState(mine.c, state, buf, sizeof buf) == fmi3Error,
+                   "%s: serializing a state of another instance is refused", f->id);
+        {
+            size_t blob_size;
+            unsigned char *blob = host3_snapshot(f, mine.c, &blob_size);
+            fmi3FMUState slot = state;
+            case_check(blob != NULL && f->api.DeserializeFMUState(mine.c, blob, blob_size, &slot) == fmi3Error
+                           && slot == state,
+                       "%s: deserializing into another instance's state is refused", f->id);
+            free(blob);
+        }
+        case_check(f->api.FreeFMUState(mine.c, &state) == fmi3Error && state != NULL,
+                   "%s: fmi3FreeFMUState refuses a state of another instance", f->id);
+        f->api.FreeFMUState(second.c, &state);
+    }
+    leave(&mine);
+    leave(&second);
+    g->api.FreeFMUState(other.c, &theirs);
+    leave(&other);
+    snprintf(what, sizeof what, "%s functions, %s instance", f->id, g->id);
+    group_end("foreign", what);
+}
+
+/* ------------------------------------------------------------------------ */
+/* value references                                                          */
+
+/* Get/set of the given value reference through each of the 14 typed functions but
+ * `except` (a type name, or NULL): refused. */
+#define TYPES_REFUSED(vr_ptr, n_values, except, label)                                                    \
+    do {                                                                                                  \
+        static fmi3Float64 r64[HOST3_MAX_ELEMENTS];                                                       \
+        static fmi3Float32 r32[HOST3_MAX_ELEMENTS];                                                       \
+        static fmi3Int8 i8[HOST3_MAX_ELEMENTS];                                                           \
+        static fmi3UInt8 u8[HOST3_MAX_ELEMENTS];                                                          \
+        static fmi3Int16 i16[HOST3_MAX_ELEMENTS];                                                         \
+        static fmi3UInt16 u16[HOST3_MAX_ELEMENTS];                                                        \
+        static fmi3Int32 i32[HOST3_MAX_ELEMENTS];                                                         \
+        static fmi3UInt32 u32[HOST3_MAX_ELEMENTS];                                                        \
+        static fmi3Int64 i64[HOST3_MAX_ELEMENTS];                                                         \
+        static fmi3UInt64 u64[HOST3_MAX_ELEMENTS];                                                        \
+        static fmi3Boolean bo[HOST3_MAX_ELEMENTS];                                                        \
+        static fmi3String st[HOST3_MAX_ELEMENTS];                                                         \
+        static fmi3Binary bi[HOST3_MAX_ELEMENTS];                                                         \
+        static size_t sz[HOST3_MAX_ELEMENTS];                                                             \
+        const char *ex = (except);                                                                        \
+        size_t nv = (size_t)(n_values);                                                                   \
+        if (!ex || strcmp(ex, "Float64")) {                                                               \
+            VR_REFUSED(f->api.GetFloat64(in.c, vr_ptr, 1, r64, nv), "fmi3GetFloat64(%s)", label);         \
+            VR_REFUSED(f->api.SetFloat64(in.c, vr_ptr, 1, r64, nv), "fmi3SetFloat64(%s)", label);         \
+        }                                                                                                 \
+        if (!ex || strcmp(ex, "Int32")) {                                                                 \
+            VR_REFUSED(f->api.GetInt32(in.c, vr_ptr, 1, i32, nv), "fmi3GetInt32(%s)", label);             \
+            VR_REFUSED(f->api.SetInt32(in.c, vr_ptr, 1, i32, nv), "fmi3SetInt32(%s)", label);             \
+        }                                                                                                 \
+        if (!ex || strcmp(ex, "Boolean")) {                                                               \
+            VR_REFUSED(f->api.GetBoolean(in.c, vr_ptr, 1, bo, nv), "fmi3GetBoolean(%s)", label);          \
+            VR_REFUSED(f->api.SetBoolean(in.c, vr_ptr, 1, bo, nv), "fmi3SetBoolean(%s)", label);          \
+        }                                                                                                 \
+        VR_REFUSED(f->api.GetFloat32(in.c, vr_ptr, 1, r32, nv), "fmi3GetFloat32(%s)", label);             \
+        VR_REFUSED(f->api.SetFloat32(in.c, vr_ptr, 1, r32, nv), "fmi3SetFloat32(%s)", label);             \
+        VR_REFUSED(f->api.GetInt8(in.c, vr_ptr, 1, i8, nv), "fmi3GetInt8(%s)", label);                    \
+        VR_REFUSED(f->api.SetInt8(in.c, vr_ptr, 1, i8, nv), "fmi3SetInt8(%s)", label);                    \
+        VR_REFUSED(f->api.GetUInt8(in.c, vr_ptr, 1, u8, nv), "fmi3GetUInt8(%s)", label);                  \
+        VR_REFUSED(f->api.SetUInt8(in.c, vr_ptr, 1, u8, nv), "fmi3SetUInt8(%s)", label);                  \
+        VR_REFUSED(f->api.GetInt16(in.c, vr_ptr, 1, i16, nv), "fmi3GetInt16(%s)", label);                 \
+        VR_REFUSED(f->api.SetInt16(in.c, vr_ptr, 1, i16, nv), "fmi3SetInt16(%s)", label);                 \
+        VR_REFUSED(f->api.GetUInt16(in.c, vr_ptr, 1, u16, nv), "fmi3GetUInt16(%s)", label);               \
+        VR_REFUSED(f->api.SetUInt16(in.c, vr_ptr, 1, u16, nv), "fmi3SetUInt16(%s)", label);               \
+        VR_REFUSED(f->api.GetUInt32(in.c, vr_ptr, 1, u32, nv), "fmi3GetUInt32(%s)", label);               \
+        VR_REFUSED(f->api.SetUInt32(in.c, vr_ptr, 1, u32, nv), "fmi3SetUInt32(%s)", label);               \
+        VR_REFUSED(f->api.GetInt64(in.c, vr_ptr, 1, i64, nv), "fmi3GetInt64(%s)", label);                 \
+        VR_REFUSED(f->api.SetInt64(in.c, vr_ptr, 1, i64, nv), "fmi3SetInt64(%s)", label);                 \
+        VR_REFUSED(f->api.GetUInt64(in.c, vr_ptr, 1, u64, nv), "fmi3GetUInt64(%s)", label);               \
+        VR_REFUSED(f->api.SetUInt64(in.c, vr_ptr, 1, u64, nv), "fmi3SetUInt64(%s)", label);               \
+        VR_REFUSED(f->api.GetString(in.c, vr_ptr, 1, st, nv), "fmi3GetString(%s)", label);                \
+        VR_REFUSED(f->api.SetString(in.c, vr_ptr, 1, st, nv), "fmi3SetString(%s)", label);                \
+        VR_REFUSED(f->api.GetBinary(in.c, vr_ptr, 1, sz, bi, nv), "fmi3GetBinary(%s)", label);            \
+        VR_REFUSED(f->api.SetBinary(in.c, vr_ptr, 1, sz, bi, nv), "fmi3SetBinary(%s)", label);            \
+        VR_REFUSED(f->api.GetClock(in.c, vr_ptr, 1, bo), "fmi3GetClock(%s)", label);                      \
+        VR_REFUSED(f->api.SetClock(in.c, vr_ptr, 1, bo), "fmi3SetClock(%s)", label);                      \
+    } while (0)
+
+static const char *type_name(int type)
+{
+    return type == VAR_REAL ? "Float64" : type == VAR_INTEGER ? "Int32" : "Boolean";
+}
+
+static void value_references(const host3_fmu *f)
+{
+    static const fmi3ValueReference bad[] = {1, 2, 1000, 0x7fffffffu, 0xffffffffu};
+    inst_t in;
+    unsigned char *before;
+    size_t before_size;
+    int i, j, n_bad = (int)(sizeof bad / sizeof bad[0]);
+    fmi3ValueReference past_time = time_var(f)->vr;
+    char label[96];
+    group_start();
+    if (!case_check(enter_state(f, &in, S_STEP), "%s: reach StepMode", f->id))
+        return;
+    before = host3_snapshot(f, in.c, &before_size);
+#define VR_REFUSED(call, fmt, ...)                                                                      \
+    do {                                                                                                \
+        host_log_clear(&in.log);                                                                        \
+        case_check((call) == fmi3Error && in.log.n_errors > 0 && host3_same_state(f, in.c, before, before_size), \
+                   "%s: " fmt " is refused, nothing changed (%s)", f->id, __VA_ARGS__, in.log.last_error);     \
+    } while (0)
+    /* past the last variable (time is the last value reference), far out */
+    for (i = 0; i < n_bad; i++) {
+        fmi3ValueReference vr = i < 2 ? past_time + bad[i] : bad[i];
+        snprintf(label, sizeof label, "vr = %u", (unsigned)vr);
+        TYPES_REFUSED(&vr, 1, (const char *)NULL, label);
+    }
+    /* the references of an array's other elements are not value references */
+    for (i = 0; i < f->n_vars; i++) {
+        const host3_var *v = &f->vars[i];
+        if (v->n < 2)
+            continue;
+        for (j = 1; j < v->n; j += v->n - 2 > 0 ? v->n - 2 : 1) {
+            fmi3ValueReference vr = v->vr + (fmi3ValueReference)j;
+            snprintf(label, sizeof label, "vr = %u, element %d of %s", (unsigned)vr, j + 1, v->name);
+            TYPES_REFUSED(&vr, 1, (const char *)NULL, label);
+        }
+    }
+    /* every variable through the functions of the other types, with its own nValues */
+    for (i = 0; i < f->n_vars; i++) {
+        const host3_var *v = &f->vars[i];
+        TYPES_REFUSED(&v->vr, v->n, type_name(v->type), v->name);
+        /* outputs and time are never set; fixed parameters not after initialization */
+        if (v->causality != VAR_INPUT)
+            VR_REFUSED(host3_set(f, in.c, v, v->start[0] + 1.0), "setting %s %s in StepMode",
+                       v->causality == VAR_OUTPUT ? "output" : v->causality == VAR_INDEPENDENT ? "independent variable"
+                                                                                              : "parameter", v->name);
+    }
+    /* nValues that does not match the references */
+    {
+        const host3_var *a = first_array(f), *out = first(f, VAR_OUTPUT, VAR_REAL);
+        static double values[64];
+        fmi3ValueReference two[2];
+        VR_REFUSED(f->api.GetFloat64(in.c, &a->vr, 1, values, 1), "fmi3GetFloat64(%s, nValues = 1)", a->name);
+        VR_REFUSED(f->api.GetFloat64(in.c, &a->vr, 1, values, (size_t)a->n + 1), "fmi3GetFloat64(%s, nValues = %d)",
+                   a->name, a->n + 1);
+        VR_REFUSED(f->api.GetFloat64(in.c, &a->vr, 1, values, 0), "fmi3GetFloat64(%s, nValues = 0)", a->name);
+        VR_REFUSED(f->api.GetFloat64(in.c, &out->vr, 1, values, 2), "fmi3GetFloat64(%s, nValues = 2)", out->name);
+        VR_REFUSED(f->api.GetFloat64(in.c, &out->vr, 1, values, 0), "fmi3GetFloat64(%s, nValues = 0)", out->name);
+        two[0] = out->vr;
+        two[1] = a->vr;
+        VR_REFUSED(f->api.GetFloat64(in.c, two, 2, values, (size_t)a->n), "fmi3GetFloat64(%s, %s, nValues = %d)",
+                   out->name, a->name, a->n);
+        VR_REFUSED(f->api.GetFloat64(in.c, two, 2, values, 2), "fmi3GetFloat64(%s, %s, nValues = 2)", out->name, a->name);
+    }
+    /* a good reference followed by a bad one, or a good value then a NaN: nothing set */
+    {
+        const host3_var *input = first(f, VAR_INPUT, VAR_REAL);
+        const host3_var *param = first(f, VAR_PARAMETER, VAR_REAL);
+        fmi3ValueReference pair[2];
+        double values[2] = {0.75, 0.75};
+        pair[0] = input ? input->vr : param->vr;
+        pair[1] = past_time + 1;
+        VR_REFUSED(f->api.SetFloat64(in.c, pair, 2, values, 2), "fmi3SetFloat64(%s, vr = %u) in one call",
+                   input ? input->name : param->name, (unsigned)pair[1]);
+        if (input) {
+            values[1] = NAN;
+            pair[1] = input->vr;
+            VR_REFUSED(f->api.SetFloat64(in.c, pair, 2, values, 2), "fmi3SetFloat64(%s = 0.75, %s = NaN) in one call",
+                       input->name, input->name);
+            values[1] = 0.75;
+            VR_REFUSED(f->api.SetFloat64(in.c, pair, 2, values, 3), "fmi3SetFloat64(%s, %s, nValues = 3) in one call",
+                       input->name, input->name);
+        }
+    }
+#undef VR_REFUSED
+    free(before);
+    leave(&in);
+    group_end("vr", f->id);
+}
+
+/* ------------------------------------------------------------------------ */
+/* instantiation                                                             */
+
+static void instantiation(const host3_fmu *f)
+{
+    host_log log;
+    long heap = host3_heap_in_use();
+    char token[80];
+    fmi3ValueReference required = 0;
+    int i;
+    group_start();
+#define NOT_INSTANTIATED(call, fmt, ...)                                                                    \
+    do {                                                                                                    \
+        fmi3Instance c;                                                                                     \
+        host_log_clear(&log);                                                                               \
+        c = (call);                                                                                         \
+        case_check(c == NULL && log.n_errors > 0, "%s: " fmt " returns NULL, says why (%s)", f->id, __VA_ARGS__, \
+                   log.last_error);                                                                         \
+        if (c != NULL)                                                                                      \
+            f->api.FreeInstance(c);                                                                         \
+    } while (0)
+#define CS(name, tok, event_mode, req, n_req)                                                               \
+    f->api.InstantiateCoSimulation(name, tok, NULL, fmi3False, fmi3False, event_mode, fmi3False, req, n_req,  \
+                                   &log, host3_logger, NULL)
+    NOT_INSTANTIATED(CS("x", "{00000000-0000-0000-0000-000000000000}", fmi3False, NULL, 0), "%s", "a wrong token");
+    NOT_INSTANTIATED(CS("x", "", fmi3False, NULL, 0), "%s", "an empty token");
+    NOT_INSTANTIATED(CS("x", NULL, fmi3False, NULL, 0), "%s", "a NULL token");
+    for (i = 0; i < n_fmus; i++)
+        if (&fmus[i] != f)
+            NOT_INSTANTIATED(CS("x", fmus[i].token, fmi3False, NULL, 0), "the token of %s", fmus[i].id);
+    snprintf(token, sizeof token, "%s", f->token);
+    token[strlen(token) - 1] = '\0';
+    NOT_INSTANTIATED(CS("x", token, fmi3False, NULL, 0), "%s", "its token without the closing brace");
+    snprintf(token, sizeof token, "%s ", f->token);
+    NOT_INSTANTIATED(CS("x", token, fmi3False, NULL, 0), "%s", "its token and a trailing space");
+    snprintf(token, sizeof token, "%s", f->token);
+    for (i = 0; token[i]; i++)
+        if (token[i] >= 'a' && token[i] <= 'f')
+            token[i] = (char)(token[i] - 'a' + 'A');
+    NOT_INSTANTIATED(CS("x", token, fmi3False, NULL, 0), "%s", "its token in upper case");
+    NOT_INSTANTIATED(CS("x", f->token, fmi3True, NULL, 0), "%s", "eventModeUsed = true (no event mode)");
+    NOT_INSTANTIATED(CS(NULL, f->token, fmi3False, NULL, 0), "%s", "a NULL instance name");
+    NOT_INSTANTIATED(CS("", f->token, fmi3False, NULL, 0), "%s", "an empty instance name");
+    NOT_INSTANTIATED(CS("x", f->token, fmi3False, NULL, 3), "%s", "3 required intermediate variables at NULL");
+    NOT_INSTANTIATED(f->api.InstantiateModelExchange("x", f->token, NULL, fmi3False, fmi3False, &log, host3_logger),
+                     "%s", "fmi3InstantiateModelExchange");
+    NOT_INSTANTIATED(f->api.InstantiateScheduledExecution("x", f->token, NULL, fmi3False, fmi3False, &log, host3_logger,
+                                                          NULL, NULL, NULL),
+                     "%s", "fmi3InstantiateScheduledExecution");
+#undef NOT_INSTANTIATED
+    case_check(host3_heap_back_to(heap), "%s: the refused instantiations allocated nothing (%ld bytes in use "
+               "before, %ld after)", f->id, heap, host3_heap_in_use());
+    {
+        /* the token check explains itself; an intermediate-variable list, earlyReturnAllowed and
+         * a resource path that has no start_values file are accepted */
+        fmi3Instance c;
+        host_log_clear(&log);
+        c = CS("x", "{wrong}", fmi3False, NULL, 0);
+        case_check(c == NULL && strstr(log.last_error, "wrong instantiationToken") != NULL,
+                   "%s: a wrong token is explained (%s)", f->id, log.last_error);
+        c = f->api.InstantiateCoSimulation("x", f->token, "/nonexistent/resources/", fmi3False, fmi3False, fmi3False,
+                                           fmi3True, &required, 1, &log, host3_logger, NULL);
+        case_check(c != NULL, "%s: earlyReturnAllowed, 1 required intermediate variable and a resource folder "
+                   "without start_values are accepted (%s)", f->id, log.last_error);
+        if (c != NULL)
+            f->api.FreeInstance(c);
+    }
+    {
+        /* FMI 3.0 lets the importer pass no logger: the FMU runs, and says nothing */
+        fmi3Instance c = f->api.InstantiateCoSimulation("silent", f->token, NULL, fmi3False, fmi3True, fmi3False,
+                                                        fmi3False, NULL, 0, NULL, NULL, NULL);
+        fmi3ValueReference bad = 100000;
+        double x = 0.0;
+        case_check(c != NULL && f->api.EnterInitializationMode(c, fmi3False, 0.0, 0.0, fmi3False, 0.0) == fmi3OK
+                       && f->api.ExitInitializationMode(c) == fmi3OK && host3_step(f, c, 0.0, f->h) <= fmi3Warning
+                       && f->api.GetFloat64(c, &bad, 1, &x, 1) == fmi3Error && host3_step(f, c, 0.0, f->h) == fmi3Error,
+                   "%s: logMessage = NULL: it runs, and refusals still return fmi3Error", f->id);
+        if (c != NULL)
+            f->api.FreeInstance(c);
+        c = f->api.InstantiateCoSimulation("silent", "{wrong}", NULL, fmi3False, fmi3True, fmi3False, fmi3False, NULL,
+                                           0, NULL, NULL, NULL);
+        case_check(c == NULL, "%s: logMessage = NULL and a wrong token: NULL, no crash", f->id);
+        if (c != NULL)
+            f->api.FreeInstance(c);
+    }
+#undef CS
+    group_end("instantiate", f->id);
+}
+
+/* ------------------------------------------------------------------------ */
+/* extreme finite values                                                     */
+
+static const double extreme_reals[] = {
+    DBL_MAX, -DBL_MAX, 1e308, -1e308, 1e300, -1e300, DBL_MIN, -DBL_MIN,
+    4.9406564584124654e-324, -4.9406564584124654e-324, 1e-300, 0.0, -0.0, 1e6, -1e6};
+#define N_EXTREME_REALS ((int)(sizeof extreme_reals / sizeof extreme_reals[0]))
+static const int extreme_ints[] = {INT_MIN, -1000001, -1, 0, 1, 2, 8, 9, 16, 17, 33, 1000001, INT_MAX};
+#define N_EXTREME_INTS ((int)(sizeof extreme_ints / sizeof extreme_ints[0]))
+
+static int run_checked(inst_t *in, int n, char *why, size_t why_size)
+{
+    const host3_fmu *f = in->f;
+    double before[32], after[32];
+    int i, n_out;
+    n_out = host3_real_outputs(f, in->c, before);
+    if (n_out < 0) {
+        snprintf(why, why_size, "outputs not readable: %s", in->log.last_error);
+        return 0;
+    }
+    if (!all_finite(before, n_out)) {
+        snprintf(why, why_size, "non-finite output before stepping");
+        return 0;
+    }
+    for (i = 0; i < n; i++) {
+        fmi3Status st = host3_step(f, in->c, in->k * f->h, f->h);
+        if (st == fmi3Error) {
+            if (host3_real_outputs(f, in->c, after) != n_out || memcmp(before, after, (size_t)n_out * sizeof *after)) {
+                snprintf(why, why_size, "a refused step changed the outputs");
+                return 0;
+            }
+            snprintf(why, why_size, "refused: %s", in->log.last_error);
+            return 1;
+        }
+        if (st > fmi3Error || host3_real_outputs(f, in->c, after) != n_out || !all_finite(after, n_out)) {
+            snprintf(why, why_size, "status %d with a non-finite or unreadable output", (int)st);
+            return 0;
+        }
+        memcpy(before, after, sizeof after);
+        in->k++;
+    }
+    snprintf(why, why_size, "ran %d samples, outputs finite", n);
+    return 1;
+}
+
+static int init_outputs_ok(inst_t *in)
+{
+    double out[32];
+    int n;
+    host_log_clear(&in->log);
+    n = host3_real_outputs(in->f, in->c, out);
+    return n < 0 ? in->log.n_errors > 0 : all_finite(out, n);
+}
+
+/* One parameter (element `element` of an array, -1: a scalar) at one value: refused at
+ * fmi3ExitInitializationMode with a message naming a parameter and its range, or a run
+ * with finite outputs. */
+static void parameter_case(const host3_fmu *f, const host3_var *v, int element, double value, double input)
+{
+    inst_t in;
+    char why[1200] = "", name[80];
+    int ok = 0, i;
+    fmi3Status st;
+    if (element >= 0)
+        snprintf(name, sizeof name, "%s[%d]", v->name, element + 1);
+    else
+        snprintf(name, sizeof name, "%s", v->name);
+    if (!enter_state(f, &in, S_INIT)) {
+        case_check(0, "%s: reach InitializationMode", f->id);
+        leave(&in);
+        return;
+    }
+    st = host3_set_named(f, in.c, name, value);
+    if (st != fmi3OK) {
+        snprintf(why, sizeof why, "set refused: %s", in.log.last_error);
+    } else if (!init_outputs_ok(&in)) {
+        snprintf(why, sizeof why, "initialization outputs not finite");
+    } else {
+        host_log_clear(&in.log);
+        st = f->api.ExitInitializationMode(in.c);
+        if (st == fmi3Error) {
+            ok = strstr(in.log.last_error, "out of range: valid range") != NULL;
+            snprintf(why, sizeof why, "refused: %s", in.log.last_error);
+        } else if (st == fmi3OK) {
+            for (i = 0; i < f->n_vars; i++)
+                if (f->vars[i].causality == VAR_INPUT)
+                    host3_set(f, in.c, &f->vars[i], input);
+            ok = run_checked(&in, 8, why, sizeof why);
+        } else {
+            snprintf(why, sizeof why, "status %d", (int)st);
+        }
+    }
+    case_check(ok, "%s: %s = %g (inputs %g): %s", f->id, name, value, input, why);
+    leave(&in);
+}
+
+static void extreme_values(const host3_fmu *f)
+{
+    int i, j, e, n;
+    group_start();
+    for (i = 0; i < f->n_vars; i++) {
+        const host3_var *v = &f->vars[i];
+        if (v->causality != VAR_PARAMETER)
+            continue;
+        for (e = v->n > 1 ? 0 : -1; e < v->n; e++) {
+            if (v->type == VAR_REAL)
+                for (j = 0; j < N_EXTREME_REALS; j++)
+                    parameter_case(f, v, e, extreme_reals[j], 1.0);
+            else if (v->type == VAR_INTEGER)
+                for (j = 0; j < N_EXTREME_INTS; j++)
+                    parameter_case(f, v, e, (double)extreme_ints[j], 1.0);
+            else
+                for (j = 0; j < 2; j++)
+                    parameter_case(f, v, e, (double)j, 1.0);
+            if (v->n == 1)
+                break;
+        }
+    }
+    /* fmi3Boolean is a C bool: byte values other than 0 and 1 mean true */
+    for (i = 0; i < f->n_vars; i++) {
+        const host3_var *v = &f->vars[i];
+        static const unsigned char odd[] = {2, 0x80, 0xff};
+        inst_t in;
+        if (v->causality != VAR_PARAMETER || v->type != VAR_BOOLEAN)
+            continue;
+        for (j = 0; j < 3; j++) {
+            fmi3Boolean value, got = fmi3False;
+            memcpy(&value, &odd[j], 1);
+            enter_state(f, &in, S_INIT);
+            case_check(f->api.SetBoolean(in.c, &v->vr, 1, &value, 1) == fmi3OK
+                           && f->api.GetBoolean(in.c, &v->vr, 1, &got, 1) == fmi3OK && got == fmi3True,
+                       "%s: fmi3SetBoolean(%s, byte %d) reads back as fmi3True", f->id, v->name, (int)odd[j]);
+            leave(&in);
+        }
+    }
+    for (j = 0; j < N_EXTREME_REALS; j++) {
+        inst_t in;
+        char why[1200];
+        if (first(f, VAR_INPUT, VAR_REAL) == NULL)
+            break;
+        enter_state(f, &in, S_STEP);
+        for (i = 0; i < f->n_vars; i++)
+            if (f->vars[i].causality == VAR_INPUT)
+                host3_set(f, in.c, &f->vars[i], extreme_reals[j]);
+        case_check(run_checked(&in, 8, why, sizeof why), "%s: every input = %g: %s", f->id, extreme_reals[j], why);
+        leave(&in);
+    }
+    for (n = 0, i = 0; i < f->n_vars; i++)
+        n += f->vars[i].causality == VAR_INPUT;
+    if (n == 2) {
+        int a, b;
+        for (a = 0; a < N_EXTREME_REALS; a++)
+            for (b = 0; b < N_EXTREME_REALS; b++) {
+                inst_t in;
+                char why[1200];
+                int which = 0;
+                enter_state(f, &in, S_STEP);
+                for (i = 0; i < f->n_vars; i++)
+                    if (f->vars[i].causality == VAR_INPUT)
+                        host3_set(f, in.c, &f->vars[i], which++ == 0 ? extreme_reals[a] : extreme_reals[b]);
+                case_check(run_checked(&in, 4, why, sizeof why), "%s: inputs (%g, %g): %s", f->id, extreme_reals[a],
+                           extreme_reals[b], why);
+                leave(&in);
+            }
+    }
+    /* step sizes and communication points; lastSuccessfulTime says where the FMU is */
+    {
+        const double h = f->h, nan_value = NAN, inf = INFINITY;
+        struct { double t, H; int ok; } steps[] = {
+            {0, 0.0, 1}, {0, -0.0, 1}, {0, DBL_MIN, 1}, {0, 4.9406564584124654e-324, 1}, {0, 1e-12 * 0.0005, 1},
+            {0, DBL_MAX, 0}, {0, 1e308, 0}, {0, -DBL_MIN, 0}, {0, -1.0, 0}, {0, -DBL_MAX, 0},
+            {0, 0.5, 0}, {0, 1.5, 0}, {0, 1e16, 0}, {0, nan_value, 0}, {0, inf, 0}, {0, -inf, 0},
+            {1, 1.0, 0}, {-1, 1.0, 0}, {DBL_MAX, 1.0, 0}, {-DBL_MAX, 1.0, 0}, {nan_value, 1.0, 0},
+            {inf, 1.0, 0}, {-inf, 1.0, 0}, {DBL_MIN, 1.0, 1}, {0, 1.0, 1}, {0, 3.0, 1}};
+        int n_steps = (int)(sizeof steps / sizeof steps[0]);
+        for (i = 0; i < n_steps; i++) {
+            inst_t in;
+            unsigned char *before;
+            size_t before_size;
+            double t_at, H, expected_end;
+            fmi3Boolean event = fmi3True, terminate = fmi3True, early = fmi3True;
+            fmi3Float64 last = -1.0;
+            fmi3Status st;
+            enter_state(f, &in, S_STEP);
+            t_at = fabs(steps[i].t) >= 1e300 || isnan(steps[i].t) || steps[i].t == DBL_MIN ? steps[i].t
+                                                                                               : (in.k + steps[i].t) * h;
+            if (steps[i].t == DBL_MIN)
+                t_at = in.k * h + DBL_MIN;
+            H = fabs(steps[i].H) >= 0.5 && fabs(steps[i].H) < 1e15 ? steps[i].H * h : steps[i].H;
+            before = host3_snapshot(f, in.c, &before_size);
+            host_log_clear(&in.log);
+            st = f->api.DoStep(in.c, t_at, H, fmi3True, &event, &terminate, &early, &last);
+            if (steps[i].ok) {
+                expected_end = (in.k + floor(H / h + 0.5)) * h;
+                case_check(st <= fmi3Warning && last == expected_end && !event && !terminate && !early,
+                           "%s: fmi3DoStep(t = %g, H = %g) passes (lastSuccessfulTime %g, no event, no early return)",
+                           f->id, t_at, H, last);
+            } else {
+                case_check(st == fmi3Error && in.log.n_errors > 0 && host3_same_state(f, in.c, before, before_size)
+                               && last == in.k * h,
+                           "%s: fmi3DoStep(t = %g, H = %g) is refused, nothing changed, lastSuccessfulTime %g (%s)",
+                           f->id, t_at, H, last, in.log.last_error);
+            }
+            free(before);
+            leave(&in);
+        }
+    }
+    /* start and stop times */
+    {
+        static const double starts[] = {DBL_MAX, -DBL_MAX, 1e300, -1e300, 4.9406564584124654e-324, -1e9, 1e15};
+        for (i = 0; i < (int)(sizeof starts / sizeof starts[0]); i++) {
+            inst_t in;
+            char why[1200] = "";
+            int ok = 0;
+            instantiate(f, &in, "start");
+            if (f->api.EnterInitializationMode(in.c, fmi3False, 0.0, starts[i], fmi3False, 0.0) == fmi3OK) {
+                fmi3Status st = f->api.ExitInitializationMode(in.c);
+                if (st == fmi3Error) {
+                    ok = in.log.n_errors > 0;
+                    snprintf(why, sizeof why, "refused: %s", in.log.last_error);
+                } else {
+                    double out[32];
+                    int n_out, s;
+                    ok = 1;
+                    for (s = 1; s <= 3 && ok; s++) {
+                        st = host3_step(f, in.c, starts[i] + (s - 1) * f->h, f->h);
+                        n_out = host3_real_outputs(f, in.c, out);
+                        if (st <= fmi3Warning)
+                            ok = n_out >= 0 && all_finite(out, n_out);
+                        else
+                            break;
+                    }
+                    snprintf(why, sizeof why, "%s", ok ? "outputs finite or step refused" : "non-finite output");
+                }
+            }
+            case_check(ok, "%s: startTime = %g: %s", f->id, starts[i], why);
+            leave(&in);
+        }
+        {
+            struct { double start, stop; int defined; } bad[] = {
+                {NAN, 0, 0}, {INFINITY, 0, 0}, {-INFINITY, 0, 0}, {1.0, 0.5, 1}, {0.0, NAN, 1}, {0.0, -DBL_MIN, 1}};
+            for (i = 0; i < (int)(sizeof bad / sizeof bad[0]); i++) {
+                inst_t in;
+                unsigned char *before;
+                size_t before_size;
+                instantiate(f, &in, "setup");
+                before = host3_snapshot(f, in.c, &before_size);
+                case_check(f->api.EnterInitializationMode(in.c, fmi3False, 0.0, bad[i].start,
+                                                          bad[i].defined ? fmi3True : fmi3False, bad[i].stop) == fmi3Error
+                               && host3_same_state(f, in.c, before, before_size),
+                           "%s: fmi3EnterInitializationMode(startTime = %g, stopTime = %g) is refused, still "
+                           "Instantiated (%s)", f->id, bad[i].start, bad[i].stop, in.log.last_error);
+                free(before);
+                leave(&in);
+            }
+        }
+    }
+    group_end("extreme", f->id);
+}
+
+/* ------------------------------------------------------------------------ */
+/* fmi3FreeInstance in every state                                           */
+
+static void free_in_every_state(const host3_fmu *f)
+{
+    int s, with_states;
+    group_start();
+    for (s = 0; s < N_STATES; s++)
+        for (with_states = 0; with_states < 2; with_states++) {
+            long heap = host3_heap_in_use();
+            inst_t in;
+            int reached = enter_state(f, &in, s);
+            if (reached && with_states) {
+                fmi3FMUState a = NULL, b = NULL, d = NULL;
+                size_t size;
+                unsigned char *blob = host3_snapshot(f, in.c, &size);
+                f->api.GetFMUState(in.c, &a);
+                f->api.GetFMUState(in.c, &b);
+                if (blob != NULL)
+                    f->api.DeserializeFMUState(in.c, blob, size, &d);
+                free(blob);
+                reached = a != NULL && b != NULL && d != NULL;
+            }
+            leave(&in);
+            case_check(reached && host3_heap_back_to(heap),
+                       "%s: fmi3FreeInstance in %s%s frees every byte (%ld bytes in use before, %ld after)", f->id,
+                       state_names[s], with_states ? " with 3 FMU states still allocated" : "", heap,
+                       host3_heap_in_use());
+        }
+    group_end("free", f->id);
+}
+
+/* stdout's buffer: static, so that printing allocates nothing on the heap whose use is compared */
+static char stdout_buffer[1 << 14];
+
+int main(int argc, char **argv)
+{
+    int i, j;
+    long heap;
+    if (argc < 3 || argc % 2 == 0 || (argc - 1) / 2 > MAX_FMUS) {
+        fprintf(stderr, "usage: %s MODEL.xml MODEL.so [MODEL.xml MODEL.so ...]\n", argv[0]);
+        return 2;
+    }
+    setvbuf(stdout, stdout_buffer, _IOLBF, sizeof stdout_buffer);
+    host_verbose = getenv("FMU_NEGATIVE_VERBOSE") != NULL;
+    for (i = 1; i + 1 < argc; i += 2)
+        if (!host3_load(&fmus[n_fmus++], argv[i], argv[i + 1]))
+            return 2;
+    printf("heap: %s\n", host3_heap_note());
+    heap = host3_heap_in_use();
+    for (i = 0; i < n_fmus; i++) {
+        matrix(&fmus[i]);
+        null_arguments(&fmus[i]);
+        value_references(&fmus[i]);
+        instantiation(&fmus[i]);
+        extreme_values(&fmus[i]);
+        free_in_every_state(&fmus[i]);
+    }
+    for (i = 0; i < n_fmus; i++)
+        for (j = 0; j < n_fmus; j++)
+            if (i != j)
+                foreign(&fmus[i], &fmus[j]);
+    case_check(host3_heap_back_to(heap), "every byte the FMUs allocated was freed (%ld bytes in use before, %ld "
+               "after)", heap, host3_heap_in_use());
+    for (i = 0; i < n_fmus; i++)
+        host3_unload(&fmus[i]);
+    return host_summary();
+}
