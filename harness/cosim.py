@@ -602,43 +602,34 @@ def _raw_function(fmu, name, *argtypes):
     return ctypes.CFUNCTYPE(ctypes.c_int, *argtypes)(address)
 
 
-class _LoopFunctions:
-    """The functions of the closed loop for one plant and one controller instance, called
-    the FMI 2.0 way (``get(c, vr, n, values)``, ``step(c, t, h, flag)``) for either edition:
-    for FMI 3.0 they pass ``nValues = n`` (the loop reads scalars only) and the doStep's
-    out-arguments. ``names`` are the FMI functions behind get, set, get_bool, step."""
+class _ScalarFunctions:
+    """One instance's C functions for scalar values, called the FMI 2.0 way
+    (``get(c, vr, n, address)``, ``step(c, t, h, flag)``, status returned) for either edition:
+    for FMI 3.0 they pass ``nValues = n`` and the doStep's out-arguments. ``names`` are the FMI
+    functions behind get, set, get_bool and step (for messages); ``c`` is the instance."""
 
-    def __init__(self, plant, ctrl):
-        vp, sz, dbl, i32 = ctypes.c_void_p, ctypes.c_size_t, ctypes.c_double, ctypes.c_int
-        pf, cf = plant.fmu, ctrl.fmu
-        self.pc, self.cc = pf.component, cf.component
-        if not plant.fmi3:
+    def __init__(self, inst):
+        vp, sz, dbl = ctypes.c_void_p, ctypes.c_size_t, ctypes.c_double
+        fmu = inst.fmu
+        self.c = fmu.component
+        if not inst.fmi3:
             self.names = ("fmi2GetReal", "fmi2SetReal", "fmi2GetBoolean", "fmi2DoStep")
-            self.p_get = _raw_function(pf, "fmi2GetReal", vp, vp, sz, vp)
-            self.p_set = _raw_function(pf, "fmi2SetReal", vp, vp, sz, vp)
-            self.p_step = _raw_function(pf, "fmi2DoStep", vp, dbl, dbl, i32)
-            self.c_get = _raw_function(cf, "fmi2GetReal", vp, vp, sz, vp)
-            self.c_set = _raw_function(cf, "fmi2SetReal", vp, vp, sz, vp)
-            self.c_get_bool = _raw_function(cf, "fmi2GetBoolean", vp, vp, sz, vp)
-            self.c_step = _raw_function(cf, "fmi2DoStep", vp, dbl, dbl, i32)
+            self.get, self.set, self.get_bool = (_raw_function(fmu, name, vp, vp, sz, vp)
+                                                 for name in self.names[:3])
+            self.step = _raw_function(fmu, "fmi2DoStep", vp, dbl, dbl, ctypes.c_int)
             return
         self.names = ("fmi3GetFloat64", "fmi3SetFloat64", "fmi3GetBoolean", "fmi3DoStep")
         flag = ctypes.c_bool
         self._out = [flag(), flag(), flag(), dbl()]         # doStep's out-arguments, kept alive
         out = [ctypes.addressof(x) for x in self._out]
 
-        def values(fmu, name):
+        def values(name):
             raw = _raw_function(fmu, name, vp, vp, sz, vp, sz)
             return lambda c, vr, n, addr: raw(c, vr, n, addr, n)
 
-        def step(fmu):
-            raw = _raw_function(fmu, "fmi3DoStep", vp, dbl, dbl, flag, vp, vp, vp, vp)
-            return lambda c, t, h, no_set: raw(c, t, h, bool(no_set), *out)
-
-        self.p_get, self.p_set = values(pf, "fmi3GetFloat64"), values(pf, "fmi3SetFloat64")
-        self.c_get, self.c_set = values(cf, "fmi3GetFloat64"), values(cf, "fmi3SetFloat64")
-        self.c_get_bool = values(cf, "fmi3GetBoolean")
-        self.p_step, self.c_step = step(pf), step(cf)
+        raw_step = _raw_function(fmu, "fmi3DoStep", vp, dbl, dbl, flag, vp, vp, vp, vp)
+        self.get, self.set, self.get_bool = (values(name) for name in self.names[:3])
+        self.step = lambda c, t, h, no_set: raw_step(c, t, h, bool(no_set), *out)
 
 
 def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=None):
@@ -657,11 +648,11 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
 
     from fmpy.fmi2 import fmi2Boolean
 
-    fn = _LoopFunctions(plant, ctrl)
-    GET, SET, GET_BOOL, DO_STEP = fn.names
-    pc, cc = fn.pc, fn.cc
-    p_get, p_set, p_step = fn.p_get, fn.p_set, fn.p_step
-    c_get, c_set, c_get_bool, c_step = fn.c_get, fn.c_set, fn.c_get_bool, fn.c_step
+    fp, fc = _ScalarFunctions(plant), _ScalarFunctions(ctrl)
+    GET, SET, GET_BOOL, DO_STEP = fp.names
+    pc, cc = fp.c, fc.c
+    p_get, p_set, p_step = fp.get, fp.set, fp.step
+    c_get, c_set, c_get_bool, c_step = fc.get, fc.set, fc.get_bool, fc.step
     pi, ci = plant.info, ctrl.info
 
     keep = []                       # ctypes arrays whose addresses are passed
@@ -822,46 +813,36 @@ def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None
     try:
         plant = _Instance(info, "plant")
         plant.initialize(params, n * h)
-        f, comp = plant.fmu, plant.fmu.component
+        fn = _ScalarFunctions(plant)
+        comp, get, set_, step = fn.c, fn.get, fn.set, fn.step
         vr_out = _vr_array([info.vr(nm) for nm in _PLANT_OUTPUTS])
         vr_in = _vr_array([info.vr("v")])
         out = (fmi2Real * 4)()
         vin = (fmi2Real * 1)()
-        if plant.fmi3:
-            names = ("fmi3GetFloat64", "fmi3SetFloat64", "fmi3DoStep")
-            flags = [ctypes.c_bool() for _ in range(3)]
-            last = ctypes.c_double()
-
-            def get(c, vr, nvr, values):
-                return f.fmi3GetFloat64(c, vr, nvr, values, nvr)
-
-            def set_(c, vr, nvr, values):
-                return f.fmi3SetFloat64(c, vr, nvr, values, nvr)
-
-            def step(c, t, dt, no_set):
-                return f.fmi3DoStep(c, t, dt, bool(no_set), *[ctypes.byref(x) for x in flags],
-                                    ctypes.byref(last))
-        else:
-            names = ("fmi2GetReal", "fmi2SetReal", "fmi2DoStep")
-            get, set_, step = f.fmi2GetReal, f.fmi2SetReal, f.fmi2DoStep
+        out_addr, vin_addr = ctypes.addressof(out), ctypes.addressof(vin)
         np_out = np.ctypeslib.as_array(out)
         vl = v.tolist()
         times = time.tolist()
-        k, stage = 0, names[0]
+        k, stage = 0, fn.names[0]
+
+        def check(status):
+            if status > 1:
+                raise FMUError(f"{stage} returned status {status}")
+
         try:
             for k in sample_range(n, h, progress):
-                stage = names[0]
-                get(comp, vr_out, 4, out)        # u(k-1), x(k), y(k), y_meas(k)
+                stage = fn.names[0]
+                check(get(comp, vr_out, 4, out_addr))        # u(k-1), x(k), y(k), y_meas(k)
                 rows[k, 3:6] = np_out[1:4]
                 if k:
                     rows[k - 1, 2] = out[0]
                 vin[0] = vl[k]
-                stage = names[1]
-                set_(comp, vr_in, 1, vin)
-                stage = names[2]
-                step(comp, times[k], h, 1)
-            k, stage = n, names[0]
-            get(comp, vr_out, 4, out)
+                stage = fn.names[1]
+                check(set_(comp, vr_in, 1, vin_addr))
+                stage = fn.names[3]
+                check(step(comp, times[k], h, 1))
+            k, stage = n, fn.names[0]
+            check(get(comp, vr_out, 4, out_addr))
             rows[n - 1, 2] = out[0]
         except Exception as exc:
             raise _step_error(plant, stage, k, h, exc) from None
