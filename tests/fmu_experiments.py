@@ -1,4 +1,5 @@
-"""The reference experiment an FMU carries (FMI-LS-REF), read from the .fmu itself.
+"""The reference experiment an FMU carries (FMI-LS-REF), read from the .fmu itself (FMI 2.0
+or FMI 3.0: an element of an FMI 3.0 array is named ``name[j]`` in the parameter file).
 
 Used by the tests that re-run it: with fmpy (test_fmu_reference_results.py), with a C host
 on the linux64 and win64 binaries (test_fmu_win64.py), and on a binary rebuilt from the
@@ -49,6 +50,35 @@ def read_csv_bytes(data):
     return np.array(rows, dtype=[(n, "f8") for n in names])
 
 
+#: the SSP 1.0 type of the values of each FMI 2.0 and FMI 3.0 variable type we use
+SSP_TYPE = {"Real": "Real", "Float64": "Real", "Integer": "Integer", "Int32": "Integer",
+            "Boolean": "Boolean"}
+
+
+def variable_of(variables, name):
+    """(variable, element index from 0 or None) behind a parameter name; ``name[j]`` that is
+    not a variable itself is element j of an FMI 3.0 array (structured naming)."""
+    if name in variables:
+        return variables[name], None
+    base, index = name[:-1].split("[")
+    assert variables[base].dimensions, name
+    return variables[base], int(index) - 1
+
+
+def start_values(variables, parameters):
+    """{variable name: value} to set: scalars as given, each FMI 3.0 array touched by an element
+    as the list of all its elements (the others at their start values)."""
+    out = {}
+    for name, value in parameters.items():
+        var, index = variable_of(variables, name)
+        if index is None:
+            out[name] = value
+        else:
+            array = out.setdefault(var.name, [float(x) for x in str(var.start).split()])
+            array[index] = value
+    return out
+
+
 def read_ssv_bytes(data, variables):
     """{name: value} of an SSV, typed by the ssv element (checked against the FMU's type)."""
     out = {}
@@ -56,7 +86,8 @@ def read_ssv_bytes(data, variables):
         (value,) = list(p)
         kind = value.tag[len(SSV):]
         name = p.get("name")
-        assert variables[name].type == kind, (name, kind, variables[name].type)
+        var, _ = variable_of(variables, name)
+        assert SSP_TYPE[var.type] == kind, (name, kind, var.type)
         text = value.get("value")
         out[name] = {"Real": float, "Integer": int, "Boolean": lambda s: s == "true"}[kind](text)
     return out
@@ -114,4 +145,5 @@ def unzip(fmu, folder):
 
 
 __all__ = ["Experiment", "load_experiment", "manifest", "read_csv_bytes", "read_ssv_bytes",
+           "start_values", "variable_of", "SSP_TYPE",
            "worst_violation", "unzip", "LS_REF"]

@@ -40,7 +40,7 @@ from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
 from conftest import FMU_NAMES
-from fmu_experiments import LS_REF, load_experiment, manifest, read_csv_bytes
+from fmu_experiments import LS_REF, load_experiment, start_values
 
 from harness.cosim import simulate_closed_loop, simulate_open_loop
 from harness.metrics import compute_metrics
@@ -188,63 +188,22 @@ def test_plant_alone_equals_fmi2_on_a_validation_input():
 # ---------------------------------------------------------------------------------------
 # (d) the reference experiment inside each FMI 3.0 FMU
 
-def _start_values_fmi3(md, parameters):
-    """fmpy start values for an FMI 3.0 FMU from parameters named the structured way
-    (``pi.w[2]``): each touched array is given whole, its other elements at their start."""
-    variables = {v.name: v for v in md.modelVariables}
-    out = {}
-    for key, value in parameters.items():
-        if key in variables:
-            out[key] = value
-            continue
-        base, index = key[:-1].split("[")
-        array = out.setdefault(base, [float(x) for x in str(variables[base].start).split()])
-        array[int(index) - 1] = value
-    return out
-
-
-def _ssv_parameters(fmu):
-    """{structured name: float} of the experiment's SSV (values typed by the SSV itself)."""
-    from xml.etree import ElementTree as ET
-    from fmu_experiments import SSV
-    root = manifest(fmu)
-    (exp_rel,) = [r.get("source") for r in root.iter("Related")
-                  if r.get("role", "").startswith("experiment")]
-    with zipfile.ZipFile(fmu) as zf:
-        (exp,) = ET.fromstring(zf.read(LS_REF + exp_rel)).iter("Experiment")
-        el = exp.find("Parameters")
-        params = {}
-        if el is not None:
-            for p in ET.fromstring(zf.read(LS_REF + el.get("source"))).iter(f"{SSV}Parameter"):
-                (value,) = list(p)
-                text = value.get("value")
-                params[p.get("name")] = (text == "true" if value.tag.endswith("Boolean")
-                                         else int(text) if value.tag.endswith("Integer")
-                                         else float(text))
-        stimuli = exp.find("Stimuli")
-        stim = None if stimuli is None else read_csv_bytes(zf.read(LS_REF + stimuli.get("source")))
-        ref = read_csv_bytes(zf.read(LS_REF + exp.find("References").get("source")))
-        return exp, params, stim, ref
-
-
 @pytest.mark.parametrize("name", FMU_NAMES)
 def test_reference_experiment_resimulates_bit_for_bit(fmu_paths, fmu3_paths, name):
     fmu = fmu3_paths[name]
-    md = fmpy.read_model_description(str(fmu))
-    exp, params, stimuli, ref = _ssv_parameters(fmu)
-    result = fmpy.simulate_fmu(str(fmu), start_time=float(exp.get("startTime")),
-                               stop_time=float(exp.get("stopTime")),
-                               output_interval=float(exp.get("stepSize")), input=stimuli,
-                               start_values=_start_values_fmi3(md, params),
-                               output=list(ref.dtype.names[1:]))
-    assert np.array_equal(result["time"], ref["time"])
-    for output in ref.dtype.names[1:]:
-        assert np.array_equal(np.asarray(result[output], dtype=float), ref[output]), output
+    exp = load_experiment(fmu)
+    result = fmpy.simulate_fmu(str(fmu), start_time=exp.start, stop_time=exp.stop,
+                               output_interval=exp.step, input=exp.stimuli,
+                               start_values=start_values(exp.variables, exp.parameters),
+                               output=exp.outputs)
+    assert np.array_equal(result["time"], exp.reference["time"])
+    for output in exp.outputs:
+        assert np.array_equal(np.asarray(result[output], dtype=float), exp.reference[output]), output
     # the same experiment and references as the FMI 2.0 edition's
     exp2 = load_experiment(fmu_paths[name])
-    assert exp2.parameters == params
-    for output in ref.dtype.names:
-        assert np.array_equal(exp2.reference[output], ref[output]), output
+    assert exp2.parameters == exp.parameters
+    for output in exp.reference.dtype.names:
+        assert np.array_equal(exp2.reference[output], exp.reference[output]), output
 
 
 # ---------------------------------------------------------------------------------------

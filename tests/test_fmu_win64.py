@@ -34,7 +34,7 @@ import pytest
 
 import fmpy
 
-from fmu_experiments import load_experiment, unzip
+from fmu_experiments import SSP_TYPE, load_experiment, start_values, unzip
 
 REPO = Path(__file__).resolve().parents[1]
 HOST_SOURCE = REPO / "tests" / "wine_host" / "fmu_host.c"
@@ -170,18 +170,23 @@ def wine_env(tmp_path_factory):
     subprocess.run([server, "-w"], env=env, check=False, timeout=60)
 
 
-def _plan(experiment, guid, identifier):
-    """The host's plan for `experiment` (see fmu_host.c)."""
+def _plan(experiment, token, identifier):
+    """The host's plan for `experiment` (see fmu_host.c), for either FMI version: an FMI 3.0
+    array touched by an element is set whole ("reals")."""
     v = experiment.variables
-    lines = [f"identifier {identifier}", f"guid {guid}", f"step {experiment.step!r}",
+    lines = [f"identifier {identifier}", f"guid {token}", f"step {experiment.step!r}",
              f"steps {experiment.steps}"]
-    for name, value in experiment.parameters.items():
-        kind = {"Real": "real", "Integer": "integer", "Boolean": "boolean"}[v[name].type]
+    for name, value in start_values(v, experiment.parameters).items():
+        if isinstance(value, list):
+            lines.append(f"reals {v[name].valueReference} {len(value)} "
+                         + " ".join(repr(float(x)) for x in value))
+            continue
+        kind = {"Real": "real", "Integer": "integer", "Boolean": "boolean"}[SSP_TYPE[v[name].type]]
         lines.append(f"{kind} {v[name].valueReference} {float(value)!r}" if kind == "real"
                      else f"{kind} {v[name].valueReference} {int(value)}")
     inputs = [] if experiment.stimuli is None else list(experiment.stimuli.dtype.names[1:])
     lines += [f"input {v[n].valueReference}" for n in inputs]
-    reals = [n for n in experiment.outputs if v[n].type == "Real"]
+    reals = [n for n in experiment.outputs if SSP_TYPE[v[n].type] == "Real"]
     bools = [n for n in experiment.outputs if v[n].type == "Boolean"]
     lines += [f"output {v[n].valueReference}" for n in reals]
     lines += [f"boutput {v[n].valueReference}" for n in bools]
@@ -253,45 +258,14 @@ def test_fmi3_binaries_and_dll_exports(fmu3_paths, tmp_path, name):
     assert ".debug" not in _objdump(dll, "-h")
 
 
-def _plan3(experiment, md3):
-    """The plan of the FMI 2.0 edition's experiment for the FMI 3.0 edition: scalars by name,
-    the elements ``name[j]`` gathered into their array variable (set whole, "reals")."""
-    v3 = {v.name: v for v in md3.modelVariables}
-    lines = [f"identifier {md3.coSimulation.modelIdentifier}", f"guid {md3.instantiationToken}",
-             f"step {experiment.step!r}", f"steps {experiment.steps}"]
-    arrays = {}
-    for name, value in experiment.parameters.items():
-        if name not in v3:
-            base, index = name[:-1].split("[")
-            values = arrays.setdefault(base, [float(x) for x in str(v3[base].start).split()])
-            values[int(index) - 1] = float(value)
-            continue
-        kind = {"Float64": "real", "Int32": "integer", "Boolean": "boolean"}[v3[name].type]
-        lines.append(f"{kind} {v3[name].valueReference} {float(value)!r}" if kind == "real"
-                     else f"{kind} {v3[name].valueReference} {int(value)}")
-    for base, values in arrays.items():
-        lines.append(f"reals {v3[base].valueReference} {len(values)} "
-                     + " ".join(repr(x) for x in values))
-    inputs = [] if experiment.stimuli is None else list(experiment.stimuli.dtype.names[1:])
-    lines += [f"input {v3[n].valueReference}" for n in inputs]
-    reals = [n for n in experiment.outputs if v3[n].type == "Float64"]
-    bools = [n for n in experiment.outputs if v3[n].type == "Boolean"]
-    lines += [f"output {v3[n].valueReference}" for n in reals]
-    lines += [f"boutput {v3[n].valueReference}" for n in bools]
-    lines.append("data")
-    for k in range(experiment.steps + 1 if inputs else 0):
-        lines.append(" ".join(repr(float(experiment.stimuli[n][k])) for n in inputs))
-    return "\n".join(lines) + "\n", reals + bools
-
-
 @pytest.mark.parametrize("name", NAMES)
-def test_fmi3_win64_under_wine_matches_linux64(fmu_paths, fmu3_paths, hosts3, wine_env, tmp_path, name):
-    """Reference: the FMI 2.0 edition's experiment and reference CSV (the FMI 3.0 edition
-    carries the same, tests/test_fmi3_editions.py), equal bit for bit on x86_64-linux."""
+def test_fmi3_win64_under_wine_matches_linux64(fmu3_paths, hosts3, wine_env, tmp_path, name):
+    """Reference: the FMI 3.0 edition's own experiment and reference CSV (the same as the FMI
+    2.0 edition's, tests/test_fmi3_editions.py), equal bit for bit on x86_64-linux."""
     native, exe = hosts3
-    experiment = load_experiment(fmu_paths[name])
+    experiment = load_experiment(fmu3_paths[name])
     md3 = fmpy.read_model_description(str(fmu3_paths[name]))
-    plan, columns = _plan3(experiment, md3)
+    plan, columns = _plan(experiment, md3.instantiationToken, name)
     if name != "AdaptiveCompoundController" and experiment.parameters:
         assert "reals " in plan, "the experiment should set an array parameter"
     (tmp_path / "plan.txt").write_text(plan)
