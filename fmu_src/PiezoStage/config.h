@@ -2,6 +2,8 @@
  * PiezoStage/config.h - identity, value references and flat data of the
  * PiezoStage FMU (docs/fmus.md). The value references follow the
  * order of modelDescription/PiezoStage.xml (value reference = position - 1).
+ * The FMI 3.0 edition (modelDescription/fmi3/) uses the same numbers: its
+ * array pi.w has the value reference of its first element, vr_pi_w1.
  */
 #ifndef PIEZOSTAGE_CONFIG_H
 #define PIEZOSTAGE_CONFIG_H

@@ -3,6 +3,9 @@
  * ReferenceSignal FMU: the tracking reference y_d and its preview y_ref for
  * the controller. The value references follow the order of
  * modelDescription/ReferenceSignal.xml (value reference = position - 1).
+ * The FMI 3.0 edition (modelDescription/fmi3/) uses the same numbers: each of
+ * its arrays amplitude, frequency, phase has the value reference of its first
+ * element (vr_amplitude1, ...).
  */
 #ifndef REFERENCESIGNAL_CONFIG_H
 #define REFERENCESIGNAL_CONFIG_H
