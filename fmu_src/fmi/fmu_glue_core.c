@@ -353,6 +353,20 @@ static model_type kind_type(glue_values kind)
     }
 }
 
+/* A get/set without value references: nothing to do, and no value either
+ * (FMI 3.0: nValues is the number of values the references hold, here 0;
+ * FMI 2.0 passes nvr, so it always agrees). 0 when refused. */
+static int no_references_no_values(const glue_instance *inst, const char *fname, size_t n_values)
+{
+    if (n_values != 0) {
+        glue_log_error(inst, "%s: nValues = %llu, but no value reference is given (nValueReferences = 0): "
+                       "nValues must be the number of values the references hold, here 0", fname,
+                       (unsigned long long)n_values);
+        return 0;
+    }
+    return 1;
+}
+
 /* Check the references of a get/set and count their values; 0 when refused. */
 static int check_references(const glue_instance *inst, const char *fname, const uint32_t vr[], size_t nvr,
                             model_type type, size_t n_values, int *any_output)
@@ -624,7 +638,7 @@ glue_status glue_get(void *c, const char *fname, const uint32_t vr[], size_t nvr
     if (inst == NULL)
         return GLUE_ERROR;
     if (nvr == 0)
-        return GLUE_OK;
+        return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
     if (!check_references(inst, fname, vr, nvr, kind_type(kind), n_values, &need_outputs))
@@ -661,7 +675,7 @@ glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr
     if (inst == NULL)
         return GLUE_ERROR;
     if (nvr == 0)
-        return GLUE_OK;
+        return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
     /* Check everything first: a refused call changes nothing. */
@@ -735,7 +749,7 @@ glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr
 }
 
 glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32_t vr[], size_t nvr,
-                              const void *values, const char *type_name)
+                              const void *values, size_t n_values, const char *type_name)
 {
     glue_instance *inst = glue_instance_of(c, fname, mask);
     const char *const *names;
@@ -743,7 +757,7 @@ glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32
     if (inst == NULL)
         return GLUE_ERROR;
     if (nvr == 0)
-        return GLUE_OK;
+        return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
     names = inst->version->type_names;
