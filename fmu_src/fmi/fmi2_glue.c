@@ -57,7 +57,9 @@
  * switched off explicitly with fmi2SetDebugLogging.
  *
  * FMU states and their serialized form are the core's (fmu_glue_core.c
- * documents the blob format): the same in FMI 2.0 and FMI 3.0.
+ * documents the blob format): the same in FMI 2.0 and FMI 3.0. Freeing a NULL
+ * state (fmi2FreeFMUstate(c, NULL) or *FMUstate == NULL) is ignored, as the
+ * standard says.
  */
 #include <string.h>
 

@@ -1095,10 +1095,14 @@ glue_status glue_free_state(void *c, const char *fname, void **state)
 {
     glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
     glue_state *st;
-    if (inst == NULL || glue_null_arg(inst, fname, "FMUstate", state))
+    if (inst == NULL)
         return GLUE_ERROR;
-    if (*state == NULL)
+    /* "If a null pointer is provided, the call is ignored" (FMI 2.0 and 3.0):
+     * no handle, or a handle holding no state */
+    if (state == NULL || *state == NULL) {
+        glue_log_event(inst, "%s: no FMU state given: nothing to free", fname);
         return GLUE_OK;
+    }
     st = checked_state(inst, fname, *state);
     if (st == NULL)
         return GLUE_ERROR;
