@@ -15,7 +15,10 @@
 The C suites (tests/c/fmu_negative.c, fmu3_negative.c, group "edges") check the same at the
 level of single calls, for all three FMUs, under valgrind.
 """
+import contextlib
+import ctypes
 import re
+import shutil
 
 import numpy as np
 import pytest
@@ -148,26 +151,37 @@ def test_with_exact_creep_the_longest_step_it_names_passes(_fmu_packages, make_f
     assert fmu.slave.getRealStatus(2) == pytest.approx((10 + longest) * H, rel=1e-15)
 
 
+@contextlib.contextmanager
+def _fmi3_in_step_mode(path, name):
+    """An FMI 3.0 instance in Step Mode at t0 = 0 and the texts it logs; freed and its folder
+    removed afterwards."""
+    unzipdir = fmpy.extract(str(path))
+    md = fmpy.read_model_description(str(path))
+    messages = []
+    slave = FMU3Slave(guid=md.instantiationToken, unzipDirectory=unzipdir, modelIdentifier=name,
+                      instanceName="edges")
+    slave.instantiate(logMessage=lambda env, status, category, message: messages.append(message.decode()))
+    try:
+        slave.enterInitializationMode(startTime=0.0)
+        slave.exitInitializationMode()
+        yield slave, messages
+        slave.terminate()
+    finally:
+        slave.freeInstance()
+        shutil.rmtree(unzipdir, ignore_errors=True)
+
+
 def test_fmi3_refuses_a_step_beyond_the_bound_without_returning_early(fmu3_paths):
     """FMI 3.0: no early return; a step of 1e9 s in Step Mode is refused at once naming the
     bound, lastSuccessfulTime stays at the current time, and the instance runs on."""
     samples, _ = _documented_bounds()
-    unzipdir = fmpy.extract(str(fmu3_paths["ReferenceSignal"]))
-    md = fmpy.read_model_description(str(fmu3_paths["ReferenceSignal"]))
-    messages = []
-    slave = FMU3Slave(guid=md.instantiationToken, unzipDirectory=unzipdir, modelIdentifier="ReferenceSignal",
-                      instanceName="edges")
-    slave.instantiate(logMessage=lambda env, status, category, message: messages.append(message.decode()))
-    slave.enterInitializationMode(startTime=0.0)
-    slave.exitInitializationMode()
-    slave.doStep(0.0, 4 * H)
-    with pytest.raises(FMICallException):
-        slave.doStep(4 * H, 1e9)
-    assert f"one doStep computes at most {samples} samples" in messages[-1]
-    *_, last_successful_time = slave.doStep(4 * H, H)
-    assert last_successful_time == 5 * H
-    slave.terminate()
-    slave.freeInstance()
+    with _fmi3_in_step_mode(fmu3_paths["ReferenceSignal"], "ReferenceSignal") as (slave, messages):
+        slave.doStep(0.0, 4 * H)
+        with pytest.raises(FMICallException):
+            slave.doStep(4 * H, 1e9)
+        assert f"one doStep computes at most {samples} samples" in messages[-1]
+        *_, last_successful_time = slave.doStep(4 * H, H)
+        assert last_successful_time == 5 * H
 
 
 # ---------------------------------------------------------------------------------------
@@ -177,24 +191,14 @@ def test_fmi3_nvalues_without_value_references_is_refused(fmu3_paths):
     """fmi3SetFloat64 with no value reference and one value (nValues = 1) is refused with a
     message naming nValues; with no value either it is a no-op; fmi3FreeFMUState(NULL) is
     ignored (fmi3OK)."""
-    import ctypes
-    unzipdir = fmpy.extract(str(fmu3_paths["PiezoStage"]))
-    md = fmpy.read_model_description(str(fmu3_paths["PiezoStage"]))
-    messages = []
-    slave = FMU3Slave(guid=md.instantiationToken, unzipDirectory=unzipdir, modelIdentifier="PiezoStage",
-                      instanceName="edges")
-    slave.instantiate(logMessage=lambda env, status, category, message: messages.append(message.decode()))
-    slave.enterInitializationMode(startTime=0.0)
-    slave.exitInitializationMode()
-    with pytest.raises(FMICallException):
-        slave.setFloat64([], [1.0])
-    assert "nValues = 1, but no value reference is given" in messages[-1]
-    slave.setFloat64([], [])
-    free_state = slave.dll.fmi3FreeFMUState
-    free_state.argtypes, free_state.restype = [ctypes.c_void_p, ctypes.c_void_p], ctypes.c_int
-    assert free_state(slave.component, None) == 0                  # fmi3OK
-    slave.terminate()
-    slave.freeInstance()
+    with _fmi3_in_step_mode(fmu3_paths["PiezoStage"], "PiezoStage") as (slave, messages):
+        with pytest.raises(FMICallException):
+            slave.setFloat64([], [1.0])
+        assert "nValues = 1, but no value reference is given" in messages[-1]
+        slave.setFloat64([], [])
+        free_state = slave.dll.fmi3FreeFMUState
+        free_state.argtypes, free_state.restype = [ctypes.c_void_p, ctypes.c_void_p], ctypes.c_int
+        assert free_state(slave.component, None) == 0              # fmi3OK
 
 
 @pytest.mark.parametrize("window", [0, 200])
