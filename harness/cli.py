@@ -73,6 +73,12 @@ def _output_option(p, what):
                    help=f"output folder for {what} (default: out/, created if missing)")
 
 
+def _fmu_dir_option(p, what):
+    from ._paths import describe_fmu_dir
+
+    p.add_argument("--fmu-dir", metavar="DIR", help=f"{what} (default: {describe_fmu_dir()})")
+
+
 def _backend_options(p, closed_loop=False):
     if closed_loop:
         p.add_argument("--backend", choices=("auto", "fmpy", "native", "core"), default="auto",
@@ -82,9 +88,7 @@ def _backend_options(p, closed_loop=False):
     else:
         p.add_argument("--backend", choices=("fmpy", "core"), default="fmpy",
                        help="fmpy: run the FMUs (default); core: the C core through cffi, no FMI")
-    p.add_argument("--fmu-dir", metavar="DIR",
-                   help="folder of PiezoStage.fmu and AdaptiveCompoundController.fmu "
-                        "(default: build/fmus or $PIEZO_FMU_DIR)")
+    _fmu_dir_option(p, "folder of PiezoStage.fmu and AdaptiveCompoundController.fmu")
     if closed_loop:
         p.add_argument("--fmi", type=int, choices=(2, 3), default=2, metavar="{2,3}",
                        help="run the FMUs' FMI 2.0 editions (default) or their FMI 3.0 editions "
@@ -288,8 +292,7 @@ def _add_export_parser(sub):
                     "a parameter file as their start values (the built binaries reused, the "
                     "modelDescription rewritten, the GUID kept); each FMU takes the names it has.")
     _output_option(p, "the two FMUs")
-    p.add_argument("--fmu-dir", metavar="DIR",
-                   help="folder of the built FMUs (default: build/fmus or $PIEZO_FMU_DIR)")
+    _fmu_dir_option(p, "folder of the built FMUs")
     add_export_arguments(p)
     p.set_defaults(handler=_cmd_export)
     return p

@@ -121,10 +121,55 @@ def test_malformed_csv_exits_2(tmp_path):
     assert "r.csv" in msg and "line 3: 'oops' is not a number" in msg
 
 
-def test_missing_fmu_exits_2_with_build_command(tmp_path):
-    msg = _one_line_error(_harness("run", "track_1hz", "--fmu-dir", str(tmp_path), "--no-plots",
-                                   "--out", str(tmp_path / "o")))
-    assert "PiezoStage.fmu" in msg and "cmake -S . -B build && cmake --build build" in msg
+def test_missing_fmu_in_a_chosen_folder_says_what_the_folder_lacks(tmp_path):
+    """A folder the user chose (--fmu-dir or $PIEZO_FMU_DIR) gets no build or reinstall advice:
+    building or reinstalling does not fill it. The message names what it lacks and holds."""
+    (tmp_path / "AdaptiveCompoundController.fmu").write_bytes(b"")
+    for args, env in (((["--fmu-dir", str(tmp_path)]), {}), ([], {"PIEZO_FMU_DIR": str(tmp_path)})):
+        proc = subprocess.run([sys.executable, "-m", "harness", "run", "track_1hz", *args,
+                               "--no-plots", "--out", str(tmp_path / "o")], cwd=REPO,
+                              env=dict(os.environ, PYTHONPATH=str(REPO), **env),
+                              capture_output=True, text=True, timeout=120)
+        msg = _one_line_error(proc)
+        folder = f"{tmp_path} ($PIEZO_FMU_DIR)" if env else str(tmp_path)
+        assert (f"FMU not found: {tmp_path / 'PiezoStage.fmu'}; the folder {folder} has no "
+                f"PiezoStage.fmu, it holds AdaptiveCompoundController.fmu") in msg, msg
+        assert "cmake" not in msg and "install" not in msg, msg
+
+
+def test_missing_fmu_in_the_default_folder_says_how_to_build_it(tmp_path, monkeypatch, capsys):
+    """The default folder (a checkout's build/fmus, here one that was never built) is filled by
+    the build: the message gives its command."""
+    from harness import _paths
+    from harness.cli import main
+
+    monkeypatch.delenv("PIEZO_FMU_DIR", raising=False)
+    monkeypatch.setattr(_paths, "fmu_dir", lambda: tmp_path / "build" / "fmus")
+    assert main(["run", "track_1hz", "--no-plots", "--out", str(tmp_path / "o")]) == 2
+    msg = capsys.readouterr().err
+    assert f"FMU not found: {tmp_path / 'build' / 'fmus' / 'PiezoStage.fmu'}" in msg
+    assert "cmake -S . -B build && cmake --build build" in msg
+
+
+@pytest.mark.parametrize("sub", ["all", "run", "export", "bench"])
+def test_fmu_dir_help_names_the_real_default(sub, monkeypatch, capsys):
+    """--fmu-dir's help names the folder the FMUs are really taken from (reference:
+    harness._paths.fmu_dir(), which the runs use): here the checkout's build/fmus, and
+    $PIEZO_FMU_DIR when it is set. (tests/test_install.py checks the installed package's.)"""
+    from harness import _paths
+    from harness.cli import main
+
+    def says(text):
+        """The help holds `text`, whatever argparse's wrapping (it also breaks at hyphens)."""
+        assert main([sub, "--help"], prog="python -m harness") == 0
+        return "".join(text.split()) in "".join(capsys.readouterr().out.split())
+
+    monkeypatch.delenv("PIEZO_FMU_DIR", raising=False)
+    assert _paths.fmu_dir() == REPO / "build" / "fmus"
+    assert says(f"(default: {REPO / 'build' / 'fmus'}, the checkout's build; $PIEZO_FMU_DIR "
+                f"overrides)")
+    monkeypatch.setenv("PIEZO_FMU_DIR", "/srv/my_fmus")
+    assert says("(default: /srv/my_fmus, from $PIEZO_FMU_DIR)")
 
 
 def test_list_shows_builtin_and_user_scenarios(tmp_path):
