@@ -231,3 +231,19 @@ def test_a_failing_run_exits_3_with_one_line(tmp_path, backend, name, fragment):
         assert fragment in lines[0], lines[0]
     else:
         assert "the loop is unstable" in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("values,count", [({"creep.alpha": 0.001}, "1 parameter"),
+                                          ({"creep.alpha": 0.001, "creep.k_c": 1.0},
+                                           "2 parameters")])
+def test_parameter_file_count_is_in_words(tmp_path, values, count):
+    """The note of --plant-params counts the file's parameters, singular for one."""
+    import json
+
+    f = tmp_path / "p.json"
+    f.write_text(json.dumps(values))
+    proc = _harness("run", "validate_1hz", "--plant-params", str(f), "--backend", "core",
+                    "--no-plots", "--no-timeseries", "--out", str(tmp_path / "o"))
+    assert proc.returncode == 0, proc.stderr
+    assert f"--plant-params {f}: {count} applied to the PiezoStage of every scenario" \
+        in proc.stderr, proc.stderr
