@@ -48,8 +48,10 @@ def _fmu_sources():
 
 
 def _commit_date_changed():
-    """The FMUs carry the commit date: a new commit re-stamps them (build/piezo_commit_date.txt
-    holds the date of the last build; packaging/assemble_fmu.py commit_epoch computes it)."""
+    """The FMUs carry the commit date and the source (commit, uncommitted changes): a new
+    commit, or a tree that became clean or dirty, re-stamps them (build/piezo_commit_date.txt
+    and build/source.json hold those of the last build; packaging/assemble_fmu.py
+    commit_epoch and harness/_source.py git_source compute them)."""
     stamp = BUILD_DIR / "piezo_commit_date.txt"
     if not stamp.is_file():
         return True
@@ -58,7 +60,9 @@ def _commit_date_changed():
         from assemble_fmu import commit_epoch
     finally:
         sys.path.pop(0)
-    return stamp.read_text().split()[0] != str(commit_epoch(REPO))
+    from harness._source import git_source, read_source
+    return (stamp.read_text().split()[0] != str(commit_epoch(REPO))
+            or read_source(BUILD_DIR / "source.json") != git_source(REPO))
 
 
 def _fmus_stale():

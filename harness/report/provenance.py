@@ -2,7 +2,7 @@
 
 :func:`collect_provenance` gathers everything a reader needs to reproduce a
 report: the commit of the harness (and whether the tree had uncommitted
-changes), each FMU's GUID, version and checksum from its modelDescription, the
+changes; for an installed package, the commit it was built from), each FMU's GUID, version and checksum from its modelDescription, the
 versions of Python, fmpy and numpy, the date and the machine.
 """
 
@@ -15,7 +15,6 @@ from importlib import metadata
 import os
 from pathlib import Path
 import platform
-import subprocess
 import sys
 
 from .._common import REPO_ROOT
@@ -77,8 +76,8 @@ class Provenance:
     Attributes
     ----------
     commit : str
-        Commit hash of the harness's repository, with `` (uncommitted changes)``
-        when the tracked files differ from it; ``unknown`` outside a git checkout.
+        Commit hash of the harness's repository, with `` with uncommitted changes`` when
+        the tracked files differ from it (see :func:`commit_id`).
     backend : str
     fmi_version : int or None
         The FMI version of the FMUs that ran (None with the core backend, which runs no FMU).
@@ -109,22 +108,25 @@ class Provenance:
         return asdict(self)
 
 
-def _git(*args):
-    try:
-        proc = subprocess.run(["git", "-C", str(REPO_ROOT), *args], capture_output=True,
-                              text=True, timeout=10)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return proc.stdout.strip() if proc.returncode == 0 else None
-
-
 def commit_id():
-    """The harness's commit, or 'unknown' outside a git checkout."""
-    head = _git("rev-parse", "HEAD")
-    if not head:
-        return "unknown (not a git checkout)"
-    dirty = _git("status", "--porcelain", "--untracked-files=no")
-    return head + (" (uncommitted changes)" if dirty else "")
+    """The commit the harness comes from (:mod:`harness._source`).
+
+    A source checkout: git's HEAD, with `` with uncommitted changes`` when the tracked files
+    differ from it. An installed package: the commit recorded when it was built, with
+    `` (recorded at build time, installed package)``. Otherwise ``unknown`` and why.
+    """
+    from .. import _paths, _source
+
+    if _paths.IN_CHECKOUT:
+        here = _source.git_source(REPO_ROOT)
+        if here["commit"]:
+            return _source.describe(here)
+    built = _source.installed_source()
+    if built is None:
+        return "unknown (not a git checkout, and no build record)"
+    if not built["commit"]:
+        return "unknown (the installed package was not built from a git checkout)"
+    return f"{_source.describe(built)} (recorded at build time, installed package)"
 
 
 def _version(dist):
