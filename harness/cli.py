@@ -136,6 +136,17 @@ def _fmi_version(args):
     return args.fmi
 
 
+def _warn_if_linux_only(args, fmi_version=2):
+    """One warning line on stderr when the FMUs to be run have no Windows binaries (a build
+    without MinGW-w64; pip hides CMake's note of it)."""
+    from .report.provenance import missing_windows_binaries
+
+    note = missing_windows_binaries(args.fmu_dir, fmi_version)
+    if note:
+        sys.stderr.write(f"{args.prog}: warning: {note}\n")
+        sys.stderr.flush()
+
+
 def _loop_settings(args):
     return (False if args.no_adaptation else None, not args.no_preview,
             "jacobi" if args.jacobi else "gauss-seidel")
@@ -174,6 +185,8 @@ def _cmd_all(args, command):
     _out_dir(args)
     registry = apply_param_files(args, registry)
     fmi_version = _fmi_version(args)
+    if args.backend != "core":
+        _warn_if_linux_only(args, fmi_version)
     report.run_all(args.out, adaptation=adaptation, preview=preview, master=master,
                    fmu_dir=args.fmu_dir, plots=not args.no_plots, backend=args.backend,
                    registry=registry, extra_scenarios=extra, command=command,
@@ -222,6 +235,8 @@ def _cmd_run(args, command):
     fmi_version = _fmi_version(args)
     _out_dir(args)
     registry = apply_param_files(args, registry)
+    if args.backend != "core":
+        _warn_if_linux_only(args, fmi_version)
     report.run_scenario(sc.name, args.out, adaptation=adaptation, preview=preview, master=master,
                         fmu_dir=args.fmu_dir, plots=not args.no_plots, registry=registry,
                         backend=args.backend, fmi_version=fmi_version,
@@ -302,6 +317,7 @@ def _cmd_export(args, command):
     from .identify.cli import run_export
 
     _out_dir(args)
+    _warn_if_linux_only(args)
     return run_export(args)
 
 
@@ -463,6 +479,7 @@ def main(argv=None, prog=None):
     from .scenarios import ScenarioError
 
     command = " ".join([prog, *argv])
+    args.prog = prog
     try:
         return args.handler(args, command)
     except UsageError as exc:

@@ -247,3 +247,74 @@ def test_parameter_file_count_is_in_words(tmp_path, values, count):
     assert proc.returncode == 0, proc.stderr
     assert f"--plant-params {f}: {count} applied to the PiezoStage of every scenario" \
         in proc.stderr, proc.stderr
+
+
+def _linux_only_copies(fmu_paths, fmu3_paths, folder):
+    """The built FMUs (both editions) rewritten without their Windows binaries, as a build
+    without MinGW-w64 makes them."""
+    import zipfile
+
+    (folder / "fmi3").mkdir(parents=True)
+    for paths, sub in ((fmu_paths, folder), (fmu3_paths, folder / "fmi3")):
+        for name, path in paths.items():
+            with zipfile.ZipFile(path) as src, zipfile.ZipFile(sub / f"{name}.fmu", "w") as dst:
+                for info in src.infolist():
+                    if not info.filename.startswith(("binaries/win64", "binaries/x86_64-windows")):
+                        dst.writestr(info, src.read(info))
+    return folder
+
+
+@pytest.mark.parametrize("where", ["--fmu-dir", "checkout", "installed"])
+@pytest.mark.parametrize("fmi", ["2", "3"])
+def test_fmus_without_windows_binaries_are_announced(fmu_paths, fmu3_paths, tmp_path, monkeypatch,
+                                                      capsys, where, fmi):
+    """pip hides CMake's output, so a build without MinGW-w64 is announced when the FMUs are
+    used: one warning line before the run, saying how to get Windows binaries where a rebuild
+    or a reinstall makes them (the default folder). Reference: the zip's binaries/ folders."""
+    from harness import _paths
+    from harness.cli import main
+
+    linux = _linux_only_copies(fmu_paths, fmu3_paths, tmp_path / "fmus")
+    monkeypatch.delenv("PIEZO_FMU_DIR", raising=False)
+    args = ["run", "track_5hz", "--no-plots", "--no-timeseries", "--out", str(tmp_path / "o"),
+            "--fmi", fmi]
+    if where == "--fmu-dir":
+        args += ["--fmu-dir", str(linux)]
+    else:
+        monkeypatch.setattr(_paths, "fmu_dir", lambda: linux)
+        monkeypatch.setattr(_paths, "IN_CHECKOUT", where == "checkout")
+    assert main(args, prog="python -m harness") == 0
+    err = capsys.readouterr().err.splitlines()
+    folder, windows = (linux, "win64") if fmi == "2" else (linux / "fmi3", "x86_64-windows")
+    warning = (f"python -m harness: warning: the FMUs in {folder} have no Windows binaries "
+               f"(binaries/{windows}): MinGW-w64 was not found when they were built, so they "
+               f"run on Linux only")
+    fix = {"--fmu-dir": "",
+           "checkout": "; for FMUs that also run on Windows install MinGW-w64 (Debian: "
+                       "gcc-mingw-w64-x86-64), then rebuild (cmake -S . -B build && cmake "
+                       "--build build)",
+           "installed": "; for FMUs that also run on Windows install MinGW-w64 (Debian: "
+                        "gcc-mingw-w64-x86-64), then reinstall the package from its source "
+                        "folder (pip install .)"}[where]
+    assert err[0] == warning + fix
+
+
+def test_the_report_names_the_platforms_and_says_linux_only(fmu_paths, fmu3_paths, tmp_path):
+    from harness.report import document, jobs
+    from harness.report.provenance import collect_provenance
+
+    linux = _linux_only_copies(fmu_paths, fmu3_paths, tmp_path / "fmus")
+    for folder, linux_only in ((linux, True), (fmu_paths["PiezoStage"].parent, False)):
+        prov = collect_provenance("fmpy", folder)
+        text = document.render_markdown(document.Document(
+            "p", jobs._provenance_blocks(prov, [], "the FMUs' own")))
+        assert ("**Linux only:** PiezoStage, AdaptiveCompoundController have no Windows "
+                "binaries" in text) == linux_only
+        platforms = [f.platforms for f in prov.fmus]
+        if linux_only:
+            assert platforms == [("linux64",), ("linux64",)]
+        elif "win64" not in platforms[0]:
+            pytest.skip("the build has no win64 binaries (no MinGW-w64)")
+        else:
+            assert platforms == [("linux64", "win64"), ("linux64", "win64")]
+            assert "| linux64, win64 |" in text

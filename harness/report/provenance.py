@@ -16,10 +16,12 @@ import os
 from pathlib import Path
 import platform
 import sys
+import zipfile
 
 from .._common import REPO_ROOT
 
-__all__ = ["FMUInfo", "Provenance", "collect_provenance", "model_description", "fmu_info"]
+__all__ = ["FMUInfo", "Provenance", "collect_provenance", "model_description", "fmu_info",
+           "fmu_platforms", "missing_windows_binaries"]
 
 _MD_CACHE = {}
 
@@ -56,6 +58,19 @@ class FMUInfo:
     generation_tool: str
     generated: str
     sha256: str
+    platforms: tuple = ()
+
+
+#: the folder of the Windows binary in each FMI version's binaries/
+WINDOWS_PLATFORM = {2: "win64", 3: "x86_64-windows"}
+
+
+def fmu_platforms(path):
+    """The platform folders of an FMU's ``binaries/`` (``linux64``, ``win64``, ...), sorted."""
+    with zipfile.ZipFile(path) as zf:
+        return tuple(sorted({n.split("/")[1] for n in zf.namelist()
+                             if n.startswith("binaries/") and n.count("/") >= 2
+                             and not n.endswith("/")}))
 
 
 def fmu_info(path):
@@ -66,7 +81,35 @@ def fmu_info(path):
                    fmi_version=md.fmiVersion or "",
                    generation_tool=md.generationTool or "",
                    generated=md.generationDateAndTime or "",
-                   sha256=_sha256(path))
+                   sha256=_sha256(path), platforms=fmu_platforms(path))
+
+
+def missing_windows_binaries(fmu_dir=None, fmi_version=2):
+    """A one-line note when the FMUs of `fmu_dir` have no Windows binary, else None.
+
+    The build cross-compiles ``binaries/win64`` (FMI 3.0: ``x86_64-windows``) only when
+    MinGW-w64 is installed; ``pip install .`` hides CMake's output, so the user learns it
+    here. Only the plant FMU is looked at: one build makes all of them.
+    """
+    from .. import _paths
+    from ..cosim import PLANT_MODEL, fmu_path
+
+    try:
+        path = fmu_path(PLANT_MODEL, fmu_dir, fmi_version)
+    except FileNotFoundError:
+        return None                         # the run itself says what is missing
+    windows = WINDOWS_PLATFORM[int(fmi_version)]
+    if windows in fmu_platforms(path):
+        return None
+    folder = path.parent
+    if fmu_dir is None and not os.environ.get("PIEZO_FMU_DIR"):
+        fix = (f"then rebuild ({_paths.BUILD_COMMAND})" if _paths.IN_CHECKOUT
+               else f"then reinstall the package from its source folder ({_paths.INSTALL_COMMAND})")
+        fix = f"; for FMUs that also run on Windows install MinGW-w64 (Debian: gcc-mingw-w64-x86-64), {fix}"
+    else:
+        fix = ""
+    return (f"the FMUs in {folder} have no Windows binaries (binaries/{windows}): MinGW-w64 was "
+            f"not found when they were built, so they run on Linux only{fix}")
 
 
 @dataclass
