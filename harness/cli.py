@@ -30,8 +30,9 @@ Exit codes, each with a one-line message on stderr that names the program:
 
 * 0: done;
 * 1: an FMI call failed for another reason (a fault);
-* 2: a user error (bad command line, unknown scenario, missing FMU, malformed
-  scenario file or CSV, bad parameter, output folder that cannot be written);
+* 2: a user error (bad command line, unknown scenario, missing FMU, an FMU of the other
+  FMI version or not an FMU of this project, malformed scenario file or CSV, bad parameter,
+  output folder that cannot be written);
 * 3: a run failed its own checks: it diverged (the controller's monitor stopped
   it, a value overflowed, or its error exceeds the reference) or the controller
   clipped the voltage persistently (see :mod:`harness.checks`).
