@@ -96,11 +96,12 @@ def missing_windows_binaries(fmu_dir=None, fmi_version=2):
 
     try:
         path = fmu_path(PLANT_MODEL, fmu_dir, fmi_version)
-    except FileNotFoundError:
-        return None                         # the run itself says what is missing
+        platforms = fmu_platforms(path)
+    except (OSError, zipfile.BadZipFile):
+        return None                         # the run itself says what is wrong
     windows = WINDOWS_PLATFORM[int(fmi_version)]
-    if windows in fmu_platforms(path):
-        return None
+    if set(platforms) & set(WINDOWS_PLATFORM.values()):
+        return None                         # (the other edition's: the run refuses it)
     folder = path.parent
     if fmu_dir is None and not os.environ.get("PIEZO_FMU_DIR"):
         fix = (f"then rebuild ({_paths.BUILD_COMMAND})" if _paths.IN_CHECKOUT
