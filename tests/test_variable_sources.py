@@ -220,7 +220,8 @@ def test_c_table_has_one_entry_per_value_reference_laid_out_as_named(tables, mod
     table = tables[model]
     assert table["model"] == model and len(table["variables"]) == table["n_variables"] > 0
     assert [e["vr"] for e in table["variables"]] == list(range(table["n_variables"]))
-    assert table_faults(table) == []
+    faults = table_faults(table)
+    assert not faults, "\n".join(faults)
 
 
 @pytest.mark.parametrize("version", ["2.0", "3.0"])
@@ -230,7 +231,8 @@ def test_model_description_has_the_c_table_variable_at_each_value_reference(tabl
     model_set_start_values leaves it; variability and initial as fmu_model.h implies)."""
     md = read_model_description(model_description_paths(model)[version].read_text())
     assert md["version"] == version
-    assert mismatches(tables[model], md) == []
+    found = mismatches(tables[model], md)
+    assert not found, "\n".join(found)
     # every element of the C table is covered, and nothing else
     assert sorted(md["variables"]) == list(range(tables[model]["n_variables"]))
 
@@ -348,7 +350,8 @@ def core_table_mismatches(model: str, table: dict) -> list[str]:
 def test_core_py_tables_map_each_parameter_to_the_c_tables_field(tables, model):
     """Reference: the C table printed by the C code (names, types, offsets, start values) and the
     core's own struct layout, read by cffi from fmu_src/core's headers."""
-    assert core_table_mismatches(model, tables[model]) == []
+    found = core_table_mismatches(model, tables[model])
+    assert not found, "\n".join(found)
 
 
 def test_every_core_py_table_is_checked():
