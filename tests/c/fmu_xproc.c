@@ -189,6 +189,13 @@ int main(int argc, char **argv)
         return 2;
     }
     setvbuf(stdout, NULL, _IOLBF, 0);
+#if FMI_VERSION == 3
+    if (access(sibling, X_OK) != 0) {
+        printf("FAIL %s runs the FMI 2.0 side with %s, which is missing (build both: target c_test_hosts)\n",
+               argv[0], sibling);
+        return 2;
+    }
+#endif
     for (i = 1; i + per_fmu - 1 < argc; i += per_fmu) {
         host_fmu f;
         edition editions[4];        /* by FMI version */
