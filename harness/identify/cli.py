@@ -39,7 +39,7 @@ __all__ = ["add_identify_arguments", "check_identify_arguments", "run_identify",
 
 _DATA = (("pi_data", "--pi-data"), ("tf_data", "--tf-data"), ("creep_data", "--creep-data"))
 _FIT = (("sample_period", "--sample-period"), ("operators", "--operators"), ("v_max", "--v-max"),
-        ("delay", "--delay"), ("holdout", "--holdout"))
+        ("delay", "--delay"), ("holdout", "--holdout"), ("max_evaluations", "--max-evaluations"))
 _DEMO = (("duration", "--duration"), ("noise_free", "--noise-free"))
 _INTERNAL = (("noise_rms", "--noise-rms"), ("free_w0", "--free-w0"),
              ("displacement_only", "--displacement-only"))
@@ -69,6 +69,9 @@ def add_identify_arguments(parser):
                    help="extra input delay of G in samples, tf.delay (default 0; not fitted)")
     g.add_argument("--holdout", type=float, metavar="F",
                    help="fraction of each record held out at its end (default 0.25; 0: none)")
+    g.add_argument("--max-evaluations", type=int, metavar="N",
+                   help="most evaluations of each start of the search (default 500; the search "
+                        "stops earlier, when it no longer improves on the records' noise floor)")
     d = parser.add_argument_group("the virtual experiment")
     d.add_argument("--demo", action="store_true",
                    help="records of the PiezoStage FMU with known parameters, identified like "
@@ -155,6 +158,7 @@ def check_identify_arguments(args):
         ("v_max", lambda x: math.isfinite(x) and x > 0, "a finite number > 0 (V)"),
         ("delay", lambda x: 0 <= x <= 8, "in 0..8 samples"),
         ("holdout", lambda x: 0 <= x <= 0.9, "in [0, 0.9]"),
+        ("max_evaluations", lambda x: x >= 10, ">= 10"),
         ("duration", lambda x: math.isfinite(x) and x > 0, "a finite number > 0 (s)"),
         ("noise_rms", lambda x: math.isfinite(x) and x >= 0, "a finite number >= 0 (µm)"),
         ("seed", lambda x: x >= 0, ">= 0"),
@@ -174,9 +178,11 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
     harness.checks.RunCheckError
         The fit did not converge, or the virtual experiment failed its checks.
     """
-    from .fit import DEFAULT_HOLDOUT, IdentificationFitError
+    from .fit import DEFAULT_HOLDOUT, DEFAULT_MAX_EVALUATIONS, IdentificationFitError
 
     holdout = DEFAULT_HOLDOUT if args.holdout is None else args.holdout
+    max_evaluations = getattr(args, "max_evaluations", None) or DEFAULT_MAX_EVALUATIONS
+    say = _progress_lines(progress)
     try:
         if args.internal_channels:
             from .. import report
@@ -193,29 +199,50 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
             demo = run_demo(args.out, duration=10.0 if args.duration is None else args.duration,
                             noise=not args.noise_free, seed=1 if args.seed is None else args.seed,
                             holdout=holdout, fmu_dir=args.fmu_dir, backend=args.backend,
-                            stream=stream, progress=progress)
+                            stream=stream, progress=progress, max_evaluations=max_evaluations)
             if demo.failures:
                 raise RunCheckError(f"the virtual experiment failed {len(demo.failures)} of its "
                                     f"checks; first: {demo.failures[0]}")
             return 0
-        return _identify_records(args, holdout, stream)
+        return _identify_records(args, holdout, max_evaluations, stream, say)
     except IdentificationFitError as exc:
         raise RunCheckError(str(exc)) from None
 
 
-def _identify_records(args, holdout, stream):
+def _progress_lines(stream):
+    """A callable that writes one progress line of the fit to ``stream`` (or nothing)."""
+    if stream is None:
+        return None
+
+    def say(line):
+        stream.write(f"identify: {line}\n")
+        stream.flush()
+
+    return say
+
+
+def _identify_records(args, holdout, max_evaluations, stream, say):
+    from .fit import UndeterminedModelError
     from .run import identify_files, write_outputs
     from .tables import format_report
 
     h = 0.0005 if args.sample_period is None else args.sample_period
     m = 9 if args.operators is None else args.operators
     result, records = identify_files(args.pi_data, args.tf_data, args.creep_data, h=h, m=m,
-                                     v_max=args.v_max, delay=args.delay or 0, holdout=holdout)
+                                     v_max=args.v_max, delay=args.delay or 0, holdout=holdout,
+                                     max_evaluations=max_evaluations, progress=say)
     header = [f"Identification from measured records (v and y only): step 1 {args.pi_data}, "
               f"step 2 {args.tf_data}, step 3 {', '.join(args.creep_data)}; h = {h:g} s, "
               f"m = {m}, v_max = {result.model.v_max:g} V; the last {holdout:.0%} of each "
               f"record held out; {result.elapsed_s:.1f} s."]
     files = write_outputs(result, args.out, records=records, header=header)
+    if result.undetermined:
+        first = result.undetermined[0]
+        more = (f" (and {len(result.undetermined) - 1} more)" if len(result.undetermined) > 1
+                else "")
+        raise UndeterminedModelError(
+            f"the records do not determine {first.text()}{more}; no parameter file written, "
+            f"see {files[1]}")
     if stream is not None:
         stream.write(format_report(result, header=header) + "\n\n")
         stream.write(f"Wrote {files[0]} (parameters, for --plant-params, --controller-params and "
