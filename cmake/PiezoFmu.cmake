@@ -104,7 +104,7 @@ endfunction()
 
 # Reference results of the FMU (FMI-LS-REF): stimuli, parameters, reference outputs, the
 # experiments file and the manifest, computed on the C core (not through the FMU) by
-# packaging/reference_results.py into OUT_DIR; STAMP_VAR receives the file to depend on.
+# harness/fmu_references.py into OUT_DIR; STAMP_VAR receives the file to depend on.
 function(piezo_fmu_reference_results id)
   cmake_parse_arguments(ARG "" "MODEL_DESCRIPTION;OUT_DIR;STAMP_VAR" "" ${ARGN})
   set(stamp "${ARG_OUT_DIR}.stamp")
@@ -114,11 +114,11 @@ function(piezo_fmu_reference_results id)
     OUTPUT "${stamp}"
     COMMAND "${CMAKE_COMMAND}" -E env
             "PIEZO_CORE_LIB=$<TARGET_FILE:piezo_core>" "PIEZO_CORE_INCLUDE=${CORE_DIR}"
-            "${PIEZO_PYTHON}" "${PIEZO_PACKAGING_DIR}/reference_results.py"
+            "${PIEZO_PYTHON}" -m harness.fmu_references
             --model "${id}" --model-description "${ARG_MODEL_DESCRIPTION}"
             --out "${ARG_OUT_DIR}" --stamp "${stamp}"
     WORKING_DIRECTORY "${CMAKE_SOURCE_DIR}"
-    DEPENDS piezo_core "${ARG_MODEL_DESCRIPTION}" "${PIEZO_PACKAGING_DIR}/reference_results.py"
+    DEPENDS piezo_core "${ARG_MODEL_DESCRIPTION}" "${CMAKE_SOURCE_DIR}/harness/fmu_references.py"
             ${harness_sources}
     COMMENT "Reference results of ${id}"
     VERBATIM)
@@ -166,7 +166,7 @@ function(piezo_fmu_package)
     DEPENDS ${ARG_BINARY_DEPENDS} ${binary_files} "${ARG_MODEL_DESCRIPTION}"
             ${ARG_SOURCES} ${ARG_HEADERS} "${ARG_ICON}" "${ARG_DOCUMENTATION}"
             "${CMAKE_SOURCE_DIR}/LICENSE" ${ARG_EXTRA_STAMP} "${date_file}" piezo_commit_date
-            "${PIEZO_PACKAGING_DIR}/assemble_fmu.py" "${PIEZO_PACKAGING_DIR}/fmu_documentation.py"
+            "${PIEZO_PACKAGING_DIR}/assemble_fmu.py" "${CMAKE_SOURCE_DIR}/harness/fmu_documentation.py"
             "${CMAKE_SOURCE_DIR}/harness/ssp.py"
     COMMENT "Packaging ${ARG_ID}.fmu (FMI ${ARG_FMI_VERSION})"
     VERBATIM)

@@ -13,8 +13,10 @@
 
     python -m harness identify --pi-data LOW.csv --tf-data MIXED.csv --creep-data A.csv [B.csv ...]
                                [--out params.json] [--sample-period S] [--operators M]
-                               [--v-max V] [--delay N] [--holdout F]
+                               [--v-max V] [--delay N] [--holdout F] [--max-evaluations N]
     python -m harness identify --demo [--duration S] [--noise-free] [--seed N] [--out DIR]
+    python -m harness identify --family N [--record-set standard|two|six] [--duration S]
+                               [--noise-free] [--seed N]
     python -m harness identify --internal-channels [--noise-rms UM] [--seed N] [--free-w0]
                                [--displacement-only]
     python -m harness export --params FILE [--out DIR] [--fmu-dir DIR]
@@ -76,12 +78,22 @@ def add_identify_arguments(parser):
     d.add_argument("--demo", action="store_true",
                    help="records of the PiezoStage FMU with known parameters, identified like "
                         "user data")
+    d.add_argument("--family", type=int, metavar="N",
+                   help="validate the identification on N stages drawn at random from around "
+                        "the paper's parameter ranges (recorded on the C core, identified from "
+                        "v and y) and print the distribution of the errors and times")
+    d.add_argument("--record-set", choices=("standard", "two", "six"),
+                   help="--family: the records of each stage: standard (1 Hz, 5/40/80 Hz, "
+                        "10 Hz), two (1 Hz, 5/40/80 Hz) or six (the paper's six validation "
+                        "inputs); default standard")
     d.add_argument("--duration", type=float, metavar="S",
-                   help="--demo: length of each record [s] (default 10)")
+                   help="--demo, --family: length of each record [s] (default 10)")
     d.add_argument("--noise-free", action="store_true",
-                   help="--demo: no sensor noise or quantisation (default: 2 nm, 1 nm rms)")
+                   help="--demo, --family: no sensor noise or quantisation (default: 2 nm, "
+                        "1 nm rms)")
     d.add_argument("--seed", type=int, metavar="N",
-                   help="--demo, --internal-channels: base seed of the noise (default 1)")
+                   help="--demo, --internal-channels: base seed of the noise (default 1); "
+                        "--family: seed of the stages (default 2026)")
     i = parser.add_argument_group("each step alone on the model's internal channels")
     i.add_argument("--internal-channels", action="store_true",
                    help="check each step alone on the PiezoStage model's internal outputs u and "
@@ -123,11 +135,13 @@ def _given(args, attr):
 def check_identify_arguments(args):
     """A one-line error about the combination of ``identify``'s options, or None."""
     data = [flag for attr, flag in _DATA if _given(args, attr)]
+    family = getattr(args, "family", None) is not None
     modes = [m for m, on in (("records", bool(data)), ("--demo", args.demo),
-                             ("--internal-channels", args.internal_channels)) if on]
+                             ("--internal-channels", args.internal_channels),
+                             ("--family", family)) if on]
     if len(modes) > 1:
-        return f"identify takes one of: the records, --demo, --internal-channels (got " \
-               f"{' and '.join(modes)})"
+        return f"identify takes one of: the records, --demo, --internal-channels, --family " \
+               f"(got {' and '.join(modes)})"
     if not modes:
         return ("identify needs the records: --pi-data LOW.csv --tf-data MIXED.csv "
                 "--creep-data A.csv [B.csv ...] (or --demo for the virtual experiment)")
@@ -138,12 +152,21 @@ def check_identify_arguments(args):
         for attr, flag in _INTERNAL:
             if _given(args, attr):
                 return f"{flag} is only used by 'identify --internal-channels'"
-    if not args.demo:
+    if not family and _given(args, "record_set"):
+        return "--record-set is only used by 'identify --family'"
+    if family and args.family < 1:
+        return f"--family must be >= 1 stage, got {args.family}"
+    if family:
+        for attr, flag in _FIT[:5]:
+            if _given(args, attr):
+                return f"{flag} is not used by 'identify --family' (the drawn stages fix it)"
+    if not args.demo and not family:
         for attr, flag in _DEMO:
             if _given(args, attr):
-                return f"{flag} is only used by 'identify --demo'"
+                return f"{flag} is only used by 'identify --demo' and 'identify --family'"
         if data and _given(args, "seed"):
-            return "--seed is only used by 'identify --demo' and 'identify --internal-channels'"
+            return ("--seed is only used by 'identify --demo', 'identify --family' and "
+                    "'identify --internal-channels'")
     if args.internal_channels:
         for attr, flag in _FIT:
             if _given(args, attr):
@@ -193,6 +216,8 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
                                       fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
                                       displacement_only=args.displacement_only)
             return 0
+        if getattr(args, "family", None) is not None:
+            return _identify_family(args, stream, say)
         if args.demo:
             from .demo import run_demo
 
@@ -207,6 +232,24 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
         return _identify_records(args, holdout, max_evaluations, stream, say)
     except IdentificationFitError as exc:
         raise RunCheckError(str(exc)) from None
+
+
+def _identify_family(args, stream, say):
+    """``identify --family N``: the distribution of the errors over N drawn stages."""
+    from .family import validate_family
+
+    family = validate_family(args.family, seed=2026 if args.seed is None else args.seed,
+                             record_set=args.record_set or "standard",
+                             duration=10.0 if args.duration is None else args.duration,
+                             noise=not args.noise_free, progress=say)
+    if stream is not None:
+        stream.write(family.format() + "\n")
+        stream.flush()
+    bad = [st for st in family.stages if st.undetermined]
+    if bad:
+        raise RunCheckError(f"stage {bad[0].index + 1} of the family: the identification left "
+                            f"{', '.join(bad[0].undetermined)} undetermined")
+    return 0
 
 
 def _progress_lines(stream):

@@ -19,7 +19,8 @@ identifies the model from ``v`` and ``y`` in four stages:
    squares with ``w >= 0``) for every value of the four parameters that do
    not (the slow pole, the fast pole, the zero and ``alpha``), which are
    searched from several starts (:data:`harness.identify.varpro.DEFAULT_STARTS`
-   and the stepwise result) until two agree on the lowest sum of squares.
+   and the stepwise result): at least three, until two have ended at the lowest
+   sum of squares found.
 3. **Joint refinement**: every parameter at once (``G`` in its general form,
    complex poles allowed), by nonlinear least squares
    (:func:`scipy.optimize.least_squares`, trust region reflective, analytic
@@ -89,7 +90,7 @@ from .model import (
 )
 from .steps import identify_transfer_function
 from .varpro import (DEFAULT_STARTS, FTOL as _FTOL, START_FAST_POLE, START_RHO, ReducedProblem,
-                     Theta, fit_multistart, theta_from_g)
+                     Theta, _triangular, fit_multistart, theta_from_g)
 
 __all__ = [
     "DEFAULT_HOLDOUT",
@@ -372,8 +373,9 @@ class IdentificationResult:
     stepwise : CoupledModel or None
         The stepwise result, normalised (one start of the search); None when a
         step gave no usable model (e.g. an unstable ``G``, see the step's note).
-    hammerstein : CoupledModel
-        The Hammerstein model (no creep) refined on the same data, normalised.
+    hammerstein : CoupledModel or None
+        The Hammerstein model (no creep) refined on the same data, normalised
+        (None when not asked for).
     steps : tuple of StepFit
         Step 1, step 2, step 3 (one per creep record), the joint refinement
         and the Hammerstein refinement, in that order.
@@ -495,7 +497,8 @@ def _step_pi(rec):
     from scipy.optimize import nnls
 
     phi = rec.design[:rec.n_fit]
-    w, _ = nnls(phi, rec.y_fit, maxiter=50 * phi.shape[1])
+    r, qty = _triangular(phi, rec.y_fit)     # the same minimiser, on an m x m system
+    w, _ = nnls(r, qty, maxiter=50 * phi.shape[1])
     resid = phi @ w - rec.y_fit
     se, _ = _std_errors(phi, resid, phi.shape[1])
     e_rms, e_r = _metrics(rec.y_fit, phi @ w)
@@ -775,7 +778,7 @@ def _label_set(pi_record, tf_record, creep_records):
 
 def fit_coupled_model(pi_record, tf_record, creep_records, *, h=0.0005, m=9, v_max=None,
                       delay=0, holdout=DEFAULT_HOLDOUT, max_evaluations=DEFAULT_MAX_EVALUATIONS,
-                      progress=None):
+                      progress=None, hammerstein=True):
     """Identify the coupled model from measured ``v`` and ``y``: stepwise, then jointly.
 
     Parameters
@@ -804,6 +807,9 @@ def fit_coupled_model(pi_record, tf_record, creep_records, *, h=0.0005, m=9, v_m
         refinement); a guard, the search stops by a rule relative to the data.
     progress : callable, optional
         Called with one line of text per start and stage.
+    hammerstein : bool
+        Also fit the Hammerstein model (no creep) for paper Tables 2-3 (the
+        result's ``hammerstein`` is None without it).
 
     Returns
     -------
@@ -887,12 +893,16 @@ def fit_coupled_model(pi_record, tf_record, creep_records, *, h=0.0005, m=9, v_m
     undetermined = undetermined_parameters(coupled, search.best, v_max)
 
     # the Hammerstein model (no creep) on the same data, for paper Tables 2-3
-    plain = ReducedProblem(designs, ys, n_fits, h, delay, creep=False)
-    hsearch = fit_multistart(plain, _starts(stepwise, creep=False),
-                             max_evaluations=max_evaluations, progress=say, label="Hammerstein")
-    _check_converged(hsearch, max_evaluations, "Hammerstein model")
-    hammer0 = _model_of(hsearch.best, v_max, h, delay, creep=False)
-    hammerstein, hfit, _, _ = _refine(records, hammer0, False, m, h, delay, max_evaluations)
+    hammer, hfits = None, ()
+    if hammerstein:
+        plain = ReducedProblem(designs, ys, n_fits, h, delay, creep=False)
+        hsearch = fit_multistart(plain, _starts(stepwise, creep=False),
+                                 max_evaluations=max_evaluations, progress=say,
+                                 label="Hammerstein")
+        _check_converged(hsearch, max_evaluations, "Hammerstein model")
+        hammer0 = _model_of(hsearch.best, v_max, h, delay, creep=False)
+        hammer, hfit, _, _ = _refine(records, hammer0, False, m, h, delay, max_evaluations)
+        hfits = (hfit,)
 
     # paper Table 1: one creep row per creep record, with the joint PI and G
     rows = []
@@ -908,15 +918,17 @@ def fit_coupled_model(pi_record, tf_record, creep_records, *, h=0.0005, m=9, v_m
         for rec in records:
             k = rec.n_fit
             y = rec.y[k:]
-            yh = hammerstein._output(rec.design @ _design_weights(hammerstein))[k:]
             yc = model._output(rec.design @ w_joint)[k:]
-            (eh, rh), (ec, rc) = _metrics(y, yh), _metrics(y, yc)
+            ec, rc = _metrics(y, yc)
+            eh = rh = math.nan
+            if hammer is not None:
+                eh, rh = _metrics(y, hammer._output(rec.design @ _design_weights(hammer))[k:])
             held.append(HeldOutFit(rec.label, eh, rh, ec, rc, int(y.size)))
 
     estimates = tuple(_ordered(joint.parameters, _derived(model, cov, m)))
     return IdentificationResult(
-        model=model, stepwise=stepwise, hammerstein=hammerstein,
-        steps=(step1, step2, *step3, joint, hfit), creep_rows=tuple(rows), held_out=tuple(held),
+        model=model, stepwise=stepwise, hammerstein=hammer,
+        steps=(step1, step2, *step3, joint, *hfits), creep_rows=tuple(rows), held_out=tuple(held),
         holdout=holdout, joint=estimates, search=search, undetermined=tuple(undetermined),
         elapsed_s=_time.perf_counter() - t_start)
 

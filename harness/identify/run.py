@@ -138,18 +138,29 @@ def _search_dict(search):
                        for f in search.fits]}
 
 
+def _record_dict(record):
+    """A record's file, length and SHA-256 (what the identification was made from)."""
+    from .export import sha256_of
+
+    d = {"path": str(record.path), "samples": record.n_samples}
+    if Path(record.path).is_file():
+        d["sha256"] = sha256_of(record.path)
+    return d
+
+
 def result_to_dict(result, records=(), truth=None, floors=None):
     """Everything of an identification as JSON-ready data."""
     d = {
         "normalisation": NORMALISATION_NOTE,
         "holdout": result.holdout,
-        "records": {r.label: {"path": str(r.path), "samples": r.n_samples} for r in records},
+        "records": {r.label: _record_dict(r) for r in records},
         "parameters": result.model.plant_params(),
         "joint": {p.name: {"value": _num(p.value), "std_error": _num(p.std_error)}
                   for p in result.joint},
         "stepwise_parameters": (None if result.stepwise is None
                                 else result.stepwise.plant_params()),
-        "hammerstein_parameters": result.hammerstein.plant_params(),
+        "hammerstein_parameters": (None if result.hammerstein is None
+                                   else result.hammerstein.plant_params()),
         "fits": [_fit_dict(s) for s in result.steps],
         "creep_rows": [_fit_dict(s) for s in result.creep_rows],
         "held_out": [{"record": h.label, "samples": h.n_samples,

@@ -34,9 +34,10 @@ count of evaluations (``max_evaluations`` only guards against a search that
 never settles).
 
 Starts: the search is local, and a slow pole that runs towards 1 can mimic creep
-(a local minimum).  :func:`fit_multistart` runs several starts and keeps the
-lowest sum of squares; once two starts agree on the minimum, the rest are
-skipped.  Real poles only: the joint refinement in :mod:`harness.identify.fit`
+(a local minimum), and a start on one side of the creep order can share one
+with its neighbours.  :func:`fit_multistart` runs at least three starts (the
+middle of Table 1's orders and both sides of it) and keeps the lowest sum of
+squares; once two have ended there, the rest are skipped.  Real poles only: the joint refinement in :mod:`harness.identify.fit`
 then polishes the general ``G`` (complex poles allowed) from the result.
 """
 
@@ -48,13 +49,19 @@ import time as _time
 
 import numpy as np
 
-__all__ = ["FTOL", "DEFAULT_STARTS", "Theta", "LocalFit", "MultiStartFit", "ReducedProblem",
+__all__ = ["FTOL", "DEFAULT_STARTS", "MIN_STARTS", "AGREE", "Theta", "LocalFit", "MultiStartFit", "ReducedProblem",
            "fit_multistart", "theta_from_g"]
 
 #: Relative decrease of the sum of squares below which an iteration ends the search.
 FTOL = 1e-10
-#: Starts (slow pole, creep order): on both sides of the usual slow pole and order.
-DEFAULT_STARTS = ((0.985, 0.01), (0.995, 0.01), (0.985, -0.01), (0.995, -0.01))
+#: Starts (slow pole, creep order), in the order they run: the middle of Table 1's orders,
+#: then both sides of it, then farther out.
+DEFAULT_STARTS = ((0.99, 0.0), (0.985, 0.01), (0.995, -0.01), (0.985, -0.01), (0.995, 0.01),
+                  (0.99, 0.02), (0.99, -0.02))
+#: Fewest starts that run, and how many of them must end at the lowest minimum before the
+#: rest are skipped.
+MIN_STARTS = 3
+AGREE = 2
 #: Start of the fast pole and of the zero's offset from the slow pole.
 START_FAST_POLE = 0.45
 START_RHO = 0.0
@@ -418,9 +425,13 @@ def _same_minimum(a, b):
     return abs(a.rms - b.rms) <= SAME_RMS * max(a.rms, b.rms)
 
 
-def fit_multistart(problem, starts, *, max_evaluations=400, agree=2, progress=None,
-                   label="search"):
+def fit_multistart(problem, starts, *, max_evaluations=400, agree=AGREE,
+                   min_starts=MIN_STARTS, progress=None, label="search"):
     """Run local searches from ``starts`` until ``agree`` of them end at the best minimum.
+
+    At least ``min_starts`` run (starts on both sides of the usual creep order: a single
+    side can share a local minimum); then the search stops as soon as ``agree`` runs
+    ended at the lowest sum of squares found.
 
     Parameters
     ----------
@@ -430,6 +441,8 @@ def fit_multistart(problem, starts, *, max_evaluations=400, agree=2, progress=No
         Most evaluations of one local search.
     agree : int
         Stop early once this many starts ended at the same lowest sum of squares.
+    min_starts : int
+        Starts that always run (all of them if fewer are given).
     progress : callable, optional
         Called with one line of text after each start.
     label : str
@@ -451,7 +464,7 @@ def fit_multistart(problem, starts, *, max_evaluations=400, agree=2, progress=No
             progress(f"{label}: start {i}/{len(starts)} (slow pole {start.slow_pole:.4g}, "
                      f"alpha {start.alpha:+.3g}) -> rms {fit.rms * 1e3:.4g} nm, {state}, "
                      f"{fit.evaluations} evaluations, {fit.elapsed_s:.1f} s")
-        if same >= agree and best.converged:
+        if i >= min_starts and same >= agree and best.converged:
             break
     best = min(fits, key=lambda f: f.cost)
     same = sum(_same_minimum(f, best) for f in fits)
