@@ -181,7 +181,7 @@ def check_identify_arguments(args):
         ("v_max", lambda x: math.isfinite(x) and x > 0, "a finite number > 0 (V)"),
         ("delay", lambda x: 0 <= x <= 8, "in 0..8 samples"),
         ("holdout", lambda x: 0 <= x <= 0.9, "in [0, 0.9]"),
-        ("max_evaluations", lambda x: x >= 10, ">= 10"),
+        ("max_evaluations", lambda x: x >= 1, ">= 1"),
         ("duration", lambda x: math.isfinite(x) and x > 0, "a finite number > 0 (s)"),
         ("noise_rms", lambda x: math.isfinite(x) and x >= 0, "a finite number >= 0 (µm)"),
         ("seed", lambda x: x >= 0, ">= 0"),

@@ -843,8 +843,8 @@ def fit_coupled_model(pi_record, tf_record, creep_records, *, h=0.0005, m=9, v_m
     if not 0.0 <= holdout <= 0.9:
         raise ValueError(f"holdout must be in [0, 0.9], got {holdout!r}")
     max_evaluations = int(max_evaluations)
-    if max_evaluations < 10:
-        raise ValueError(f"max_evaluations must be >= 10, got {max_evaluations}")
+    if max_evaluations < 1:
+        raise ValueError(f"max_evaluations must be >= 1, got {max_evaluations}")
     if v_max is None:
         v_max = float(np.max(np.abs(_finite(f"{pi_record.label}: v", pi_record.v))))
     v_max = float(v_max)
