@@ -1,15 +1,18 @@
 """Assemble an FMU from its parts, reproducibly (called by the build, cmake/PiezoFmu.cmake).
 
-``python packaging/assemble_fmu.py commit-date --repo DIR --out FILE``
+``python packaging/assemble_fmu.py commit-date --repo DIR --out FILE [--source-out FILE]``
     Writes the date the FMUs are stamped with (seconds since 1970, UTC): the
     ``SOURCE_DATE_EPOCH`` environment variable, else the date of the checked-out commit,
-    else the newest modification time of the model descriptions and C sources. The file
-    is rewritten only when the date changes.
+    else the newest modification time of the model descriptions and C sources. With
+    ``--source-out``, also the source they are built from: the commit and whether the
+    tracked files had uncommitted changes (``harness/_source.py``). Each file is rewritten
+    only when it changes.
 
 ``python packaging/assemble_fmu.py assemble --id ID --fmi-version 2.0 ...``
     Lays out the FMU in ``--stage`` and zips it to ``--out``:
 
-    * ``modelDescription.xml``: the source XML with ``version``, ``generationTool`` and
+    * ``modelDescription.xml``: the source XML with ``version``, ``generationTool`` (the
+      project, its version and the commit, from ``--source-file``) and
       ``generationDateAndTime`` (the commit date) set;
     * ``model.png``: the icon;
     * ``binaries/<platform>/<id>.<so|dll>``: one per ``--binary PLATFORM=FILE``;
@@ -37,7 +40,7 @@ import sys
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-if str(REPO) not in sys.path:          # harness.fmu_documentation
+if str(REPO) not in sys.path:          # harness: fmu_documentation, fmu_archive, _source
     sys.path.insert(0, str(REPO))
 
 TOOL = "piezo_fmus"
@@ -89,14 +92,26 @@ def _set_attribute(tag, name, value):
     return re.sub(r"\s*(/?>)$", lambda m: f'\n{indent}{name}="{value}"{m.group(1)}', tag, count=1)
 
 
-def stamp_model_description(text, version, epoch):
-    """The model description with ``version``, ``generationTool`` and
-    ``generationDateAndTime`` set; the rest of the text unchanged."""
+def generation_tool(version, source=None):
+    """``generationTool``: the project, its version and the source it was built from, e.g.
+    ``piezo_fmus 1.0.0, commit 0123...cdef`` (``... with uncommitted changes`` when the
+    tracked files differed from the commit; no commit outside a git checkout)."""
+    from harness._source import describe
+
+    if not source or not source.get("commit"):
+        return f"{TOOL} {version}, not built from a git checkout"
+    return f"{TOOL} {version}, commit {describe(source)}"
+
+
+def stamp_model_description(text, version, epoch, source=None):
+    """The model description with ``version``, ``generationTool`` (see
+    :func:`generation_tool`) and ``generationDateAndTime`` set; the rest of the text
+    unchanged."""
     match = _ROOT_TAG.search(text)
     if not match:
         raise ValueError("no <fmiModelDescription> element")
     tag = match.group(0)
-    for name, value in (("version", version), ("generationTool", f"{TOOL} {version}"),
+    for name, value in (("version", version), ("generationTool", generation_tool(version, source)),
                         ("generationDateAndTime", iso_date(epoch))):
         tag = _set_attribute(tag, name, value)
     return text[:match.start()] + tag + text[match.end():]
@@ -188,8 +203,11 @@ def assemble(args):
         shutil.rmtree(stage)
     stage.mkdir(parents=True)
 
+    from harness._source import git_source, read_source
+
+    source = read_source(args.source_file) if args.source_file else git_source(Path.cwd())
     xml = stamp_model_description(Path(args.model_description).read_text(encoding="utf-8"),
-                                  args.version, epoch)
+                                  args.version, epoch, source)
     (stage / "modelDescription.xml").write_text(xml, encoding="utf-8", newline="\n")
     _copy(args.icon, stage / "model.png")
 
@@ -245,6 +263,10 @@ def write_commit_date(args):
     if not out.is_file() or out.read_text() != text:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(text)
+    if args.source_out:
+        from harness._source import write_source
+
+        write_source(args.repo, args.source_out)
 
 
 def main(argv=None):
@@ -253,12 +275,15 @@ def main(argv=None):
     d = sub.add_parser("commit-date", help="write the build date (seconds since 1970)")
     d.add_argument("--repo", required=True)
     d.add_argument("--out", required=True)
+    d.add_argument("--source-out", help="also write the source record (commit, uncommitted changes)")
     a = sub.add_parser("assemble", help="lay out and zip one FMU")
     a.add_argument("--id", required=True)
     a.add_argument("--fmi-version", required=True, choices=("2.0", "3.0"))
     a.add_argument("--model-description", required=True)
     a.add_argument("--version", required=True)
     a.add_argument("--date-file")
+    a.add_argument("--source-file", help="the source record of commit-date --source-out "
+                                         "(default: ask git in the current folder)")
     a.add_argument("--binary", action="append", default=[], metavar="PLATFORM=FILE")
     a.add_argument("--sources", nargs="+", required=True)
     a.add_argument("--headers", nargs="*", default=[])

@@ -334,6 +334,7 @@ def apply_param_files(args, registry, progress=sys.stderr):
         else:
             controller, target, model = c, c, CONTROLLER_MODEL
         if progress is not None:
-            progress.write(f"{flag} {path}: {len(target)} parameters applied to the {model} of "
-                           f"every scenario\n")
+            n = len(target)
+            progress.write(f"{flag} {path}: {n} parameter{'' if n == 1 else 's'} applied to the "
+                           f"{model} of every scenario\n")
     return override_scenarios(registry, plant, controller)

@@ -64,6 +64,8 @@ typedef struct {
     int causality;              /* VAR_PARAMETER, VAR_INPUT, VAR_OUTPUT, VAR_INDEPENDENT */
     int n;                      /* values: 1 for a scalar, the size of an array */
     double start[HOST3_MAX_ELEMENTS];   /* parameters and inputs, per element */
+    int has_min, has_max;       /* the declared range, where the model description has one */
+    double min, max;
 } host3_var;
 
 typedef struct {
@@ -213,6 +215,10 @@ static inline int host3_read_model_description(host3_fmu *f, const char *xml_pat
                 }
             }
         }
+        if ((v->has_min = xml_tag_attribute(next, "min", value, sizeof value)) != 0)
+            v->min = atof(value);
+        if ((v->has_max = xml_tag_attribute(next, "max", value, sizeof value)) != 0)
+            v->max = atof(value);
         f->n_vars++;
         p = close != NULL ? close : next + 1;
     }

@@ -29,6 +29,14 @@
  *              finite; a refused step leaves the outputs as they were
  *   free       fmi3FreeInstance in every state, with and without FMU states
  *              still allocated: the bytes in use are back where they were
+ *   edges      the standard at its edges (issue 23): a step size of 0 or below
+ *              refused, a positive one that rounds to no sample a no-op; a huge
+ *              step refused at once, naming the bound of one doStep's work
+ *              (samples, and the terms of the exact creep sum); nValues that
+ *              does not match no value reference, in every getter and setter;
+ *              an input beyond its declared range clamped with one warning and
+ *              a count at fmi3Terminate; fmi3FreeFMUState(c, NULL) ignored; the
+ *              monitor's warning with monitor.divergence_samples = 0
  *
  * The FMU allocates with calloc/free (FMI 3.0 has no memory callbacks): the
  * "nothing allocated/everything freed" oracle is the C library's count of bytes
@@ -43,6 +51,8 @@
 
 #include <float.h>
 #include <limits.h>
+#include <signal.h>
+#include <unistd.h>
 
 #define MAX_FMUS 4
 static host3_fmu fmus[MAX_FMUS];
@@ -698,7 +708,6 @@ static void null_arguments(const host3_fmu *f)
     NULL_REFUSED(f->api.SetClock(in.c, &vr, 1, NULL));
     NULL_REFUSED(f->api.GetFMUState(in.c, NULL));
     NULL_REFUSED(f->api.SetFMUState(in.c, NULL));
-    NULL_REFUSED(f->api.FreeFMUState(in.c, NULL));
     NULL_REFUSED(f->api.SerializedFMUStateSize(in.c, NULL, &size));
     NULL_REFUSED(f->api.SerializedFMUStateSize(in.c, state, NULL));
     NULL_REFUSED(f->api.SerializeFMUState(in.c, NULL, buf, sizeof buf));
@@ -1215,7 +1224,7 @@ static void extreme_values(const host3_fmu *f)
     {
         const double h = f->h, nan_value = NAN, inf = INFINITY;
         struct { double t, H; int ok; } steps[] = {
-            {0, 0.0, 1}, {0, -0.0, 1}, {0, DBL_MIN, 1}, {0, 4.9406564584124654e-324, 1}, {0, 1e-12 * 0.0005, 1},
+            {0, 0.0, 0}, {0, -0.0, 0}, {0, DBL_MIN, 1}, {0, 4.9406564584124654e-324, 1}, {0, 1e-12 * 0.0005, 1},
             {0, DBL_MAX, 0}, {0, 1e308, 0}, {0, -DBL_MIN, 0}, {0, -1.0, 0}, {0, -DBL_MAX, 0},
             {0, 0.5, 0}, {0, 1.5, 0}, {0, 1e16, 0}, {0, nan_value, 0}, {0, inf, 0}, {0, -inf, 0},
             {1, 1.0, 0}, {-1, 1.0, 0}, {DBL_MAX, 1.0, 0}, {-DBL_MAX, 1.0, 0}, {nan_value, 1.0, 0},
@@ -1338,6 +1347,363 @@ static void free_in_every_state(const host3_fmu *f)
     group_end("free", f->id);
 }
 
+/* ------------------------------------------------------------------------ */
+/* the standard at its edges (issue 23)                                      */
+
+/* A refusal does no work, so it returns at once: a doStep still running after
+ * a minute (a huge step computed instead of refused) ends the host with FAIL. */
+static void on_hang(int sig)
+{
+    static const char text[] = "FAIL a doStep did not return within 60 s: a huge step was computed, not refused\n";
+    (void)sig;
+    if (write(STDOUT_FILENO, text, sizeof text - 1) < 0)
+        _exit(1);
+    _exit(1);
+}
+
+/* One doStep from the instance's time; *last: lastSuccessfulTime. */
+static fmi3Status step_within_a_minute(inst_t *in, double H, double *last)
+{
+    fmi3Boolean event = fmi3False, terminate = fmi3False, early = fmi3False;
+    fmi3Status st;
+    signal(SIGALRM, on_hang);
+    alarm(60);
+    st = in->f->api.DoStep(in->c, in->k * in->f->h, H, fmi3True, &event, &terminate, &early, last);
+    alarm(0);
+    return st;
+}
+
+/* The unsigned integer after `key` in text, or 0. */
+static unsigned long long number_after(const char *text, const char *key)
+{
+    const char *p = strstr(text, key);
+    return p != NULL ? strtoull(p + strlen(key), NULL, 10) : 0;
+}
+
+/* Terms the exact creep sum adds up over n samples when the first sums a
+ * (sample k sums its k + 1 past inputs): a + (a + 1) + ... + (a + n - 1). */
+static double creep_terms(double n, double a)
+{
+    return n * a + n * (n - 1.0) / 2.0;
+}
+
+/* A step size of 0 or below is refused (FMI 3.0: communicationStepSize > 0);
+ * a positive one below 1e-9 h rounds to no sample and is a no-op. */
+static void edge_zero_step(const host3_fmu *f)
+{
+    const double refused[] = {0.0, -0.0, -1e-20, -5.6e-17, -f->h};
+    const double no_ops[] = {1e-20, 5.6e-17, 1e-10 * f->h};
+    inst_t in;
+    unsigned char *before;
+    size_t before_size, i;
+    double t = -1.0;
+    if (!case_check(enter_state(f, &in, S_STEP), "%s: reach StepMode", f->id))
+        return;
+    before = host3_snapshot(f, in.c, &before_size);
+    for (i = 0; i < sizeof refused / sizeof refused[0]; i++) {
+        fmi3Status st;
+        host_log_clear(&in.log);
+        st = step_within_a_minute(&in, refused[i], &t);
+        case_check(st == fmi3Error && strstr(in.log.last_error, "communicationStepSize") != NULL
+                       && strstr(in.log.last_error, "> 0") != NULL && t == in.k * f->h
+                       && host3_same_state(f, in.c, before, before_size),
+                   "%s: fmi3DoStep(H = %g) is refused: the step size must be > 0, nothing changed (%s)", f->id,
+                   refused[i], in.log.last_error);
+    }
+    for (i = 0; i < sizeof no_ops / sizeof no_ops[0]; i++) {
+        fmi3Status st;
+        host_log_clear(&in.log);
+        st = step_within_a_minute(&in, no_ops[i], &t);
+        case_check(st == fmi3OK && in.log.n_errors == 0 && t == in.k * f->h
+                       && host3_same_state(f, in.c, before, before_size),
+                   "%s: fmi3DoStep(H = %g) rounds to no sample: a no-op returning fmi3OK (%s)", f->id, no_ops[i],
+                   in.log.last_error);
+    }
+    free(before);
+    leave(&in);
+}
+
+/* A step of more samples than one doStep may compute is refused at once with
+ * the bound (no early return: documented); in exact creep mode (work O(k) a
+ * sample) the bound on the terms of the creep sum too, with the longest step
+ * that passes from here. */
+static void edge_huge_step(const host3_fmu *f)
+{
+    inst_t in;
+    unsigned char *before;
+    size_t before_size;
+    unsigned long long bound, terms_bound, longest;
+    fmi3Status st;
+    double t = -1.0, a;
+    if (!case_check(enter_state(f, &in, S_STEP), "%s: reach StepMode", f->id))
+        return;
+    before = host3_snapshot(f, in.c, &before_size);
+    host_log_clear(&in.log);
+    st = step_within_a_minute(&in, 1e9, &t);
+    bound = number_after(in.log.last_error, "computes at most ");
+    case_check(st == fmi3Error && bound > 0 && t == in.k * f->h && host3_same_state(f, in.c, before, before_size),
+               "%s: fmi3DoStep(H = 1e9 s) is refused at once, naming the bound of one doStep (%s)", f->id,
+               in.log.last_error);
+    /* the harness steps h, its longest experiments are minutes: they all pass */
+    case_check((double)bound * f->h >= 1000.0, "%s: the bound, %llu samples, is at least 1000 s of h = %g s", f->id,
+               bound, f->h);
+    host_log_clear(&in.log);
+    st = step_within_a_minute(&in, (double)(bound + 1) * f->h, &t);
+    case_check(st == fmi3Error && number_after(in.log.last_error, "computes at most ") == bound
+                   && host3_same_state(f, in.c, before, before_size),
+               "%s: fmi3DoStep of bound + 1 = %llu samples is refused (%s)", f->id, bound + 1, in.log.last_error);
+    host_log_clear(&in.log);
+    st = step_within_a_minute(&in, 1e300, &t);
+    case_check(st == fmi3Error && in.log.n_errors > 0 && host3_same_state(f, in.c, before, before_size),
+               "%s: fmi3DoStep(H = 1e300 s) is refused (%s)", f->id, in.log.last_error);
+    free(before);
+    leave(&in);
+
+    if (!host3_named(f, "creep.exact", (int[]){0}))
+        return;
+    /* exact creep: 2 samples done, the next sums a = 3 terms */
+    instantiate(f, &in, "exact");
+    f->api.EnterInitializationMode(in.c, fmi3False, 0.0, 0.0, fmi3False, 0.0);
+    host3_set_named(f, in.c, "creep.exact", 1.0);
+    if (!case_check(f->api.ExitInitializationMode(in.c) == fmi3OK && host3_step(f, in.c, 0.0, 2 * f->h) <= fmi3Warning,
+                    "%s: exact creep, 2 samples", f->id)) {
+        leave(&in);
+        return;
+    }
+    in.k = 2;
+    a = 3.0;
+    before = host3_snapshot(f, in.c, &before_size);
+    host_log_clear(&in.log);
+    st = step_within_a_minute(&in, (double)bound * f->h, &t);
+    terms_bound = number_after(in.log.last_error, "sums at most ");
+    longest = number_after(in.log.last_error, "a step of at most ");
+    case_check(st == fmi3Error && terms_bound > 0 && host3_same_state(f, in.c, before, before_size),
+               "%s: with creep.exact a step of %llu samples is refused at once, naming the bound on the terms of "
+               "the creep sum (%s)", f->id, bound, in.log.last_error);
+    /* reference: the closed form of the sum a + (a + 1) + ... */
+    case_check(longest >= 1 && creep_terms((double)longest, a) <= (double)terms_bound
+                   && creep_terms((double)longest + 1.0, a) > (double)terms_bound,
+               "%s: the longest step it names, %llu samples, is the longest whose creep sums stay within %llu terms",
+               f->id, longest, terms_bound);
+    host_log_clear(&in.log);
+    st = step_within_a_minute(&in, (double)(longest + 1) * f->h, &t);
+    case_check(st == fmi3Error && number_after(in.log.last_error, "sums at most ") == terms_bound
+                   && host3_same_state(f, in.c, before, before_size),
+               "%s: with creep.exact a step of %llu samples is refused (%s)", f->id, longest + 1, in.log.last_error);
+    free(before);
+    leave(&in);
+}
+
+/* nValues must equal the values the value references hold (FMI 3.0, 2.2.6.2):
+ * with no value reference that is 0, in every getter and setter. */
+static void edge_value_counts(const host3_fmu *f)
+{
+    inst_t in;
+    unsigned char *before;
+    size_t before_size;
+    if (!case_check(enter_state(f, &in, S_STEP), "%s: reach StepMode", f->id))
+        return;
+    before = host3_snapshot(f, in.c, &before_size);
+#define COUNT_CASE(call, text, expected, what)                                                                 \
+    do {                                                                                                 \
+        fmi3Status st_;                                                                                  \
+        host_log_clear(&in.log);                                                                         \
+        st_ = (call);                                                                                    \
+        case_check(st_ == (expected) && (st_ == fmi3OK ? in.log.n_errors == 0                            \
+                                                       : strstr(in.log.last_error, "nValues") != NULL)   \
+                       && host3_same_state(f, in.c, before, before_size),                                \
+                   "%s: %s: %s (%s)", f->id, text, what, in.log.last_error);                            \
+    } while (0)
+#define NO_VR_REFUSED(call) COUNT_CASE(call, #call, fmi3Error, "nValues = 1 without a value reference is refused")
+#define NO_VR_PASSES(call) COUNT_CASE(call, #call, fmi3OK, "nValues = 0 without a value reference: nothing to do")
+    NO_VR_REFUSED(f->api.GetFloat64(in.c, NULL, 0, scratch_real, 1));
+    NO_VR_REFUSED(f->api.GetInt32(in.c, NULL, 0, scratch_int, 1));
+    NO_VR_REFUSED(f->api.GetBoolean(in.c, NULL, 0, scratch_bool, 1));
+    NO_VR_REFUSED(f->api.GetFloat32(in.c, NULL, 0, (fmi3Float32 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.GetInt8(in.c, NULL, 0, (fmi3Int8 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.GetUInt8(in.c, NULL, 0, (fmi3UInt8 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.GetInt16(in.c, NULL, 0, (fmi3Int16 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.GetUInt16(in.c, NULL, 0, (fmi3UInt16 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.GetUInt32(in.c, NULL, 0, (fmi3UInt32 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.GetInt64(in.c, NULL, 0, (fmi3Int64 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.GetUInt64(in.c, NULL, 0, scratch_u64, 1));
+    NO_VR_REFUSED(f->api.GetString(in.c, NULL, 0, scratch_str, 1));
+    NO_VR_REFUSED(f->api.GetBinary(in.c, NULL, 0, scratch_size, scratch_bin, 1));
+    NO_VR_REFUSED(f->api.SetFloat64(in.c, NULL, 0, scratch_real, 1));
+    NO_VR_REFUSED(f->api.SetInt32(in.c, NULL, 0, scratch_int, 1));
+    NO_VR_REFUSED(f->api.SetBoolean(in.c, NULL, 0, scratch_bool, 1));
+    NO_VR_REFUSED(f->api.SetFloat32(in.c, NULL, 0, (const fmi3Float32 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.SetInt8(in.c, NULL, 0, (const fmi3Int8 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.SetUInt8(in.c, NULL, 0, (const fmi3UInt8 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.SetInt16(in.c, NULL, 0, (const fmi3Int16 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.SetUInt16(in.c, NULL, 0, (const fmi3UInt16 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.SetUInt32(in.c, NULL, 0, (const fmi3UInt32 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.SetInt64(in.c, NULL, 0, (const fmi3Int64 *)scratch_real, 1));
+    NO_VR_REFUSED(f->api.SetUInt64(in.c, NULL, 0, scratch_u64, 1));
+    NO_VR_REFUSED(f->api.SetString(in.c, NULL, 0, scratch_str, 1));
+    NO_VR_REFUSED(f->api.SetBinary(in.c, NULL, 0, scratch_size, scratch_bin, 1));
+    NO_VR_PASSES(f->api.GetFloat64(in.c, NULL, 0, NULL, 0));
+    NO_VR_PASSES(f->api.SetFloat64(in.c, NULL, 0, NULL, 0));
+    NO_VR_PASSES(f->api.GetFloat32(in.c, NULL, 0, NULL, 0));
+    NO_VR_PASSES(f->api.SetBinary(in.c, NULL, 0, NULL, NULL, 0));
+#undef NO_VR_REFUSED
+#undef NO_VR_PASSES
+#undef COUNT_CASE
+    free(before);
+    leave(&in);
+}
+
+/* One run of n single-sample steps with input v at `value` (set before
+ * initialization or after it): the outputs after each step, the statuses,
+ * the first warning, fmi3Terminate's status and message, v read back. */
+typedef struct {
+    double out[8][32];
+    int n_out;
+    fmi3Status status[8], terminate;
+    char first_warning[1024], terminate_message[1024];
+    double v_read;
+} ranged_run;
+
+static int run_with_input(const host3_fmu *f, const host3_var *v, double value, int before_init, int n, ranged_run *r)
+{
+    inst_t in;
+    int k;
+    memset(r, 0, sizeof *r);
+    if (instantiate(f, &in, "range") == NULL)
+        return 0;
+    if (before_init && f->api.SetFloat64(in.c, &v->vr, 1, &value, 1) != fmi3OK)
+        return leave(&in), 0;
+    if (f->api.EnterInitializationMode(in.c, fmi3False, 0.0, 0.0, fmi3False, 0.0) != fmi3OK
+        || f->api.ExitInitializationMode(in.c) != fmi3OK
+        || (!before_init && f->api.SetFloat64(in.c, &v->vr, 1, &value, 1) != fmi3OK))
+        return leave(&in), 0;
+    for (k = 0; k < n; k++) {
+        host_log_clear(&in.log);
+        r->status[k] = host3_step(f, in.c, k * f->h, f->h);
+        if (r->status[k] == fmi3Warning && r->first_warning[0] == '\0')
+            snprintf(r->first_warning, sizeof r->first_warning, "%s", in.log.last);
+        r->n_out = host3_real_outputs(f, in.c, r->out[k]);
+    }
+    f->api.GetFloat64(in.c, &v->vr, 1, &r->v_read, 1);
+    host_log_clear(&in.log);
+    r->terminate = f->api.Terminate(in.c);
+    snprintf(r->terminate_message, sizeof r->terminate_message, "%s", in.log.last);
+    leave(&in);
+    return r->n_out > 0;
+}
+
+/* An input beyond its declared [min, max] is clamped to it: the run equals the
+ * run at the bound (the reference), the first doStep that clamps returns
+ * fmi3Warning saying so, and fmi3Terminate reports the count. */
+static void edge_input_range(const host3_fmu *f)
+{
+    int i, c, k;
+    const int n = 5;
+    for (i = 0; i < f->n_vars; i++) {
+        const host3_var *v = &f->vars[i];
+        char range[96], count[160];
+        ranged_run at_bound, beyond;
+        struct { double value, bound; int before_init; } cases[] = {
+            {0, 0, 0}, {0, 0, 0}, {1e300, 0, 0}, {-1e300, 0, 0}, {DBL_MAX, 0, 0}, {0, 0, 1}};
+        if (v->causality != VAR_INPUT || v->type != VAR_REAL || !v->has_min || !v->has_max)
+            continue;
+        cases[0].value = v->max + 1.5;
+        cases[1].value = v->min - 1.5;
+        cases[5].value = v->max + 1.5;
+        for (c = 0; c < 6; c++)
+            cases[c].bound = cases[c].value > v->max ? v->max : v->min;
+        snprintf(range, sizeof range, "[%g, %g]", v->min, v->max);
+        snprintf(count, sizeof count, "clamped to its declared range %s V in %d of %d samples", range, n, n);
+        for (c = 0; c < 6; c++) {
+            int same = 1, quiet = 1;
+            const char *when = cases[c].before_init ? "set before initialization" : "set in StepMode";
+            if (!case_check(run_with_input(f, v, cases[c].bound, cases[c].before_init, n, &at_bound)
+                                && run_with_input(f, v, cases[c].value, cases[c].before_init, n, &beyond),
+                            "%s: runs with %s = %g and %g", f->id, v->name, cases[c].bound, cases[c].value))
+                continue;
+            for (k = 0; k < n; k++) {
+                same = same && memcmp(at_bound.out[k], beyond.out[k], (size_t)at_bound.n_out * sizeof(double)) == 0;
+                quiet = quiet && at_bound.status[k] == fmi3OK && (k == 0 || beyond.status[k] == fmi3OK);
+            }
+            case_check(same && beyond.n_out == at_bound.n_out,
+                       "%s: %s = %g (%s) gives the outputs of %s = %g at every sample", f->id, v->name,
+                       cases[c].value, when, v->name, cases[c].bound);
+            case_check(beyond.status[0] == fmi3Warning && strstr(beyond.first_warning, "clamped") != NULL
+                           && strstr(beyond.first_warning, range) != NULL && quiet,
+                       "%s: the first doStep with %s = %g warns once, naming the range %s; %s = %g warns never (%s)",
+                       f->id, v->name, cases[c].value, range, v->name, cases[c].bound, beyond.first_warning);
+            case_check(beyond.terminate == fmi3Warning && strstr(beyond.terminate_message, count) != NULL
+                           && at_bound.terminate == fmi3OK,
+                       "%s: fmi3Terminate reports the count: %s (%s)", f->id, count, beyond.terminate_message);
+            case_check(beyond.v_read == cases[c].value, "%s: %s reads back as set, %g", f->id, v->name,
+                       beyond.v_read);
+        }
+    }
+}
+
+/* fmi3FreeFMUState(c, NULL) is ignored (FMI 3.0: "If a NULL pointer is
+ * provided, the call is ignored"); the monitor's warning says what
+ * monitor.divergence_samples = 0 means (never unstable). */
+static void edge_small_ones(const host3_fmu *f)
+{
+    inst_t in;
+    unsigned char *before;
+    size_t before_size;
+    fmi3Status st;
+    int k, window;
+    if (!case_check(enter_state(f, &in, S_STEP), "%s: reach StepMode", f->id))
+        return;
+    before = host3_snapshot(f, in.c, &before_size);
+    host_log_clear(&in.log);
+    st = f->api.FreeFMUState(in.c, NULL);
+    case_check(st == fmi3OK && in.log.n_errors == 0 && host3_same_state(f, in.c, before, before_size),
+               "%s: fmi3FreeFMUState(c, NULL) is ignored: fmi3OK, nothing changed (%s)", f->id, in.log.last_error);
+    free(before);
+    leave(&in);
+
+    if (!host3_named(f, "monitor.divergence_samples", (int[]){0}))
+        return;
+    for (window = 0; window <= 1000; window += 1000) {
+        char warning[1024] = "", expected[96];
+        int failed = 0;
+        instantiate(f, &in, "monitor");
+        f->api.EnterInitializationMode(in.c, fmi3False, 0.0, 0.0, fmi3False, 0.0);
+        host3_set_named(f, in.c, "monitor.divergence_samples", window);
+        host3_set_named(f, in.c, "monitor.pred_error_max", 1e-3);
+        f->api.ExitInitializationMode(in.c);
+        host3_set_named(f, in.c, "y_meas", 5.0);    /* the model predicts 0: |pred_error| is far above 1e-3 um */
+        for (k = 0; k < 50; k++) {
+            host_log_clear(&in.log);
+            st = host3_step(f, in.c, k * f->h, f->h);
+            failed = failed || st == fmi3Error;
+            if (st == fmi3Warning && strstr(in.log.last, "pred_error") != NULL && warning[0] == '\0')
+                snprintf(warning, sizeof warning, "%s", in.log.last);
+        }
+        if (window == 0) {
+            case_check(!failed && strstr(warning, "never") != NULL && strstr(warning, "= 0 consecutive") == NULL,
+                       "%s: with monitor.divergence_samples = 0 the loop is never declared unstable, and the "
+                       "warning says so (%s)", f->id, warning);
+        } else {
+            snprintf(expected, sizeof expected, "monitor.divergence_samples = %d consecutive samples", window);
+            case_check(!failed && strstr(warning, expected) != NULL,
+                       "%s: with monitor.divergence_samples = %d the warning names the window (%s)", f->id, window,
+                       warning);
+        }
+        leave(&in);
+    }
+}
+
+static void edges(const host3_fmu *f)
+{
+    group_start();
+    edge_zero_step(f);
+    edge_value_counts(f);
+    edge_input_range(f);
+    edge_small_ones(f);
+    edge_huge_step(f);      /* last: before issue 23 it ran for hours */
+    group_end("edges", f->id);
+}
+
 /* stdout's buffer: static, so that printing allocates nothing on the heap whose use is compared */
 static char stdout_buffer[1 << 14];
 
@@ -1368,6 +1734,8 @@ int main(int argc, char **argv)
         for (j = 0; j < n_fmus; j++)
             if (i != j)
                 foreign(&fmus[i], &fmus[j]);
+    for (i = 0; i < n_fmus; i++)
+        edges(&fmus[i]);     /* last: before issue 23 its huge step ran for hours */
     case_check(host3_heap_back_to(heap), "every byte the FMUs allocated was freed (%ld bytes in use before, %ld "
                "after)", heap, host3_heap_in_use());
     for (i = 0; i < n_fmus; i++)

@@ -153,6 +153,8 @@ typedef struct {
     int type;                   /* VAR_REAL, VAR_INTEGER, VAR_BOOLEAN */
     int causality;              /* VAR_PARAMETER, VAR_INPUT, VAR_OUTPUT */
     double start;               /* parameters and inputs */
+    int has_min, has_max;       /* the declared range, where the model description has one */
+    double min, max;
 } host_var;
 
 #define HOST_MAX_VARS 128
@@ -242,6 +244,10 @@ static inline int host_read_model_description(host_fmu *f, const char *xml_path)
                 : strstr(p, "<Boolean") && strstr(p, "<Boolean") < close ? VAR_BOOLEAN : VAR_REAL;
         if (xml_attribute(p, close, "start", value, sizeof value))
             v->start = strcmp(value, "true") == 0 ? 1.0 : strcmp(value, "false") == 0 ? 0.0 : atof(value);
+        if ((v->has_min = xml_attribute(p, close, "min", value, sizeof value)) != 0)
+            v->min = atof(value);
+        if ((v->has_max = xml_attribute(p, close, "max", value, sizeof value)) != 0)
+            v->max = atof(value);
         f->n_vars++;
     }
     free(xml);

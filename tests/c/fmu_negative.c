@@ -23,6 +23,14 @@
  *              the outputs as they were
  *   free       fmi2FreeInstance in every state, with and without FMU states
  *              still allocated: every block the FMU allocated is freed
+ *   edges      the standard at its edges (issue 23): a step size of 0 or below
+ *              refused, a positive one that rounds to no sample a no-op; a huge
+ *              step refused at once, naming the bound of one doStep's work
+ *              (samples, and the terms of the exact creep sum); value arrays
+ *              of no value reference; an input beyond its declared range
+ *              clamped with one warning and a count at fmi2Terminate;
+ *              fmi2FreeFMUstate(c, NULL) ignored; the monitor's warning with
+ *              monitor.divergence_samples = 0
  *
  * The oracle of "no NaN/Inf output": every Real output read after an
  * fmi2OK/fmi2Warning step is finite. Allocations go through counting callbacks.
@@ -35,6 +43,8 @@
 
 #include <float.h>
 #include <limits.h>
+#include <signal.h>
+#include <unistd.h>
 
 #define MAX_FMUS 4
 static host_fmu fmus[MAX_FMUS];
@@ -625,7 +635,6 @@ static void null_arguments(const host_fmu *f)
     NULL_REFUSED(f->api.SetString(in.c, &vr, 1, NULL));
     NULL_REFUSED(f->api.GetFMUstate(in.c, NULL));
     NULL_REFUSED(f->api.SetFMUstate(in.c, NULL));
-    NULL_REFUSED(f->api.FreeFMUstate(in.c, NULL));
     NULL_REFUSED(f->api.SerializedFMUstateSize(in.c, NULL, &size));
     NULL_REFUSED(f->api.SerializedFMUstateSize(in.c, state, NULL));
     NULL_REFUSED(f->api.SerializeFMUstate(in.c, NULL, (fmi2Byte *)buf, sizeof buf));
@@ -1047,7 +1056,7 @@ static void extreme_values(const host_fmu *f)
     {
         const double h = f->h, nan_value = NAN, inf = INFINITY;
         struct { double t, H; int ok; } steps[] = {
-            {0, 0.0, 1}, {0, -0.0, 1}, {0, DBL_MIN, 1}, {0, 4.9406564584124654e-324, 1}, {0, 1e-12 * 0.0005, 1},
+            {0, 0.0, 0}, {0, -0.0, 0}, {0, DBL_MIN, 1}, {0, 4.9406564584124654e-324, 1}, {0, 1e-12 * 0.0005, 1},
             {0, DBL_MAX, 0}, {0, 1e308, 0}, {0, -DBL_MIN, 0}, {0, -1.0, 0}, {0, -DBL_MAX, 0},
             {0, 0.5, 0}, {0, 1.5, 0}, {0, 1e16, 0}, {0, nan_value, 0}, {0, inf, 0}, {0, -inf, 0},
             {1, 1.0, 0}, {-1, 1.0, 0}, {DBL_MAX, 1.0, 0}, {-DBL_MAX, 1.0, 0}, {nan_value, 1.0, 0},
@@ -1168,6 +1177,344 @@ static void free_in_every_state(const host_fmu *f)
     group_end("free", f->id);
 }
 
+/* ------------------------------------------------------------------------ */
+/* the standard at its edges (issue 23)                                      */
+
+/* A refusal does no work, so it returns at once: a doStep still running after
+ * a minute (a huge step computed instead of refused) ends the host with FAIL. */
+static void on_hang(int sig)
+{
+    static const char text[] = "FAIL a doStep did not return within 60 s: a huge step was computed, not refused\n";
+    (void)sig;
+    if (write(STDOUT_FILENO, text, sizeof text - 1) < 0)
+        _exit(1);
+    _exit(1);
+}
+
+static fmi2Status step_within_a_minute(inst_t *in, double H)
+{
+    fmi2Status st;
+    signal(SIGALRM, on_hang);
+    alarm(60);
+    st = in->f->api.DoStep(in->c, in->k * in->f->h, H, fmi2True);
+    alarm(0);
+    return st;
+}
+
+/* The unsigned integer after `key` in text, or 0. */
+static unsigned long long number_after(const char *text, const char *key)
+{
+    const char *p = strstr(text, key);
+    return p != NULL ? strtoull(p + strlen(key), NULL, 10) : 0;
+}
+
+/* Terms the exact creep sum adds up over n samples when the first sums a
+ * (sample k sums its k + 1 past inputs): a + (a + 1) + ... + (a + n - 1). */
+static double creep_terms(double n, double a)
+{
+    return n * a + n * (n - 1.0) / 2.0;
+}
+
+/* A step size of 0 or below is refused (FMI 2.0: communicationStepSize > 0);
+ * a positive one below 1e-9 h rounds to no sample and is a no-op. */
+static void edge_zero_step(const host_fmu *f)
+{
+    const double refused[] = {0.0, -0.0, -1e-20, -5.6e-17, -f->h};
+    const double no_ops[] = {1e-20, 5.6e-17, 1e-10 * f->h};
+    inst_t in;
+    unsigned char *before;
+    size_t before_size, i;
+    double t = -1.0;
+    if (!case_check(enter_state(f, &in, S_STEP), "%s: reach StepComplete", f->id))
+        return;
+    before = host_snapshot(f, in.c, &before_size);
+    for (i = 0; i < sizeof refused / sizeof refused[0]; i++) {
+        fmi2Status st;
+        host_log_clear(&in.log);
+        st = f->api.DoStep(in.c, in.k * f->h, refused[i], fmi2True);
+        case_check(st == fmi2Error && strstr(in.log.last_error, "communicationStepSize") != NULL
+                       && strstr(in.log.last_error, "> 0") != NULL && host_same_state(f, in.c, before, before_size),
+                   "%s: fmi2DoStep(H = %g) is refused: the step size must be > 0, nothing changed (%s)", f->id,
+                   refused[i], in.log.last_error);
+    }
+    for (i = 0; i < sizeof no_ops / sizeof no_ops[0]; i++) {
+        fmi2Status st;
+        host_log_clear(&in.log);
+        st = f->api.DoStep(in.c, in.k * f->h, no_ops[i], fmi2True);
+        f->api.GetRealStatus(in.c, fmi2LastSuccessfulTime, &t);
+        case_check(st == fmi2OK && in.log.n_errors == 0 && t == in.k * f->h
+                       && host_same_state(f, in.c, before, before_size),
+                   "%s: fmi2DoStep(H = %g) rounds to no sample: a no-op returning fmi2OK (%s)", f->id, no_ops[i],
+                   in.log.last_error);
+    }
+    free(before);
+    leave(&in);
+}
+
+/* A step of more samples than one doStep may compute is refused at once with
+ * the bound; in exact creep mode (work O(k) a sample) the bound on the terms
+ * of the creep sum too, with the longest step that passes from here. */
+static void edge_huge_step(const host_fmu *f)
+{
+    inst_t in;
+    unsigned char *before;
+    size_t before_size;
+    unsigned long long bound, terms_bound, longest;
+    fmi2Status st;
+    double t = -1.0, a;
+    if (!case_check(enter_state(f, &in, S_STEP), "%s: reach StepComplete", f->id))
+        return;
+    before = host_snapshot(f, in.c, &before_size);
+    host_log_clear(&in.log);
+    st = step_within_a_minute(&in, 1e9);
+    f->api.GetRealStatus(in.c, fmi2LastSuccessfulTime, &t);
+    bound = number_after(in.log.last_error, "computes at most ");
+    case_check(st == fmi2Error && bound > 0 && t == in.k * f->h && host_same_state(f, in.c, before, before_size),
+               "%s: fmi2DoStep(H = 1e9 s) is refused at once, naming the bound of one doStep (%s)", f->id,
+               in.log.last_error);
+    /* the harness steps h, its longest experiments are minutes: they all pass */
+    case_check((double)bound * f->h >= 1000.0, "%s: the bound, %llu samples, is at least 1000 s of h = %g s", f->id,
+               bound, f->h);
+    host_log_clear(&in.log);
+    st = step_within_a_minute(&in, (double)(bound + 1) * f->h);
+    case_check(st == fmi2Error && number_after(in.log.last_error, "computes at most ") == bound
+                   && host_same_state(f, in.c, before, before_size),
+               "%s: fmi2DoStep of bound + 1 = %llu samples is refused (%s)", f->id, bound + 1, in.log.last_error);
+    host_log_clear(&in.log);
+    st = step_within_a_minute(&in, 1e300);
+    case_check(st == fmi2Error && in.log.n_errors > 0 && host_same_state(f, in.c, before, before_size),
+               "%s: fmi2DoStep(H = 1e300 s) is refused (%s)", f->id, in.log.last_error);
+    free(before);
+    leave(&in);
+
+    if (host_named(f, "creep.exact") == NULL)
+        return;
+    /* exact creep: 2 samples done, the next sums a = 3 terms */
+    instantiate(f, &in, "exact");
+    f->api.SetupExperiment(in.c, fmi2False, 0.0, 0.0, fmi2False, 0.0);
+    f->api.EnterInitializationMode(in.c);
+    host_set_named(f, in.c, "creep.exact", 1.0);
+    if (!case_check(f->api.ExitInitializationMode(in.c) == fmi2OK
+                        && f->api.DoStep(in.c, 0.0, 2 * f->h, fmi2True) <= fmi2Warning,
+                    "%s: exact creep, 2 samples", f->id)) {
+        leave(&in);
+        return;
+    }
+    in.k = 2;
+    a = 3.0;
+    before = host_snapshot(f, in.c, &before_size);
+    host_log_clear(&in.log);
+    st = step_within_a_minute(&in, (double)bound * f->h);
+    terms_bound = number_after(in.log.last_error, "sums at most ");
+    longest = number_after(in.log.last_error, "a step of at most ");
+    case_check(st == fmi2Error && terms_bound > 0 && host_same_state(f, in.c, before, before_size),
+               "%s: with creep.exact a step of %llu samples is refused at once, naming the bound on the terms of "
+               "the creep sum (%s)", f->id, bound, in.log.last_error);
+    /* reference: the closed form of the sum a + (a + 1) + ... */
+    case_check(longest >= 1 && creep_terms((double)longest, a) <= (double)terms_bound
+                   && creep_terms((double)longest + 1.0, a) > (double)terms_bound,
+               "%s: the longest step it names, %llu samples, is the longest whose creep sums stay within %llu terms",
+               f->id, longest, terms_bound);
+    host_log_clear(&in.log);
+    st = step_within_a_minute(&in, (double)(longest + 1) * f->h);
+    case_check(st == fmi2Error && number_after(in.log.last_error, "sums at most ") == terms_bound
+                   && host_same_state(f, in.c, before, before_size),
+               "%s: with creep.exact a step of %llu samples is refused (%s)", f->id, longest + 1, in.log.last_error);
+    free(before);
+    leave(&in);
+}
+
+/* FMI 2.0 has no nValues: nvr = 0 needs no arrays, nvr > 0 needs both. */
+static void edge_value_counts(const host_fmu *f)
+{
+    inst_t in;
+    fmi2ValueReference vr = first(f, VAR_OUTPUT, VAR_REAL)->vr;
+    double real = 0.0;
+    unsigned char *before;
+    size_t before_size;
+    if (!case_check(enter_state(f, &in, S_STEP), "%s: reach StepComplete", f->id))
+        return;
+    before = host_snapshot(f, in.c, &before_size);
+#define COUNT_CASE(call, text, expected, what)                                                           \
+    do {                                                                                                 \
+        fmi2Status st_;                                                                                  \
+        host_log_clear(&in.log);                                                                         \
+        st_ = (call);                                                                                    \
+        case_check(st_ == (expected) && (st_ == fmi2OK) == (in.log.n_errors == 0)                        \
+                       && host_same_state(f, in.c, before, before_size),                                 \
+                   "%s: %s: %s (%s)", f->id, text, what, in.log.last_error);                             \
+    } while (0)
+#define NO_VR_PASSES(call) COUNT_CASE(call, #call, fmi2OK, "no value reference and no array: nothing to do")
+#define NULL_ARRAY_REFUSED(call) COUNT_CASE(call, #call, fmi2Error, "a missing array is refused")
+    NO_VR_PASSES(f->api.GetReal(in.c, NULL, 0, NULL));
+    NO_VR_PASSES(f->api.GetInteger(in.c, NULL, 0, NULL));
+    NO_VR_PASSES(f->api.GetBoolean(in.c, NULL, 0, NULL));
+    NO_VR_PASSES(f->api.GetString(in.c, NULL, 0, NULL));
+    NO_VR_PASSES(f->api.SetReal(in.c, NULL, 0, NULL));
+    NO_VR_PASSES(f->api.SetInteger(in.c, NULL, 0, NULL));
+    NO_VR_PASSES(f->api.SetBoolean(in.c, NULL, 0, NULL));
+    NO_VR_PASSES(f->api.SetString(in.c, NULL, 0, NULL));
+    NULL_ARRAY_REFUSED(f->api.GetReal(in.c, &vr, 1, NULL));
+    NULL_ARRAY_REFUSED(f->api.SetReal(in.c, NULL, 1, &real));
+#undef NO_VR_PASSES
+#undef NULL_ARRAY_REFUSED
+#undef COUNT_CASE
+    free(before);
+    leave(&in);
+}
+
+/* One run of n single-sample steps with input v at `value` (set before
+ * initialization or after it): the outputs after each step, the statuses,
+ * the first warning, fmi2Terminate's status and message, v read back. */
+typedef struct {
+    double out[8][32];
+    int n_out;
+    fmi2Status status[8], terminate;
+    char first_warning[1024], terminate_message[1024];
+    double v_read;
+} ranged_run;
+
+static int run_with_input(const host_fmu *f, const host_var *v, double value, int before_init, int n, ranged_run *r)
+{
+    inst_t in;
+    int k;
+    memset(r, 0, sizeof *r);
+    if (instantiate(f, &in, "range") == NULL)
+        return 0;
+    if (before_init && f->api.SetReal(in.c, &v->vr, 1, &value) != fmi2OK)
+        return leave(&in), 0;
+    if (f->api.SetupExperiment(in.c, fmi2False, 0.0, 0.0, fmi2False, 0.0) != fmi2OK
+        || f->api.EnterInitializationMode(in.c) != fmi2OK || f->api.ExitInitializationMode(in.c) != fmi2OK
+        || (!before_init && f->api.SetReal(in.c, &v->vr, 1, &value) != fmi2OK))
+        return leave(&in), 0;
+    for (k = 0; k < n; k++) {
+        host_log_clear(&in.log);
+        r->status[k] = f->api.DoStep(in.c, k * f->h, f->h, fmi2True);
+        if (r->status[k] == fmi2Warning && r->first_warning[0] == '\0')
+            snprintf(r->first_warning, sizeof r->first_warning, "%s", in.log.last);
+        r->n_out = host_real_outputs(f, in.c, r->out[k]);
+    }
+    f->api.GetReal(in.c, &v->vr, 1, &r->v_read);
+    host_log_clear(&in.log);
+    r->terminate = f->api.Terminate(in.c);
+    snprintf(r->terminate_message, sizeof r->terminate_message, "%s", in.log.last);
+    leave(&in);
+    return r->n_out > 0;
+}
+
+/* An input beyond its declared [min, max] is clamped to it: the run equals the
+ * run at the bound (the reference), the first doStep that clamps returns
+ * fmi2Warning saying so, and fmi2Terminate reports the count. */
+static void edge_input_range(const host_fmu *f)
+{
+    int i, c, k;
+    const int n = 5;
+    for (i = 0; i < f->n_vars; i++) {
+        const host_var *v = &f->vars[i];
+        char range[96], count[160];
+        ranged_run at_bound, beyond;
+        struct { double value, bound; int before_init; } cases[] = {
+            {0, 0, 0}, {0, 0, 0}, {1e300, 0, 0}, {-1e300, 0, 0}, {DBL_MAX, 0, 0}, {0, 0, 1}};
+        if (v->causality != VAR_INPUT || v->type != VAR_REAL || !v->has_min || !v->has_max)
+            continue;
+        cases[0].value = v->max + 1.5;
+        cases[1].value = v->min - 1.5;
+        cases[5].value = v->max + 1.5;
+        for (c = 0; c < 6; c++)
+            cases[c].bound = cases[c].value > v->max ? v->max : v->min;
+        snprintf(range, sizeof range, "[%g, %g]", v->min, v->max);
+        snprintf(count, sizeof count, "clamped to its declared range %s V in %d of %d samples", range, n, n);
+        for (c = 0; c < 6; c++) {
+            int same = 1, quiet = 1;
+            const char *when = cases[c].before_init ? "set before initialization" : "set in StepComplete";
+            if (!case_check(run_with_input(f, v, cases[c].bound, cases[c].before_init, n, &at_bound)
+                                && run_with_input(f, v, cases[c].value, cases[c].before_init, n, &beyond),
+                            "%s: runs with %s = %g and %g", f->id, v->name, cases[c].bound, cases[c].value))
+                continue;
+            for (k = 0; k < n; k++) {
+                same = same && memcmp(at_bound.out[k], beyond.out[k], (size_t)at_bound.n_out * sizeof(double)) == 0;
+                quiet = quiet && at_bound.status[k] == fmi2OK && (k == 0 || beyond.status[k] == fmi2OK);
+            }
+            case_check(same && beyond.n_out == at_bound.n_out,
+                       "%s: %s = %g (%s) gives the outputs of %s = %g at every sample", f->id, v->name,
+                       cases[c].value, when, v->name, cases[c].bound);
+            case_check(beyond.status[0] == fmi2Warning && strstr(beyond.first_warning, "clamped") != NULL
+                           && strstr(beyond.first_warning, range) != NULL && quiet,
+                       "%s: the first doStep with %s = %g warns once, naming the range %s; %s = %g warns never (%s)",
+                       f->id, v->name, cases[c].value, range, v->name, cases[c].bound, beyond.first_warning);
+            case_check(beyond.terminate == fmi2Warning && strstr(beyond.terminate_message, count) != NULL
+                           && at_bound.terminate == fmi2OK,
+                       "%s: fmi2Terminate reports the count: %s (%s)", f->id, count, beyond.terminate_message);
+            case_check(beyond.v_read == cases[c].value, "%s: %s reads back as set, %g", f->id, v->name,
+                       beyond.v_read);
+        }
+    }
+}
+
+/* fmi2FreeFMUstate(c, NULL) is ignored (FMI 2.0: "If a null pointer is provided,
+ * the call is ignored"); the monitor's warning says what
+ * monitor.divergence_samples = 0 means (never unstable). */
+static void edge_small_ones(const host_fmu *f)
+{
+    inst_t in;
+    unsigned char *before;
+    size_t before_size;
+    fmi2Status st;
+    int k, window;
+    if (!case_check(enter_state(f, &in, S_STEP), "%s: reach StepComplete", f->id))
+        return;
+    before = host_snapshot(f, in.c, &before_size);
+    host_log_clear(&in.log);
+    st = f->api.FreeFMUstate(in.c, NULL);
+    case_check(st == fmi2OK && in.log.n_errors == 0 && host_same_state(f, in.c, before, before_size),
+               "%s: fmi2FreeFMUstate(c, NULL) is ignored: fmi2OK, nothing changed (%s)", f->id, in.log.last_error);
+    free(before);
+    leave(&in);
+
+    if (host_named(f, "monitor.divergence_samples") == NULL)
+        return;
+    for (window = 0; window <= 1000; window += 1000) {
+        char warning[1024] = "", expected[96];
+        int failed = 0;
+        instantiate(f, &in, "monitor");
+        f->api.SetupExperiment(in.c, fmi2False, 0.0, 0.0, fmi2False, 0.0);
+        f->api.EnterInitializationMode(in.c);
+        host_set_named(f, in.c, "monitor.divergence_samples", window);
+        host_set_named(f, in.c, "monitor.pred_error_max", 1e-3);
+        f->api.ExitInitializationMode(in.c);
+        host_set_named(f, in.c, "y_meas", 5.0);     /* the model predicts 0: |pred_error| is far above 1e-3 um */
+        for (k = 0; k < 50; k++) {
+            host_log_clear(&in.log);
+            st = f->api.DoStep(in.c, k * f->h, f->h, fmi2True);
+            failed = failed || st == fmi2Error;
+            if (st == fmi2Warning && strstr(in.log.last, "pred_error") != NULL && warning[0] == '\0')
+                snprintf(warning, sizeof warning, "%s", in.log.last);
+        }
+        if (window == 0) {
+            case_check(!failed && strstr(warning, "never") != NULL && strstr(warning, "= 0 consecutive") == NULL,
+                       "%s: with monitor.divergence_samples = 0 the loop is never declared unstable, and the "
+                       "warning says so (%s)", f->id, warning);
+        } else {
+            snprintf(expected, sizeof expected, "monitor.divergence_samples = %d consecutive samples", window);
+            case_check(!failed && strstr(warning, expected) != NULL,
+                       "%s: with monitor.divergence_samples = %d the warning names the window (%s)", f->id, window,
+                       warning);
+        }
+        leave(&in);
+    }
+}
+
+static void edges(const host_fmu *f)
+{
+    group_start();
+    edge_zero_step(f);
+    edge_value_counts(f);
+    edge_input_range(f);
+    edge_small_ones(f);
+    edge_huge_step(f);      /* last: before issue 23 it ran for hours */
+    group_end("edges", f->id);
+}
+
 int main(int argc, char **argv)
 {
     int i, j;
@@ -1192,6 +1539,8 @@ int main(int argc, char **argv)
         for (j = 0; j < n_fmus; j++)
             if (i != j)
                 foreign(&fmus[i], &fmus[j]);
+    for (i = 0; i < n_fmus; i++)
+        edges(&fmus[i]);     /* last: before issue 23 its huge step ran for hours */
     case_check(atomic_load(&host_live_blocks) == 0, "every block the FMUs allocated was freed (%ld left)",
                atomic_load(&host_live_blocks));
     for (i = 0; i < n_fmus; i++)
