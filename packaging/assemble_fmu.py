@@ -19,7 +19,7 @@
     * ``sources/``: the C files and headers, flat, and ``buildDescription.xml`` (the
       FMI 3.0 build description, which FMI 2.0.4 adopts for source-code FMUs);
     * ``documentation/index.html`` (generated from the model description and the
-      hand-written part, see ``fmu_documentation.py``), ``documentation/fmi-ls-ref.html``
+      hand-written part, see ``harness/fmu_documentation.py``), ``documentation/fmi-ls-ref.html``
       and ``documentation/licenses/license.txt``;
     * ``extra/org.fmi-standard.fmi-ls-ref/``: the reference results (``--extra-dir``).
 
@@ -37,19 +37,16 @@ import re
 import shutil
 import subprocess
 import sys
-import zipfile
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-for _path in (HERE, REPO):
-    if str(_path) not in sys.path:
-        sys.path.insert(0, str(_path))
+if str(REPO) not in sys.path:          # harness: fmu_documentation, fmu_archive, _source
+    sys.path.insert(0, str(REPO))
 
 TOOL = "piezo_fmus"
 LS_REF_DIR = "extra/org.fmi-standard.fmi-ls-ref"
 #: the oldest date a zip entry can carry
 ZIP_EPOCH = int(_dt.datetime(1980, 1, 1, tzinfo=_dt.timezone.utc).timestamp())
-BINARY_SUFFIXES = {".so", ".dll", ".dylib"}
 
 
 # ---------------------------------------------------------------------------
@@ -177,29 +174,14 @@ DEFINE_DESCRIPTIONS = {
 # ---------------------------------------------------------------------------
 
 def write_zip(stage, out, epoch):
-    """Zip the folder `stage` to `out` reproducibly; return the entry names."""
-    stage, out = Path(stage), Path(out)
+    """Zip the folder `stage` to `out` reproducibly (harness.fmu_archive); return the entry names."""
+    from harness.fmu_archive import write_fmu_zip
+
+    stage = Path(stage)
     date = _dt.datetime.fromtimestamp(max(epoch, ZIP_EPOCH), _dt.timezone.utc).timetuple()[:6]
-    entries = []
-    for path in sorted(stage.rglob("*"), key=lambda p: p.relative_to(stage).as_posix()):
-        rel = path.relative_to(stage).as_posix()
-        entries.append((rel + "/", None) if path.is_dir() else (rel, path))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    with zipfile.ZipFile(tmp, "w") as zf:
-        for name, path in entries:
-            info = zipfile.ZipInfo(name, date_time=date)
-            info.create_system = 3                       # Unix permissions below
-            if path is None:
-                info.external_attr = (0o40755 << 16) | 0x10
-                zf.writestr(info, b"")
-                continue
-            executable = path.suffix in BINARY_SUFFIXES
-            info.external_attr = (0o100755 if executable else 0o100644) << 16
-            info.compress_type = zipfile.ZIP_DEFLATED
-            zf.writestr(info, path.read_bytes(), compresslevel=9)
-    tmp.replace(out)
-    return [name for name, _ in entries]
+    files = {p.relative_to(stage).as_posix(): p.read_bytes()
+             for p in stage.rglob("*") if p.is_file()}
+    return write_fmu_zip(files, out, date)
 
 
 # ---------------------------------------------------------------------------
@@ -212,7 +194,7 @@ def _copy(src, dst):
 
 
 def assemble(args):
-    import fmu_documentation
+    from harness import fmu_documentation
 
     epoch = int(Path(args.date_file).read_text().split()[0]) if args.date_file else \
         commit_epoch(Path.cwd())
@@ -233,7 +215,7 @@ def assemble(args):
     for item in args.binary:
         folder, _, file = item.partition("=")
         file = Path(file)
-        if file.suffix not in BINARY_SUFFIXES:
+        if file.suffix not in (".so", ".dll", ".dylib"):
             raise ValueError(f"--binary {item}: not a shared library")
         _copy(file, stage / "binaries" / folder / f"{args.id}{file.suffix}")
         platforms.append(folder)
