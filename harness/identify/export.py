@@ -35,7 +35,6 @@ FMUs' own validation); afterwards each FMU is checked with
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -44,10 +43,11 @@ import re
 import tempfile
 import zipfile
 
+from .data import sha256_of
 from .params import CONTROLLER_MODEL, PLANT_MODEL, split_params
 
 __all__ = ["ExportError", "START_VALUES_PATH", "PROVENANCE_DIR", "export_fmus",
-           "format_start_value", "sha256_of"]
+           "format_start_value"]
 
 #: Where the start values sit inside an FMU (read by fmu_start_values.c).
 START_VALUES_PATH = "resources/start_values"
@@ -55,14 +55,6 @@ START_VALUES_PATH = "resources/start_values"
 PROVENANCE_DIR = "extra/piezo_fmus.identification"
 LS_REF_DIR = "extra/org.fmi-standard.fmi-ls-ref"
 
-
-def sha256_of(path):
-    """The SHA-256 of a file's bytes, as hex."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 class ExportError(ValueError):

@@ -19,7 +19,7 @@ import json
 import math
 from pathlib import Path
 
-from .data import read_record
+from .data import read_record, sha256_of
 from .fit import DEFAULT_HOLDOUT, DEFAULT_MAX_EVALUATIONS, fit_coupled_model
 from .params import write_params
 from .tables import NORMALISATION_NOTE, format_report
@@ -140,8 +140,6 @@ def _search_dict(search):
 
 def _record_dict(record):
     """A record's file, length and SHA-256 (what the identification was made from)."""
-    from .export import sha256_of
-
     d = {"path": str(record.path), "samples": record.n_samples}
     if Path(record.path).is_file():
         d["sha256"] = sha256_of(record.path)
