@@ -69,18 +69,29 @@ static uint64_t rng_next(piezo_rng *rng)
     return result;
 }
 
-/* Top 53 bits, shifted by half an ulp so the result is never 0 or 1. */
-double piezo_rng_uniform(piezo_rng *rng)
+/* Top 53 bits, shifted by half an ulp so the result is never 0 or 1. Static,
+ * so the plant's step inlines it; exported below. */
+static double rng_uniform(piezo_rng *rng)
 {
     return ((double)(rng_next(rng) >> 11) + 0.5) * (1.0 / 9007199254740992.0);
 }
 
 /* Box-Muller; the second variate is dropped so the state stays one generator. */
+static double rng_normal(piezo_rng *rng)
+{
+    double u1 = rng_uniform(rng);
+    double u2 = rng_uniform(rng);
+    return sqrt(-2.0 * log(u1)) * cos(2.0 * PI_D * u2);
+}
+
+double piezo_rng_uniform(piezo_rng *rng)
+{
+    return rng_uniform(rng);
+}
+
 double piezo_rng_normal(piezo_rng *rng)
 {
-    double u1 = piezo_rng_uniform(rng);
-    double u2 = piezo_rng_uniform(rng);
-    return sqrt(-2.0 * log(u1)) * cos(2.0 * PI_D * u2);
+    return rng_normal(rng);
 }
 
 /* ---- plant --------------------------------------------------------------- */
@@ -126,11 +137,19 @@ piezo_status piezo_plant_init(piezo_plant *plant, const piezo_plant_params *p, p
     return PIEZO_OK;
 }
 
-/* y_meas = quantize(y + noise), quantize(a) = res * round(a / res) */
-static double sense(const piezo_plant *plant, piezo_rng *rng, double y)
+/* The sensor noise of one sample, noise_rms N(0, 1) drawn from *rng; nothing
+ * is drawn (0 returned) when the noise is off. */
+static double sensor_noise(const piezo_plant *plant, piezo_rng *rng)
+{
+    return plant->sensor_noise_rms > 0.0 ? plant->sensor_noise_rms * rng_normal(rng) : 0.0;
+}
+
+/* y_meas = quantize(y + noise), quantize(a) = res * round(a / res); noise from
+ * sensor_noise (not added when the noise is off) */
+static double sense(const piezo_plant *plant, double y, double noise)
 {
     double reading = y;
-    if (plant->sensor_noise_rms > 0.0) reading += plant->sensor_noise_rms * piezo_rng_normal(rng);
+    if (plant->sensor_noise_rms > 0.0) reading += noise;
     if (plant->sensor_resolution > 0.0)
         reading = plant->sensor_resolution * floor(reading / plant->sensor_resolution + 0.5);
     return reading;
@@ -149,7 +168,7 @@ void piezo_plant_reset(piezo_plant *plant)
     plant->out.u = 0.0;
     plant->out.x = 0.0;
     plant->out.y = 0.0;
-    plant->out.y_meas = sense(plant, &plant->rng, 0.0);
+    plant->out.y_meas = sense(plant, 0.0, sensor_noise(plant, &plant->rng));
 }
 
 size_t piezo_plant_history_needed(const piezo_plant *plant)
@@ -168,7 +187,7 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
                               size_t history_capacity, piezo_plant_output *out)
 {
     double z_next[PIEZO_PI_MAX_OPERATORS], soe_next[PIEZO_GL_MAX_TERMS];
-    double u, x, y, y_meas;
+    double u, x, y, y_meas, noise;
     piezo_rng rng;
     if (!plant) return PIEZO_ERR_NULL;
     if (!isfinite(v)) return PIEZO_ERR_NONFINITE;
@@ -176,6 +195,11 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
         if (!creep_history) return PIEZO_ERR_NULL;
         if (history_capacity < piezo_plant_history_needed(plant)) return PIEZO_ERR_CAPACITY;
     }
+    /* The reading's noise first: it does not depend on the sample, so its libm
+     * calls overlap the operators below. The generator advances on a copy until
+     * the sample is accepted. */
+    rng = plant->rng;
+    noise = sensor_noise(plant, &rng);
     /* v is finite, so a non-finite value from here on was computed: overflow, not bad input */
     piezo_pi_eval(&plant->pi, v, z_next, &u);                         /* u(k) = P[v](k) */
     if (!isfinite(u)) return PIEZO_ERR_DIVERGED;
@@ -189,10 +213,8 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
     } else {
         y = x;
     }
-    /* the reading before the commit: quantising a finite y can overflow (y / resolution);
-     * the generator advances on a copy until the sample is accepted */
-    rng = plant->rng;
-    y_meas = sense(plant, &rng, y);
+    /* the reading before the commit: quantising a finite y can overflow (y / resolution) */
+    y_meas = sense(plant, y, noise);
     if (!isfinite(y_meas)) return PIEZO_ERR_DIVERGED;
     /* commit */
     memcpy(plant->pi.z, z_next, (size_t)plant->pi.m * sizeof *z_next);
