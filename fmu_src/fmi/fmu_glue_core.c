@@ -342,6 +342,28 @@ static model_type kind_type(glue_values kind)
 }
 
 /* Check the references of a get/set and count their values; 0 when refused. */
+/*
+ * The hot path of a master's exchange: 1 when every vr[i] is a scalar variable
+ * of the model of the given type (not time, not an array), which
+ * check_references then accepts with nValues = nvr; *any_output says whether
+ * one is an output. Only a yes/no: anything else (and every error with its
+ * message) takes the checks of check_references.
+ */
+static int scalars_of_type(const glue_instance *inst, const uint32_t vr[], size_t nvr, model_type type,
+                           int *any_output)
+{
+    size_t i;
+    int outputs = 0;
+    for (i = 0; i < nvr; i++) {
+        uint32_t r = vr[i];
+        if (r >= (uint32_t)MODEL_N_VARIABLES || inst->n_values[r] != 1 || model_variables[r].type != type)
+            return 0;
+        outputs |= model_variables[r].causality == MODEL_OUTPUT;
+    }
+    *any_output = outputs;
+    return 1;
+}
+
 static int check_references(const glue_instance *inst, const char *fname, const uint32_t vr[], size_t nvr,
                             model_type type, size_t n_values, int *any_output)
 {
@@ -615,7 +637,9 @@ glue_status glue_get(void *c, const char *fname, const uint32_t vr[], size_t nvr
         return GLUE_OK;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
-    if (!check_references(inst, fname, vr, nvr, kind_type(kind), n_values, &need_outputs))
+    /* scalars of the right type (a master's exchange) pass check_references: skip its bookkeeping */
+    if (!(nvr == n_values && scalars_of_type(inst, vr, nvr, kind_type(kind), &need_outputs))
+        && !check_references(inst, fname, vr, nvr, kind_type(kind), n_values, &need_outputs))
         return GLUE_ERROR;
     if (need_outputs && !refresh_outputs(inst, fname))
         return GLUE_ERROR;
@@ -652,6 +676,23 @@ glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr
         return GLUE_OK;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
+    /* The master's exchange: finite values for scalar Real inputs, with no
+     * feedthrough warning due. Every check below passes and the values are
+     * stored as below; anything else takes the full path. */
+    if (kind == GLUE_VALUES_DOUBLE && nvr == n_values && scalars_of_type(inst, vr, nvr, MODEL_REAL, &any_output)
+        && !(inst->outputs_read && inst->mode == GLUE_MODE_STEP && !inst->warned_read_before_set
+             && model_direct_feedthrough(&inst->data))) {
+        const double *v = (const double *)values;
+        for (i = 0; i < nvr; i++)
+            if (model_variables[vr[i]].causality != MODEL_INPUT || !isfinite(v[i]))
+                break;
+        if (i == nvr) {
+            for (i = 0; i < nvr; i++)
+                *(double *)value_ptr(inst, vr[i]) = v[i];
+            inst->outputs_valid = 0;
+            return GLUE_OK;
+        }
+    }
     /* Check everything first: a refused call changes nothing. */
     for (i = 0, j = 0; i < nvr; i++) {
         const model_variable *var;
@@ -755,6 +796,13 @@ double glue_time(const glue_instance *inst)
     return inst->t0 + (double)inst->k * inst->h;
 }
 
+/* fmax(a, b) inline (a libm call on baseline x86-64): the larger, or the other
+ * argument when one is NaN */
+static double max_of(double a, double b)
+{
+    return a > b || b != b ? a : b;
+}
+
 /* Log what the model asks to say after a step; a warning if anything. */
 static glue_status step_warnings(glue_instance *inst, const char *fname)
 {
@@ -777,7 +825,7 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
     size_t needed;
 
     t = glue_time(inst);
-    tol = 1e-9 * fmax(inst->h, fabs(t));
+    tol = 1e-9 * max_of(inst->h, fabs(t));
     if (tol > 1e-3 * inst->h)
         tol = 1e-3 * inst->h;
     if (!isfinite(currentCommunicationPoint) || fabs(currentCommunicationPoint - t) > tol) {
@@ -793,15 +841,16 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
                        glue_real_text(t1, communicationStepSize), glue_real_text(t2, inst->h));
         return GLUE_ERROR;
     }
-    ratio = communicationStepSize / inst->h;
-    n_real = floor(ratio + 0.5);
+    /* one sample, the usual step: H/h = 1 passes the checks below exactly */
+    ratio = communicationStepSize == inst->h ? 1.0 : communicationStepSize / inst->h;
+    n_real = ratio == 1.0 ? 1.0 : floor(ratio + 0.5);
     if (ratio > 4.0e15) {
         glue_log_error(inst, "%s: communicationStepSize = %s is too large: %s samples of h = %s", fname,
                        glue_real_text(t1, communicationStepSize), glue_real_text(t2, ratio),
                        glue_real_text(t3, inst->h));
         return GLUE_ERROR;
     }
-    if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * fmax(1.0, n_real) * inst->h) {
+    if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * max_of(1.0, n_real) * inst->h) {
         glue_log_error(inst, "%s: communicationStepSize = %s is not a whole multiple of h = %s "
                        "(H/h = %s; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
                        "time unchanged", fname, glue_real_text(t1, communicationStepSize),
@@ -818,7 +867,9 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
     }
     if (inst->stop_time_defined) {
         double t_end = inst->t0 + (double)(inst->k + n) * inst->h;
-        double tol_end = fmin(1e-9 * fmax(inst->h, fabs(inst->stop_time)), 1e-3 * inst->h);
+        double tol_end = 1e-9 * max_of(inst->h, fabs(inst->stop_time));
+        if (tol_end > 1e-3 * inst->h)
+            tol_end = 1e-3 * inst->h;
         if (t_end > inst->stop_time + tol_end) {
             glue_log_error(inst, "%s: the step from t = %s to t = %s passes stopTime = %s of "
                            "%s: step refused, state and time unchanged", fname,
