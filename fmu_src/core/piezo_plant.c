@@ -76,12 +76,53 @@ static double rng_uniform(piezo_rng *rng)
     return ((double)(rng_next(rng) >> 11) + 0.5) * (1.0 / 9007199254740992.0);
 }
 
-/* Box-Muller; the second variate is dropped so the state stays one generator. */
+/* Taylor coefficients (-1)^n / (2n)! of cos x and (-1)^n / (2n+1)! of sin x / x,
+ * in powers of z = x^2 */
+static const double COS_TAYLOR[10] = {
+    1.0, -1.0 / 2, 1.0 / 24, -1.0 / 720, 1.0 / 40320, -1.0 / 3628800, 1.0 / 479001600,
+    -1.0 / 87178291200.0, 1.0 / 20922789888000.0, -1.0 / 6402373705728000.0};
+static const double SIN_TAYLOR[9] = {
+    1.0, -1.0 / 6, 1.0 / 120, -1.0 / 5040, 1.0 / 362880, -1.0 / 39916800, 1.0 / 6227020800.0,
+    -1.0 / 1307674368000.0, 1.0 / 355687428096000.0};
+
+/*
+ * cos(2 pi u) for u in (0, 1), with basic operations only: the same bits from
+ * every C library and compiler (given no contraction), and no data-dependent
+ * branch (a library cos branches on the argument's range, and a uniform
+ * argument makes those branches unpredictable).
+ * Quadrant: q = round(4u), t = u - q/4 in [-1/8, 1/8] (exact: u and q/4 are
+ * within a factor 2), x = 2 pi t in [-pi/4, pi/4], and
+ *     cos(2 pi u) = cos(x + q pi/2) = cos x, -sin x, -cos x, sin x  for q mod 4 = 0..3.
+ * cos x and sin x by their Taylor series to x^18 and x^17, whose next terms are
+ * below 3e-21 and 8e-20 for |x| <= pi/4, evaluated in z = x^2 by Estrin's
+ * scheme (pairs c_2n + c_2n+1 z, then z^2, z^4, z^8: four steps deep instead of
+ * nine, so the draw's latency does not hold up the sample):
+ *     P(z) = ((c0 + c1 z) + z^2 (c2 + c3 z)) + z^4 ((c4 + c5 z) + z^2 (c6 + c7 z)) + z^8 (c8 + c9 z).
+ */
+static double cos_2pi(double u)
+{
+    const double *c = COS_TAYLOR, *s = SIN_TAYLOR;
+    int q = (int)(4.0 * u + 0.5);
+    double t = u - 0.25 * (double)q;
+    double x = (2.0 * PI_D) * t, z = x * x, z2 = z * z, z4 = z2 * z2, z8 = z4 * z4, r[4];
+    double cos_x = ((c[0] + c[1] * z) + z2 * (c[2] + c[3] * z))
+                   + z4 * ((c[4] + c[5] * z) + z2 * (c[6] + c[7] * z)) + z8 * (c[8] + c[9] * z);
+    double sin_x = x * (((s[0] + s[1] * z) + z2 * (s[2] + s[3] * z))
+                        + z4 * ((s[4] + s[5] * z) + z2 * (s[6] + s[7] * z)) + z8 * s[8]);
+    r[0] = cos_x;
+    r[1] = -sin_x;
+    r[2] = -cos_x;
+    r[3] = sin_x;
+    return r[q & 3];
+}
+
+/* Box-Muller, sqrt(-2 ln u1) cos(2 pi u2); the second variate is dropped so the
+ * state stays one generator. */
 static double rng_normal(piezo_rng *rng)
 {
     double u1 = rng_uniform(rng);
     double u2 = rng_uniform(rng);
-    return sqrt(-2.0 * log(u1)) * cos(2.0 * PI_D * u2);
+    return sqrt(-2.0 * log(u1)) * cos_2pi(u2);
 }
 
 double piezo_rng_uniform(piezo_rng *rng)
