@@ -22,17 +22,25 @@ relative (WIDTH in percent), without it absolute. KEY is
 * ``creep.k_c``, ``creep.alpha``, or any other Real PiezoStage parameter by its name;
 * ``sensor.seed`` (no SPEC): every run gets its own sensor-noise seed.
 
-The parameter sets are drawn once, from ``--seed``, before anything runs (so a sweep is
-reproducible whatever the scheduling) and the same draws are applied to every scenario's
-own plant. A run that diverges (the controller's monitor stops it, a value overflows, or
-its error exceeds the reference: :mod:`harness.checks`), clips its voltage persistently,
-or whose drawn parameters the FMU refuses is counted and reported; it does not stop the
-sweep.
+A sweep must move something: without a spread (or with only spreads of width 0) every run
+would be the same run, and it is refused. Run i draws its parameters from a generator seeded
+by (``--seed``, i), on the worker that runs it, so a sweep is reproducible whatever the
+scheduling, and the same draws are applied to every scenario's own plant. A run that
+diverges (the controller's monitor stops it, a value overflows, or its error exceeds the
+reference: :mod:`harness.checks`), clips its voltage persistently, or whose drawn
+parameters the FMU refuses is counted and reported; it does not stop the sweep.
+
+Scale: each task's rows are appended to ``sweep_runs.journal.csv`` (and flushed) as it
+completes; the client keeps 25 bytes per run and queues a few tasks per worker, so its
+memory does not grow with the number of runs. A task lost with its worker is run again and
+a run is recorded once. ``--resume`` continues an interrupted sweep from its journal
+(``sweep_manifest.json`` says what the runs depend on; a different sweep is refused): only
+the missing runs are computed.
 
 Results (under ``--out``, default ``out/sweep``): the table of percentiles and worst case
 of e_rms and e_r per scenario (printed, ``sweep_summary.csv``/``.md``), every run with its
-drawn parameters (``sweep_runs.csv``), the worst run's parameter set as a scenario file
-keyed by FMU variable names (``worst_<scenario>.toml``: rerun it with
+drawn parameters (``sweep_runs.csv``, sorted by scenario and run), the worst run's parameter
+set as a scenario file keyed by FMU variable names (``worst_<scenario>.toml``: rerun it with
 ``python -m harness run worst_<scenario> --scenario-file ...``), and histogram and CDF of
 e_rms (``sweep_e_rms.png``).
 """
@@ -554,6 +562,19 @@ class _Store:
         os.replace(tmp, path)
         return Path(path)
 
+    def adopt(self, path):
+        """Read the rows from ``path`` (written by :meth:`write_sorted`) from now on, so that
+        the journal can go."""
+        pos = 0
+        with open(path, "rb") as f:
+            f.readline()                                # the header
+            pos = f.tell()
+            for name in self.names:
+                for i in np.flatnonzero(self.offset[name] >= 0):
+                    self.offset[name][i] = pos
+                    pos += len(f.readline())
+        self.path = Path(path)
+
 
 class _Parameters:
     """Run i's parameter set, drawn again when asked for (nothing is kept per run)."""
@@ -752,13 +773,13 @@ def _identity_difference(old, new):
     return ", ".join(diff)
 
 
-def _prepare_folder(folder, identity, resume, total, progress):
+def _prepare_folder(folder, identity, resume, progress):
     """Check the output folder against ``resume`` and return whether the journal is new."""
     manifest = _read_manifest(folder)
     journal, final = folder / JOURNAL, folder / RUNS
     unfinished = manifest is not None and not manifest.get("complete") and journal.exists()
     if not resume:
-        if unfinished and manifest.get("identity", {}).get("runs") is not None:
+        if unfinished:
             raise ValueError(f"{folder} holds an unfinished sweep: add --resume to continue it "
                              f"(same scenarios, -n, --seed and --vary), or give another --out")
         return True
@@ -872,7 +893,7 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
     else:
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
-    fresh = _prepare_folder(folder, identity, resume, total, progress)
+    fresh = _prepare_folder(folder, identity, resume, progress)
     store = _Store(folder, names, n_runs, varied)
     if not fresh:
         store.load()
@@ -1121,12 +1142,14 @@ def write_outputs(result, out_dir, plots=True):
                                                 result.parameters[name][j], title, result.options))
     if plots:
         written.append(plot_errors(result, out / "sweep_e_rms.png"))
-    if out.resolve() == result.store.folder.resolve():
+    if out.resolve() == result.store.folder.resolve() and result.store.path.name == JOURNAL:
         # the sorted table is written: the sweep is complete, its journal is no longer needed
         manifest = _read_manifest(out)
         if manifest is not None:
             _write_manifest(out, manifest["identity"], complete=True)
-        result.store.path.unlink(missing_ok=True)
+        journal = result.store.path
+        result.store.adopt(out / RUNS)
+        journal.unlink(missing_ok=True)
     return written
 
 

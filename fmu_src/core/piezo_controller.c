@@ -282,8 +282,8 @@ static double rls_update(const piezo_controller *c, double y, piezo_controller_s
 
 /* 1 when every x[i] is finite: x * 0 is +-0 for a finite x and NaN for Inf or
  * NaN (IEEE 754; no -ffinite-math-only here), so a sum of those products is 0
- * exactly when all are finite. No branch per element, and two lanes that the
- * compiler keeps in one SSE2 register (the check runs on every sample). */
+ * exactly when all are finite. No branch per element, and two short chains of
+ * additions instead of one (the check runs on every sample). */
 static int all_finite(const double *x, int n)
 {
     double z0 = 0.0, z1 = 0.0;
@@ -501,7 +501,7 @@ const char *piezo_controller_check(const piezo_controller *c)
         return "rls.enabled or sat.enabled is not 0 or 1";
     if (!(isfinite(c->lambda_u) && c->lambda_u >= 0.0)) return "mv.lambda_u out of range";
     if (!(isfinite(c->forgetting) && c->forgetting > 0.0 && c->forgetting <= 1.0)) return "rls.forgetting out of range";
-    if (c->inv_forgetting != 1.0 / c->forgetting) return "1 / rls.forgetting differs from rls.forgetting";
+    if (c->inv_forgetting != 1.0 / c->forgetting) return "the reciprocal of rls.forgetting kept from init does not match rls.forgetting";
     if (!(isfinite(c->p0) && c->p0 > 0.0 && isfinite(c->trace_max) && c->trace_max >= 4.0 * c->p0))
         return "rls.p0 or rls.trace_max out of range";
     if (!(isfinite(c->sat_v_min) && isfinite(c->sat_v_max) && (!c->sat_enabled || c->sat_v_max > c->sat_v_min)))
