@@ -193,7 +193,8 @@ size_t piezo_controller_history_needed(const piezo_controller *c)
 /* q(k-i), i >= 1 */
 static double q_past(const piezo_controller *c, int i)
 {
-    return c->q_ring[(c->head + i - 1) % PIEZO_MV_Q_RING];
+    int at = c->head + i - 1;       /* head <= 9 and i <= d + 1 <= 10: below 2 rings */
+    return c->q_ring[at < PIEZO_MV_Q_RING ? at : at - PIEZO_MV_Q_RING];
 }
 
 static void project(const piezo_controller *c, double *th)
