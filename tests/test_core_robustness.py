@@ -246,7 +246,8 @@ def test_reference_refuses_a_step_whose_time_overflows_and_keeps_its_state():
     2e308 is not, and sin(0 * Inf) is NaN. The second step is refused and the reference
     keeps sample 1."""
     lib = core.lib()
-    status, ref, _ = reference_init(h=1e308, lead=0, **{"amplitude[1]": 1.0, "phase[1]": 0.5})
+    status, ref, _ = reference_init(h=1e308, lead=0, **{"amplitude[1]": 1.0, "frequency[1]": 0.0,
+                                                         "phase[1]": 0.5})
     assert status == core.PIEZO_OK
     assert lib.piezo_reference_step(ref) == core.PIEZO_OK and ref.k == 1
     before = snapshot(ref, "piezo_reference")

@@ -646,16 +646,17 @@ def test_log_categories_logall_and_logstatuswarning(piezo_stage, make_fmu):
 
 
 def test_a_step_the_core_refuses_enters_the_error_state(piezo_stage, make_fmu):
-    """v = 1e308 with w0 = 4 overflows u: the core refuses the sample, the glue
-    restores the state of the start of the step and enters Error; getters, the FMU-state
-    functions (fmi2GetFMUstate too: FMI 2.0 allows it in Error, for debugging) and Reset
-    remain. The state saved in Error brings Error back when set."""
+    """v = 150 V with w0 = 4 and tf.b1 = 1e307 overflows x (b1 u(k) = 6e309): the core
+    refuses the sample, the glue restores the state of the start of the step and enters
+    Error; getters, the FMU-state functions (fmi2GetFMUstate too: FMI 2.0 allows it in
+    Error, for debugging) and Reset remain. The state saved in Error brings Error back when
+    set."""
     fmu = make_fmu(piezo_stage)
-    fmu.initialize({"pi.w0": 4.0})
+    fmu.initialize({"pi.w0": 4.0, "tf.b1": 1e307})
     fmu.step()
     state = fmu.slave.getFMUstate()
     before = fmu.get_reals(OUTPUTS)
-    fmu.set({"v": 1e308})
+    fmu.set({"v": 150.0})
     assert_refused(lambda: fmu.slave.doStep(fmu.time, 5 * H), fmu, "enters state Error")
     assert any("the model diverged" in text for text in fmu.errors()), fmu.errors()
     assert fmu.get_reals(OUTPUTS) == before

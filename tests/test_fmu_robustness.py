@@ -10,8 +10,10 @@ files):
   controller's pred_error had already been fixed by then). Under valgrind too.
 - fmu_negative: the negative suite (every call in each state of the FMI 2.0 state
   machine, NULL and foreign arguments, value references, instantiation, extreme finite
-  values, fmi2FreeInstance in every state), under valgrind's memcheck: 0 errors and
-  0 bytes lost are required, not only a passing run.
+  values, fmi2FreeInstance in every state, and the standard at its edges: step sizes of 0
+  and huge steps, value counts, inputs beyond their declared range, FMU states freed through
+  NULL, the monitor's message), under valgrind's memcheck: 0 errors and 0 bytes lost are
+  required, not only a passing run.
 - fmu_threads: 8 threads of instances give bitwise the sequential results.
 - fmu_xproc: a state serialized in one process continues bitwise in another.
 
@@ -115,7 +117,7 @@ def test_negative_suite_under_memcheck(hosts, fmu_args):
     assert failed == 0, report
     groups = re.findall(r"^group (\S+)\s+(.+?)\s+(\d+) cases, (\d+) failed$", proc.stdout, flags=re.M)
     # every group ran for every FMU, and the groups add up to the count
-    for group in ("matrix", "null", "vr", "instantiate", "extreme", "free"):
+    for group in ("matrix", "null", "vr", "instantiate", "extreme", "free", "edges"):
         assert {what for g, what, _, _ in groups if g == group} == set(FMU_NAMES), (group, report)
     assert sum(1 for g, *_ in groups if g == "foreign") == len(FMU_NAMES) * (len(FMU_NAMES) - 1)
     assert sum(int(n) for *_, n, _ in groups) + 1 == passed, report   # + the final leak check
@@ -146,7 +148,7 @@ def test_state_serialized_in_one_process_continues_in_another(hosts, fmu_args):
 
 
 # ---------------------------------------------------------------------------------------
-# the FMI 3.0 editions (tests/c/fmu3_*.c through fmu3_host.h; the same references)
+# the FMI 3.0 editions (fmu3_*: the same sources of tests/c/ built with -DFMI_VERSION=3; the same references)
 
 @pytest.fixture(scope="module")
 def fmu3_args(fmu3_paths, tmp_path_factory):
@@ -181,7 +183,7 @@ def test_fmi3_negative_suite_under_memcheck(hosts, fmu3_args):
     passed, failed = summary(proc.stdout)
     assert failed == 0, report
     groups = re.findall(r"^group (\S+)\s+(.+?)\s+(\d+) cases, (\d+) failed$", proc.stdout, flags=re.M)
-    for group in ("matrix", "null", "vr", "instantiate", "extreme", "free"):
+    for group in ("matrix", "null", "vr", "instantiate", "extreme", "free", "edges"):
         assert {what for g, what, _, _ in groups if g == group} == set(FMU_NAMES), (group, report)
     assert sum(1 for g, *_ in groups if g == "foreign") == len(FMU_NAMES) * (len(FMU_NAMES) - 1)
     assert passed > 5000, report

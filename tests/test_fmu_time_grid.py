@@ -2,7 +2,8 @@
 
 Importers that step to input-file time points (fmusim with --input-file) issue steps of a
 few 1e-17 s when an input time equals a grid point up to round-off; those must be no-ops,
-not refusals. A step past the stopTime of fmi2SetupExperiment is refused (FMI 2.0).
+not refusals. A step size of 0 or below is refused (FMI 2.0 and 3.0: communicationStepSize
+> 0). A step past the stopTime of fmi2SetupExperiment is refused (FMI 2.0).
 """
 import math
 
@@ -54,9 +55,10 @@ def _reference_run(package, make_fmu, n):
 
 
 def test_steps_that_round_to_no_sample_are_no_ops(package, make_fmu):
-    """Reference: the exact-step run. doStep(t, H) with H in {0, 5.6e-17 s, 1e-10 h} returns
-    fmi2OK and changes nothing: interleaved before every sample of a 200-sample run, the
-    outputs at every grid point equal the reference bitwise."""
+    """Reference: the exact-step run. doStep(t, H) with H in {1e-20 s, 5.6e-17 s, 1e-10 h}
+    returns fmi2OK and changes nothing, and H = 0 or -5.6e-17 s returns fmi2Error (the
+    standard asks for a step size > 0) and changes nothing either: interleaved before every
+    sample of a 200-sample run, the outputs at every grid point equal the reference bitwise."""
     name = _model(package)
     inp, drive, outs = DRIVES[name]
     want = _reference_run(package, make_fmu, 200)
@@ -66,11 +68,16 @@ def test_steps_that_round_to_no_sample_are_no_ops(package, make_fmu):
     for k in range(200):
         if inp:
             fmu.set({inp: drive(k)})
-        for tiny in (0.0, 5.6e-17, 1e-10 * H):
+        for tiny in (1e-20, 5.6e-17, 1e-10 * H):
             assert do_step(fmu, fmu.time, tiny) == 0          # fmi2OK
+        for not_positive in (0.0, -5.6e-17):
+            with pytest.raises(FMICallException) as refused:
+                do_step(fmu, fmu.time, not_positive)
+            assert refused.value.status == 3                  # fmi2Error
         fmu.step()
         got.append(fmu.get_reals(outs))
     assert np.array_equal(np.array(got), want)
+    assert "communicationStepSize = 0 refused: the step size must be > 0" in fmu.errors()[0]
 
 
 def test_fmusim_like_irregular_time_points(package, make_fmu):

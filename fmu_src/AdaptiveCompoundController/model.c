@@ -147,13 +147,20 @@ int model_step_warning(ModelData *data, double start_time, char *text, size_t si
         return 1;
     }
     if (c->n_large_error > 0 && !data->said_large_error) {
+        char consequence[192];
         data->said_large_error = 1;
+        /* monitor.divergence_samples = 0 switches the verdict off: say so, not "after 0 samples" */
+        if (c->divergence_samples > 0)
+            snprintf(consequence, sizeof consequence, "If it stays above for monitor.divergence_samples = %llu "
+                     "consecutive samples the loop is declared unstable and the doStep fails",
+                     (unsigned long long)c->divergence_samples);
+        else
+            snprintf(consequence, sizeof consequence, "With monitor.divergence_samples = 0 the loop is never "
+                     "declared unstable, however long it stays above");
         snprintf(text, size, "|pred_error| exceeded monitor.pred_error_max = %g um, first at t = %.9g s: "
-                 "the model of G no longer predicts the measurement. If it stays above for "
-                 "monitor.divergence_samples = %llu consecutive samples the loop is declared unstable "
-                 "and the doStep fails; further exceedances are counted, not logged",
-                 c->pred_error_max, sample_time(data, start_time, c->k_first_large_error),
-                 (unsigned long long)c->divergence_samples);
+                 "the model of G no longer predicts the measurement. %s; further exceedances are counted, "
+                 "not logged", c->pred_error_max, sample_time(data, start_time, c->k_first_large_error),
+                 consequence);
         return 1;
     }
     return 0;

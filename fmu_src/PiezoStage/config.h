@@ -12,6 +12,14 @@
 
 #define MODEL_IDENTIFIER_STRING "PiezoStage"
 #define MODEL_GUID "{ef01aaba-a721-42bc-89a7-48ea3affdc56}"
+/* optional hooks of fmu_model.h: messages (v clamped to its declared range) */
+#define MODEL_HAS_MESSAGES 1
+
+/* The declared range of the input v, [min, max] in both model descriptions:
+ * the stage applies v clamped to it (model.c; tests/test_fmu_edges.py reads
+ * the range from the model descriptions and checks the clamp against it). */
+#define PIEZOSTAGE_V_MIN (-150.0)
+#define PIEZOSTAGE_V_MAX 150.0
 
 typedef enum {
     vr_v = 0,               /* input  [V] */
@@ -43,8 +51,12 @@ typedef enum {
 /* Flat and pointer-free: an FMU state is a copy of this plus the history. */
 typedef struct {
     piezo_plant_params params;  /* parameters as set through the FMI */
-    double v;                   /* input held over the communication step */
+    double v;                   /* input held over the communication step, as set */
     piezo_plant plant;          /* core state; outputs in plant.out */
+    uint64_t n_clamped;         /* samples whose v was outside [V_MIN, V_MAX] (applied clamped) */
+    uint64_t k_first_clamped;   /* the first of them (valid when n_clamped > 0) */
+    double v_first_clamped;     /* the v held then */
+    int said_clamped;           /* the first-clamping warning was logged */
 } ModelData;
 
 #endif

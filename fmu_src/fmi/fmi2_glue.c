@@ -40,11 +40,14 @@
  * refused at fmi2Instantiate (see there).
  *
  * Time is t0 + k h with an integer sample counter k. A communication step H
- * must be n h with n >= 0 (|H - n h| <= 1e-9 max(1, n) h); the n samples are
- * computed with the inputs held. A step that rounds to no sample (|H| below
- * 1e-9 h, as importers issue when they step to input time points that equal
- * the FMU's grid up to round-off) is a no-op returning fmi2OK. A step whose
- * end passes the stopTime of fmi2SetupExperiment is refused.
+ * must be > 0 (FMI 2.0 and 3.0) and n h (|H - n h| <= 1e-9 max(1, n) h); the n
+ * samples are computed with the inputs held. A positive step that rounds to no
+ * sample (H below 1e-9 h, as importers issue when they step to input time
+ * points that equal the FMU's grid up to round-off) is a no-op returning
+ * fmi2OK; H <= 0 is refused. A step whose end passes the stopTime of
+ * fmi2SetupExperiment is refused, and so is one that would do more work than a
+ * host should wait for in one call (more than MAX_STEP_SAMPLES samples, or with
+ * exact creep more than MAX_STEP_CREEP_TERMS terms of its sum: fmu_glue_core.c).
  * After a step the model may ask for a warning (logged once per kind, e.g.
  * the first clipped voltage, with a count at fmi2Terminate); fmi2DoStep then
  * returns fmi2Warning. Logging: messages go through the host's
@@ -54,7 +57,9 @@
  * switched off explicitly with fmi2SetDebugLogging.
  *
  * FMU states and their serialized form are the core's (fmu_glue_core.c
- * documents the blob format): the same in FMI 2.0 and FMI 3.0.
+ * documents the blob format): the same in FMI 2.0 and FMI 3.0. Freeing a NULL
+ * state (fmi2FreeFMUstate(c, NULL) or *FMUstate == NULL) is ignored, as the
+ * standard says.
  */
 #include <string.h>
 

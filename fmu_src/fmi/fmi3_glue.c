@@ -26,22 +26,25 @@
  *     (no clocks), variable dependencies, directional and adjoint derivatives,
  *     output derivatives, Model Exchange and Scheduled Execution.
  *   Get/Set of the other types (Float32, Int8..UInt64, String, Binary, Clock):
- *     the FMU has no such variable: nvr = 0 passes, anything else is refused
- *     naming the variable's real type.
+ *     the FMU has no such variable: nvr = 0 with nValues = 0 passes, anything
+ *     else is refused naming the variable's real type (or nValues).
  *
  * ExitInitializationMode enters Step Mode directly (no event mode), so an
  * instantiation with eventModeUsed = true is refused. The FMU never returns
  * early from a doStep and has no intermediate update: earlyReturnAllowed and
- * the intermediateUpdate callback are accepted and not used. Time, the step
- * rules, the warnings, the FMU states and their serialized form are the core's
- * and the same as in the FMI 2.0 edition (see fmi2_glue.c, fmu_glue_core.c);
- * the stopTime is fmi3EnterInitializationMode's.
+ * the intermediateUpdate callback are accepted and not used; a step longer than
+ * one doStep may compute is refused (fmu_glue_core.c), lastSuccessfulTime
+ * staying at the current time. Time, the step rules, the warnings, the FMU
+ * states and their serialized form are the core's and the same as in the FMI
+ * 2.0 edition (see fmi2_glue.c, fmu_glue_core.c); the stopTime is
+ * fmi3EnterInitializationMode's.
  *
  * Variables: a scalar has the value reference of its model variable (the FMI
  * 2.0 edition's); an array name[1..n] (e.g. pi.w) is one variable whose value
  * reference is that of name[1], holding n values in element order; the value
  * references of its other elements are not used (value references need not be
- * contiguous). Get/set calls give nValues = the values the references hold.
+ * contiguous). Get/set calls give nValues = the values the references hold
+ * (0 without references); any other nValues is refused.
  *
  * Memory: FMI 3.0 has no memory callbacks; the FMU uses calloc/free, and only
  * outside a step of one sample (instances, states, the exact-mode history).
@@ -270,17 +273,15 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
     fmi3Status fmi3Get##T(fmi3Instance instance, const fmi3ValueReference valueReferences[],                \
                           size_t nValueReferences, fmi3##T values[], size_t nValues)                         \
     {                                                                                                       \
-        (void)nValues;                                                                                      \
         return (fmi3Status)glue_no_such_type(instance, "fmi3Get" #T, GLUE_MASK_GET, valueReferences,        \
-                                             nValueReferences, values, #T);                                 \
+                                             nValueReferences, values, nValues, #T);                        \
     }
 #define NO_SUCH_SETTER(T)                                                                                   \
     fmi3Status fmi3Set##T(fmi3Instance instance, const fmi3ValueReference valueReferences[],                \
                           size_t nValueReferences, const fmi3##T values[], size_t nValues)                   \
     {                                                                                                       \
-        (void)nValues;                                                                                      \
         return (fmi3Status)glue_no_such_type(instance, "fmi3Set" #T, GLUE_MASK_SET, valueReferences,        \
-                                             nValueReferences, values, #T);                                 \
+                                             nValueReferences, values, nValues, #T);                        \
     }
 #define NO_SUCH_TYPE(T) NO_SUCH_GETTER(T) NO_SUCH_SETTER(T)
 
@@ -297,32 +298,34 @@ NO_SUCH_TYPE(String)
 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                          size_t nValueReferences, size_t valueSizes[], fmi3Binary values[], size_t nValues)
 {
-    (void)valueSizes; (void)nValues;
+    (void)valueSizes;
     return (fmi3Status)glue_no_such_type(instance, "fmi3GetBinary", GLUE_MASK_GET, valueReferences,
-                                         nValueReferences, values, "Binary");
+                                         nValueReferences, values, nValues, "Binary");
 }
 
 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                          size_t nValueReferences, const size_t valueSizes[], const fmi3Binary values[],
                          size_t nValues)
 {
-    (void)valueSizes; (void)nValues;
+    (void)valueSizes;
     return (fmi3Status)glue_no_such_type(instance, "fmi3SetBinary", GLUE_MASK_SET, valueReferences,
-                                         nValueReferences, values, "Binary");
+                                         nValueReferences, values, nValues, "Binary");
 }
 
 fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, fmi3Clock values[])
 {
+    /* no nValues: a clock is a scalar, one value a reference */
     return (fmi3Status)glue_no_such_type(instance, "fmi3GetClock", GLUE_MASK_GET, valueReferences,
-                                         nValueReferences, values, "Clock");
+                                         nValueReferences, values, nValueReferences, "Clock");
 }
 
 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, const fmi3Clock values[])
 {
+    /* no nValues: a clock is a scalar, one value a reference */
     return (fmi3Status)glue_no_such_type(instance, "fmi3SetClock", GLUE_MASK_SET, valueReferences,
-                                         nValueReferences, values, "Clock");
+                                         nValueReferences, values, nValueReferences, "Clock");
 }
 
 /* ------------------------------------------------------------------------ */

@@ -27,6 +27,18 @@ static const char model_guid[] = MODEL_GUID;
 /* Most samples since t0: (double)k stays exact and t0 + k h keeps its meaning. */
 #define MAX_SAMPLES 9007199254740992ull     /* 2^53 */
 
+/*
+ * The work one doStep may do. A host must never wait long in one call, so a
+ * step that would take more than about a second is refused before any work,
+ * naming the bound (docs/fmus.md, "Behaviour any importer can rely on", has the
+ * figures: build/tests/fmu_bound_bench times the longest step each FMU accepts).
+ * A sample costs 80-400 ns (the three FMUs, the inputs held, on the shared
+ * development machine); with creep.exact the sample at k also sums k + 1 terms
+ * of the creep, 0.3-0.5 ns each. A step of one sample always passes.
+ */
+#define MAX_STEP_SAMPLES 2000000ull             /* 1000 s at h = 0.5 ms */
+#define MAX_STEP_CREEP_TERMS 1000000000ull      /* from t0: 44720 samples, 22 s at h = 0.5 ms */
+
 enum { CAT_EVENTS = 1, CAT_WARNING = 2, CAT_ERROR = 4, CAT_ALL = 7 };
 
 /* An FMU state: a copy of everything that defines the instance's future. It
@@ -341,7 +353,20 @@ static model_type kind_type(glue_values kind)
     }
 }
 
-/* Check the references of a get/set and count their values; 0 when refused. */
+/* A get/set without value references: nothing to do, and no value either
+ * (FMI 3.0: nValues is the number of values the references hold, here 0;
+ * FMI 2.0 passes nvr, so it always agrees). 0 when refused. */
+static int no_references_no_values(const glue_instance *inst, const char *fname, size_t n_values)
+{
+    if (n_values != 0) {
+        glue_log_error(inst, "%s: nValues = %llu, but no value reference is given (nValueReferences = 0): "
+                       "nValues must be the number of values the references hold, here 0", fname,
+                       (unsigned long long)n_values);
+        return 0;
+    }
+    return 1;
+}
+
 /*
  * The hot path of a master's exchange: 1 when every vr[i] is a scalar variable
  * of the model of the given type (not time, not an array), which
@@ -364,6 +389,7 @@ static int scalars_of_type(const glue_instance *inst, const uint32_t vr[], size_
     return 1;
 }
 
+/* Check the references of a get/set and count their values; 0 when refused. */
 static int check_references(const glue_instance *inst, const char *fname, const uint32_t vr[], size_t nvr,
                             model_type type, size_t n_values, int *any_output)
 {
@@ -634,7 +660,7 @@ glue_status glue_get(void *c, const char *fname, const uint32_t vr[], size_t nvr
     if (inst == NULL)
         return GLUE_ERROR;
     if (nvr == 0)
-        return GLUE_OK;
+        return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
     /* scalars of the right type (a master's exchange) pass check_references: skip its bookkeeping */
@@ -679,7 +705,7 @@ glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr
     if (inst == NULL)
         return GLUE_ERROR;
     if (nvr == 0)
-        return GLUE_OK;
+        return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
     /* The master's exchange: finite values for scalar Real inputs, with no
@@ -770,7 +796,7 @@ glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr
 }
 
 glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32_t vr[], size_t nvr,
-                              const void *values, const char *type_name)
+                              const void *values, size_t n_values, const char *type_name)
 {
     glue_instance *inst = glue_instance_of(c, fname, mask);
     const char *const *names;
@@ -778,7 +804,7 @@ glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32
     if (inst == NULL)
         return GLUE_ERROR;
     if (nvr == 0)
-        return GLUE_OK;
+        return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
     names = inst->version->type_names;
@@ -822,11 +848,33 @@ static glue_status step_warnings(glue_instance *inst, const char *fname)
     return status;
 }
 
+/* Terms of the exact creep sum over n samples whose first sums a:
+ * a + (a + 1) + ... + (a + n - 1) = n a + n (n - 1) / 2 (exact in doubles up
+ * to 2^53, far above the bound, so comparisons with the bound are exact). */
+static double creep_terms(double n, double a)
+{
+    return n * a + n * (n - 1.0) / 2.0;
+}
+
+/* The longest step (>= 1 sample: one always passes) whose creep sums stay
+ * within MAX_STEP_CREEP_TERMS when its first sample sums a terms: the root of
+ * n^2/2 + (a - 1/2) n = B, then corrected to the exact integer. */
+static uint64_t longest_creep_step(double a)
+{
+    const double b = (double)MAX_STEP_CREEP_TERMS;
+    double n = floor(sqrt((a - 0.5) * (a - 0.5) + 2.0 * b) - (a - 0.5));
+    while (n > 1.0 && creep_terms(n, a) > b)
+        n -= 1.0;
+    while (creep_terms(n + 1.0, a) <= b)
+        n += 1.0;
+    return n < 1.0 ? 1u : (uint64_t)n;
+}
+
 static glue_status do_step(glue_instance *inst, const char *fname, double currentCommunicationPoint,
                            double communicationStepSize)
 {
     double t, tol, ratio, n_real;
-    char t1[GLUE_REAL_TEXT_SIZE], t2[GLUE_REAL_TEXT_SIZE], t3[GLUE_REAL_TEXT_SIZE];
+    char t1[GLUE_REAL_TEXT_SIZE], t2[GLUE_REAL_TEXT_SIZE], t3[GLUE_REAL_TEXT_SIZE], t4[GLUE_REAL_TEXT_SIZE];
     uint64_t n, i;
     size_t needed;
 
@@ -841,19 +889,23 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
                        (unsigned long long)inst->k, glue_real_text(t3, inst->h));
         return GLUE_ERROR;
     }
-    if (!isfinite(communicationStepSize) || communicationStepSize < 0.0) {
-        glue_log_error(inst, "%s: communicationStepSize = %s refused: it must be a whole multiple "
-                       "n >= 0 of h = %s; state and time unchanged", fname,
-                       glue_real_text(t1, communicationStepSize), glue_real_text(t2, inst->h));
+    if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
+        glue_log_error(inst, "%s: communicationStepSize = %s refused: the step size must be > 0, a whole "
+                       "multiple n >= 1 of h = %s (a positive step below 1e-9 h rounds to no sample and is a "
+                       "no-op); state and time unchanged", fname, glue_real_text(t1, communicationStepSize),
+                       glue_real_text(t2, inst->h));
         return GLUE_ERROR;
     }
     /* one sample, the usual step: H/h = 1 passes the checks below exactly */
     ratio = communicationStepSize == inst->h ? 1.0 : communicationStepSize / inst->h;
     n_real = ratio == 1.0 ? 1.0 : floor(ratio + 0.5);
-    if (ratio > 4.0e15) {
-        glue_log_error(inst, "%s: communicationStepSize = %s is too large: %s samples of h = %s", fname,
+    if (!(n_real <= (double)MAX_STEP_SAMPLES)) {
+        glue_log_error(inst, "%s: communicationStepSize = %s is %s samples of h = %s: refused, one doStep "
+                       "computes at most %llu samples (about a second of work: a host must not wait longer in one "
+                       "call); step at most %s s at a time; state and time unchanged", fname,
                        glue_real_text(t1, communicationStepSize), glue_real_text(t2, ratio),
-                       glue_real_text(t3, inst->h));
+                       glue_real_text(t3, inst->h), (unsigned long long)MAX_STEP_SAMPLES,
+                       glue_real_text(t4, (double)MAX_STEP_SAMPLES * inst->h));
         return GLUE_ERROR;
     }
     if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * max_of(1.0, n_real) * inst->h) {
@@ -884,13 +936,28 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
             return GLUE_ERROR;
         }
     }
-    inst->outputs_read = 0;
     if (n == 0) {
-        /* |H| < 1e-9 h: the step ends on the sample it starts from */
+        /* 0 < H < 1e-9 h: the step ends on the sample it starts from */
+        inst->outputs_read = 0;
         glue_log_event(inst, "%s: communicationStepSize = %s holds no sample of h = %s: nothing to do",
                        fname, glue_real_text(t1, communicationStepSize), glue_real_text(t2, inst->h));
         return GLUE_OK;
     }
+    /* exact creep: the sample at k sums its k + 1 past values (the history holds
+     * two doubles a sample), so the work grows with the time since t0 */
+    needed = model_history_needed(&inst->data);
+    if (n > 1 && needed > 0 && creep_terms((double)n, (double)(needed / 2)) > (double)MAX_STEP_CREEP_TERMS) {
+        uint64_t longest = longest_creep_step((double)(needed / 2));
+        glue_log_error(inst, "%s: the step from t = %s over %llu samples would sum %s terms of the exact creep "
+                       "(creep.exact = true: the sample at k sums its k + 1 past values), but one doStep sums at "
+                       "most %llu (about a second of work): refused; from t = %s a step of at most %llu samples "
+                       "(%s s) passes; state and time unchanged", fname, glue_real_text(t1, t),
+                       (unsigned long long)n, glue_real_text(t2, creep_terms((double)n, (double)(needed / 2))),
+                       (unsigned long long)MAX_STEP_CREEP_TERMS, glue_real_text(t3, t),
+                       (unsigned long long)longest, glue_real_text(t4, (double)longest * inst->h));
+        return GLUE_ERROR;
+    }
+    inst->outputs_read = 0;
 
     /* A refused sample changes nothing (model_step), so only a step of several
      * samples needs a copy to roll back the samples before the refused one. */
@@ -1085,10 +1152,14 @@ glue_status glue_free_state(void *c, const char *fname, void **state)
 {
     glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
     glue_state *st;
-    if (inst == NULL || glue_null_arg(inst, fname, "FMUstate", state))
+    if (inst == NULL)
         return GLUE_ERROR;
-    if (*state == NULL)
+    /* "If a null pointer is provided, the call is ignored" (FMI 2.0 and 3.0):
+     * no handle, or a handle holding no state */
+    if (state == NULL || *state == NULL) {
+        glue_log_event(inst, "%s: no FMU state given: nothing to free", fname);
         return GLUE_OK;
+    }
     st = checked_state(inst, fname, *state);
     if (st == NULL)
         return GLUE_ERROR;

@@ -172,16 +172,17 @@ glue_status glue_reset(void *c, const char *fname);
 /* ------------------------------------------------------------------------ */
 /* variables                                                                 */
 
-/* n_values must equal the values the value references hold (FMI 2.0: nvr). */
+/* n_values must equal the values the value references hold (FMI 2.0: nvr),
+ * with no value reference 0. */
 glue_status glue_get(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
                      void *values, size_t n_values);
 glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
                      const void *values, size_t n_values);
 /* Get/set of a type the FMU has no variable of: the state is checked, nvr = 0
- * passes, otherwise refused naming the first reference's type (or that it is
- * unknown). */
+ * passes with n_values = 0, otherwise refused naming the first reference's
+ * type (or that it is unknown). */
 glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32_t vr[], size_t nvr,
-                              const void *values, const char *type_name);
+                              const void *values, size_t n_values, const char *type_name);
 
 /* ------------------------------------------------------------------------ */
 /* time and stepping                                                         */

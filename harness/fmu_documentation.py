@@ -16,12 +16,9 @@ from __future__ import annotations
 
 import html
 from pathlib import Path
-import sys
+import re
 from xml.etree import ElementTree as ET
 
-REPO = Path(__file__).resolve().parents[1]
-if str(REPO) not in sys.path:
-    sys.path.insert(0, str(REPO))
 
 PROJECT = "piezo_fmus"
 CITATION = ('"Coupling Modeling and Adaptive Control for Piezoelectric-Actuated Positioning '
@@ -160,7 +157,7 @@ def _identity_table(root, platforms):
 
 
 def _connection_section(model_identifier, do_step="fmi2DoStep"):
-    from harness.ssp import SSP_COMPONENTS, SSP_CONNECTIONS
+    from .ssp import SSP_COMPONENTS, SSP_CONNECTIONS
 
     fmu_of = {comp: fmu for comp, (fmu, _) in SSP_COMPONENTS.items()}
     units = {(comp, name): unit for comp, (_, conns) in SSP_COMPONENTS.items()
@@ -302,6 +299,23 @@ its repository) gives each correction and its reason.</p>
 </body>
 </html>
 """
+
+
+def exported_index_html(index, model_description, section):
+    """``documentation/index.html`` of an exported FMU from the built FMU's ``index``.
+
+    The variables table is generated again from the exported ``model_description`` (its
+    start values are the identified ones), and ``section`` (HTML: where the start values
+    came from) is put before it; the rest of the built page is kept.
+    """
+    root = ET.fromstring(model_description.encode("utf-8"))
+    table = re.compile(r'<table class="variables">.*?</table>', re.DOTALL)
+    if len(table.findall(index)) != 1 or index.count('<h2 id="variables">') != 1:
+        raise ValueError("the built documentation has no single variables table to replace")
+    index = table.sub(lambda m: _variables_table(root), index)
+    old = re.compile(r'<h2 id="identified">.*?(?=<h2 id="variables">)', re.DOTALL)
+    index = old.sub("", index)          # an exported FMU exported again: one section
+    return index.replace('<h2 id="variables">', section + '<h2 id="variables">', 1)
 
 
 def ls_ref_html(model_description, ls_ref_dir):
