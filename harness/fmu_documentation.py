@@ -237,13 +237,15 @@ and <code>sources/buildDescription.xml</code> lists the files to compile, the in
 folder and the definitions{note}. Only the FMI {major}.0 headers
 (<code>fmi{major}Functions.h</code>, <code>fmi{major}FunctionTypes.h</code>,
 <code>fmi{major}{platform_types}.h</code>) come from the importer. With GCC or Clang:</p>
-<pre>cc -shared -fPIC -std=c99 -O2 -I sources -I FMI{major}_HEADERS \\
+<pre>cc -shared -fPIC -std=c99 -O2 -ffp-contract=off -I sources -I FMI{major}_HEADERS \\
    {_e(files)} \\
    -lm -o binaries/{linux}/{_e(model_identifier)}.so</pre>
 <p>For Windows with MinGW-w64, add <code>-D__USE_MINGW_ANSI_STDIO=1 -static-libgcc</code>
 and write <code>binaries/{windows}/{_e(model_identifier)}.dll</code> (the shipped win64
 binary is built this way). The code is plain C99 with no dependency other than the C
-library and its math functions.</p>
+library and its math functions. <code>-ffp-contract=off</code> keeps every multiply and add
+as written (no fused multiply-add), as in the shipped binaries; <code>-ffast-math</code>
+would change the results.</p>
 {optional}
 """
 

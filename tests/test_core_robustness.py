@@ -96,6 +96,11 @@ def test_plant_check_accepts_runs_and_names_tampered_fields():
         setattr(struct, field, value)
         assert fragment in (check_text(lib.piezo_plant_check(raw)) or ""), (block, field)
         setattr(struct, field, old)
+    # the creep's input ring and its mirror hold the same doubles (the window sum reads both)
+    raw.creep.x_ring[17 + 3] = raw.creep.x_ring[3] + 1.0
+    assert "mirror" in (check_text(lib.piezo_plant_check(raw)) or "")
+    raw.creep.x_ring[17 + 3] = raw.creep.x_ring[3]
+    assert check_text(lib.piezo_plant_check(raw)) is None
     raw.out.y_meas = math.nan
     assert "not finite" in check_text(lib.piezo_plant_check(raw))
 
@@ -194,6 +199,17 @@ def test_controller_check_accepts_runs_and_names_tampered_fields():
         setattr(raw, field, value)
         assert fragment in (check_text(lib.piezo_controller_check(raw)) or ""), field
         setattr(raw, field, old)
+    # derived at init, so a restored state must carry the reciprocal of its own rls.forgetting
+    old = raw.inv_forgetting
+    raw.inv_forgetting = old * (1 + 2 ** -52)
+    assert "rls.forgetting" in (check_text(lib.piezo_controller_check(raw)) or "")
+    raw.inv_forgetting = old
+    # the RLS reads P_ij as P_ji: a live P is symmetric bit for bit
+    old = raw.P[1]
+    raw.P[1] = raw.P[4] * (1 + 2 ** -52) if raw.P[4] != 0 else 1e-300
+    assert "symmetric" in (check_text(lib.piezo_controller_check(raw)) or "")
+    raw.P[1] = old
+    assert check_text(lib.piezo_controller_check(raw)) is None
     raw.P[5] = math.nan
     assert "covariance" in check_text(lib.piezo_controller_check(raw))
 

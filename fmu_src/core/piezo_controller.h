@@ -65,6 +65,7 @@ typedef struct {
     double lambda_u;
     int rls_enabled;
     double forgetting, p0, trace_max;
+    double inv_forgetting;       /* 1 / forgetting, set at init (the RLS multiplies by it) */
     int sat_enabled;
     double sat_v_min, sat_v_max;
     double theta_nominal[4];
