@@ -47,6 +47,7 @@ from .identify import (
     identify_transfer_function,
     read_params,
     read_record,
+    run_identification,
 )
 from .identify.export import export_fmus
 from .native import simulate_closed_loop_native
@@ -56,7 +57,6 @@ from .report import (
     evaluate_tracking,
     evaluate_validation,
     run_all,
-    run_identification,
     run_scenario,
 )
 from .scenarios import (

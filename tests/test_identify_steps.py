@@ -77,7 +77,7 @@ from harness.identify import (
     identify_creep,
     transfer_function_output,
 )
-from harness.report import generate_identification_records
+from harness.identify import generate_identification_records
 
 REPO = Path(__file__).resolve().parents[1]
 

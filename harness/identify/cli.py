@@ -34,6 +34,7 @@ import math
 import sys
 
 from ..checks import RunCheckError
+from .internal import run_identification
 
 __all__ = ["add_identify_arguments", "check_identify_arguments", "run_identify",
            "add_export_arguments", "run_export", "add_param_file_arguments",
@@ -208,13 +209,11 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
     say = _progress_lines(progress)
     try:
         if args.internal_channels:
-            from .. import report
-
-            report.run_identification(args.out, backend=args.backend,
-                                      noise_rms_um=args.noise_rms or 0.0,
-                                      seed=1 if args.seed is None else args.seed,
-                                      fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
-                                      displacement_only=args.displacement_only)
+            run_identification(args.out, backend=args.backend,
+                               noise_rms_um=args.noise_rms or 0.0,
+                               seed=1 if args.seed is None else args.seed,
+                               fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
+                               displacement_only=args.displacement_only)
             return 0
         if getattr(args, "family", None) is not None:
             return _identify_family(args, stream, say)

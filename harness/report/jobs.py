@@ -19,6 +19,7 @@ from pathlib import Path
 import sys
 import textwrap
 
+from .. import masters
 from ..scenarios import VALIDATION_SCENARIOS, get_scenario, load_scenarios
 from . import document as doc_
 from . import tables
@@ -28,10 +29,9 @@ from .conditions import (
     describe_condition,
     user_condition,
 )
-from .progress import Progress
+from ..progress import Progress
 from .provenance import WINDOWS_PLATFORM
-from .run import (evaluate_tracking, evaluate_validation, parameter_defaults, simulators,
-                  validation_series)
+from .run import evaluate_tracking, evaluate_validation, parameter_defaults, validation_series
 
 __all__ = ["run_all", "run_scenario", "check_out_dir", "prepare_out_dir", "VALIDATION_NOTES",
            "REPORT_WIDTH"]
@@ -202,7 +202,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     if extra_track:
         conditions.append(user_condition(extra_track, adaptation, preview, master))
     # provenance first: a missing FMU fails here, before minutes of runs
-    simulators(backend, fmi_version)        # an impossible backend/version pair fails now
+    masters.simulators(backend, fmi_version)    # an impossible backend/version pair fails now
     prov = collect_provenance(backend, fmu_dir, command=command, fmi_version=fmi_version)
     plant_def = parameter_defaults(PLANT_MODEL, backend, fmu_dir, fmi_version)
     ctrl_def = parameter_defaults(CONTROLLER_MODEL, backend, fmu_dir, fmi_version)
@@ -439,7 +439,7 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
                                     or master != "gauss-seidel"):
         raise ValueError(f"scenario '{sc.name}' is a validation scenario (the plant runs alone): "
                          f"adaptation, preview and master do not apply")
-    simulators(backend, fmi_version)        # an impossible backend/version pair fails now
+    masters.simulators(backend, fmi_version)    # an impossible backend/version pair fails now
     out = prepare_out_dir(out_dir)
     prog = Progress(1, progress, progress_interval)
     keep = plots or timeseries is not None

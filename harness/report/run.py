@@ -13,22 +13,18 @@ import time as _time
 
 import numpy as np
 
+from .. import masters
 from ..metrics import compute_metrics, window_mask
 from ..scenarios import get_scenario
 
 __all__ = [
-    "BACKENDS",
     "TrackingResult",
     "ValidationResult",
     "evaluate_tracking",
     "evaluate_validation",
-    "simulators",
     "parameter_defaults",
     "validation_series",
 ]
-
-BACKENDS = ("auto", "fmpy", "native", "core")
-
 
 def _ratio(a, b):
     if b is None or not math.isfinite(b) or b == 0:
@@ -104,47 +100,6 @@ class ValidationResult:
         return math.isfinite(self.paper_coupled_e_rms_um)
 
 
-def simulators(backend, fmi_version=2):
-    """The (closed-loop, open-loop) simulation functions of a backend.
-
-    ``fmi_version=3`` runs the FMI 3.0 editions of the FMUs (fmpy; ``auto`` then runs every
-    loop with fmpy); the core and native backends have no FMI 3.0 path and raise ValueError.
-    """
-    if fmi_version != 2:
-        return _fmi3_simulators(backend, fmi_version)
-    if backend == "fmpy":
-        from ..cosim import simulate_closed_loop, simulate_open_loop
-        return simulate_closed_loop, simulate_open_loop
-    if backend == "core":
-        from ..core_loop import simulate_closed_loop_core, simulate_open_loop_core
-        return simulate_closed_loop_core, simulate_open_loop_core
-    if backend in ("native", "auto"):   # closed loops only; the plant alone runs in fmpy
-        from ..cosim import simulate_open_loop
-        from ..native import simulate_closed_loop_auto, simulate_closed_loop_native
-        return (simulate_closed_loop_native if backend == "native" else simulate_closed_loop_auto,
-                simulate_open_loop)
-    raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-
-
-def _fmi3_simulators(backend, fmi_version):
-    import functools
-
-    from ..cosim import FMI_VERSIONS, simulate_closed_loop, simulate_open_loop
-    from ..native import FMI3_REFUSAL
-
-    if fmi_version not in FMI_VERSIONS:
-        raise ValueError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
-    if backend == "core":
-        raise ValueError("the core backend runs the C core without FMI: an FMI version does "
-                         "not apply to it")
-    if backend == "native":
-        raise ValueError(FMI3_REFUSAL)
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-    return (functools.partial(simulate_closed_loop, fmi_version=fmi_version),
-            functools.partial(simulate_open_loop, fmi_version=fmi_version))
-
-
 def parameter_defaults(model, backend="fmpy", fmu_dir=None, fmi_version=2):
     """A model's default parameters (its start values) on a backend, by FMU variable name.
 
@@ -213,7 +168,7 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
     backend : {"auto", "fmpy", "native", "core"}
         Run the FMUs (default) or the C core directly.
     fmi_version : {2, 3}
-        The FMUs' FMI 2.0 (default) or FMI 3.0 editions (see :func:`simulators`).
+        The FMUs' FMI 2.0 (default) or FMI 3.0 editions (see :func:`harness.masters.closed_loop`).
     keep_data : bool
         Keep the time series in ``result.data``.
     progress : callable, optional
@@ -234,7 +189,7 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
     from ..cosim import LoopDivergedError
 
     sc = get_scenario(scenario, registry)
-    closed, _ = simulators(backend, fmi_version)
+    closed = masters.closed_loop(backend, fmi_version)
     label = f"{condition} / {sc.name}"
     t0 = _time.perf_counter()
     try:
@@ -278,7 +233,7 @@ def evaluate_validation(scenario, *, fmu_dir=None, registry=None, backend="fmpy"
     sc = get_scenario(scenario, registry)
     if sc.kind != "validation":
         raise ValueError(f"scenario '{sc.name}' is a {sc.kind} scenario, not a validation input")
-    _, open_loop = simulators(backend, fmi_version)
+    open_loop = masters.open_loop(backend, fmi_version)
     t0 = _time.perf_counter()
     v = sc.signal.evaluate(sc.time_grid())
     params = dict(sc.plant)
