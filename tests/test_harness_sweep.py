@@ -22,6 +22,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from harness import native, sweep  # noqa: E402
 from harness.scenarios import load_scenarios  # noqa: E402
+from harness.sweep.store import RunStore  # noqa: E402
 
 BASE = sweep.plant_start_values()
 REALS = [k for k, v in BASE.items() if isinstance(v, float)]
@@ -285,7 +286,7 @@ def test_store_records_each_run_once_and_drops_a_row_cut_off_by_a_kill(tmp_path)
     """Reference: the journal's own rows. A second row of a recorded run is not written; a
     journal whose last line was cut off mid-write loads the complete rows only, and the
     cut line is removed from the file, so appending continues on a clean line."""
-    store = sweep._Store(tmp_path, ["a"], 5, ["p"])
+    store = RunStore(tmp_path, ["a"], 5, ["p"])
     store.open(fresh=True)
     assert [i for i, _ in store.add("a", [(3, "ok", 1e-3, 1e-4, "", 0.01, [1.5]),
                                           (1, "diverged", math.nan, math.nan, "why, with a comma", 0.02, [2.5])])] == [3, 1]
@@ -293,7 +294,7 @@ def test_store_records_each_run_once_and_drops_a_row_cut_off_by_a_kill(tmp_path)
     store.close()
     text = store.path.read_bytes()
     store.path.write_bytes(text + b"a,4,ok,0.5,0.")              # killed mid-row
-    again = sweep._Store(tmp_path, ["a"], 5, ["p"])
+    again = RunStore(tmp_path, ["a"], 5, ["p"])
     assert again.load() == 2
     assert store.path.read_bytes() == text
     assert list(again.missing("a")) == [0, 2, 4]

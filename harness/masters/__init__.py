@@ -33,7 +33,7 @@ from .. import core_loop as core, cosim as fmpy, native   # until the masters mo
 
 __all__ = ["Master", "MASTERS", "BACKENDS", "OPEN_LOOP_BACKENDS", "SWEEP_BACKENDS",
            "LONG_RUN_SAMPLES", "get", "closed_loop", "open_loop", "prepared_loop",
-           "simulators", "simulate_closed_loop_auto"]
+           "simulators", "simulate_closed_loop_auto", "check_sweep_backend"]
 
 
 @dataclass(frozen=True)
@@ -165,10 +165,8 @@ def simulators(backend, fmi_version=2):
     return closed_loop(backend, fmi_version), open_loop(backend, fmi_version)
 
 
-def prepared_loop(backend, fmu_dir=None):
-    """A function ``run(setup)`` that runs a prepared closed loop
-    (:class:`harness.loop.ClosedLoopSetup`) on this thread's instances of the FMUs in
-    ``fmu_dir``, kept from run to run: the runs of a sweep.
+def check_sweep_backend(backend):
+    """Refuse a master that cannot run a sweep's prepared loops here.
 
     Raises
     ------
@@ -179,6 +177,18 @@ def prepared_loop(backend, fmu_dir=None):
     """
     if backend not in SWEEP_BACKENDS:
         raise ValueError(f"backend must be 'native' or 'fmpy', got {backend!r}")
+    if backend == "native" and not native.native_available():
+        raise FileNotFoundError(f"native runner library not found: {native.runner_library_path()}; "
+                                f"build it (cmake --build build) or use --backend fmpy")
+
+
+def prepared_loop(backend, fmu_dir=None):
+    """A function ``run(setup)`` that runs a prepared closed loop
+    (:class:`harness.loop.ClosedLoopSetup`) on this thread's instances of the FMUs in
+    ``fmu_dir``, kept from run to run: the runs of a sweep. Raises as
+    :func:`check_sweep_backend`.
+    """
+    check_sweep_backend(backend)
     if backend == "native":
         return native.native_loop(fmu_dir).run
     return functools.partial(fmpy._simulate, fmu_dir=fmu_dir)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..text_tables import fmt, markdown_table, num, text_table, titled_table
+from ..text_tables import fmt, num, titled_table
 from .conditions import reference_label
 
 __all__ = [
