@@ -18,6 +18,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from harness import bench, core, native  # noqa: E402
+from harness.bench.measure import timing_library  # noqa: E402
 from harness._common import prepare_closed_loop  # noqa: E402
 from harness.core_loop import simulate_closed_loop_core  # noqa: E402
 
@@ -65,7 +66,7 @@ def test_bench_loops_run_the_closed_loop_trajectory():
     the FMUs' timing). piezo_bench_closed_loop records y_meas(k) and the applied v(k): both
     equal the reference's bit for bit; the plant timed alone on that v and the controller
     timed alone on those inputs run every sample (status PIEZO_OK)."""
-    ffi, lib = bench._bench_lib()
+    ffi, lib = timing_library()
     n = 3000
     setup = prepare_closed_loop("mismatch_1_5_10hz", duration=n * 0.0005)
     want = simulate_closed_loop_core("mismatch_1_5_10hz", duration=n * 0.0005)

@@ -56,6 +56,8 @@ class Master:
         One of the command line's ``--backend`` choices.
     reuses_instances : bool
         It runs a prepared loop on instances kept from run to run (:func:`prepared_loop`).
+    fmi_note : str
+        Why it runs only the FMI versions it runs (for messages), or "".
     """
 
     name: str
@@ -66,6 +68,7 @@ class Master:
     needs: str
     backend: bool = True
     reuses_instances: bool = False
+    fmi_note: str = ""
 
 
 MASTERS = {m.name: m for m in (
@@ -74,8 +77,10 @@ MASTERS = {m.name: m for m in (
     Master("fmpy", "the FMUs through fmpy, values exchanged at communication points",
            True, True, (2, 3), "fmpy", reuses_instances=True),
     Master("native", "the same FMUs and loop in the C master of fmu_src/runner",
-           True, False, (2,), "build/libpiezo_runner.so", reuses_instances=True),
-    Master("core", "the C core through cffi, no FMI", True, True, (), "build/libpiezo_core.so"),
+           True, False, (2,), "build/libpiezo_runner.so", reuses_instances=True,
+           fmi_note="the native master calls the fmi2 functions"),
+    Master("core", "the C core through cffi, no FMI", True, True, (), "build/libpiezo_core.so",
+           fmi_note="the core backend runs no FMU"),
     Master("ssp-player", "fmpy's SSP player on the closed-loop SSP (a Jacobi schedule)",
            True, False, (2,), "fmpy", backend=False),
     Master("container", "an FMU container of fmu-manipulation-toolbox (parallel or sequential)",
