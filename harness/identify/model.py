@@ -21,6 +21,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+# scipy is imported inside the functions that use it: the build imports this package with
+# its build requirements only (fmpy, cffi, numpy), and scipy costs 0.3-0.7 s at import.
+
+from .. import core
 
 __all__ = [
     "IdentificationInputError",
@@ -215,8 +219,6 @@ def _order(alpha):
 
 def _gl_run(x, alpha, gain, exact):
     """``gain * sum_j w_j(alpha) x(k-j)`` by the C core (the plant's own operator)."""
-    from .. import core
-
     return core.gl_operator(alpha, gain, exact).run(x)
 
 

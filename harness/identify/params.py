@@ -23,6 +23,11 @@ import json
 import math
 from pathlib import Path
 
+import fmpy
+
+from .. import core
+from ..cosim import fmu_path
+
 __all__ = [
     "PLANT_MODEL",
     "CONTROLLER_MODEL",
@@ -156,16 +161,10 @@ def parameter_types(model, *, fmu_dir=None, backend="fmpy"):
         Name -> ``"Real"``, ``"Integer"`` or ``"Boolean"``.
     """
     if backend == "core":
-        from .. import core
-
         defaults = (core.default_plant_params() if model == PLANT_MODEL
                     else core.default_controller_params())
         return {n: ("Boolean" if isinstance(v, bool) else "Integer" if isinstance(v, int)
                     else "Real") for n, v in defaults.items()}
-    import fmpy
-
-    from ..cosim import fmu_path
-
     md = fmpy.read_model_description(str(fmu_path(model, fmu_dir)))
     return {v.name: v.type for v in md.modelVariables if v.causality == "parameter"}
 

@@ -33,6 +33,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+# scipy is imported inside the functions that use it: the build imports this package with
+# its build requirements only (fmpy, cffi, numpy), and scipy costs 0.3-0.7 s at import.
 
 from .model import (
     IdentificationInputError,

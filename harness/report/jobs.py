@@ -20,6 +20,8 @@ import sys
 import textwrap
 
 from .. import masters
+from ..cosim import CONTROLLER_MODEL, PLANT_MODEL
+from ..progress import Progress
 from ..scenarios import VALIDATION_SCENARIOS, get_scenario, load_scenarios
 from . import document as doc_
 from . import tables
@@ -29,8 +31,8 @@ from .conditions import (
     describe_condition,
     user_condition,
 )
-from ..progress import Progress
-from .provenance import WINDOWS_PLATFORM
+from .figures import draw_main_figures, draw_scenario_figure
+from .provenance import WINDOWS_PLATFORM, collect_provenance
 from .run import evaluate_tracking, evaluate_validation, parameter_defaults, validation_series
 
 __all__ = ["run_all", "run_scenario", "check_out_dir", "prepare_out_dir", "VALIDATION_NOTES",
@@ -189,9 +191,6 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
         "conditions": [Condition], "provenance": Provenance, "figures": [FigureFile],
         "files": [Path]}``
     """
-    from ..cosim import CONTROLLER_MODEL, PLANT_MODEL
-    from .provenance import collect_provenance
-
     out = prepare_out_dir(out_dir)
     registry = load_scenarios() if registry is None else registry
     conditions = default_conditions(adaptation, preview, master)
@@ -239,8 +238,6 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
 
     figures = []
     if plots:
-        from .figures import draw_main_figures
-
         first = all_tracking[0].spec
         nominal_g = _effective(ctrl_def, first.controller)
         plants = {r.scenario: _effective(plant_def, r.spec.plant) for r in all_tracking}
@@ -428,9 +425,6 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
     ValueError
         Closed-loop options given for a validation scenario, or an unknown format.
     """
-    from ..cosim import CONTROLLER_MODEL, PLANT_MODEL
-    from .figures import draw_scenario_figure
-
     sc = get_scenario(name, registry)
     if timeseries not in (None, *tables.TIMESERIES_FORMATS):
         raise ValueError(f"timeseries must be one of {', '.join(tables.TIMESERIES_FORMATS)} "

@@ -18,7 +18,11 @@ import platform
 import sys
 import zipfile
 
+import fmpy
+
+from .. import _paths, _source, core
 from .._common import REPO_ROOT
+from ..cosim import CONTROLLER_MODEL, PLANT_MODEL, fmu_path
 
 __all__ = ["FMUInfo", "Provenance", "collect_provenance", "model_description", "fmu_info",
            "fmu_platforms", "missing_windows_binaries"]
@@ -28,8 +32,6 @@ _MD_CACHE = {}
 
 def model_description(path):
     """fmpy's model description of an FMU file (cached by path, mtime and size)."""
-    import fmpy
-
     path = Path(path)
     st = path.stat()
     key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
@@ -91,9 +93,6 @@ def missing_windows_binaries(fmu_dir=None, fmi_version=2):
     MinGW-w64 is installed; ``pip install .`` hides CMake's output, so the user learns it
     here. Only the plant FMU is looked at: one build makes all of them.
     """
-    from .. import _paths
-    from ..cosim import PLANT_MODEL, fmu_path
-
     try:
         path = fmu_path(PLANT_MODEL, fmu_dir, fmi_version)
         platforms = fmu_platforms(path)
@@ -159,8 +158,6 @@ def commit_id():
     differ from it. An installed package: the commit recorded when it was built, with
     `` (recorded at build time, installed package)``. Otherwise ``unknown`` and why.
     """
-    from .. import _paths, _source
-
     if _paths.IN_CHECKOUT:
         here = _source.git_source(REPO_ROOT)
         if here["commit"]:
@@ -214,15 +211,12 @@ def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None, 
     -------
     Provenance
     """
-    from ..cosim import CONTROLLER_MODEL, PLANT_MODEL, fmu_path
-
     models = (PLANT_MODEL, CONTROLLER_MODEL) if models is None else tuple(models)
     prov = Provenance(commit=commit_id(), backend=backend,
                       fmi_version=None if backend == "core" else int(fmi_version))
     if backend != "core":
         prov.fmus = [fmu_info(fmu_path(m, fmu_dir, fmi_version)) for m in models]
     else:
-        from .. import core
         lib = core.library_path()
         prov.core_library = {"path": str(lib), "sha256": _sha256(lib) if lib.is_file() else ""}
     prov.versions = {"python": platform.python_version(), "fmpy": _version("fmpy"),

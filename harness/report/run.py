@@ -13,9 +13,12 @@ import time as _time
 
 import numpy as np
 
-from .. import masters
+from .. import core, masters
+from ..checks import RunDivergedError, check_tracking_run
+from ..cosim import CONTROLLER_MODEL, PLANT_MODEL, LoopDivergedError, fmu_path
 from ..metrics import compute_metrics, window_mask
 from ..scenarios import get_scenario
+from .provenance import model_description
 
 __all__ = [
     "TrackingResult",
@@ -120,16 +123,11 @@ def parameter_defaults(model, backend="fmpy", fmu_dir=None, fmi_version=2):
     -------
     dict
     """
-    from ..cosim import CONTROLLER_MODEL, PLANT_MODEL, fmu_path
-
     if model not in (PLANT_MODEL, CONTROLLER_MODEL):
         raise ValueError(f"model must be {PLANT_MODEL} or {CONTROLLER_MODEL}, got {model!r}")
     if backend == "core":
-        from .. import core
         return dict(core.default_plant_params() if model == PLANT_MODEL
                     else core.default_controller_params())
-    from .provenance import model_description
-
     md = model_description(fmu_path(model, fmu_dir, fmi_version))
     out = {}
     for v in md.modelVariables:
@@ -184,10 +182,6 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
         The run diverged (the controller stopped it, or its error exceeds the reference) or
         saturated persistently (:func:`harness.checks.check_tracking_run`).
     """
-    from ..checks import RunDivergedError, check_tracking_run
-    from ..core import CoreDivergedError
-    from ..cosim import LoopDivergedError
-
     sc = get_scenario(scenario, registry)
     closed = masters.closed_loop(backend, fmi_version)
     label = f"{condition} / {sc.name}"
@@ -195,7 +189,7 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
     try:
         data = closed(sc, adaptation=adaptation, preview=preview, master=master, fmu_dir=fmu_dir,
                       progress=progress)
-    except (LoopDivergedError, CoreDivergedError) as exc:
+    except (LoopDivergedError, core.CoreDivergedError) as exc:
         raise RunDivergedError(f"{label}: {exc}") from None
     elapsed = _time.perf_counter() - t0
     check_tracking_run(data, sc, label)
