@@ -200,6 +200,9 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
                                                      if s.kind == "validation"]
     if extra_track:
         conditions.append(user_condition(extra_track, adaptation, preview, master))
+    # every scenario looked up once, here; the Scenario objects go down
+    scenarios = {n: get_scenario(n, registry)
+                 for n in [*(n for c in conditions for n in c.scenarios), *validation_names]}
     # provenance first: a missing FMU fails here, before minutes of runs
     masters.simulators(backend, fmi_version)    # an impossible backend/version pair fails now
     prov = collect_provenance(backend, fmu_dir, command=command, fmi_version=fmi_version)
@@ -213,10 +216,10 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
         res = []
         for name in cond.scenarios:
             what = f"{cond.key} / {name}"
-            sc = get_scenario(name, registry)
+            sc = scenarios[name]
             r = evaluate_tracking(sc, condition=cond.key, adaptation=cond.adaptation,
                                   preview=cond.preview, master=cond.master, fmu_dir=fmu_dir,
-                                  registry=registry, backend=backend, fmi_version=fmi_version,
+                                  backend=backend, fmi_version=fmi_version,
                                   keep_data=plots and cond.role != "check",
                                   progress=prog.within(what, sc.step_size))
             prog.done(f"{what}: e_rms {r.e_rms_um * 1e3:.4g} nm", r.elapsed_s)
@@ -224,8 +227,8 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
         tracking[cond.key] = res
     validation = []
     for name in validation_names:
-        sc = get_scenario(name, registry)
-        r = evaluate_validation(sc, fmu_dir=fmu_dir, registry=registry, backend=backend,
+        sc = scenarios[name]
+        r = evaluate_validation(sc, fmu_dir=fmu_dir, backend=backend,
                                 fmi_version=fmi_version, keep_data=plots,
                                 progress=prog.within(f"validation / {name}", sc.step_size))
         prog.done(f"validation / {name}: C − H e_rms {r.diff_e_rms_um:.4f} µm", r.elapsed_s)
@@ -440,7 +443,7 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
     if sc.kind == "tracking":
         label = condition_label("run", adaptation, preview, master)
         r = evaluate_tracking(sc, condition="run", adaptation=adaptation, preview=preview,
-                              master=master, fmu_dir=fmu_dir, registry=registry, backend=backend,
+                              master=master, fmu_dir=fmu_dir, backend=backend,
                               fmi_version=fmi_version, keep_data=keep,
                               progress=prog.within(sc.name, sc.step_size))
         prog.done(f"{sc.name}: e_rms {r.e_rms_um * 1e3:.4g} nm", r.elapsed_s)
@@ -448,7 +451,7 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
         series = r.data
         table = tables.format_tracking_table([r], f"Tracking: {sc.name} ({label})")
     else:
-        r = evaluate_validation(sc, fmu_dir=fmu_dir, registry=registry, backend=backend,
+        r = evaluate_validation(sc, fmu_dir=fmu_dir, backend=backend,
                                 fmi_version=fmi_version, keep_data=keep,
                                 progress=prog.within(sc.name, sc.step_size))
         prog.done(f"{sc.name}: C − H e_rms {r.diff_e_rms_um:.4f} µm", r.elapsed_s)
