@@ -310,7 +310,11 @@ def _add_export_parser(sub):
         "export", help="parameterised FMUs from a parameter file",
         description="Write PiezoStage.fmu and AdaptiveCompoundController.fmu with the values of "
                     "a parameter file as their start values (the built binaries reused, the "
-                    "modelDescription rewritten, the GUID kept); each FMU takes the names it has.")
+                    "modelDescription rewritten, the GUID kept); each FMU takes the names it has. "
+                    "Each FMU's regression experiment (FMI-LS-REF) and documentation are "
+                    "recomputed for those values, and extra/piezo_fmus.identification/ records "
+                    "where they came from (the parameter file, the identification report and the "
+                    "measured records beside it, with their SHA-256).")
     _output_option(p, "the two FMUs")
     _fmu_dir_option(p, "folder of the built FMUs")
     add_export_arguments(p)
