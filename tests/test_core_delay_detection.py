@@ -60,6 +60,8 @@ def closed_loop(scenario, schedule, tf_delay=0, *, signal_fn=None, ctrl_params=N
         if not o:
             queue.append(out.v)
             plant.step(queue.pop(0))
+    # the state a deserialized FMU state must also pass (piezo_controller_check)
+    assert core.lib().piezo_controller_check(ctrl.raw) == core.ffi.NULL
     return y, y_d[:n], outs
 
 

@@ -730,8 +730,10 @@ const char *piezo_controller_check(const piezo_controller *c)
         || (c->detecting && !c->auto_delay) || (c->auto_delay && c->d > PIEZO_DETECT_N)
         || (c->detecting && c->d != PIEZO_DETECT_START_D))
         return "delay detection flags or d inconsistent";
+    /* a choice leaves its leader with a run of PIEZO_DETECT_CONFIRM */
     if (c->det_leader < -1 || c->det_leader >= PIEZO_DETECT_N || c->det_run < 0
-        || c->det_run >= PIEZO_DETECT_CONFIRM || (c->det_leader < 0 && c->det_run != 0))
+        || c->det_run > PIEZO_DETECT_CONFIRM || (c->detecting && c->det_run == PIEZO_DETECT_CONFIRM)
+        || (c->det_leader < 0 && c->det_run != 0))
         return "delay detection leader out of range";
     if (c->det_trial > c->k || !(isfinite(c->det_probe) && c->det_probe >= 0.0 && c->det_probe <= PROBE_MAX))
         return "delay detection trial out of range";

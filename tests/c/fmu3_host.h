@@ -349,6 +349,16 @@ static inline fmi3Status host3_set_named(const host3_fmu *f, fmi3Instance c, con
 }
 
 /* Every Float64 output into out[] (in variable order); returns how many, or -1 on fmi3Error. */
+/* The controller refuses a doStep of several samples unless mv.hold_inputs is
+ * true (a closed loop needs one exchange per sample); these hosts step several
+ * samples at once to test the FMI layer, so they set it wherever the FMU has it. */
+static inline int host3_hold_inputs(const host3_fmu *f, fmi3Instance c)
+{
+    int element;
+    return host3_named(f, "mv.hold_inputs", &element) == NULL
+           || host3_set_named(f, c, "mv.hold_inputs", 1.0) == fmi3OK;
+}
+
 static inline int host3_real_outputs(const host3_fmu *f, fmi3Instance c, double *out)
 {
     int i, n = 0;

@@ -82,6 +82,8 @@ static fmi3Instance instantiate(const host3_fmu *f, inst_t *in, const char *name
     memset(in, 0, sizeof *in);
     in->f = f;
     in->c = host3_instantiate(f, name, &in->log);
+    if (in->c != NULL && !host3_hold_inputs(f, in->c))
+        return NULL;
     return in->c;
 }
 

@@ -209,6 +209,7 @@ static void defect3_stop_time(const host3_fmu *f)
     fmi3Instance c;
     host_log_clear(&log);
     c = host3_instantiate(f, "stop", &log);
+    host3_hold_inputs(f, c);
     f->api.EnterInitializationMode(c, fmi3False, 0.0, 0.0, fmi3True, 10 * f->h);
     f->api.ExitInitializationMode(c);
     check(host3_step(f, c, 0.0, 10 * f->h) <= fmi3Warning, "defect 3 %s: a step to stopTime passes", f->id);

@@ -327,6 +327,14 @@ static inline fmi2Status host_set_named(const host_fmu *f, fmi2Component c, cons
     return host_set(f, c, v, value);
 }
 
+/* The controller refuses a doStep of several samples unless mv.hold_inputs is
+ * true (a closed loop needs one exchange per sample); these hosts step several
+ * samples at once to test the FMI layer, so they set it wherever the FMU has it. */
+static inline int host_hold_inputs(const host_fmu *f, fmi2Component c)
+{
+    return host_named(f, "mv.hold_inputs") == NULL || host_set_named(f, c, "mv.hold_inputs", 1.0) == fmi2OK;
+}
+
 /* Every Real output into out[] (in variable order); returns how many, or -1 on fmi2Error. */
 static inline int host_real_outputs(const host_fmu *f, fmi2Component c, double *out)
 {

@@ -74,6 +74,8 @@ static fmi2Component instantiate(const host_fmu *f, inst_t *in, const char *name
     in->f = f;
     in->cb = host_callbacks(&in->log);
     in->c = f->api.Instantiate(name, fmi2CoSimulation, f->guid, "", &in->cb, fmi2False, fmi2False);
+    if (in->c != NULL && !host_hold_inputs(f, in->c))
+        return NULL;
     return in->c;
 }
 

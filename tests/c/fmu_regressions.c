@@ -217,6 +217,7 @@ static void defect3_stop_time(const host_fmu *f)
     fmi2Component c;
     host_log_clear(&log);
     c = f->api.Instantiate("stop", fmi2CoSimulation, f->guid, "", &cb, fmi2False, fmi2False);
+    host_hold_inputs(f, c);
     f->api.SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2True, 10 * f->h);
     f->api.EnterInitializationMode(c);
     f->api.ExitInitializationMode(c);
