@@ -182,8 +182,8 @@ def test_parameter_errors_are_reported_by_name():
 
 
 def test_failed_run_releases_both_instances(monkeypatch):
-    # A NaN in the reference makes the controller refuse y_ref mid-run; both instances
-    # must still be terminated and freed (and a following run must work).
+    # A NaN in the reference makes the controller refuse its stamped preview mid-run; both
+    # instances must still be terminated and freed (and a following run must work).
     closed = []
     original = cosim._Instance.close
 
@@ -197,7 +197,7 @@ def test_failed_run_releases_both_instances(monkeypatch):
     y = 10 * np.sin(2 * np.pi * t)
     y[201] = np.nan
     bad = sc.with_overrides(signal=Signal("table", table_time=tuple(t), table_value=tuple(y)))
-    with pytest.raises(cosim.FMUError, match=r"sample 199"):     # y_ref(199) = y_d(201)
+    with pytest.raises(cosim.FMUError, match=r"sample 197.*y_preview = nan"):   # y_preview(197) = y_d(201)
         cosim.simulate_closed_loop(bad)
     assert sorted(closed) == [("AdaptiveCompoundController", True), ("PiezoStage", True)]
     assert cosim._LOGS == {}
