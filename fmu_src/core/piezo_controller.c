@@ -393,7 +393,9 @@ static double detect_update(const piezo_controller *c, double y, piezo_controlle
     return err[best];
 }
 
-/* The detection state of k+1 when nothing is detected this sample. */
+/* The detection state of k+1 when nothing is detected this sample (the
+ * candidates' sums, estimates and covariances are not used then: neither
+ * copied here nor committed). */
 static void detect_carry(const piezo_controller *c, piezo_controller_sample *s)
 {
     s->d = c->d;
@@ -403,9 +405,6 @@ static void detect_carry(const piezo_controller *c, piezo_controller_sample *s)
     s->k_delay = c->k_delay;
     s->new_trial = 0;
     s->next_probe = 0.0;
-    memcpy(s->det_score, c->det_score, sizeof s->det_score);
-    memcpy(s->det_theta, c->det_theta, sizeof s->det_theta);
-    memcpy(s->det_P, c->det_P, sizeof s->det_P);
 }
 
 /* The reference r(k) = y_d(k + d): the stamped preview for sample k + d when
