@@ -54,10 +54,16 @@ def test_fmpy_loop_equals_core_loop(name):
 @pytest.mark.parametrize("name", TRACKING_SCENARIOS)
 def test_nominal_model_with_preview_tracks_exactly(name):
     # Reference: docs/model.md, scenarios - a perfect model with preview gives zero error by
-    # construction; bound e_rms <= 1e-6 um over [1, 3) s.
+    # construction; bound e_rms <= 1e-6 um over [1, 3) s. The controller detects its loop
+    # delay (2 here, 3 with a plant whose input is one sample late) and aligns the stamped
+    # preview with it; measured at most 2.4e-12 um.
     m = _metrics(name, _run(name))
     assert m.n_samples == 4000
     assert m.e_rms <= 1e-6, f"{name}: e_rms = {m.e_rms:.3g} um"
+    timing = {}
+    late = cosim.simulate_closed_loop(name, plant_params={"tf.delay": 1}, timing=timing)
+    assert timing["loop_delay"] == 3
+    assert _metrics(name, late).e_rms <= 1e-6
 
 
 @pytest.mark.parametrize("name", MISMATCH_SCENARIOS)
