@@ -160,6 +160,24 @@ def test_the_probe_is_the_doublet_of_the_documented_size():
     assert qs[22] == pytest.approx(-(f[1] * qs[21] + f[2] * qs[20]) / f[0], rel=1e-12)
 
 
+def test_probes_stop_after_eight():
+    """Reference: the documented rule (docs/cosimulation.md, section 3.1): a detection sends
+    at most 8 probes, each at least twice the one before up to the bound of 1 um, the first
+    1e-3 um (zero inputs: nothing answers, the errors are the law's own echo), starting the
+    trials at samples 20, 40, ..., 160; then its trials go on without probes. Driven open loop with zero inputs,
+    the probe amplitude is 0 from sample 180 on and the controller is still detecting."""
+    ctrl = core.Controller({"monitor.divergence_samples": 0})
+    by_trial = {}
+    for k in range(400):
+        ctrl.step(0.0, 0.0)
+        by_trial[int(ctrl.raw.det_trial)] = ctrl.raw.det_probe
+    assert sorted(by_trial) == [20 * i for i in range(21)]
+    sent = [by_trial[20 * i] for i in range(1, 9)]
+    assert sent[0] == 1e-3 and all(b >= min(2 * a, 1.0) and b <= 1.0 for a, b in zip(sent, sent[1:]))
+    assert all(by_trial[20 * i] == 0.0 for i in range(9, 20))
+    assert ctrl.raw.det_probes == 8 and ctrl.output.delay == 0
+
+
 def test_a_master_that_changes_its_schedule_is_followed():
     """Reference: the true delay by construction: exchange (d = 2) up to sample 2000, then
     true Gauss-Seidel (d = 1). The chosen d = 2 is then wrong; |pred_error| stays above

@@ -131,7 +131,7 @@ class ControllerRef:
     saturation with back-calculation, monitor counts. Written from the header's and the
     docs' description, operation by operation in the C order."""
 
-    START_D, START_T, N, CONFIRM, TRIAL, REDETECT = 2, 0.9, 3, 3, 20, 10
+    START_D, START_T, N, CONFIRM, TRIAL, REDETECT, PROBES = 2, 0.9, 3, 3, 20, 10, 8
 
     def __init__(self, ctrl):
         c = ctrl.raw
@@ -156,7 +156,7 @@ class ControllerRef:
     def start_detection(self):
         self.detecting, self.d = True, self.START_D
         self.leader, self.run = -1, 0
-        self.trial, self.probe = self.k, 0.0
+        self.trial, self.probe, self.probes = self.k, 0.0, 0
         self.n_detections += 1
         self.scores = [0.0] * self.N
         self.det_theta = [list(self.nominal) for _ in range(self.N)]
@@ -235,7 +235,7 @@ class ControllerRef:
             p = 20.0 * math.sqrt(self.scores[best] / self.TRIAL) / self.nominal[2]
             if p < 2.0 * self.probe:
                 p = 2.0 * self.probe
-            self.next_probe = 1e-3 if p < 1e-3 else (1.0 if p > 1.0 else p)
+            self.next_probe = 0.0 if self.probes >= self.PROBES else (1e-3 if p < 1e-3 else (1.0 if p > 1.0 else p))
         if not self.detecting:
             self.d, self.k_delay = best + 1, self.k
             self.theta, self.P = list(self.det_theta[best]), self.det_P[best]
@@ -298,6 +298,7 @@ class ControllerRef:
         delay = 0 if self.detecting else d
         if self.new_trial:
             self.trial, self.probe = self.k + 1, self.next_probe
+            self.probes += self.next_probe > 0.0
             self.leader, self.run = -1, 0
             self.scores = [0.0] * self.N
         self.k += 1

@@ -34,7 +34,10 @@
  * one that starts with a probe: the doublet +p, -p added to q on its first two
  * samples. Its first response, b1 p, is PROBE_SNR times the rms a-priori
  * error of the best candidate in the trial before (noise and model error),
- * p within [PROBE_MIN, PROBE_MAX] um; each further trial doubles it. */
+ * p within [PROBE_MIN, PROBE_MAX] um; each further trial doubles it. After
+ * PIEZO_DETECT_PROBES probes a detection probes no more (a measurement that
+ * never answers, e.g. a controller driven open loop): its trials go on, and a
+ * kink of the reference can still decide. */
 #define PROBE_SNR 20.0
 #define PROBE_MIN 1e-3
 #define PROBE_MAX 1.0
@@ -212,6 +215,7 @@ static void detection_start(piezo_controller *c)
     c->det_run = 0;
     c->det_trial = c->k;
     c->det_probe = 0.0;
+    c->det_probes = 0;
     c->n_detections += 1;
     for (i = 0; i < PIEZO_DETECT_N; ++i) {
         c->det_score[i] = 0.0;
@@ -381,7 +385,8 @@ static double detect_update(const piezo_controller *c, double y, piezo_controlle
     if (s->new_trial) {
         double p = PROBE_SNR * sqrt(s->det_score[best] / PIEZO_DETECT_TRIAL) / c->theta_nominal[2];
         if (p < 2.0 * c->det_probe) p = 2.0 * c->det_probe;
-        s->next_probe = p < PROBE_MIN ? PROBE_MIN : (p > PROBE_MAX ? PROBE_MAX : p);
+        s->next_probe = c->det_probes >= PIEZO_DETECT_PROBES ? 0.0
+                        : p < PROBE_MIN ? PROBE_MIN : (p > PROBE_MAX ? PROBE_MAX : p);
     }
     s->d = s->detecting ? PIEZO_DETECT_START_D : best + 1;
     s->k_delay = s->detecting ? c->k_delay : c->k;
@@ -580,6 +585,7 @@ static void commit_timing(piezo_controller *c, const piezo_controller_sample *s)
         int i;
         c->det_trial = c->k + 1;
         c->det_probe = s->next_probe;
+        c->det_probes += s->next_probe > 0.0;
         c->det_leader = -1;
         c->det_run = 0;
         for (i = 0; i < PIEZO_DETECT_N; ++i) c->det_score[i] = 0.0;
@@ -734,7 +740,8 @@ const char *piezo_controller_check(const piezo_controller *c)
         || c->det_run > PIEZO_DETECT_CONFIRM || (c->detecting && c->det_run == PIEZO_DETECT_CONFIRM)
         || (c->det_leader < 0 && c->det_run != 0))
         return "delay detection leader out of range";
-    if (c->det_trial > c->k || !(isfinite(c->det_probe) && c->det_probe >= 0.0 && c->det_probe <= PROBE_MAX))
+    if (c->det_trial > c->k || !(isfinite(c->det_probe) && c->det_probe >= 0.0 && c->det_probe <= PROBE_MAX)
+        || c->det_probes < 0 || c->det_probes > PIEZO_DETECT_PROBES)
         return "delay detection trial out of range";
     if (c->k_delay > c->k || (c->auto_delay && (c->n_detections < 1 || c->n_detections > c->k + 1))
         || (!c->auto_delay && c->n_detections != 0))

@@ -51,6 +51,7 @@
 #define PIEZO_DETECT_RATIO_INV 10 /* clear: sum at most 1/10 of every other candidate's */
 #define PIEZO_DETECT_REDETECT 10 /* samples beyond the monitor bound that restart detection */
 #define PIEZO_DETECT_TRIAL 20    /* samples of one detection trial (the next one starts with a probe) */
+#define PIEZO_DETECT_PROBES 8    /* probes per detection at most (then trials without probes) */
 #define PIEZO_PREVIEW_RING 16    /* stamped previews kept: leads 1..15 samples */
 
 typedef struct {
@@ -111,6 +112,7 @@ typedef struct {
     int det_run;                 /* consecutive samples it has led */
     uint64_t det_trial;          /* sample at which the current trial started */
     double det_probe;            /* the trial's probe amplitude [um] on q (0: none) */
+    int det_probes;              /* probes started in this detection */
     double det_score[PIEZO_DETECT_N];        /* sums of squared a-priori errors in the trial */
     double det_theta[PIEZO_DETECT_THETA];    /* each candidate's estimates, 4 per candidate */
     double det_P[PIEZO_DETECT_P];            /* each candidate's covariance, 16 per candidate */
