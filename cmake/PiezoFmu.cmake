@@ -37,11 +37,39 @@ function(piezo_fmi_platform_folder fmi_version system out_var)
   set(${out_var} "${names_${system}}" PARENT_SCOPE)
 endfunction()
 
+# Whether the FMU binaries get link-time optimisation (checked once per configure).
+function(piezo_fmu_ipo out_var)
+  if(PIEZO_SANITIZE OR PIEZO_FUZZ)
+    set(${out_var} FALSE PARENT_SCOPE)
+    return()
+  endif()
+  get_property(known GLOBAL PROPERTY PIEZO_FMU_IPO SET)
+  if(NOT known)
+    include(CheckIPOSupported)
+    check_ipo_supported(RESULT supported OUTPUT why LANGUAGES C)
+    if(NOT supported)
+      message(STATUS "FMU binaries without link-time optimisation: ${why}")
+    endif()
+    set_property(GLOBAL PROPERTY PIEZO_FMU_IPO ${supported})
+  endif()
+  get_property(supported GLOBAL PROPERTY PIEZO_FMU_IPO)
+  set(${out_var} ${supported} PARENT_SCOPE)
+endfunction()
+
 # A loadable FMU binary <OUTPUT_NAME>.so/.dll in OUTPUT_DIR, exporting the FMI API only.
 function(piezo_add_fmu_binary target)
   cmake_parse_arguments(ARG "" "OUTPUT_NAME;OUTPUT_DIR;EXPORTS_MAP" "SOURCES;INCLUDE_DIRS" ${ARGN})
   add_library(${target} MODULE ${ARG_SOURCES})
   target_include_directories(${target} PRIVATE ${ARG_INCLUDE_DIRS})
+  # The FMI glue, the model and the core are separate files: link-time optimisation
+  # lets the compiler inline across them (the doStep, get and set paths into the core)
+  # as within one file. It does not touch the arithmetic (no -ffast-math, no
+  # contraction: a binary built from sources/ without it gives the same results).
+  # Off for the sanitizer and fuzz builds, and where the toolchain cannot do it.
+  piezo_fmu_ipo(ipo)
+  if(ipo)
+    set_property(TARGET ${target} PROPERTY INTERPROCEDURAL_OPTIMIZATION TRUE)
+  endif()
   set_target_properties(${target} PROPERTIES
     PREFIX "" OUTPUT_NAME "${ARG_OUTPUT_NAME}"
     C_VISIBILITY_PRESET hidden
@@ -86,17 +114,20 @@ function(piezo_fmu_check_source_files xml)
   set_property(DIRECTORY APPEND PROPERTY CMAKE_CONFIGURE_DEPENDS "${xml}")
 endfunction()
 
-# The date every FMU is stamped with: the commit's (SOURCE_DATE_EPOCH overrides).
-# The file is rewritten only when the date changes, so a new commit re-stamps the FMUs
-# and an unchanged one leaves them alone.
+# The date every FMU is stamped with: the commit's (SOURCE_DATE_EPOCH overrides), and the
+# source it is built from (the commit, and whether the tracked files had uncommitted
+# changes: PIEZO_SOURCE_FILE, harness/_source.py), checked at every build.
+# Each file is rewritten only when it changes, so a new commit (or a tree that becomes
+# clean or dirty) re-stamps the FMUs and an unchanged one leaves them alone.
+set(PIEZO_SOURCE_FILE "${CMAKE_BINARY_DIR}/source.json")
 function(piezo_commit_date_target out_var)
   set(file "${CMAKE_BINARY_DIR}/piezo_commit_date.txt")
   if(NOT TARGET piezo_commit_date)
     add_custom_target(piezo_commit_date ALL
       COMMAND "${PIEZO_PYTHON}" "${PIEZO_PACKAGING_DIR}/assemble_fmu.py" commit-date
-              --repo "${CMAKE_SOURCE_DIR}" --out "${file}"
-      BYPRODUCTS "${file}"
-      COMMENT "Commit date for the FMUs"
+              --repo "${CMAKE_SOURCE_DIR}" --out "${file}" --source-out "${PIEZO_SOURCE_FILE}"
+      BYPRODUCTS "${file}" "${PIEZO_SOURCE_FILE}"
+      COMMENT "Commit date and source for the FMUs"
       VERBATIM)
   endif()
   set(${out_var} "${file}" PARENT_SCOPE)
@@ -104,7 +135,7 @@ endfunction()
 
 # Reference results of the FMU (FMI-LS-REF): stimuli, parameters, reference outputs, the
 # experiments file and the manifest, computed on the C core (not through the FMU) by
-# packaging/reference_results.py into OUT_DIR; STAMP_VAR receives the file to depend on.
+# harness/fmu_references.py into OUT_DIR; STAMP_VAR receives the file to depend on.
 function(piezo_fmu_reference_results id)
   cmake_parse_arguments(ARG "" "MODEL_DESCRIPTION;OUT_DIR;STAMP_VAR" "" ${ARGN})
   set(stamp "${ARG_OUT_DIR}.stamp")
@@ -114,11 +145,11 @@ function(piezo_fmu_reference_results id)
     OUTPUT "${stamp}"
     COMMAND "${CMAKE_COMMAND}" -E env
             "PIEZO_CORE_LIB=$<TARGET_FILE:piezo_core>" "PIEZO_CORE_INCLUDE=${CORE_DIR}"
-            "${PIEZO_PYTHON}" "${PIEZO_PACKAGING_DIR}/reference_results.py"
+            "${PIEZO_PYTHON}" -m harness.fmu_references
             --model "${id}" --model-description "${ARG_MODEL_DESCRIPTION}"
             --out "${ARG_OUT_DIR}" --stamp "${stamp}"
     WORKING_DIRECTORY "${CMAKE_SOURCE_DIR}"
-    DEPENDS piezo_core "${ARG_MODEL_DESCRIPTION}" "${PIEZO_PACKAGING_DIR}/reference_results.py"
+    DEPENDS piezo_core "${ARG_MODEL_DESCRIPTION}" "${CMAKE_SOURCE_DIR}/harness/fmu_references.py"
             ${harness_sources}
     COMMENT "Reference results of ${id}"
     VERBATIM)
@@ -157,6 +188,7 @@ function(piezo_fmu_package)
             --id "${ARG_ID}" --fmi-version "${ARG_FMI_VERSION}"
             --model-description "${ARG_MODEL_DESCRIPTION}"
             --version "${project_version}" --date-file "${date_file}"
+            --source-file "${PIEZO_SOURCE_FILE}"
             ${binary_args}
             --sources ${ARG_SOURCES} --headers ${ARG_HEADERS} ${define_args}
             --icon "${ARG_ICON}" --documentation "${ARG_DOCUMENTATION}"
@@ -165,8 +197,10 @@ function(piezo_fmu_package)
     WORKING_DIRECTORY "${CMAKE_SOURCE_DIR}"
     DEPENDS ${ARG_BINARY_DEPENDS} ${binary_files} "${ARG_MODEL_DESCRIPTION}"
             ${ARG_SOURCES} ${ARG_HEADERS} "${ARG_ICON}" "${ARG_DOCUMENTATION}"
-            "${CMAKE_SOURCE_DIR}/LICENSE" ${ARG_EXTRA_STAMP} "${date_file}" piezo_commit_date
-            "${PIEZO_PACKAGING_DIR}/assemble_fmu.py" "${PIEZO_PACKAGING_DIR}/fmu_documentation.py"
+            "${CMAKE_SOURCE_DIR}/LICENSE" ${ARG_EXTRA_STAMP} "${date_file}" "${PIEZO_SOURCE_FILE}"
+            piezo_commit_date "${CMAKE_SOURCE_DIR}/harness/_source.py"
+            "${PIEZO_PACKAGING_DIR}/assemble_fmu.py" "${CMAKE_SOURCE_DIR}/harness/fmu_documentation.py"
+            "${CMAKE_SOURCE_DIR}/harness/fmu_archive.py"
             "${CMAKE_SOURCE_DIR}/harness/ssp.py"
     COMMENT "Packaging ${ARG_ID}.fmu (FMI ${ARG_FMI_VERSION})"
     VERBATIM)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 __all__ = ["PACKAGE_DIR", "REPO_ROOT", "IN_CHECKOUT", "BUILD_COMMAND", "INSTALL_COMMAND",
            "fmu_dir", "core_library", "core_include_dir", "runner_library", "runner_include_dir",
-           "bench_library", "bench_include_dir", "where_to_get_it"]
+           "bench_library", "bench_include_dir", "where_to_get_it", "describe_fmu_dir"]
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_ROOT = PACKAGE_DIR.parent
@@ -103,3 +103,16 @@ def where_to_get_it() -> str:
     if IN_CHECKOUT:
         return f"build them in {REPO_ROOT} with: {BUILD_COMMAND}  (or {INSTALL_COMMAND})"
     return f"reinstall the package from its source folder with: {INSTALL_COMMAND}"
+
+
+def describe_fmu_dir() -> str:
+    """The folder the FMUs are taken from when none is given, and why, for help texts:
+    ``$PIEZO_FMU_DIR``, the package's own ``_data/fmus`` (``pip install .``) or the
+    checkout's ``build/fmus``."""
+    value = os.environ.get("PIEZO_FMU_DIR")
+    if value:
+        return f"{value}, from $PIEZO_FMU_DIR"
+    path = fmu_dir()
+    if path.parent.name == "_data":
+        return f"{path}, the FMUs installed with the package; $PIEZO_FMU_DIR overrides"
+    return f"{path}, the checkout's build; $PIEZO_FMU_DIR overrides"

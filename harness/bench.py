@@ -33,6 +33,8 @@ import time
 
 import numpy as np
 
+from . import _paths
+
 __all__ = ["CHECKPOINTS", "add_bench_arguments", "run_bench", "measure"]
 
 CHECKPOINTS = (2_000, 20_000, 120_000, 1_000_000)
@@ -58,7 +60,8 @@ def add_bench_arguments(parser):
     parser.add_argument("--fmpy-repeat", type=int, default=3, metavar="R",
                         help="repetitions of the fmpy loop (default 3)")
     parser.add_argument("--no-fmpy", action="store_true", help="skip the fmpy loop")
-    parser.add_argument("--fmu-dir", metavar="DIR", help="folder of the FMUs (default build/fmus)")
+    parser.add_argument("--fmu-dir", metavar="DIR",
+                        help=f"folder of the FMUs (default: {_paths.describe_fmu_dir()})")
     parser.add_argument("--scenario-file", action="append", default=[], metavar="FILE",
                         help="TOML file of extra scenarios (repeatable)")
     return parser

@@ -30,8 +30,9 @@ Exit codes, each with a one-line message on stderr that names the program:
 
 * 0: done;
 * 1: an FMI call failed for another reason (a fault);
-* 2: a user error (bad command line, unknown scenario, missing FMU, malformed
-  scenario file or CSV, bad parameter, output folder that cannot be written);
+* 2: a user error (bad command line, unknown scenario, missing FMU, an FMU of the other
+  FMI version or not an FMU of this project, malformed scenario file or CSV, bad parameter,
+  output folder that cannot be written);
 * 3: a run failed its own checks: it diverged (the controller's monitor stopped
   it, a value overflowed, or its error exceeds the reference) or the controller
   clipped the voltage persistently (see :mod:`harness.checks`).
@@ -73,6 +74,12 @@ def _output_option(p, what):
                    help=f"output folder for {what} (default: out/, created if missing)")
 
 
+def _fmu_dir_option(p, what):
+    from ._paths import describe_fmu_dir
+
+    p.add_argument("--fmu-dir", metavar="DIR", help=f"{what} (default: {describe_fmu_dir()})")
+
+
 def _backend_options(p, closed_loop=False):
     if closed_loop:
         p.add_argument("--backend", choices=("auto", "fmpy", "native", "core"), default="auto",
@@ -82,9 +89,7 @@ def _backend_options(p, closed_loop=False):
     else:
         p.add_argument("--backend", choices=("fmpy", "core"), default="fmpy",
                        help="fmpy: run the FMUs (default); core: the C core through cffi, no FMI")
-    p.add_argument("--fmu-dir", metavar="DIR",
-                   help="folder of PiezoStage.fmu and AdaptiveCompoundController.fmu "
-                        "(default: build/fmus or $PIEZO_FMU_DIR)")
+    _fmu_dir_option(p, "folder of PiezoStage.fmu and AdaptiveCompoundController.fmu")
     if closed_loop:
         p.add_argument("--fmi", type=int, choices=(2, 3), default=2, metavar="{2,3}",
                        help="run the FMUs' FMI 2.0 editions (default) or their FMI 3.0 editions "
@@ -132,6 +137,17 @@ def _fmi_version(args):
     return args.fmi
 
 
+def _warn_if_linux_only(args, fmi_version=2):
+    """One warning line on stderr when the FMUs to be run have no Windows binaries (a build
+    without MinGW-w64; pip hides CMake's note of it)."""
+    from .report.provenance import missing_windows_binaries
+
+    note = missing_windows_binaries(args.fmu_dir, fmi_version)
+    if note:
+        sys.stderr.write(f"{args.prog}: warning: {note}\n")
+        sys.stderr.flush()
+
+
 def _loop_settings(args):
     return (False if args.no_adaptation else None, not args.no_preview,
             "jacobi" if args.jacobi else "gauss-seidel")
@@ -170,6 +186,8 @@ def _cmd_all(args, command):
     _out_dir(args)
     registry = apply_param_files(args, registry)
     fmi_version = _fmi_version(args)
+    if args.backend != "core":
+        _warn_if_linux_only(args, fmi_version)
     report.run_all(args.out, adaptation=adaptation, preview=preview, master=master,
                    fmu_dir=args.fmu_dir, plots=not args.no_plots, backend=args.backend,
                    registry=registry, extra_scenarios=extra, command=command,
@@ -218,6 +236,8 @@ def _cmd_run(args, command):
     fmi_version = _fmi_version(args)
     _out_dir(args)
     registry = apply_param_files(args, registry)
+    if args.backend != "core":
+        _warn_if_linux_only(args, fmi_version)
     report.run_scenario(sc.name, args.out, adaptation=adaptation, preview=preview, master=master,
                         fmu_dir=args.fmu_dir, plots=not args.no_plots, registry=registry,
                         backend=args.backend, fmi_version=fmi_version,
@@ -288,8 +308,7 @@ def _add_export_parser(sub):
                     "a parameter file as their start values (the built binaries reused, the "
                     "modelDescription rewritten, the GUID kept); each FMU takes the names it has.")
     _output_option(p, "the two FMUs")
-    p.add_argument("--fmu-dir", metavar="DIR",
-                   help="folder of the built FMUs (default: build/fmus or $PIEZO_FMU_DIR)")
+    _fmu_dir_option(p, "folder of the built FMUs")
     add_export_arguments(p)
     p.set_defaults(handler=_cmd_export)
     return p
@@ -299,6 +318,7 @@ def _cmd_export(args, command):
     from .identify.cli import run_export
 
     _out_dir(args)
+    _warn_if_linux_only(args)
     return run_export(args)
 
 
@@ -460,6 +480,7 @@ def main(argv=None, prog=None):
     from .scenarios import ScenarioError
 
     command = " ".join([prog, *argv])
+    args.prog = prog
     try:
         return args.handler(args, command)
     except UsageError as exc:

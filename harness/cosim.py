@@ -69,6 +69,7 @@ __all__ = [
     "REFERENCE_MODEL",
     "FMUError",
     "FMUInitializationError",
+    "FMUFileError",
     "LoopDivergedError",
     "UnknownParameterError",
     "FMI_VERSIONS",
@@ -101,6 +102,11 @@ class LoopDivergedError(FMUError):
 
 class FMUInitializationError(FMUError, ValueError):
     """The FMU refused its parameters (instantiation or initialization failed)."""
+
+
+class FMUFileError(FMUError, ValueError):
+    """The file is not the FMU expected there: not an FMU at all, the other FMI version, or
+    another model under this model's file name (a user error, like a missing FMU)."""
 
 
 class UnknownParameterError(KeyError):
@@ -146,17 +152,40 @@ def fmu_path(model, fmu_dir=None, fmi_version=2):
     FileNotFoundError
         With the command that builds the FMUs.
     """
+    import os
+
     _check_fmi_version(fmi_version)
+    chosen = fmu_dir is not None or bool(os.environ.get("PIEZO_FMU_DIR"))
     folder = Path(fmu_dir if fmu_dir is not None else default_fmu_dir())
     path = folder / f"{model}.fmu"
     if fmi_version == 3:
         nested = folder / "fmi3" / f"{model}.fmu"
         path = nested if nested.is_file() or not path.is_file() else path
     if not path.is_file():
+        if chosen:
+            why = _folder_contents(folder, model, fmi_version, from_env=fmu_dir is None)
+            raise FileNotFoundError(f"FMU not found: {path}; {why}")
         from . import _paths
         raise FileNotFoundError(f"FMU not found: {path}; {_paths.where_to_get_it()} "
                                 f"(or set PIEZO_FMU_DIR to the folder of the FMUs)")
     return path
+
+
+def _folder_contents(folder, model, fmi_version, from_env):
+    """What a user-chosen FMU folder lacks and what it holds, for the message of a missing FMU."""
+    need = f"the harness runs {PLANT_MODEL}.fmu and {CONTROLLER_MODEL}.fmu from it"
+    if fmi_version == 3:
+        need += ", or from its fmi3/ subfolder, in their FMI 3.0 editions"
+    name = f"{folder} ($PIEZO_FMU_DIR)" if from_env else str(folder)
+    if not folder.exists():
+        return f"the folder {name} does not exist ({need})"
+    if not folder.is_dir():
+        return f"{name} is a file, not a folder ({need})"
+    present = sorted(p.name for p in folder.glob("*.fmu"))
+    if fmi_version == 3:
+        present += sorted(f"fmi3/{p.name}" for p in (folder / "fmi3").glob("*.fmu"))
+    held = f"it holds {', '.join(present)}" if present else "it holds no .fmu file at all"
+    return f"the folder {name} has no {model}.fmu, {held} ({need})"
 
 
 # ---------------------------------------------------------------------------
@@ -188,7 +217,9 @@ class _FMUInfo:
         try:
             return self.variables[name].valueReference
         except KeyError:
-            raise FMUError(f"{self.path.name} has no variable '{name}'") from None
+            other = (f": it is not this project's {self.path.stem} (its model is {self.model})"
+                     if self.model != self.path.stem else "")
+            raise FMUFileError(f"{self.path} has no variable '{name}'{other}") from None
 
     def parameter_names(self):
         """The parameters by their FMI 2.0 names (array elements one by one)."""
@@ -231,21 +262,33 @@ def _load(path, fmi_version=2):
     key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
     info = _EXTRACTED.get(key)
     if info is None:
-        md = fmpy.read_model_description(str(path))
-        want = f"{fmi_version}.0"
-        if md.fmiVersion != want or md.coSimulation is None:
-            hint = (" (the FMI 3.0 editions are in the fmi3/ folder beside the FMI 2.0 FMUs)"
-                    if fmi_version == 3 else "")
-            raise FMUError(f"{path} is not an FMI {want} Co-Simulation FMU (it is FMI "
-                           f"{md.fmiVersion}){hint}")
+        try:
+            md = fmpy.read_model_description(str(path))
+        except Exception as exc:    # fmpy raises BadZipFile, KeyError, lxml errors, ...
+            raise FMUFileError(f"{path} is not an FMU (its model description cannot be read: "
+                               f"{type(exc).__name__}: {exc})") from None
+        if md.fmiVersion != f"{fmi_version}.0" or md.coSimulation is None:
+            raise _wrong_edition(path, md.fmiVersion, fmi_version)
         unzipdir = tempfile.mkdtemp(prefix=f"harness_{path.stem}_")
         _TEMP_DIRS.append(unzipdir)
         fmpy.extract(str(path), unzipdir=unzipdir)
         info = _FMUInfo(path, md, unzipdir)
         _EXTRACTED[key] = info
     if info.fmi_version != fmi_version:
-        raise FMUError(f"{path} is an FMI {info.fmi_version}.0 FMU, not FMI {fmi_version}.0")
+        raise _wrong_edition(path, info.md.fmiVersion, fmi_version)
     return info
+
+
+def _wrong_edition(path, found, fmi_version):
+    """The error for an FMU of the other FMI version (or without Co-Simulation)."""
+    if fmi_version == 3:
+        hint = " (the FMI 3.0 editions are in the fmi3/ folder beside the FMI 2.0 FMUs)"
+    elif str(found).startswith("3"):
+        hint = " (an FMI 3.0 edition: run it with --fmi 3)"
+    else:
+        hint = ""
+    return FMUFileError(f"{path} is not an FMI {fmi_version}.0 Co-Simulation FMU (it is FMI "
+                        f"{found}){hint}")
 
 
 # ---------------------------------------------------------------------------

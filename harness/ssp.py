@@ -158,7 +158,11 @@ def parameter_set_for_scenario(name, registry=None):
             values[f"{comp}.{key}"] = value
     values["plant.h"] = values["controller.h"] = values["reference.h"] = float(sc.step_size)
     values["reference.offset"] = float(sig.offset)
-    for i, (a, f, p) in enumerate(zip(sig.amplitudes, sig.frequencies, sig.phases), start=1):
+    # all 8 tones, the unused ones 0: the set is the scenario's whole reference, whatever
+    # ReferenceSignal's defaults (its first tone defaults to the paper's 1 Hz, 10 um one)
+    tones = list(zip(sig.amplitudes, sig.frequencies, sig.phases))
+    tones += [(0.0, 0.0, 0.0)] * (8 - len(tones))
+    for i, (a, f, p) in enumerate(tones, start=1):
         values[f"reference.amplitude[{i}]"] = float(a)
         values[f"reference.frequency[{i}]"] = float(f)
         values[f"reference.phase[{i}]"] = float(p)

@@ -1,22 +1,25 @@
 """Assemble an FMU from its parts, reproducibly (called by the build, cmake/PiezoFmu.cmake).
 
-``python packaging/assemble_fmu.py commit-date --repo DIR --out FILE``
+``python packaging/assemble_fmu.py commit-date --repo DIR --out FILE [--source-out FILE]``
     Writes the date the FMUs are stamped with (seconds since 1970, UTC): the
     ``SOURCE_DATE_EPOCH`` environment variable, else the date of the checked-out commit,
-    else the newest modification time of the model descriptions and C sources. The file
-    is rewritten only when the date changes.
+    else the newest modification time of the model descriptions and C sources. With
+    ``--source-out``, also the source they are built from: the commit and whether the
+    tracked files had uncommitted changes (``harness/_source.py``). Each file is rewritten
+    only when it changes.
 
 ``python packaging/assemble_fmu.py assemble --id ID --fmi-version 2.0 ...``
     Lays out the FMU in ``--stage`` and zips it to ``--out``:
 
-    * ``modelDescription.xml``: the source XML with ``version``, ``generationTool`` and
+    * ``modelDescription.xml``: the source XML with ``version``, ``generationTool`` (the
+      project, its version and the commit, from ``--source-file``) and
       ``generationDateAndTime`` (the commit date) set;
     * ``model.png``: the icon;
     * ``binaries/<platform>/<id>.<so|dll>``: one per ``--binary PLATFORM=FILE``;
     * ``sources/``: the C files and headers, flat, and ``buildDescription.xml`` (the
       FMI 3.0 build description, which FMI 2.0.4 adopts for source-code FMUs);
     * ``documentation/index.html`` (generated from the model description and the
-      hand-written part, see ``fmu_documentation.py``), ``documentation/fmi-ls-ref.html``
+      hand-written part, see ``harness/fmu_documentation.py``), ``documentation/fmi-ls-ref.html``
       and ``documentation/licenses/license.txt``;
     * ``extra/org.fmi-standard.fmi-ls-ref/``: the reference results (``--extra-dir``).
 
@@ -34,17 +37,16 @@ import re
 import shutil
 import subprocess
 import sys
-import zipfile
 
 HERE = Path(__file__).resolve().parent
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
+REPO = HERE.parent
+if str(REPO) not in sys.path:          # harness: fmu_documentation, fmu_archive, _source
+    sys.path.insert(0, str(REPO))
 
 TOOL = "piezo_fmus"
 LS_REF_DIR = "extra/org.fmi-standard.fmi-ls-ref"
 #: the oldest date a zip entry can carry
 ZIP_EPOCH = int(_dt.datetime(1980, 1, 1, tzinfo=_dt.timezone.utc).timestamp())
-BINARY_SUFFIXES = {".so", ".dll", ".dylib"}
 
 
 # ---------------------------------------------------------------------------
@@ -90,14 +92,26 @@ def _set_attribute(tag, name, value):
     return re.sub(r"\s*(/?>)$", lambda m: f'\n{indent}{name}="{value}"{m.group(1)}', tag, count=1)
 
 
-def stamp_model_description(text, version, epoch):
-    """The model description with ``version``, ``generationTool`` and
-    ``generationDateAndTime`` set; the rest of the text unchanged."""
+def generation_tool(version, source=None):
+    """``generationTool``: the project, its version and the source it was built from, e.g.
+    ``piezo_fmus 1.0.0, commit 0123...cdef`` (``... with uncommitted changes`` when the
+    tracked files differed from the commit; no commit outside a git checkout)."""
+    from harness._source import describe
+
+    if not source or not source.get("commit"):
+        return f"{TOOL} {version}, not built from a git checkout"
+    return f"{TOOL} {version}, commit {describe(source)}"
+
+
+def stamp_model_description(text, version, epoch, source=None):
+    """The model description with ``version``, ``generationTool`` (see
+    :func:`generation_tool`) and ``generationDateAndTime`` set; the rest of the text
+    unchanged."""
     match = _ROOT_TAG.search(text)
     if not match:
         raise ValueError("no <fmiModelDescription> element")
     tag = match.group(0)
-    for name, value in (("version", version), ("generationTool", f"{TOOL} {version}"),
+    for name, value in (("version", version), ("generationTool", generation_tool(version, source)),
                         ("generationDateAndTime", iso_date(epoch))):
         tag = _set_attribute(tag, name, value)
     return text[:match.start()] + tag + text[match.end():]
@@ -160,29 +174,14 @@ DEFINE_DESCRIPTIONS = {
 # ---------------------------------------------------------------------------
 
 def write_zip(stage, out, epoch):
-    """Zip the folder `stage` to `out` reproducibly; return the entry names."""
-    stage, out = Path(stage), Path(out)
+    """Zip the folder `stage` to `out` reproducibly (harness.fmu_archive); return the entry names."""
+    from harness.fmu_archive import write_fmu_zip
+
+    stage = Path(stage)
     date = _dt.datetime.fromtimestamp(max(epoch, ZIP_EPOCH), _dt.timezone.utc).timetuple()[:6]
-    entries = []
-    for path in sorted(stage.rglob("*"), key=lambda p: p.relative_to(stage).as_posix()):
-        rel = path.relative_to(stage).as_posix()
-        entries.append((rel + "/", None) if path.is_dir() else (rel, path))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    with zipfile.ZipFile(tmp, "w") as zf:
-        for name, path in entries:
-            info = zipfile.ZipInfo(name, date_time=date)
-            info.create_system = 3                       # Unix permissions below
-            if path is None:
-                info.external_attr = (0o40755 << 16) | 0x10
-                zf.writestr(info, b"")
-                continue
-            executable = path.suffix in BINARY_SUFFIXES
-            info.external_attr = (0o100755 if executable else 0o100644) << 16
-            info.compress_type = zipfile.ZIP_DEFLATED
-            zf.writestr(info, path.read_bytes(), compresslevel=9)
-    tmp.replace(out)
-    return [name for name, _ in entries]
+    files = {p.relative_to(stage).as_posix(): p.read_bytes()
+             for p in stage.rglob("*") if p.is_file()}
+    return write_fmu_zip(files, out, date)
 
 
 # ---------------------------------------------------------------------------
@@ -195,7 +194,7 @@ def _copy(src, dst):
 
 
 def assemble(args):
-    import fmu_documentation
+    from harness import fmu_documentation
 
     epoch = int(Path(args.date_file).read_text().split()[0]) if args.date_file else \
         commit_epoch(Path.cwd())
@@ -204,8 +203,11 @@ def assemble(args):
         shutil.rmtree(stage)
     stage.mkdir(parents=True)
 
+    from harness._source import git_source, read_source
+
+    source = read_source(args.source_file) if args.source_file else git_source(Path.cwd())
     xml = stamp_model_description(Path(args.model_description).read_text(encoding="utf-8"),
-                                  args.version, epoch)
+                                  args.version, epoch, source)
     (stage / "modelDescription.xml").write_text(xml, encoding="utf-8", newline="\n")
     _copy(args.icon, stage / "model.png")
 
@@ -213,7 +215,7 @@ def assemble(args):
     for item in args.binary:
         folder, _, file = item.partition("=")
         file = Path(file)
-        if file.suffix not in BINARY_SUFFIXES:
+        if file.suffix not in (".so", ".dll", ".dylib"):
             raise ValueError(f"--binary {item}: not a shared library")
         _copy(file, stage / "binaries" / folder / f"{args.id}{file.suffix}")
         platforms.append(folder)
@@ -261,6 +263,10 @@ def write_commit_date(args):
     if not out.is_file() or out.read_text() != text:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(text)
+    if args.source_out:
+        from harness._source import write_source
+
+        write_source(args.repo, args.source_out)
 
 
 def main(argv=None):
@@ -269,12 +275,15 @@ def main(argv=None):
     d = sub.add_parser("commit-date", help="write the build date (seconds since 1970)")
     d.add_argument("--repo", required=True)
     d.add_argument("--out", required=True)
+    d.add_argument("--source-out", help="also write the source record (commit, uncommitted changes)")
     a = sub.add_parser("assemble", help="lay out and zip one FMU")
     a.add_argument("--id", required=True)
     a.add_argument("--fmi-version", required=True, choices=("2.0", "3.0"))
     a.add_argument("--model-description", required=True)
     a.add_argument("--version", required=True)
     a.add_argument("--date-file")
+    a.add_argument("--source-file", help="the source record of commit-date --source-out "
+                                         "(default: ask git in the current folder)")
     a.add_argument("--binary", action="append", default=[], metavar="PLATFORM=FILE")
     a.add_argument("--sources", nargs="+", required=True)
     a.add_argument("--headers", nargs="*", default=[])

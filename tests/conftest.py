@@ -48,8 +48,10 @@ def _fmu_sources():
 
 
 def _commit_date_changed():
-    """The FMUs carry the commit date: a new commit re-stamps them (build/piezo_commit_date.txt
-    holds the date of the last build; packaging/assemble_fmu.py commit_epoch computes it)."""
+    """The FMUs carry the commit date and the source (commit, uncommitted changes): a new
+    commit, or a tree that became clean or dirty, re-stamps them (build/piezo_commit_date.txt
+    and build/source.json hold those of the last build; packaging/assemble_fmu.py
+    commit_epoch and harness/_source.py git_source compute them)."""
     stamp = BUILD_DIR / "piezo_commit_date.txt"
     if not stamp.is_file():
         return True
@@ -58,7 +60,9 @@ def _commit_date_changed():
         from assemble_fmu import commit_epoch
     finally:
         sys.path.pop(0)
-    return stamp.read_text().split()[0] != str(commit_epoch(REPO))
+    from harness._source import git_source, read_source
+    return (stamp.read_text().split()[0] != str(commit_epoch(REPO))
+            or read_source(BUILD_DIR / "source.json") != git_source(REPO))
 
 
 def _fmus_stale():
@@ -281,3 +285,64 @@ def make_fmu():
         fmu.free()
 
 # ============================ end of FMU fixtures ============================
+
+
+# =============================================================================
+# Optional tools: MinGW-w64 (the win64 binaries) and wine64 (running them)
+#
+# Without them the build makes Linux-only FMUs, and the tests that need them skip with
+# the reason. .ci/run installs both and sets PIEZO_REQUIRE_WIN64=1: there such a skip is
+# a failure, so CI still proves the win64 binaries.
+# =============================================================================
+
+#: set by .ci/run: a missing MinGW-w64 or wine64, or FMUs built without them, fail the test
+REQUIRE_WIN64 = os.environ.get("PIEZO_REQUIRE_WIN64", "") == "1"
+WIN64_HINT = ("install MinGW-w64 and wine64 (Debian: gcc-mingw-w64-x86-64 wine64, as .ci/run "
+              "does) and rebuild")
+#: where Debian's wine64 package puts wine64 (not on PATH)
+WINE64_DIRS = ("/usr/lib/wine",)
+
+
+def need_win64(reason):
+    """Skip the calling test because `reason` (what is missing); with PIEZO_REQUIRE_WIN64=1
+    fail it instead, with the same reason."""
+    text = f"{reason}: {WIN64_HINT}"
+    if REQUIRE_WIN64:
+        pytest.fail(f"{text} (PIEZO_REQUIRE_WIN64=1 makes this a failure, not a skip)",
+                    pytrace=False)
+    pytest.skip(text)
+
+
+def mingw_tool(name):
+    """Path of the MinGW-w64 tool x86_64-w64-mingw32-<name> on PATH, or skip (see need_win64)."""
+    tool = f"x86_64-w64-mingw32-{name}"
+    path = shutil.which(tool)
+    if not path:
+        need_win64(f"{tool} not found on PATH")
+    return path
+
+
+def wine64():
+    """Path of wine64 (PATH, then Debian's /usr/lib/wine), or skip (see need_win64)."""
+    path = shutil.which("wine64") or shutil.which("wine64", path=os.pathsep.join(WINE64_DIRS))
+    if not path:
+        need_win64("wine64 not found (on PATH or in /usr/lib/wine)")
+    return path
+
+
+def fmu_platforms(path):
+    """The platform folders under binaries/ of an FMU file."""
+    import zipfile
+    with zipfile.ZipFile(path) as zf:
+        return sorted({n.split("/")[1] for n in zf.namelist()
+                       if n.startswith("binaries/") and n.count("/") >= 2 and not n.endswith("/")})
+
+
+def need_windows_binaries(path, folder="win64"):
+    """Skip (see need_win64) unless the FMU at `path` has binaries/<folder>/: the build
+    cross-compiles them only when MinGW-w64 is installed."""
+    if folder not in fmu_platforms(path):
+        need_win64(f"{pathlib.Path(path).name} has no binaries/{folder}/ (MinGW-w64 was not "
+                   f"found when it was built)")
+
+# ======================== end of optional tools =========================

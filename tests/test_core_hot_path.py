@@ -3,11 +3,15 @@ and the refusal guarantees, without copies of the whole state.
 
 Reference for bit identity: a scalar Python transcription of the documented equations
 (piezo_hysteresis.h, piezo_tf.h, piezo_creep.h, piezo_plant.h, piezo_controller.h), every
-sum in the order the headers give it. Python floats are IEEE doubles and Python's math
-module calls the same libm, so the same operations in the same order give the same bits;
-the transcription reads only the constants the core derives at init (thresholds, inverse
-weights, SOE nodes and gains), never a state the step computes. Any change to the step's
-arithmetic (a reordered sum, a reciprocal instead of a division) fails these tests.
+sum in the order the headers give it (the PI and creep sums in four lanes, the RLS with one
+reciprocal). Python floats are IEEE doubles and Python's math module calls the same libm, so
+the same operations in the same order give the same bits; the transcription reads only the
+constants the core derives at init (thresholds, inverse weights, SOE nodes and gains), never
+a state the step computes. What it pins is the documented arithmetic, not one compiler's
+output: that order is what makes a run the same on every machine (baseline x86-64, no FMA
+contraction, no -ffast-math reassociation), so a change to the step's arithmetic (a
+reordered sum, a reciprocal instead of a division, a contracted multiply-add) fails here
+until the headers and this transcription say the same.
 
 Reference for the refusals: the struct's bytes before the refused call, and an untouched
 twin that continues the run.
@@ -41,8 +45,18 @@ def play(v, r, z_prev):
     return z if z > lower else lower
 
 
+def lanes4(terms):
+    """Four partial sums, term n into lane n mod 4 in increasing n, then
+    (a0 + a1) + (a2 + a3): the order of the PI and creep sums (piezo_hysteresis.h,
+    piezo_creep.h)."""
+    a = [0.0, 0.0, 0.0, 0.0]
+    for n, t in enumerate(terms):
+        a[n % 4] += t
+    return (a[0] + a[1]) + (a[2] + a[3])
+
+
 class PIRef:
-    """u = w0 v + sum_j w_j z_j, the sum from j = 1 up (eq 18 / eq 24 for the inverse)."""
+    """u = w0 v + sum_j w_j z_j, the sum in four lanes (eq 18 / eq 24 for the inverse)."""
 
     def __init__(self, raw):
         m = raw.m
@@ -50,11 +64,11 @@ class PIRef:
         self.z = list(raw.z)[:m]
 
     def step(self, v):
-        s = self.w0 * v
+        terms = []
         for j in range(len(self.w)):
             self.z[j] = play(v, self.r[j], self.z[j])
-            s += self.w[j] * self.z[j]
-        return s
+            terms.append(self.w[j] * self.z[j])
+        return self.w0 * v + lanes4(terms)
 
 
 class TFRef:
@@ -74,30 +88,30 @@ class TFRef:
 
 
 class SOERef:
-    """SOE G-L operator (piezo_creep.h): y = gain (sum_{j=0..16} w_j x(k-j) + sum_i c_i S_i),
-    S_i = decay_i S_i + inject_i x(k-17); head sum x(k) + w_1 x(k-1) + ... + w_16 x(k-16),
-    tail sum c_0 S_0 + c_1 S_1 + ..., then head + tail."""
+    """SOE G-L operator (piezo_creep.h): y = gain (x(k) + sum_{j=1..16} w_j x(k-j) + sum_i T_i),
+    T_i = decay_i T_i + inject_i x(k-17) (inject_i = c_i e^{-17 s_i}); lane l sums the head
+    terms j - 1 = l mod 4, then the tail terms i = l mod 4, and
+    y = gain (x + ((a0 + a1) + (a2 + a3)))."""
 
     def __init__(self, raw):
         n = raw.n_terms
         self.gain, self.w = raw.gain, list(raw.w_head)
-        self.c, self.decay, self.inject = (list(raw.soe_c)[:n], list(raw.soe_decay)[:n],
-                                           list(raw.soe_inject)[:n])
+        self.decay, self.inject = list(raw.soe_decay)[:n], list(raw.soe_inject)[:n]
         self.s = [0.0] * n
         self.x = [0.0] * 17                     # x(k-1) .. x(k-17)
 
     def evaluate(self, x):
-        """(y, next S, next past) without committing."""
+        """(y, next T, next past) without committing."""
         leaving = self.x[16]
-        tail, s_next = 0.0, []
-        for i in range(len(self.c)):
+        a = [0.0, 0.0, 0.0, 0.0]
+        for j in range(1, 17):
+            a[(j - 1) % 4] += self.w[j] * self.x[j - 1]
+        s_next = []
+        for i in range(len(self.decay)):
             s = self.decay[i] * self.s[i] + self.inject[i] * leaving
             s_next.append(s)
-            tail += self.c[i] * s
-        head = x
-        for j in range(1, 17):
-            head += self.w[j] * self.x[j - 1]
-        return self.gain * (head + tail), s_next, [x] + self.x[:16]
+            a[i % 4] += s
+        return self.gain * (x + ((a[0] + a[1]) + (a[2] + a[3]))), s_next, [x] + self.x[:16]
 
     def step(self, x):
         y, self.s, self.x = self.evaluate(x)
@@ -124,12 +138,13 @@ class PlantRef:
 
 
 class ControllerRef:
-    """piezo_controller.h/.c: RLS (sums over i = 0..3, one triangle of the symmetric update
-    averaged with itself), projection, delay detection (one RLS per candidate d = 1, 2, 3,
-    sums of squared a-priori errors per trial, the clear-leader rule, probes, restarts),
-    Diophantine with the observer polynomial T, MV law on T r, inverse creep, inverse PI,
-    saturation with back-calculation, monitor counts. Written from the header's and the
-    docs' description, operation by operation in the C order."""
+    """piezo_controller.h/.c: RLS (sums over i = 0..3, one reciprocal of the denominator,
+    1/lambda from init, the update (P phi)_i (P phi)_j / denom symmetric by itself),
+    projection, delay detection (one RLS per candidate d = 1, 2, 3, sums of squared
+    a-priori errors per trial, the clear-leader rule, probes, restarts), Diophantine with
+    the observer polynomial T, MV law on T r, inverse creep, inverse PI, saturation with
+    back-calculation, monitor counts. Written from the header's and the docs' description,
+    operation by operation in the C order."""
 
     START_D, START_T, N, CONFIRM, TRIAL, REDETECT, PROBES = 2, 0.9, 3, 3, 20, 10, 8
 
@@ -192,14 +207,13 @@ class ControllerRef:
             for j in range(4):
                 acc += P[i][j] * phi[j]
             pphi.append(acc)
-            denom += phi[i] * acc
-        theta = [theta[i] + pphi[i] / denom * e for i in range(4)]
-        new = [[(P[i][j] - pphi[i] * pphi[j] / denom) / self.lam for j in range(4)] for i in range(4)]
-        trace = 0.0
         for i in range(4):
-            for j in range(i):
-                new[i][j] = new[j][i] = 0.5 * (new[i][j] + new[j][i])
-            trace += new[i][i]
+            denom += phi[i] * pphi[i]
+        inv_denom, inv_lam = 1.0 / denom, 1.0 / self.lam
+        theta = [theta[i] + pphi[i] * inv_denom * e for i in range(4)]
+        new = [[(P[i][j] - pphi[i] * pphi[j] * inv_denom) * inv_lam for j in range(4)]
+               for i in range(4)]
+        trace = ((new[0][0] + new[1][1]) + new[2][2]) + new[3][3]
         if trace > self.trace_max:
             scale = self.trace_max / trace
             new = [[v * scale for v in row] for row in new]

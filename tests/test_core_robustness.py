@@ -96,6 +96,11 @@ def test_plant_check_accepts_runs_and_names_tampered_fields():
         setattr(struct, field, value)
         assert fragment in (check_text(lib.piezo_plant_check(raw)) or ""), (block, field)
         setattr(struct, field, old)
+    # the creep's input ring and its mirror hold the same doubles (the window sum reads both)
+    raw.creep.x_ring[17 + 3] = raw.creep.x_ring[3] + 1.0
+    assert "mirror" in (check_text(lib.piezo_plant_check(raw)) or "")
+    raw.creep.x_ring[17 + 3] = raw.creep.x_ring[3]
+    assert check_text(lib.piezo_plant_check(raw)) is None
     raw.out.y_meas = math.nan
     assert "not finite" in check_text(lib.piezo_plant_check(raw))
 
@@ -206,6 +211,28 @@ def test_controller_check_accepts_runs_and_names_tampered_fields():
         setattr(raw, field, value)
         assert fragment in (check_text(lib.piezo_controller_check(raw)) or ""), field
         setattr(raw, field, old)
+    # derived at init, so a restored state must carry the reciprocal of its own rls.forgetting
+    old = raw.inv_forgetting
+    raw.inv_forgetting = old * (1 + 2 ** -52)
+    assert "rls.forgetting" in (check_text(lib.piezo_controller_check(raw)) or "")
+    raw.inv_forgetting = old
+    # the RLS reads P_ij as P_ji: a live P is symmetric bit for bit
+    old = raw.P[1]
+    raw.P[1] = raw.P[4] * (1 + 2 ** -52) if raw.P[4] != 0 else 1e-300
+    assert "symmetric" in (check_text(lib.piezo_controller_check(raw)) or "")
+    raw.P[1] = old
+    assert check_text(lib.piezo_controller_check(raw)) is None
+    # ... and so is each delay candidate's (the same update), while detecting or after
+    auto = core.Controller({"monitor.divergence_samples": 0})
+    for k in range(5):
+        auto.step(2.0 * math.sin(0.01 * (k + 2)), 2.0 * math.sin(0.01 * k))
+    det = auto.raw
+    assert det.auto_delay == 1 and check_text(lib.piezo_controller_check(det)) is None
+    old = det.det_P[16 + 1]
+    det.det_P[16 + 1] = det.det_P[16 + 4] * (1 + 2 ** -52) if det.det_P[16 + 4] != 0 else 1e-300
+    assert "candidate's covariance not symmetric" in (check_text(lib.piezo_controller_check(det)) or "")
+    det.det_P[16 + 1] = old
+    assert check_text(lib.piezo_controller_check(det)) is None
     raw.P[5] = math.nan
     assert "covariance" in check_text(lib.piezo_controller_check(raw))
 
@@ -242,7 +269,8 @@ def test_reference_refuses_a_step_whose_time_overflows_and_keeps_its_state():
     2e308 is not, and sin(0 * Inf) is NaN. The second step is refused and the reference
     keeps sample 1."""
     lib = core.lib()
-    status, ref, _ = reference_init(h=1e308, lead=0, preview=0, **{"amplitude[1]": 1.0, "phase[1]": 0.5})
+    status, ref, _ = reference_init(h=1e308, lead=0, preview=0,
+                                    **{"amplitude[1]": 1.0, "frequency[1]": 0.0, "phase[1]": 0.5})
     assert status == core.PIEZO_OK
     assert lib.piezo_reference_step(ref) == core.PIEZO_OK and ref.k == 1
     before = snapshot(ref, "piezo_reference")

@@ -73,8 +73,8 @@ def rebuilt(fmu_paths, tmp_path_factory):
         sources = folder / "sources"
         binary = folder / "binaries" / fmpy.platform / f"{name}.so"
         binary.parent.mkdir(parents=True)
-        command = [cc, "-shared", "-fPIC", "-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic",
-                   "-Werror", "-I", str(FMI_HEADERS)]
+        command = [cc, "-shared", "-fPIC", "-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wextra",
+                   "-Wpedantic", "-Werror", "-I", str(FMI_HEADERS)]
         command += [f"-I{sources / d}" for d in file_set.includeDirectories]
         command += [f"-D{d.name}" + (f"={d.value}" if d.value else "")
                     for d in file_set.preprocessorDefinitions if not d.optional]

@@ -12,8 +12,8 @@
 - The controller's warning with ``monitor.divergence_samples = 0`` says the loop is never
   declared unstable (0 switches the verdict off), not "after 0 consecutive samples".
 
-The C suites (tests/c/fmu_negative.c, fmu3_negative.c, group "edges") check the same at the
-level of single calls, for all three FMUs, under valgrind.
+The C suites (tests/c/fmu_negative.c, built as fmu_negative and fmu3_negative, group "edges")
+check the same at the level of single calls, for all three FMUs, under valgrind.
 """
 import contextlib
 import ctypes

@@ -43,16 +43,18 @@ def test_validate_fmu_reports_nothing(fmu_paths):
 
 def test_interface(reference_signal):
     """The documented interface: outputs y_d, y_ref, y_preview [um] and t_preview [s] with no
-    dependencies; parameters offset, amplitude/frequency/phase[1..8] (0), lead (2, the loop
-    delay of a master that exchanges at communication points), h, preview (4)."""
+    dependencies; parameters offset, amplitude/frequency/phase[1..8] (0, except the paper's
+    1 Hz, 10 um tone: amplitude[1] = 10, frequency[1] = 1), lead (2, the loop delay of a
+    master that exchanges at communication points), h, preview (4)."""
     v = reference_signal.variables
     md = reference_signal.md
     assert md.coSimulation.modelIdentifier == "ReferenceSignal"
     assert [n for n, x in v.items() if x.causality == "output"] == ["y_d", "y_ref", "y_preview", "t_preview"]
     assert [n for n, x in v.items() if x.causality == "input"] == []
     names = ["offset"] + [f"{k}[{i}]" for k in ("amplitude", "frequency", "phase") for i in range(1, 9)]
+    tone = {"amplitude[1]": 10.0, "frequency[1]": 1.0}
     for name in names:
-        assert v[name].causality == "parameter" and float(v[name].start) == 0.0, name
+        assert v[name].causality == "parameter" and float(v[name].start) == tone.get(name, 0.0), name
     assert v["lead"].type == "Integer" and int(v["lead"].start) == 2
     assert v["preview"].type == "Integer" and int(v["preview"].start) == 4
     assert float(v["h"].start) == H
@@ -148,3 +150,20 @@ def test_state_restore_continues_bitwise(reference_signal, make_fmu):
     fresh.h, fresh.k = H, 700
     assert np.array_equal(record(fresh, 300), first)
     assert math.isfinite(first[0, 0])
+
+
+@pytest.mark.parametrize("edition", ["fmi2", "fmi3"])
+def test_a_plain_fmpy_run_shows_the_papers_1hz_tone(fmu_paths, fmu3_paths, edition):
+    """A user's first `fmpy.simulate_fmu("ReferenceSignal.fmu")`, no parameters given: the
+    default experiment (3 s) shows the paper's 1 Hz, 10 um tone, not a flat line.
+    Reference: 10 sin(2 pi t) in NumPy on fmpy's output grid, and y_ref = y_d two samples on."""
+    import fmpy
+
+    path = (fmu_paths if edition == "fmi2" else fmu3_paths)["ReferenceSignal"]
+    result = fmpy.simulate_fmu(str(path), output=["y_d", "y_ref"])
+    t = result["time"]
+    assert t[0] == 0.0 and t[-1] == pytest.approx(3.0) and len(t) > 500   # fmpy's output grid
+    np.testing.assert_allclose(result["y_d"], 10 * np.sin(2 * np.pi * t), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result["y_ref"], 10 * np.sin(2 * np.pi * (t + 2 * H)), rtol=0,
+                               atol=1e-9)
+    assert result["y_d"].max() > 9.99 and result["y_d"].min() < -9.99

@@ -148,7 +148,7 @@ def test_state_serialized_in_one_process_continues_in_another(hosts, fmu_args):
 
 
 # ---------------------------------------------------------------------------------------
-# the FMI 3.0 editions (tests/c/fmu3_*.c through fmu3_host.h; the same references)
+# the FMI 3.0 editions (fmu3_*: the same sources of tests/c/ built with -DFMI_VERSION=3; the same references)
 
 @pytest.fixture(scope="module")
 def fmu3_args(fmu3_paths, tmp_path_factory):

@@ -113,7 +113,7 @@ def source_built(fmu_paths, tmp_path_factory):
         assert not (unzipdir / "binaries").exists()
         out = unzipdir / "binaries" / fmpy.platform / f"{name}.so"
         out.parent.mkdir(parents=True)
-        command = [cc, "-shared", "-fPIC", "-std=c99", "-O2",
+        command = [cc, "-shared", "-fPIC", "-std=c99", "-O2", "-ffp-contract=off",
                    "-Wall", "-Wextra", "-Wpedantic", "-Werror",
                    "-I", "sources", "-I", str(FMI_HEADERS_DIR),
                    *[f"sources/{f}" for f in _source_files(fmu_paths[name])],

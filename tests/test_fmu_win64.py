@@ -17,7 +17,10 @@ importer would meet them.
     DLLs, and the same host compiled with -DFMU_HOST_FMI3 runs the FMI 3.0 edition's reference
     experiment on both binaries with the same tolerances.
 
-The cross compiler and wine64 are installed by .ci/run (Debian: gcc-mingw-w64-x86-64, wine64).
+The cross compiler and wine64 are optional (tests/conftest.py, need_win64): without them, or
+with FMUs built without MinGW-w64, these tests skip and say what is missing. .ci/run installs
+both (Debian: gcc-mingw-w64-x86-64, wine64) and sets PIEZO_REQUIRE_WIN64=1, which turns each
+such skip into a failure.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from pathlib import Path
 import re
 import shutil
 import subprocess
+import sys
 import zipfile
 
 import numpy as np
@@ -34,14 +38,13 @@ import pytest
 
 import fmpy
 
+from conftest import mingw_tool, need_windows_binaries, wine64
 from fmu_experiments import SSP_TYPE, load_experiment, start_values, unzip
 
 REPO = Path(__file__).resolve().parents[1]
 HOST_SOURCE = REPO / "tests" / "wine_host" / "fmu_host.c"
 FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
 NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
-MINGW_PREFIX = "x86_64-w64-mingw32-"
-INSTALL_HINT = "install gcc-mingw-w64-x86-64 and wine64 (Debian), as .ci/run does"
 
 FMI2_FUNCTIONS = {
     "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate",
@@ -62,35 +65,21 @@ FMI2_FUNCTIONS = {
 SYSTEM_DLLS = {"kernel32.dll", "msvcrt.dll"}
 
 
-def _tool(name):
-    path = shutil.which(name)
-    assert path, f"{name} not found: {INSTALL_HINT}"
-    return path
-
-
-def _wine64():
-    path = shutil.which("wine64") or ("/usr/lib/wine/wine64" if os.path.isfile("/usr/lib/wine/wine64")
-                                      else None)
-    assert path, f"wine64 not found: {INSTALL_HINT}"
-    return path
-
-
 @pytest.fixture(scope="module")
 def dlls(fmu_paths, tmp_path_factory):
     """{modelIdentifier: path of the win64 DLL extracted from the FMU}."""
     root = tmp_path_factory.mktemp("dlls")
     out = {}
     for name in NAMES:
+        need_windows_binaries(fmu_paths[name])
         with zipfile.ZipFile(fmu_paths[name]) as zf:
-            member = f"binaries/win64/{name}.dll"
-            assert member in zf.namelist(), f"{name}.fmu has no win64 binary: {INSTALL_HINT}"
-            (root / f"{name}.dll").write_bytes(zf.read(member))
+            (root / f"{name}.dll").write_bytes(zf.read(f"binaries/win64/{name}.dll"))
         out[name] = root / f"{name}.dll"
     return out
 
 
 def _objdump(path, *flags):
-    return subprocess.run([_tool(MINGW_PREFIX + "objdump"), *flags, str(path)],
+    return subprocess.run([mingw_tool("objdump"), *flags, str(path)],
                           capture_output=True, text=True, check=True).stdout
 
 
@@ -99,6 +88,7 @@ def _objdump(path, *flags):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_binaries_are_one_so_and_one_dll(fmu_paths, name):
+    need_windows_binaries(fmu_paths[name])
     with zipfile.ZipFile(fmu_paths[name]) as zf:
         files = sorted(n for n in zf.namelist() if n.startswith("binaries/") and not n.endswith("/"))
     assert files == [f"binaries/linux64/{name}.so", f"binaries/win64/{name}.dll"]
@@ -142,9 +132,11 @@ def _build_hosts(root, *defines):
     flags = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-I", str(FMI_HEADERS),
              *defines]
     native, exe = root / "fmu_host", root / "fmu_host.exe"
-    cc = os.environ.get("CC") or _tool("cc")
+    cross = mingw_tool("gcc")
+    cc = os.environ.get("CC") or shutil.which("cc")
+    assert cc, "no C compiler (cc) for the native host"
     subprocess.run([cc, *flags, str(HOST_SOURCE), "-ldl", "-o", str(native)], check=True)
-    subprocess.run([_tool(MINGW_PREFIX + "gcc"), *flags, "-static", str(HOST_SOURCE),
+    subprocess.run([cross, *flags, "-static", str(HOST_SOURCE),
                     "-o", str(exe)], check=True)
     return native, exe
 
@@ -161,11 +153,12 @@ def hosts3(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def wine_env(tmp_path_factory):
-    """Environment for wine64 with a prefix of its own; its wineserver is stopped at the end."""
+    """(wine64, its environment with a prefix of its own); the wineserver is stopped at the end."""
+    wine = wine64()
     env = dict(os.environ, WINEPREFIX=str(tmp_path_factory.mktemp("wineprefix")),
                WINEDEBUG="-all", WINEDLLOVERRIDES="mscoree,mshtml=")
-    yield env
-    server = shutil.which("wineserver") or "/usr/lib/wine/wineserver"
+    yield wine, env
+    server = shutil.which("wineserver") or str(Path(wine).parent / "wineserver")
     subprocess.run([server, "-k"], env=env, check=False, timeout=60)
     subprocess.run([server, "-w"], env=env, check=False, timeout=60)
 
@@ -206,6 +199,7 @@ def _run(command, env=None):
 def test_win64_under_wine_matches_linux64(fmu_paths, hosts, wine_env, tmp_path, name):
     native, exe = hosts
     fmu = fmu_paths[name]
+    need_windows_binaries(fmu)
     experiment = load_experiment(fmu)
     md = fmpy.read_model_description(str(fmu))
     plan, columns = _plan(experiment, md.guid, md.coSimulation.modelIdentifier)
@@ -216,8 +210,9 @@ def test_win64_under_wine_matches_linux64(fmu_paths, hosts, wine_env, tmp_path, 
 
     linux = _run([str(native), str(tmp_path / "plan.txt"), str(so)])
     windows_path = "Z:" + str(dll).replace("/", "\\")
-    windows = _run([_wine64(), str(exe), "Z:" + str(tmp_path / "plan.txt").replace("/", "\\"),
-                    windows_path], env=wine_env)
+    wine, env = wine_env
+    windows = _run([wine, str(exe), "Z:" + str(tmp_path / "plan.txt").replace("/", "\\"),
+                    windows_path], env=env)
 
     n = experiment.steps + 1
     assert linux.shape == windows.shape == (n, 1 + len(columns))
@@ -241,6 +236,7 @@ FMI3_HEADER = FMI_HEADERS / "fmi3Functions.h"
 
 @pytest.mark.parametrize("name", NAMES)
 def test_fmi3_binaries_and_dll_exports(fmu3_paths, tmp_path, name):
+    need_windows_binaries(fmu3_paths[name], "x86_64-windows")
     with zipfile.ZipFile(fmu3_paths[name]) as zf:
         files = sorted(n for n in zf.namelist() if n.startswith("binaries/") and not n.endswith("/"))
         assert files == [f"binaries/x86_64-linux/{name}.so", f"binaries/x86_64-windows/{name}.dll"]
@@ -263,6 +259,7 @@ def test_fmi3_win64_under_wine_matches_linux64(fmu3_paths, hosts3, wine_env, tmp
     """Reference: the FMI 3.0 edition's own experiment and reference CSV (the same as the FMI
     2.0 edition's, tests/test_fmi3_editions.py), equal bit for bit on x86_64-linux."""
     native, exe = hosts3
+    need_windows_binaries(fmu3_paths[name], "x86_64-windows")
     experiment = load_experiment(fmu3_paths[name])
     md3 = fmpy.read_model_description(str(fmu3_paths[name]))
     plan, columns = _plan(experiment, md3.instantiationToken, name)
@@ -274,8 +271,9 @@ def test_fmi3_win64_under_wine_matches_linux64(fmu3_paths, hosts3, wine_env, tmp
     dll = tmp_path / "fmu" / "binaries" / "x86_64-windows" / f"{name}.dll"
 
     linux = _run([str(native), str(tmp_path / "plan.txt"), str(so)])
-    windows = _run([_wine64(), str(exe), "Z:" + str(tmp_path / "plan.txt").replace("/", "\\"),
-                    "Z:" + str(dll).replace("/", "\\")], env=wine_env)
+    wine, env = wine_env
+    windows = _run([wine, str(exe), "Z:" + str(tmp_path / "plan.txt").replace("/", "\\"),
+                    "Z:" + str(dll).replace("/", "\\")], env=env)
     n = experiment.steps + 1
     assert linux.shape == windows.shape == (n, 1 + len(columns))
     for j, column in enumerate(columns, start=1):
@@ -284,3 +282,84 @@ def test_fmi3_win64_under_wine_matches_linux64(fmu3_paths, hosts3, wine_env, tmp
     print(f"\n{name} FMI 3.0: x86_64-windows (wine) vs x86_64-linux, worst |difference| "
           f"over {n} samples: {worst:.3g}")
     assert worst <= 1e-12, f"win64 and linux64 differ by {worst:.3g}"
+
+
+# ---------------------------------------------------------------------------------------
+# (e) without MinGW-w64: visible skips, and failures where CI requires win64
+
+HIDDEN = ("x86_64-w64-mingw32-", "wine")
+
+
+def path_without_mingw_and_wine(root):
+    """$PATH with every folder that holds a MinGW-w64 or wine program replaced by a folder of
+    links to everything else in it: the tools are hidden, not uninstalled."""
+    out = []
+    for i, folder in enumerate(os.environ.get("PATH", "").split(os.pathsep)):
+        entries = sorted(os.listdir(folder)) if os.path.isdir(folder) else []
+        if not any(e.startswith(HIDDEN) for e in entries):
+            out.append(folder)
+            continue
+        farm = root / f"path{i}"
+        farm.mkdir()
+        for e in entries:
+            if not e.startswith(HIDDEN):
+                (farm / e).symlink_to(os.path.join(folder, e))
+        out.append(str(farm))
+    return os.pathsep.join(out)
+
+
+def test_without_mingw_the_tests_skip_and_say_why_unless_ci_requires_win64(tmp_path):
+    """The README's test command on a machine without MinGW-w64: this file's tests that need
+    it are skipped, each with the missing tool and how to install it (pytest -rs shows it);
+    with PIEZO_REQUIRE_WIN64=1, as .ci/run sets, they fail with the same reason instead.
+    Reference: shutil.which finds no x86_64-w64-mingw32-gcc on the hidden PATH."""
+    hidden = path_without_mingw_and_wine(tmp_path)
+    assert shutil.which("x86_64-w64-mingw32-gcc", path=hidden) is None
+    assert shutil.which("cmake", path=hidden) and shutil.which("cc", path=hidden)
+    command = [sys.executable, "-m", "pytest", "-q", "-rs", "-p", "no:cacheprovider",
+               str(Path(__file__)), "-k", "(dll or wine or fmi3_binaries) and not without"]
+
+    def run(require):
+        env = dict(os.environ, PATH=hidden, PIEZO_REQUIRE_WIN64=require)
+        return subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True,
+                              timeout=600)
+
+    done = run("")
+    assert done.returncode == 0, done.stdout[-3000:]
+    assert re.search(r"\b(\d+) skipped", done.stdout), done.stdout[-3000:]
+    assert "x86_64-w64-mingw32-objdump not found on PATH: install MinGW-w64 and wine64 " \
+           "(Debian: gcc-mingw-w64-x86-64 wine64, as .ci/run does) and rebuild" in done.stdout
+    assert "x86_64-w64-mingw32-gcc not found on PATH" in done.stdout
+    assert " failed" not in done.stdout and " error" not in done.stdout
+
+    required = run("1")
+    assert required.returncode == 1, required.stdout[-3000:]
+    assert "skipped" not in required.stdout.splitlines()[-1], required.stdout[-3000:]
+    assert ("x86_64-w64-mingw32-objdump not found on PATH: install MinGW-w64 and wine64 "
+            "(Debian: gcc-mingw-w64-x86-64 wine64, as .ci/run does) and rebuild "
+            "(PIEZO_REQUIRE_WIN64=1 makes this a failure, not a skip)") in required.stdout
+
+
+def test_an_fmu_without_windows_binaries_is_a_visible_skip(tmp_path, fmu_paths):
+    """An FMU built without MinGW-w64 (here: a copy with binaries/win64 left out) skips the
+    tests that need its DLL, naming the FMU and the folder; with PIEZO_REQUIRE_WIN64=1 it
+    fails them."""
+    linux_only = tmp_path / "PiezoStage.fmu"
+    with zipfile.ZipFile(fmu_paths["PiezoStage"]) as src, zipfile.ZipFile(linux_only, "w") as dst:
+        for info in src.infolist():
+            if not info.filename.startswith("binaries/win64"):
+                dst.writestr(info, src.read(info))
+    test = tmp_path / "test_probe.py"
+    test.write_text("from conftest import need_windows_binaries\n"
+                    f"def test_probe():\n    need_windows_binaries({str(linux_only)!r})\n")
+    for require, code, outcome in (("", 0, "skipped"), ("1", 1, "failed")):
+        done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rs", "-p",
+                               "no:cacheprovider", "--rootdir", str(REPO / "tests"), "-c",
+                               os.devnull, "--confcutdir", str(REPO / "tests"), str(test)],
+                              cwd=REPO / "tests", capture_output=True, text=True, timeout=600,
+                              env=dict(os.environ, PIEZO_REQUIRE_WIN64=require,
+                                       PYTHONPATH=f"{REPO / 'tests'}{os.pathsep}{REPO}"))
+        assert done.returncode == code, done.stdout[-3000:]
+        assert f"1 {outcome}" in done.stdout, done.stdout[-3000:]
+        assert ("PiezoStage.fmu has no binaries/win64/ (MinGW-w64 was not found when it was "
+                "built): install MinGW-w64") in done.stdout, done.stdout[-3000:]

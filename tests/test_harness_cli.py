@@ -121,10 +121,55 @@ def test_malformed_csv_exits_2(tmp_path):
     assert "r.csv" in msg and "line 3: 'oops' is not a number" in msg
 
 
-def test_missing_fmu_exits_2_with_build_command(tmp_path):
-    msg = _one_line_error(_harness("run", "track_1hz", "--fmu-dir", str(tmp_path), "--no-plots",
-                                   "--out", str(tmp_path / "o")))
-    assert "PiezoStage.fmu" in msg and "cmake -S . -B build && cmake --build build" in msg
+def test_missing_fmu_in_a_chosen_folder_says_what_the_folder_lacks(tmp_path):
+    """A folder the user chose (--fmu-dir or $PIEZO_FMU_DIR) gets no build or reinstall advice:
+    building or reinstalling does not fill it. The message names what it lacks and holds."""
+    (tmp_path / "AdaptiveCompoundController.fmu").write_bytes(b"")
+    for args, env in (((["--fmu-dir", str(tmp_path)]), {}), ([], {"PIEZO_FMU_DIR": str(tmp_path)})):
+        proc = subprocess.run([sys.executable, "-m", "harness", "run", "track_1hz", *args,
+                               "--no-plots", "--out", str(tmp_path / "o")], cwd=REPO,
+                              env=dict(os.environ, PYTHONPATH=str(REPO), **env),
+                              capture_output=True, text=True, timeout=120)
+        msg = _one_line_error(proc)
+        folder = f"{tmp_path} ($PIEZO_FMU_DIR)" if env else str(tmp_path)
+        assert (f"FMU not found: {tmp_path / 'PiezoStage.fmu'}; the folder {folder} has no "
+                f"PiezoStage.fmu, it holds AdaptiveCompoundController.fmu") in msg, msg
+        assert "cmake" not in msg and "install" not in msg, msg
+
+
+def test_missing_fmu_in_the_default_folder_says_how_to_build_it(tmp_path, monkeypatch, capsys):
+    """The default folder (a checkout's build/fmus, here one that was never built) is filled by
+    the build: the message gives its command."""
+    from harness import _paths
+    from harness.cli import main
+
+    monkeypatch.delenv("PIEZO_FMU_DIR", raising=False)
+    monkeypatch.setattr(_paths, "fmu_dir", lambda: tmp_path / "build" / "fmus")
+    assert main(["run", "track_1hz", "--no-plots", "--out", str(tmp_path / "o")]) == 2
+    msg = capsys.readouterr().err
+    assert f"FMU not found: {tmp_path / 'build' / 'fmus' / 'PiezoStage.fmu'}" in msg
+    assert "cmake -S . -B build && cmake --build build" in msg
+
+
+@pytest.mark.parametrize("sub", ["all", "run", "export", "bench"])
+def test_fmu_dir_help_names_the_real_default(sub, monkeypatch, capsys):
+    """--fmu-dir's help names the folder the FMUs are really taken from (reference:
+    harness._paths.fmu_dir(), which the runs use): here the checkout's build/fmus, and
+    $PIEZO_FMU_DIR when it is set. (tests/test_install.py checks the installed package's.)"""
+    from harness import _paths
+    from harness.cli import main
+
+    def says(text):
+        """The help holds `text`, whatever argparse's wrapping (it also breaks at hyphens)."""
+        assert main([sub, "--help"], prog="python -m harness") == 0
+        return "".join(text.split()) in "".join(capsys.readouterr().out.split())
+
+    monkeypatch.delenv("PIEZO_FMU_DIR", raising=False)
+    assert _paths.fmu_dir() == REPO / "build" / "fmus"
+    assert says(f"(default: {REPO / 'build' / 'fmus'}, the checkout's build; $PIEZO_FMU_DIR "
+                f"overrides)")
+    monkeypatch.setenv("PIEZO_FMU_DIR", "/srv/my_fmus")
+    assert says("(default: /srv/my_fmus, from $PIEZO_FMU_DIR)")
 
 
 def test_list_shows_builtin_and_user_scenarios(tmp_path):
@@ -186,3 +231,90 @@ def test_a_failing_run_exits_3_with_one_line(tmp_path, backend, name, fragment):
         assert fragment in lines[0], lines[0]
     else:
         assert "the loop is unstable" in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("values,count", [({"creep.alpha": 0.001}, "1 parameter"),
+                                          ({"creep.alpha": 0.001, "creep.k_c": 1.0},
+                                           "2 parameters")])
+def test_parameter_file_count_is_in_words(tmp_path, values, count):
+    """The note of --plant-params counts the file's parameters, singular for one."""
+    import json
+
+    f = tmp_path / "p.json"
+    f.write_text(json.dumps(values))
+    proc = _harness("run", "validate_1hz", "--plant-params", str(f), "--backend", "core",
+                    "--no-plots", "--no-timeseries", "--out", str(tmp_path / "o"))
+    assert proc.returncode == 0, proc.stderr
+    assert f"--plant-params {f}: {count} applied to the PiezoStage of every scenario" \
+        in proc.stderr, proc.stderr
+
+
+def _linux_only_copies(fmu_paths, fmu3_paths, folder):
+    """The built FMUs (both editions) rewritten without their Windows binaries, as a build
+    without MinGW-w64 makes them."""
+    import zipfile
+
+    (folder / "fmi3").mkdir(parents=True)
+    for paths, sub in ((fmu_paths, folder), (fmu3_paths, folder / "fmi3")):
+        for name, path in paths.items():
+            with zipfile.ZipFile(path) as src, zipfile.ZipFile(sub / f"{name}.fmu", "w") as dst:
+                for info in src.infolist():
+                    if not info.filename.startswith(("binaries/win64", "binaries/x86_64-windows")):
+                        dst.writestr(info, src.read(info))
+    return folder
+
+
+@pytest.mark.parametrize("where", ["--fmu-dir", "checkout", "installed"])
+@pytest.mark.parametrize("fmi", ["2", "3"])
+def test_fmus_without_windows_binaries_are_announced(fmu_paths, fmu3_paths, tmp_path, monkeypatch,
+                                                      capsys, where, fmi):
+    """pip hides CMake's output, so a build without MinGW-w64 is announced when the FMUs are
+    used: one warning line before the run, saying how to get Windows binaries where a rebuild
+    or a reinstall makes them (the default folder). Reference: the zip's binaries/ folders."""
+    from harness import _paths
+    from harness.cli import main
+
+    linux = _linux_only_copies(fmu_paths, fmu3_paths, tmp_path / "fmus")
+    monkeypatch.delenv("PIEZO_FMU_DIR", raising=False)
+    args = ["run", "track_5hz", "--no-plots", "--no-timeseries", "--out", str(tmp_path / "o"),
+            "--fmi", fmi]
+    if where == "--fmu-dir":
+        args += ["--fmu-dir", str(linux)]
+    else:
+        monkeypatch.setattr(_paths, "fmu_dir", lambda: linux)
+        monkeypatch.setattr(_paths, "IN_CHECKOUT", where == "checkout")
+    assert main(args, prog="python -m harness") == 0
+    err = capsys.readouterr().err.splitlines()
+    folder, windows = (linux, "win64") if fmi == "2" else (linux / "fmi3", "x86_64-windows")
+    warning = (f"python -m harness: warning: the FMUs in {folder} have no Windows binaries "
+               f"(binaries/{windows}): MinGW-w64 was not found when they were built, so they "
+               f"run on Linux only")
+    fix = {"--fmu-dir": "",
+           "checkout": "; for FMUs that also run on Windows install MinGW-w64 (Debian: "
+                       "gcc-mingw-w64-x86-64), then rebuild (cmake -S . -B build && cmake "
+                       "--build build)",
+           "installed": "; for FMUs that also run on Windows install MinGW-w64 (Debian: "
+                        "gcc-mingw-w64-x86-64), then reinstall the package from its source "
+                        "folder (pip install .)"}[where]
+    assert err[0] == warning + fix
+
+
+def test_the_report_names_the_platforms_and_says_linux_only(fmu_paths, fmu3_paths, tmp_path):
+    from harness.report import document, jobs
+    from harness.report.provenance import collect_provenance
+
+    linux = _linux_only_copies(fmu_paths, fmu3_paths, tmp_path / "fmus")
+    for folder, linux_only in ((linux, True), (fmu_paths["PiezoStage"].parent, False)):
+        prov = collect_provenance("fmpy", folder)
+        text = document.render_markdown(document.Document(
+            "p", jobs._provenance_blocks(prov, [], "the FMUs' own")))
+        assert ("**Linux only:** PiezoStage, AdaptiveCompoundController have no Windows "
+                "binaries" in text) == linux_only
+        platforms = [f.platforms for f in prov.fmus]
+        if linux_only:
+            assert platforms == [("linux64",), ("linux64",)]
+        elif "win64" not in platforms[0]:
+            pytest.skip("the build has no win64 binaries (no MinGW-w64)")
+        else:
+            assert platforms == [("linux64", "win64"), ("linux64", "win64")]
+            assert "| linux64, win64 |" in text

@@ -91,7 +91,7 @@ plant = { "creep.alpha" = 2.0 }
 
 
 @pytest.fixture
-def files(tmp_path):
+def files(tmp_path, fmu_paths, fmu3_paths):
     for name, text in [("nyquist", NYQUIST), ("step", STEP), ("builtin", BUILTIN_NAME),
                        ("ctrl", CONTROLLER_IN_VALIDATION), ("paper", PAPER_IN_USER_FILE),
                        ("csv", MISSING_CSV), ("header", VOLTAGE_AS_REFERENCE),
@@ -101,6 +101,22 @@ def files(tmp_path):
     (tmp_path / "afile").write_text("not a folder")
     (tmp_path / "empty").mkdir()
     (tmp_path / "bad.toml").write_text("[[scenario]\nname = 'x'\n")
+    (tmp_path / "bad.json").write_text('{"pi.w0": ')
+    # FMU folders a user may point --fmu-dir at by mistake
+    for folder, paths in (("fmi2", fmu_paths), ("fmi3", fmu3_paths)):
+        (tmp_path / folder).mkdir()
+        for name, path in paths.items():
+            (tmp_path / folder / f"{name}.fmu").symlink_to(path)
+    (tmp_path / "half").mkdir()
+    (tmp_path / "half" / "PiezoStage.fmu").symlink_to(fmu_paths["PiezoStage"])
+    (tmp_path / "notzip").mkdir()
+    (tmp_path / "notzip" / "PiezoStage.fmu").write_text("not a zip")
+    (tmp_path / "notzip" / "AdaptiveCompoundController.fmu").symlink_to(
+        fmu_paths["AdaptiveCompoundController"])
+    (tmp_path / "foreign").mkdir()              # another model under PiezoStage's file name
+    (tmp_path / "foreign" / "PiezoStage.fmu").symlink_to(fmu_paths["ReferenceSignal"])
+    (tmp_path / "foreign" / "AdaptiveCompoundController.fmu").symlink_to(
+        fmu_paths["AdaptiveCompoundController"])
     return tmp_path
 
 
@@ -164,7 +180,38 @@ CASES = [
      "scenario 'wrong_header': field 'reference.file': {d}/volts.csv: line 1: header's second "
      "column is 'v', expected 'y_d'"),
     (["run", "track_1hz", "--fmu-dir", "{d}/empty", "--no-plots", "--out", "{d}/o"], 2,
-     "FMU not found: {d}/empty/PiezoStage.fmu; build them in"),
+     "FMU not found: {d}/empty/PiezoStage.fmu; the folder {d}/empty has no PiezoStage.fmu, it "
+     "holds no .fmu file at all (the harness runs PiezoStage.fmu and "
+     "AdaptiveCompoundController.fmu from it)"),
+    (["run", "track_1hz", "--fmu-dir", "{d}/nowhere", "--no-plots", "--out", "{d}/o"], 2,
+     "FMU not found: {d}/nowhere/PiezoStage.fmu; the folder {d}/nowhere does not exist"),
+    (["run", "track_1hz", "--fmu-dir", "{d}/afile", "--no-plots", "--out", "{d}/o"], 2,
+     "{d}/afile is a file, not a folder"),
+    (["run", "track_1hz", "--fmu-dir", "{d}/half", "--no-plots", "--out", "{d}/o"], 2,
+     "the folder {d}/half has no AdaptiveCompoundController.fmu, it holds PiezoStage.fmu"),
+    (["run", "track_5hz", "--fmu-dir", "{d}/fmi2", "--fmi", "3", "--no-plots", "--out", "{d}/o"],
+     2, "{d}/fmi2/PiezoStage.fmu is not an FMI 3.0 Co-Simulation FMU (it is FMI 2.0) (the FMI "
+        "3.0 editions are in the fmi3/ folder beside the FMI 2.0 FMUs)"),
+    (["run", "track_5hz", "--fmu-dir", "{d}/fmi3", "--no-plots", "--out", "{d}/o"], 2,
+     "{d}/fmi3/PiezoStage.fmu is not an FMI 2.0 Co-Simulation FMU (it is FMI 3.0) (an FMI 3.0 "
+     "edition: run it with --fmi 3)"),
+    (["run", "track_5hz", "--fmu-dir", "{d}/notzip", "--no-plots", "--out", "{d}/o"], 2,
+     "{d}/notzip/PiezoStage.fmu is not an FMU (its model description cannot be read: "
+     "BadZipFile"),
+    (["run", "track_5hz", "--fmu-dir", "{d}/foreign", "--no-plots", "--out", "{d}/o"], 2,
+     "{d}/foreign/PiezoStage.fmu has no variable 'y_meas': it is not this project's PiezoStage "
+     "(its model is ReferenceSignal)"),
+    (["run", "track_5hz", "--fmu-dir", "{d}/foreign", "--backend", "native", "--no-plots",
+      "--out", "{d}/o"], 2, "it is not this project's PiezoStage (its model is ReferenceSignal)"),
+    (["run", "validate_1hz", "--fmu-dir", "{d}/notzip", "--no-plots", "--out", "{d}/o"], 2,
+     "{d}/notzip/PiezoStage.fmu is not an FMU"),
+    (["run", "track_1hz", "--plant-params", "{d}/absent.json"], 2, "{d}/absent.json: no such file"),
+    (["run", "track_1hz", "--plant-params", "{d}/bad.json"], 2, "{d}/bad.json: not valid JSON"),
+    (["run", "track_1hz", "--controller-params", "{d}/empty"], 2,
+     "{d}/empty: is a folder, not a parameter file"),
+    (["run", "track_1hz", "--scenario-file", "{d}/empty"], 2,
+     "{d}/empty: cannot read the scenario file"),
+    (["export", "--params", "{d}/absent.json", "--out", "{d}/o"], 2, "{d}/absent.json: no such file"),
     (["run", "typo", "--scenario-file", "{d}/param.toml", "--no-plots", "--out", "{d}/o"], 2,
      "'pi.w00' is not a parameter of PiezoStage (did you mean pi.w0"),
     (["run", "alpha_too_big", "--scenario-file", "{d}/value.toml", "--no-plots", "--out",

@@ -68,7 +68,7 @@ def test_progress_is_throttled_by_wall_time():
 
 
 def test_npz_and_csv_time_series_hold_the_same_numbers(tmp_path):
-    """Reference: the CSV (%.17g round-trips a double exactly). The .npz holds each field as
+    """Reference: the CSV (repr round-trips a double exactly). The .npz holds each field as
     a float64 array equal to the CSV's column; --no-timeseries writes neither."""
     f = tmp_path / "s.toml"
     f.write_text(SHORT)
@@ -180,3 +180,33 @@ def test_markdown_and_html_say_the_same_thing():
     assert "a <code>code</code> and <strong>bold</strong> &lt;tag&gt;" in html
     assert "<th>peak |v| [V]</th>" in html and "<td>2 | 3</td>" in html
     assert '<a href="f.svg"><img src="f.png" alt="f"></a>' in html
+
+
+def test_csv_files_have_lf_line_endings_and_shortest_exact_numbers(tmp_path):
+    """Every CSV a run writes ends its lines with LF only, and the time series writes each
+    value as Python's repr of the double: the shortest text that reads back as the same
+    double (the time column of k h at h = 0.5 ms reads 0.0005, 0.001, ..., never the 17-digit
+    0.00050000000000000001). Reference: float(text) == value for every cell, and repr itself
+    (the shortest round-tripping form, Python's documented float repr)."""
+    f = tmp_path / "s.toml"
+    f.write_text(SHORT)
+    sc = load_scenarios([f])["short"]
+    run_scenario(sc, tmp_path / "o", backend="core", plots=False, stream=None, progress=None)
+    series_path = tmp_path / "o" / "short_timeseries.csv"
+    for path in (series_path, tmp_path / "o" / "short.csv"):
+        raw = path.read_bytes()
+        assert b"\r" not in raw and raw.endswith(b"\n"), path.name
+    lines = series_path.read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[0] == "time"
+    rows = [line.split(",") for line in lines[1:]]
+    assert len(rows) == 5000
+    assert [r[0] for r in rows[:4]] == ["0.0", "0.0005", "0.001", "0.0015"]
+    run_scenario(sc, tmp_path / "n", backend="core", plots=False, stream=None, progress=None,
+                 timeseries="npz")
+    npz = np.load(tmp_path / "n" / "short_timeseries.npz")
+    for j, name in enumerate(header):
+        values = npz[name]
+        texts = [r[j] for r in rows]
+        assert texts == [repr(float(x)) for x in values], name
+        assert all(float(t) == x for t, x in zip(texts, values.tolist())), name

@@ -235,3 +235,183 @@ def test_cli_sweep_local_cluster_and_errors(tmp_path):
                              capture_output=True, text=True, timeout=120)
         assert bad.returncode == 2, (args, bad.stderr)
         assert bad.stderr.count("\n") == 1 and fragment in bad.stderr, bad.stderr
+
+
+# ---------------------------------------------------------------------------- scale and faults
+def _journal_rows(path):
+    """The data rows of a journal or runs table, by (scenario, run) (header skipped)."""
+    rows = {}
+    if not path.exists():
+        return rows
+    for line in path.read_text().splitlines()[1:]:
+        cells = next(__import__("csv").reader([line]))
+        rows.setdefault((cells[0], int(cells[1])), []).append(line)
+    return rows
+
+
+def _without_seconds(path):
+    import csv as _csv
+    with open(path, newline="") as f:
+        return [row[:5] + row[6:] for row in _csv.reader(f)]
+
+
+def _wait_for_rows(path, proc, at_least, timeout=240):
+    deadline = time.time() + timeout
+    while time.time() < deadline and proc.poll() is None:
+        if path.exists() and path.read_bytes().count(b"\n") - 1 >= at_least:
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_sweep_that_varies_nothing_is_refused_with_the_flag_to_add(tmp_path):
+    """Issue 19 item 3: without --vary (or with only spreads of width 0) every run would be
+    the same run. The command exits 2 with one line that says so and names --vary."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    for extra, fragment in (([], "no spread is given"), (["--vary", "pi.weights=0%"], "every spread has width 0")):
+        proc = subprocess.run([sys.executable, "-m", "harness", "sweep", "mismatch_1hz", "-n", "20",
+                               "--workers", "0", "--out", str(tmp_path / "x"), *extra], env=env, cwd=tmp_path,
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 2, proc.stderr
+        assert proc.stderr.count("\n") == 1, proc.stderr
+        assert fragment in proc.stderr and "all 20 runs would be the same run" in proc.stderr
+        assert "add --vary KEY=SPEC" in proc.stderr
+        assert not (tmp_path / "x" / "sweep_runs.csv").exists()
+    with pytest.raises(ValueError, match="nothing varies"):
+        sweep.run_sweep(["mismatch_1hz"], [], 3, workers=0)
+
+
+def test_store_records_each_run_once_and_drops_a_row_cut_off_by_a_kill(tmp_path):
+    """Reference: the journal's own rows. A second row of a recorded run is not written; a
+    journal whose last line was cut off mid-write loads the complete rows only, and the
+    cut line is removed from the file, so appending continues on a clean line."""
+    store = sweep._Store(tmp_path, ["a"], 5, ["p"])
+    store.open(fresh=True)
+    assert [i for i, _ in store.add("a", [(3, "ok", 1e-3, 1e-4, "", 0.01, [1.5]),
+                                          (1, "diverged", math.nan, math.nan, "why, with a comma", 0.02, [2.5])])] == [3, 1]
+    assert store.add("a", [(3, "ok", 9.0, 9.0, "", 0.01, [7.0])]) == []
+    store.close()
+    text = store.path.read_bytes()
+    store.path.write_bytes(text + b"a,4,ok,0.5,0.")              # killed mid-row
+    again = sweep._Store(tmp_path, ["a"], 5, ["p"])
+    assert again.load() == 2
+    assert store.path.read_bytes() == text
+    assert list(again.missing("a")) == [0, 2, 4]
+    assert again.row("a", 3)[3] == repr(1e-3) and again.row("a", 1)[-1] == "why, with a comma"
+    again.write_sorted(tmp_path / "sorted.csv")
+    assert [line.split(",")[1] for line in (tmp_path / "sorted.csv").read_text().splitlines()[1:]] == ["1", "3"]
+
+
+SCALE_ARGS = ["mismatch_5hz", "--vary", "pi.weights=10%", "--vary", "tf.poles=5%", "--vary", "sensor.seed",
+              "--seed", "4", "--chunk", "10", "--no-plots"]
+
+
+def test_a_lost_worker_loses_no_run(tmp_path):
+    """Reference: the same sweep undisturbed in this process (workers = 0). A real `dask
+    scheduler` and two `dask worker` processes (no nanny, one thread each) on 127.0.0.1; once
+    the sweep running on them has streamed some runs to its journal, one worker process is
+    killed (SIGKILL). The sweep completes on the other: every run exactly once, and the runs
+    table equals the undisturbed sweep's (all but the seconds column)."""
+    from dask.distributed import Client
+
+    dask = shutil.which("dask")
+    assert dask, "the dask command line is needed (pip install 'dask[distributed]')"
+    env = {**os.environ, "PYTHONPATH": str(REPO), "OPENBLAS_NUM_THREADS": "1"}
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    n = 800
+    procs = []
+    try:
+        procs.append(subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                                       "--no-dashboard"], env=env, cwd=tmp_path,
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        workers = [subprocess.Popen([dask, "worker", address, "--nthreads", "1", "--no-nanny",
+                                     "--no-dashboard", "--host", "127.0.0.1"], env=env, cwd=tmp_path,
+                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for _ in range(2)]
+        procs += workers
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(2, timeout=120)
+        out = tmp_path / "dask"
+        run = subprocess.Popen([sys.executable, "-m", "harness", "sweep", *SCALE_ARGS, "-n", str(n),
+                                "--scheduler", address, "--out", str(out)], env=env, cwd=tmp_path,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        procs.append(run)
+        assert _wait_for_rows(out / sweep.JOURNAL, run, 150), "the sweep streamed no runs"
+        workers[0].kill()                                   # SIGKILL: the process is gone
+        workers[0].wait(timeout=30)
+        at_kill = len(_journal_rows(out / sweep.JOURNAL))
+        stdout, stderr = run.communicate(timeout=600)
+    finally:
+        for p in reversed(procs):
+            _stop(p)
+    assert run.returncode == 0, stderr
+    assert at_kill < n, "the sweep ended before the worker was killed"
+    assert f"sweep: {n}/{n} runs (100%)" in stderr
+    rows = _journal_rows(out / sweep.RUNS)
+    assert sorted(rows) == [("mismatch_5hz", i) for i in range(n)]
+    assert all(len(v) == 1 for v in rows.values())
+    local = subprocess.run([sys.executable, "-m", "harness", "sweep", *SCALE_ARGS, "-n", str(n),
+                            "--workers", "0", "--out", str(tmp_path / "local")], env=env, cwd=tmp_path,
+                           capture_output=True, text=True, timeout=600)
+    assert local.returncode == 0, local.stderr
+    assert _without_seconds(out / sweep.RUNS) == _without_seconds(tmp_path / "local" / sweep.RUNS)
+
+
+def test_resume_after_a_real_interruption_computes_only_the_missing_runs(tmp_path):
+    """Reference: the same sweep run through without interruption (workers = 0). The sweep
+    (a local Dask cluster of one worker) is killed with its whole process group (SIGKILL)
+    once its journal holds some runs. Rerun without --resume it is refused (exit 2: the
+    folder holds an unfinished sweep), and with --resume but another seed too. With
+    --resume it says how many runs are left, computes only those (the rows that were in
+    the journal come back unchanged, their seconds included) and ends with the same table
+    and runs as the uninterrupted sweep; the journal is then gone and the manifest says
+    complete."""
+    import json
+    import signal as _signal
+
+    env = {**os.environ, "PYTHONPATH": str(REPO), "OPENBLAS_NUM_THREADS": "1"}
+    n = 600
+    out = tmp_path / "resumed"
+    cmd = [sys.executable, "-m", "harness", "sweep", *SCALE_ARGS, "-n", str(n), "--out", str(out)]
+    first = subprocess.Popen([*cmd, "--workers", "1"], env=env, cwd=tmp_path, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        assert _wait_for_rows(out / sweep.JOURNAL, first, 60), "the sweep streamed no runs"
+        os.killpg(first.pid, _signal.SIGKILL)
+    finally:
+        if first.poll() is None:
+            try:
+                os.killpg(first.pid, _signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        first.wait(timeout=30)
+    kept = _journal_rows(out / sweep.JOURNAL)
+    assert 0 < len(kept) < n
+    refused = subprocess.run([*cmd, "--workers", "0"], env=env, cwd=tmp_path, capture_output=True,
+                             text=True, timeout=120)
+    assert refused.returncode == 2 and "unfinished sweep" in refused.stderr and "--resume" in refused.stderr
+    other = subprocess.run([*[c if c != "4" else "5" for c in cmd], "--workers", "0", "--resume"], env=env,
+                           cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert other.returncode == 2 and "the seed (4, now 5)" in other.stderr, other.stderr
+    resumed = subprocess.run([*cmd, "--workers", "0", "--resume"], env=env, cwd=tmp_path,
+                             capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    assert f"{len(kept)} of {n} runs done, {n - len(kept)} to compute" in resumed.stderr
+    assert f"this call: {n - len(kept)} runs computed ({len(kept)} from the journal)" in resumed.stdout
+    assert "runs/s" in resumed.stderr and "ETA" in resumed.stderr
+    final = _journal_rows(out / sweep.RUNS)
+    assert sorted(final) == [("mismatch_5hz", i) for i in range(n)]
+    for key, lines in kept.items():
+        assert final[key] == lines[:1], key             # not computed again (same seconds)
+    assert not (out / sweep.JOURNAL).exists()
+    assert json.loads((out / sweep.MANIFEST).read_text())["complete"] is True
+    whole = subprocess.run([*[c if c != str(out) else str(tmp_path / "whole") for c in cmd], "--workers", "0"],
+                           env=env, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert whole.returncode == 0, whole.stderr
+
+    def table(text):
+        return [line for line in text.splitlines() if line.startswith("mismatch_5hz")]
+
+    assert table(resumed.stdout) == table(whole.stdout) and len(table(whole.stdout)) == 1
+    assert _without_seconds(out / sweep.RUNS) == _without_seconds(tmp_path / "whole" / sweep.RUNS)
+    assert (out / "sweep_summary.csv").read_text() == (tmp_path / "whole" / "sweep_summary.csv").read_text()

@@ -115,7 +115,7 @@ def test_option_refusals(capsys, records, tmp_path):
         (["identify", "--pi-data", low], "identify needs --pi-data, --tf-data and --creep-data "
                                          "(missing: --tf-data, --creep-data)"),
         (["identify", "--demo", "--pi-data", low],
-         "identify takes one of: the records, --demo, --internal-channels (got records and --demo)"),
+         "identify takes one of: the records, --demo, --internal-channels, --family (got records and --demo)"),
         (["list", "--pi-data", low],
          f"'list' does not take --pi-data {low} (see: python -m harness list --help)"),
         (["run", "track_1hz", "--demo"],
@@ -127,11 +127,11 @@ def test_option_refusals(capsys, records, tmp_path):
         (["export"], "the following arguments are required: --params "
                      "(see: python -m harness export --help)"),
         (["identify", "--pi-data", low, "--tf-data", mixed, "--creep-data", low, "--duration", "3"],
-         "--duration is only used by 'identify --demo'"),
+         "--duration is only used by 'identify --demo' and 'identify --family'"),
         (["identify", "--demo", "--noise-rms", "0.001"],
          "--noise-rms is only used by 'identify --internal-channels'"),
         (["identify", "--pi-data", low, "--tf-data", mixed, "--creep-data", low, "--seed", "2"],
-         "--seed is only used by 'identify --demo' and 'identify --internal-channels'"),
+         "--seed is only used by 'identify --demo', 'identify --family' and 'identify --internal-channels'"),
         (["identify", "--internal-channels", "--holdout", "0.1"],
          "--holdout is not used by 'identify --internal-channels'"),
         (["identify", "--demo", "--operators", "5"],
@@ -193,3 +193,66 @@ def test_failed_checks_exit_3_with_one_line(capsys, monkeypatch, records):
     _fails(capsys, ["identify", "--pi-data", low, "--tf-data", mixed, "--creep-data", low],
            "the joint refinement did not converge in 300 evaluations (cost 1 um^2); check the "
            "records", 3)
+
+
+def test_a_search_at_its_limit_names_the_limit_not_the_records(capsys, records):
+    """Issue 18: 'never blame the records when the optimiser stopped'. With a limit no start
+    can converge within, the one line names the limit and the option to raise it."""
+    low, mixed = str(records["low"]), str(records["mixed"])
+    code = main(["identify", "--pi-data", low, "--tf-data", mixed, "--creep-data", low,
+                 "--max-evaluations", "2", "--out", str(Path(low).parent / "limit.json")])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 3
+    assert "stopped at its limit of 2 evaluations per start before converging" in err, err
+    assert err.endswith("rerun with --max-evaluations 8"), err
+    assert "record" not in err
+
+
+def test_records_that_do_not_determine_a_parameter_exit_2(capsys, tmp_path):
+    """Issue 18: records that never move the play operators apart (v = 10 + sin, a 1 V swing,
+    with --v-max 20) determine the static gain but not the PI weights: the run names the
+    first weight and what would fix it, exits 2, writes the reports (the list on top) and
+    no parameter file (an older one is removed)."""
+    t = np.arange(4000) * H
+    paths = {}
+    for name, v in {"small": 10 + np.sin(2 * np.pi * t),
+                    "smallmix": 10 + 0.4 * (np.sin(2 * np.pi * 5 * t) + np.sin(2 * np.pi * 40 * t)
+                                            + np.sin(2 * np.pi * 80 * t))}.items():
+        run = simulate_open_loop_core({}, v)
+        paths[name] = str(write_record(tmp_path / f"{name}.csv", t, v, run["y"]))
+    out = tmp_path / "stage.json"
+    out.write_text("{}")
+    code = main(["identify", "--pi-data", paths["small"], "--tf-data", paths["smallmix"],
+                 "--creep-data", paths["small"], "--v-max", "20", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 2
+    assert err.startswith("python -m harness: error: the records do not determine pi.w["), err
+    assert "record voltage swings over the whole range" in err
+    assert err.endswith(f"no parameter file written, see {tmp_path / 'stage.report.md'}"), err
+    assert not out.exists()
+    report = (tmp_path / "stage.report.md").read_text()
+    assert report.index("NOT DETERMINED") < report.index("Fits")
+    js = json.loads((tmp_path / "stage.report.json").read_text())
+    assert {u["parameter"] for u in js["undetermined"]} >= {"pi.w[9]"}
+
+
+def test_family_prints_the_distribution(tmp_path):
+    proc = _harness("identify", "--family", "2", "--record-set", "two", "--duration", "2",
+                    "--noise-free", "--backend", "core", "--out", str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    assert "2 stages (seed 2026), record set 'two' (1Hz, 5-40-80Hz), 2 s each, noise-free" \
+        in proc.stdout
+    lines = [ln for ln in proc.stdout.splitlines() if "held-out e_rms vs measured y" in ln]
+    worst = float(lines[0].split("worst")[1])
+    assert worst <= 1e-3                       # nm: noise-free, the bound of the family test
+    assert proc.stderr.count("identify: stage ") == 2
+
+
+def test_demo_duration_too_short_is_refused_before_writing(capsys, tmp_path):
+    """Issue 19: 'identify --demo --duration 0.01' wrote six records before refusing."""
+    code = main(["identify", "--demo", "--duration", "0.01", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert err.endswith("--duration 0.01 s is too short: each record needs 200 samples and the "
+                        "1Hz record 4 voltage reversals; use --duration 1.8 or more"), err
+    assert not (tmp_path / "o" / "demo_records").exists()

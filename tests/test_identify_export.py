@@ -19,7 +19,7 @@ import pytest
 from fmpy.validation import validate_fmu
 
 from harness.cosim import simulate_closed_loop, simulate_open_loop
-from harness.identify.export import START_VALUES_PATH, ExportError, export_fmus
+from harness.identify.export import PROVENANCE_DIR, START_VALUES_PATH, ExportError, export_fmus
 from harness.identify.fit import fit_coupled_model
 from harness.identify.params import ParameterFileError
 from test_fmu_c_master import (  # noqa: F401  (master is a fixture)
@@ -64,15 +64,25 @@ def test_both_fmus_are_written_valid_with_the_guid_kept(exported, fmu_paths, ide
     assert written["PiezoStage"][1] == identified.plant_params()
 
 
+#: what an export rewrites or adds; everything else is the built FMU's, byte for byte
+REWRITTEN = ("modelDescription.xml", "documentation/index.html", "documentation/fmi-ls-ref.html",
+             "extra/org.fmi-standard.fmi-ls-ref/")
+ADDED = (START_VALUES_PATH, PROVENANCE_DIR + "/")
+
+
 def test_only_start_values_change_and_start_values_list_every_parameter(exported, fmu_paths):
     out, written = exported
     for model in MODELS:
         with zipfile.ZipFile(written[model][0]) as z, zipfile.ZipFile(fmu_paths[model]) as b:
             new, old = (zz.read("modelDescription.xml").decode().splitlines() for zz in (z, b))
-            # everything else in the FMU is the built one, byte for byte
+            # binaries, sources, icon, licence: the built ones, byte for byte
             for name in b.namelist():
-                if name != "modelDescription.xml":
+                if not name.startswith(REWRITTEN) and not name.endswith("/"):
                     assert z.read(name) == b.read(name), name
+            # nothing else is added
+            for name in z.namelist():
+                if name not in b.namelist():
+                    assert name.startswith(ADDED + REWRITTEN) or name.endswith("/"), name
             text = z.read(START_VALUES_PATH).decode()
         assert len(new) == len(old)
         changed = [(a, c) for a, c in zip(old, new) if a != c]
@@ -89,6 +99,147 @@ def test_only_start_values_change_and_start_values_list_every_parameter(exported
                 assert entries[name] == var.start, name
             else:
                 assert float(entries[name]) == float(var.start), name
+
+
+def test_archive_has_the_builds_modes_and_date_and_is_reproducible(exported, fmu_paths, tmp_path,
+                                                                   identified):
+    """Issue 18: the exported files had mode 0600 where the build's have 0644. Now every entry
+    has the build's permissions (0644 files, 0755 folders and shared libraries) and the
+    built FMU's date, and exporting the same parameters again gives the same bytes."""
+    out, written = exported
+    for model in MODELS:
+        with zipfile.ZipFile(written[model][0]) as z, zipfile.ZipFile(fmu_paths[model]) as b:
+            date = b.getinfo("modelDescription.xml").date_time
+            for info in z.infolist():
+                mode = info.external_attr >> 16
+                if info.filename.endswith("/"):
+                    assert mode == 0o40755, info.filename
+                elif info.filename.endswith((".so", ".dll")):
+                    assert mode == 0o100755, info.filename
+                else:
+                    assert mode == 0o100644, info.filename
+                assert info.date_time == date, info.filename
+            assert z.namelist() == sorted(z.namelist())
+    again = export_fmus(identified.plant_params(), tmp_path, fmu_dir=fmu_paths["PiezoStage"].parent,
+                        source="identified.json")
+    for model in MODELS:
+        assert again[model][0].read_bytes() == written[model][0].read_bytes(), model
+
+
+def test_each_exported_fmu_reproduces_its_own_experiment(exported, identified, fmu_paths):
+    """Issue 18: an exported controller failed its own FMI-LS-REF experiment by 2.5 (the
+    references were the built FMU's, the start values the identified ones). Now each exported
+    FMU re-simulates its experiment (fmpy, from the files in the FMU alone) within its
+    tolerance, here bit for bit, while the built FMU run on the same experiment does not;
+    and the plant's references are the identified model itself (CoupledModel.simulate with
+    the FMU's creep tail, NumPy/scipy) within 1e-9 um."""
+    from fmu_experiments import load_experiment, worst_violation
+
+    out, written = exported
+    for model in MODELS:
+        path = written[model][0]
+        exp = load_experiment(path)
+        run = fmpy.simulate_fmu(str(path), start_time=exp.start, stop_time=exp.stop,
+                                output_interval=exp.step, input=exp.stimuli,
+                                start_values=dict(exp.parameters), output=exp.outputs)
+        assert worst_violation(run, exp) <= 1.0, model
+        for name in exp.outputs:
+            assert np.array_equal(np.asarray(run[name], dtype=float), exp.reference[name]), name
+        built = fmpy.simulate_fmu(str(fmu_paths[model]), start_time=exp.start, stop_time=exp.stop,
+                                  output_interval=exp.step, input=exp.stimuli,
+                                  start_values=dict(exp.parameters), output=exp.outputs)
+        assert worst_violation(built, exp) > 1e3, model
+    exp = load_experiment(written["PiezoStage"][0])
+    assert exp.parameters == {}                   # it runs the FMU's own start values
+    model_y = identified.simulate(exp.stimuli["v"], memory="soe")
+    assert np.max(np.abs(exp.reference["y"] - model_y)) < 1e-9
+
+
+def test_documentation_shows_the_exported_start_values(exported):
+    """Issue 18: documentation/index.html listed the defaults (pi.w0 = 0.3344) while the model
+    description started pi.w0 at the identified value. Now its variables table is generated
+    from the exported model description: every parameter's Default column equals the
+    model description's start (parsed back from the HTML), and a section says where the
+    values came from."""
+    import html as htmlmod
+
+    out, written = exported
+    for model in MODELS:
+        path = written[model][0]
+        md = fmpy.read_model_description(str(path))
+        with zipfile.ZipFile(path) as z:
+            page = z.read("documentation/index.html").decode()
+            ls_ref = z.read("documentation/fmi-ls-ref.html").decode()
+        rows = re.findall(r"<tr><td><code>([^<]+)</code></td>(?:<td[^>]*>[^<]*</td>){4}"
+                          r'<td class="num">([^<]*)</td>', page)
+        shown = {htmlmod.unescape(n): htmlmod.unescape(v).replace("\u2212", "-") for n, v in rows}
+        params = [v for v in md.modelVariables if v.causality == "parameter"]
+        assert len(shown) >= len(params)
+        for v in params:
+            if v.type == "Boolean":
+                assert shown[v.name] == v.start, v.name
+            else:
+                assert float(shown[v.name]) == float(v.start), v.name
+        assert page.count('<h2 id="identified">') == 1 and "pi.w0" in page
+        assert load_experiment_name(path) in ls_ref
+
+
+def load_experiment_name(path):
+    from fmu_experiments import load_experiment
+
+    return load_experiment(path).name
+
+
+@pytest.fixture(scope="module")
+def from_files(tmp_path_factory, fmu_paths):
+    """The user's path: CSV records -> identify (parameter file and reports) -> export."""
+    from harness.identify.data import write_record
+    from harness.identify.params import read_params
+    from harness.identify.run import identify_files, write_outputs
+
+    folder = tmp_path_factory.mktemp("from_files")
+    rec = _records()
+    paths = {}
+    for label, r in rec.items():
+        paths[label] = write_record(folder / f"{label}.csv", np.arange(r.v.size) * H, r.v, r.y)
+    result, records = identify_files(paths["low"], paths["mixed"], list(paths.values()),
+                                     v_max=20.0)
+    params_path = write_outputs(result, folder / "stage.json", records=records)[0]
+    written = export_fmus(read_params(params_path), folder / "fmus",
+                          fmu_dir=fmu_paths["PiezoStage"].parent, source=str(params_path))
+    return folder, paths, params_path, written
+
+
+def test_provenance_names_the_records_and_the_report(from_files):
+    """Issue 18: the FMUs record where they came from: the parameter file's, the report's and
+    each record's SHA-256 (checked against hashlib on the files themselves), the built FMU
+    they were made from, and the start values that changed; the reports ride along."""
+    import hashlib
+    import json
+
+    folder, paths, params_path, written = from_files
+
+    def sha(p):
+        return hashlib.sha256(p.read_bytes()).hexdigest()
+
+    for model in MODELS:
+        with zipfile.ZipFile(written[model][0]) as z:
+            doc = json.loads(z.read(PROVENANCE_DIR + "/provenance.json"))
+            report = z.read(PROVENANCE_DIR + "/stage.report.json")
+            assert z.read(PROVENANCE_DIR + "/stage.report.md")
+        assert doc["parameter_file"] == {"file": "stage.json", "sha256": sha(params_path)}
+        assert doc["identification_report"]["sha256"] == hashlib.sha256(report).hexdigest()
+        assert {r["label"]: r["sha256"] for r in doc["records"]} == \
+            {label: sha(p) for label, p in paths.items()}
+        assert doc["start_values_changed"]["pi.w0"]["exported"] == \
+            read_params_value(params_path, "pi.w0")
+        assert doc["made_from"]["file"] == f"{model}.fmu"
+
+
+def read_params_value(path, name):
+    from harness.identify.params import read_params
+
+    return read_params(path)[name]
 
 
 def test_exported_plant_reproduces_the_identified_model(exported, identified, fmu_paths):

@@ -172,6 +172,7 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->observer = p->mv_observer;
     c->rls_enabled = p->rls_enabled ? 1 : 0;
     c->forgetting = p->rls_forgetting;
+    c->inv_forgetting = 1.0 / p->rls_forgetting;
     c->p0 = p->rls_p0;
     c->trace_max = p->rls_trace_max;
     c->sat_enabled = p->sat_enabled ? 1 : 0;
@@ -263,7 +264,8 @@ size_t piezo_controller_history_needed(const piezo_controller *c)
 /* q(k-i), i >= 1 */
 static double q_past(const piezo_controller *c, int i)
 {
-    return c->q_ring[(c->head + i - 1) % PIEZO_MV_Q_RING];
+    int at = c->head + i - 1;       /* head <= 9 and i <= d + 1 <= 10: below 2 rings */
+    return c->q_ring[at < PIEZO_MV_Q_RING ? at : at - PIEZO_MV_Q_RING];
 }
 
 static void project(const piezo_controller *c, double *th)
@@ -293,14 +295,22 @@ static void project(const piezo_controller *c, double *th)
 /*
  * RLS with forgetting on y(k) = phi^T theta, phi = [-y(k-1), -y(k-2), q(k-d), q(k-d-1)]:
  *   e = y(k) - phi^T theta,  K = P phi / (lambda + phi^T P phi),
- *   theta += K e,  P = (P - K phi^T P) / lambda,  trace(P) <= trace_max.
- * The a-priori prediction error of (theta, P) under delay d; with update set,
- * the updated estimates and covariance go to theta_new, P_new.
+ *   theta += K e,  P = (P - (P phi)(P phi)^T / (lambda + phi^T P phi)) / lambda,
+ *   trace(P) <= trace_max.
+ * One division per sample: 1 / (lambda + phi^T P phi); 1/lambda is fixed
+ * between samples (c->inv_forgetting, set at init). P stays bitwise symmetric
+ * from the diagonal P0 on: (P phi)_i (P phi)_j is the same product as
+ * (P phi)_j (P phi)_i, so P_new[ij] = P_new[ji] with no mirroring, and
+ * P phi = sum_j phi_j (row j of P), four-element rows the compiler vectorises.
+ * The same update serves the chosen loop and each delay candidate: the
+ * a-priori prediction error of (theta_in, P) under delay d; with update set,
+ * the updated estimates and covariance go to theta, P_new (not P's storage).
  */
 static double rls_step(const piezo_controller *c, const double *theta_in, const double *P, int d, double y,
                        int update, double *theta, double *P_new)
 {
-    double phi[4], Pphi[4], denom, e, trace = 0.0;
+    double phi[4], Pphi[4] = {0.0, 0.0, 0.0, 0.0}, denom, inv_denom, e, trace;
+    const double inv_lambda = c->inv_forgetting;
     int i, j;
     phi[0] = -c->y_prev[0];
     phi[1] = -c->y_prev[1];
@@ -310,25 +320,31 @@ static double rls_step(const piezo_controller *c, const double *theta_in, const 
     for (i = 0; i < 4; ++i) e -= phi[i] * theta_in[i];
     if (!update) return e;
 
+    /* (P phi)_i = sum_j P_ij phi_j in increasing j, P_ij read as P_ji (symmetric) */
+    for (j = 0; j < 4; ++j) {
+        const double *row = P + 4 * j;
+        Pphi[0] += row[0] * phi[j];
+        Pphi[1] += row[1] * phi[j];
+        Pphi[2] += row[2] * phi[j];
+        Pphi[3] += row[3] * phi[j];
+    }
     denom = c->forgetting;
+    for (i = 0; i < 4; ++i) denom += phi[i] * Pphi[i];
+    inv_denom = 1.0 / denom;
+    for (i = 0; i < 4; ++i) theta[i] = theta_in[i] + Pphi[i] * inv_denom * e;
     for (i = 0; i < 4; ++i) {
-        Pphi[i] = 0.0;
-        for (j = 0; j < 4; ++j) Pphi[i] += P[4 * i + j] * phi[j];
-        denom += phi[i] * Pphi[i];
+        /* the row is read before the new one is written (P_new is not P) */
+        const double *row = P + 4 * i;
+        double n0 = (row[0] - Pphi[i] * Pphi[0] * inv_denom) * inv_lambda;
+        double n1 = (row[1] - Pphi[i] * Pphi[1] * inv_denom) * inv_lambda;
+        double n2 = (row[2] - Pphi[i] * Pphi[2] * inv_denom) * inv_lambda;
+        double n3 = (row[3] - Pphi[i] * Pphi[3] * inv_denom) * inv_lambda;
+        P_new[4 * i] = n0;
+        P_new[4 * i + 1] = n1;
+        P_new[4 * i + 2] = n2;
+        P_new[4 * i + 3] = n3;
     }
-    for (i = 0; i < 4; ++i) theta[i] = theta_in[i] + Pphi[i] / denom * e;
-    /* P is symmetric, so phi^T P = (P phi)^T; keep it exactly symmetric:
-     * P_new[ij] = P_new[ji] = (a_ij + a_ji) / 2. P stays bitwise symmetric from
-     * the diagonal P0 on, so a_ji = a_ij (same operands) and one triangle is
-     * computed (the divisions dominate the update). */
-    for (i = 0; i < 4; ++i) {
-        P_new[5 * i] = (P[5 * i] - Pphi[i] * Pphi[i] / denom) / c->forgetting;
-        for (j = 0; j < i; ++j) {
-            double a = (P[4 * i + j] - Pphi[i] * Pphi[j] / denom) / c->forgetting;
-            P_new[4 * i + j] = P_new[4 * j + i] = 0.5 * (a + a);
-        }
-        trace += P_new[5 * i];
-    }
+    trace = ((P_new[0] + P_new[5]) + P_new[10]) + P_new[15];
     if (trace > c->trace_max) {
         double scale = c->trace_max / trace;
         for (i = 0; i < 16; ++i) P_new[i] *= scale;
@@ -427,20 +443,20 @@ static double reference(const piezo_controller *c, const piezo_controller_input 
     return in->y_ref;
 }
 
-/* 1 when every x[i] is finite. Inf and NaN have an exponent field of all ones:
- * (bits & EXP) + EXP_LSB then carries into the sign bit, and no other double
- * does, so OR-ing those sums over the array and testing the sign bit needs no
- * branch per element (the check runs on every sample). */
+/* 1 when every x[i] is finite: x * 0 is +-0 for a finite x and NaN for Inf or
+ * NaN (IEEE 754; no -ffinite-math-only here), so a sum of those products is 0
+ * exactly when all are finite. No branch per element, and two short chains of
+ * additions instead of one (the check runs on every sample). */
 static int all_finite(const double *x, int n)
 {
-    const uint64_t exp_mask = 0x7FF0000000000000ull, exp_lsb = 0x0010000000000000ull;
-    uint64_t any = 0, bits;
+    double z0 = 0.0, z1 = 0.0;
     int i;
-    for (i = 0; i < n; ++i) {
-        memcpy(&bits, &x[i], sizeof bits);
-        any |= (bits & exp_mask) + exp_lsb;
+    for (i = 0; i + 2 <= n; i += 2) {
+        z0 += x[i] * 0.0;
+        z1 += x[i + 1] * 0.0;
     }
-    return (any >> 63) == 0;
+    if (i < n) z0 += x[i] * 0.0;
+    return z0 + z1 == 0.0;
 }
 
 /* The estimates and the covariance of an evaluated sample are finite. The
@@ -721,6 +737,7 @@ const char *piezo_controller_check(const piezo_controller *c)
 {
     const char *fault;
     const piezo_controller_output *o;
+    int i, j, m;
     if (!c) return "controller missing";
     if ((fault = piezo_pi_check(&c->fwd_pi)) != NULL) return fault;
     if ((fault = piezo_pi_inverse_check(&c->inv_pi)) != NULL) return fault;
@@ -755,6 +772,7 @@ const char *piezo_controller_check(const piezo_controller *c)
         return "rls.enabled or sat.enabled is not 0 or 1";
     if (!(isfinite(c->lambda_u) && c->lambda_u >= 0.0)) return "mv.lambda_u out of range";
     if (!(isfinite(c->forgetting) && c->forgetting > 0.0 && c->forgetting <= 1.0)) return "rls.forgetting out of range";
+    if (c->inv_forgetting != 1.0 / c->forgetting) return "the reciprocal of rls.forgetting kept from init does not match rls.forgetting";
     if (!(isfinite(c->p0) && c->p0 > 0.0 && isfinite(c->trace_max) && c->trace_max >= 4.0 * c->p0))
         return "rls.p0 or rls.trace_max out of range";
     if (!(isfinite(c->sat_v_min) && isfinite(c->sat_v_max) && (!c->sat_enabled || c->sat_v_max > c->sat_v_min)))
@@ -765,6 +783,14 @@ const char *piezo_controller_check(const piezo_controller *c)
     if (!all_finite(c->theta, 4) || !all_finite(c->P, 16) || !all_finite(c->y_prev, 2)
         || !all_finite(c->q_ring, PIEZO_MV_Q_RING))
         return "estimates, covariance or past values not finite";
+    /* the loop's covariance and each candidate's stay bitwise symmetric (rls_step) */
+    for (m = 0; m <= PIEZO_DETECT_N; ++m) {
+        const double *P = m == 0 ? c->P : &c->det_P[16 * (m - 1)];
+        for (i = 0; i < 4; ++i)
+            for (j = 0; j < i; ++j)
+                if (memcmp(&P[4 * i + j], &P[4 * j + i], sizeof P[0]) != 0)
+                    return m == 0 ? "covariance not symmetric" : "a delay candidate's covariance not symmetric";
+    }
     if (!(isfinite(c->max_abs_pred_error) && c->max_abs_pred_error >= 0.0)) return "largest |pred_error| not finite";
     if (c->n_saturated > c->k || c->n_large_error > c->k || c->run_saturated > c->n_saturated
         || c->run_large_error > c->n_large_error)

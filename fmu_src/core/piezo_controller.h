@@ -121,6 +121,7 @@ typedef struct {
     uint64_t preview_tag[PIEZO_PREVIEW_RING];/* 1 + the sample each value is for; 0: empty */
     int rls_enabled;
     double forgetting, p0, trace_max;
+    double inv_forgetting;       /* 1 / forgetting, set at init (the RLS multiplies by it) */
     int sat_enabled;
     double sat_v_min, sat_v_max;
     double theta_nominal[4];

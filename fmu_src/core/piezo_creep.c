@@ -51,7 +51,7 @@ static int soe_add(piezo_gl *gl, double c, double s)
     if (i >= PIEZO_GL_MAX_TERMS) return 0;
     gl->soe_c[i] = c;
     gl->soe_decay[i] = exp(-s);
-    gl->soe_inject[i] = exp(-s * (double)PIEZO_GL_HEAD_LEN);
+    gl->soe_inject[i] = c * exp(-s * (double)PIEZO_GL_HEAD_LEN);
     gl->n_terms = i + 1;
     return 1;
 }
@@ -142,6 +142,8 @@ const char *piezo_gl_check(const piezo_gl *gl)
     if (gl->exact && gl->n_terms != 0) return "creep SOE terms in exact mode";
     if (!all_finite(gl->w_head, PIEZO_GL_HEAD_LEN) || !all_finite(gl->x_ring, PIEZO_GL_HEAD_LEN))
         return "creep head weights or inputs not finite";
+    if (memcmp(gl->x_ring, gl->x_ring + PIEZO_GL_HEAD_LEN, sizeof gl->x_ring / 2) != 0)
+        return "creep input ring differs from its mirror";
     if (!all_finite(gl->soe_c, PIEZO_GL_MAX_TERMS) || !all_finite(gl->soe_decay, PIEZO_GL_MAX_TERMS)
         || !all_finite(gl->soe_inject, PIEZO_GL_MAX_TERMS) || !all_finite(gl->soe_state, PIEZO_GL_MAX_TERMS))
         return "creep SOE values not finite";
@@ -181,36 +183,63 @@ static double gl_exact_sum(const double *history, size_t k)
     return (s0 + s1) + (s2 + s3);
 }
 
-/* SOE: y(k) = gain * (sum_{j=0..L0} w_j x(k-j) + sum_i c_i S_i(k)),
- * S_i(k) = e^{-s_i} S_i(k-1) + e^{-s_i (L0+1)} x(k-L0-1).
- * x_ring holds x(k-1) .. x(k-1-L0), x(k-j) at (oldest + j) mod (L0+1); the
- * oldest, x(k-L0-1), leaves the head window now, and its slot receives x(k)
- * at the commit. Each next[i] is written after soe_state[i] is read, so next
- * may be gl->soe_state (in place).
- * Both sums are sequential chains of additions (their order fixes the
- * rounding); one loop advances both, so the CPU overlaps their latencies. */
+/* The head window is summed in blocks of four lanes (piezo_creep.h). */
+typedef char gl_head_is_a_multiple_of_4[PIEZO_GL_HEAD % 4 == 0 ? 1 : -1];
+
+/* One SOE term: T_i(k) = e^{-s_i} T_i(k-1) + c_i e^{-s_i (L0+1)} x(k-L0-1) into
+ * next[i] (after soe_state[i] is read) and returned. */
+static double soe_term(const piezo_gl *gl, int i, double x_leaving, double *next)
+{
+    double t = gl->soe_decay[i] * gl->soe_state[i] + gl->soe_inject[i] * x_leaving;
+    next[i] = t;
+    return t;
+}
+
+/* SOE: y(k) = gain * (x(k) + sum_{j=1..L0} w_j x(k-j) + sum_i T_i(k)),
+ * T_i(k) = c_i S_i(k) = e^{-s_i} T_i(k-1) + c_i e^{-s_i (L0+1)} x(k-L0-1),
+ * in the four lanes of piezo_creep.h:
+ *     a_l = sum_{j-1 = l mod 4} w_j x(k-j) + sum_{i = l mod 4} T_i(k),
+ *     sum = x(k) + ((a_0 + a_1) + (a_2 + a_3)).
+ * x(k-j) is x_ring[head + j - 1] (the mirror keeps the window contiguous) and
+ * x(k-L0-1), the one leaving the window now, is x_ring[head + L0]. Every term is
+ * independent of the others: the lanes are four chains of additions instead of
+ * one, and the blocks of four are two SSE2 vectors each. In each block the
+ * states and constants are read before next[] is written, so next may be
+ * gl->soe_state (in place). */
 static double gl_soe_sum(const piezo_gl *gl, double x, double *next)
 {
-    int oldest = gl->head == 0 ? PIEZO_GL_HEAD : gl->head - 1;
-    double x_leaving = gl->x_ring[oldest];   /* x(k-L0-1) */
-    double sum = x, tail = 0.0;
-    int i, j = 1, pos = oldest + 1;          /* x(k-j) at x_ring[pos] */
-    if (pos == PIEZO_GL_HEAD_LEN) pos = 0;
-    for (i = 0; i < gl->n_terms; ++i) {
-        double s = gl->soe_decay[i] * gl->soe_state[i] + gl->soe_inject[i] * x_leaving;
-        next[i] = s;
-        tail += gl->soe_c[i] * s;
-        if (j <= PIEZO_GL_HEAD) {
-            sum += gl->w_head[j] * gl->x_ring[pos];
-            ++j;
-            if (++pos == PIEZO_GL_HEAD_LEN) pos = 0;
-        }
+    const double *xw = gl->x_ring + gl->head;    /* xw[j-1] = x(k-j) */
+    const double *w = gl->w_head + 1;            /* w[j-1] = w_j */
+    const double x_leaving = xw[PIEZO_GL_HEAD];  /* x(k-L0-1) */
+    double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
+    int i, n = gl->n_terms;
+    for (i = 0; i < PIEZO_GL_HEAD; i += 4) {
+        a0 += w[i] * xw[i];
+        a1 += w[i + 1] * xw[i + 1];
+        a2 += w[i + 2] * xw[i + 2];
+        a3 += w[i + 3] * xw[i + 3];
     }
-    for (; j <= PIEZO_GL_HEAD; ++j) {
-        sum += gl->w_head[j] * gl->x_ring[pos];
-        if (++pos == PIEZO_GL_HEAD_LEN) pos = 0;
+    for (i = 0; i + 4 <= n; i += 4) {
+        const double *decay = gl->soe_decay + i, *inject = gl->soe_inject + i;
+        const double *state = gl->soe_state + i;
+        double t0 = decay[0] * state[0] + inject[0] * x_leaving;
+        double t1 = decay[1] * state[1] + inject[1] * x_leaving;
+        double t2 = decay[2] * state[2] + inject[2] * x_leaving;
+        double t3 = decay[3] * state[3] + inject[3] * x_leaving;
+        a0 += t0;
+        a1 += t1;
+        a2 += t2;
+        a3 += t3;
+        next[i] = t0;
+        next[i + 1] = t1;
+        next[i + 2] = t2;
+        next[i + 3] = t3;
     }
-    return sum + tail;
+    /* the last n mod 4 terms continue lanes 0, 1, 2 */
+    if (i < n) a0 += soe_term(gl, i, x_leaving, next);
+    if (i + 1 < n) a1 += soe_term(gl, i + 1, x_leaving, next);
+    if (i + 2 < n) a2 += soe_term(gl, i + 2, x_leaving, next);
+    return x + ((a0 + a1) + (a2 + a3));
 }
 
 piezo_status piezo_gl_eval(const piezo_gl *gl, double x, double *history, size_t history_capacity,
@@ -238,9 +267,10 @@ piezo_status piezo_gl_eval(const piezo_gl *gl, double x, double *history, size_t
 void piezo_gl_commit(piezo_gl *gl, double x, const double *next_state)
 {
     if (!gl->exact) {
-        /* the slot of x(k-L0-1) becomes the newest */
+        /* the slot of x(k-L0-1) becomes the newest, in the ring and its mirror */
         gl->head = gl->head == 0 ? PIEZO_GL_HEAD : gl->head - 1;
         gl->x_ring[gl->head] = x;
+        gl->x_ring[gl->head + PIEZO_GL_HEAD_LEN] = x;
         if (next_state != gl->soe_state)
             memcpy(gl->soe_state, next_state, (size_t)gl->n_terms * sizeof *next_state);
     }

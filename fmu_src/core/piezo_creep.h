@@ -17,7 +17,19 @@
  *    w_0..w_L0 exactly; for j > L0
  *        w_j = -(sin(pi alpha)/pi) int_0^inf e^{-s j} e^{alpha s} (1-e^{-s})^alpha ds
  *    discretised by the trapezoid rule in u = ln s, so w_j ~ sum_i c_i e^{-s_i j}
- *    and each term is a first-order recursion on x(k-L0-1). O(1) per step.
+ *    and each term is a first-order recursion on x(k-L0-1), kept scaled by c_i:
+ *        T_i(k) = c_i sum_{j>L0} e^{-s_i j} x(k-j)
+ *               = e^{-s_i} T_i(k-1) + c_i e^{-s_i (L0+1)} x(k-L0-1).
+ *    O(1) per step.
+ *
+ * Summation order (it fixes the rounding, so it is part of the definition; the
+ * same on every machine, since it is written out in the source): four partial
+ * sums, lane l = 0..3, each in increasing index,
+ *     a_l = sum_{j = 1..L0, j-1 = l mod 4} w_j x(k-j)
+ *         + sum_{i = 0..n-1, i = l mod 4} T_i(k),
+ *     y(k) = gain * (x(k) + ((a_0 + a_1) + (a_2 + a_3))),
+ * so that the CPU overlaps the additions and the compiler can keep the lanes
+ * in vector registers (SSE2 on any x86-64).
  */
 #ifndef PIEZO_CREEP_H
 #define PIEZO_CREEP_H
@@ -36,13 +48,16 @@ typedef struct {
     int exact;                  /* 1: full memory, 0: SOE */
     uint64_t k;                 /* samples consumed so far */
     double w_head[PIEZO_GL_HEAD_LEN];   /* w_0..w_L0 */
-    double x_ring[PIEZO_GL_HEAD_LEN];   /* x(k-1)..x(k-1-L0), ring, x_ring[head] newest */
-    int head;
+    /* x(k-1)..x(k-1-L0), a ring with a mirror: x(k-j) at x_ring[head + j - 1]
+     * for j = 1..L0+1, and x_ring[p + L0+1] == x_ring[p], so the window is
+     * contiguous wherever head is (one loop the compiler can vectorise) */
+    double x_ring[2 * PIEZO_GL_HEAD_LEN];
+    int head;                            /* 0..L0: x(k-1) at x_ring[head] */
     int n_terms;                         /* SOE terms in use */
     double soe_c[PIEZO_GL_MAX_TERMS];      /* c_i */
     double soe_decay[PIEZO_GL_MAX_TERMS];  /* e^{-s_i} */
-    double soe_inject[PIEZO_GL_MAX_TERMS]; /* e^{-s_i (L0+1)} */
-    double soe_state[PIEZO_GL_MAX_TERMS];  /* S_i(k) = sum_{j>L0} e^{-s_i j} x(k-j) */
+    double soe_inject[PIEZO_GL_MAX_TERMS]; /* c_i e^{-s_i (L0+1)} */
+    double soe_state[PIEZO_GL_MAX_TERMS];  /* T_i(k) = c_i sum_{j>L0} e^{-s_i j} x(k-j) */
 } piezo_gl;
 
 /* Closed-form-free weights by the recursion of eq 14: w[0..n-1]. */

@@ -64,21 +64,56 @@ void piezo_pi_reset(piezo_pi *pi)
     if (pi) memset(pi->z, 0, sizeof pi->z);
 }
 
-/* eq 18: u(k) = w0 v(k) + sum_j w_j z_{r_j}(k). Each z_next[j] is written after
- * z[j] is read, so z_next may be pi->z (in place). */
+/* One play operator of a PI sum: its next state into z_next[j] (after z[j] is
+ * read), w_j z_j(k) returned. */
+static double pi_term(const double *w, const double *r, const double *z, double *z_next, int j, double v)
+{
+    double zj = play(v, r[j], z[j]);
+    z_next[j] = zj;
+    return w[j] * zj;
+}
+
+/*
+ * The PI sum of eq 18 (and of eq 24 for the inverse), with the play states of
+ * sample k into z_next[0..m-1] (each written after z[j] is read: z_next may be
+ * z, in place). Four partial sums, lane l = 0..3, each in increasing j
+ * (piezo_hysteresis.h, "Summation order"):
+ *     a_l = sum_{j = l mod 4} w_j z_j(k),   u = w0 v + ((a_0 + a_1) + (a_2 + a_3)).
+ * The operators are independent, so a block of four is two SSE2 vectors
+ * (minpd/maxpd for eq 3) and the lanes are four short chains of additions.
+ */
+static double pi_sum(int m, double w0, const double *w, const double *r, const double *z,
+                     double *z_next, double v)
+{
+    double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
+    int j;
+    for (j = 0; j + 4 <= m; j += 4) {
+        double z0 = play(v, r[j], z[j]);
+        double z1 = play(v, r[j + 1], z[j + 1]);
+        double z2 = play(v, r[j + 2], z[j + 2]);
+        double z3 = play(v, r[j + 3], z[j + 3]);
+        a0 += w[j] * z0;
+        a1 += w[j + 1] * z1;
+        a2 += w[j + 2] * z2;
+        a3 += w[j + 3] * z3;
+        z_next[j] = z0;
+        z_next[j + 1] = z1;
+        z_next[j + 2] = z2;
+        z_next[j + 3] = z3;
+    }
+    /* the last m mod 4 operators continue lanes 0, 1, 2 */
+    if (j < m) a0 += pi_term(w, r, z, z_next, j, v);
+    if (j + 1 < m) a1 += pi_term(w, r, z, z_next, j + 1, v);
+    if (j + 2 < m) a2 += pi_term(w, r, z, z_next, j + 2, v);
+    return w0 * v + ((a0 + a1) + (a2 + a3));
+}
+
+/* eq 18: u(k) = w0 v(k) + sum_j w_j z_{r_j}(k) (pi_sum). z_next may be pi->z (in place). */
 piezo_status piezo_pi_eval(const piezo_pi *pi, double v, double *z_next, double *u)
 {
-    int j;
-    double sum;
     if (!pi || !z_next || !u) return PIEZO_ERR_NULL;
     if (!isfinite(v)) return PIEZO_ERR_NONFINITE;
-    sum = pi->w0 * v;
-    for (j = 0; j < pi->m; ++j) {
-        double z = play(v, pi->r[j], pi->z[j]);
-        z_next[j] = z;
-        sum += pi->w[j] * z;
-    }
-    *u = sum;
+    *u = pi_sum(pi->m, pi->w0, pi->w, pi->r, pi->z, z_next, v);
     return PIEZO_OK;
 }
 
@@ -118,20 +153,12 @@ piezo_status piezo_pi_inverse_init(piezo_pi_inverse *inv, const piezo_pi *pi)
     return PIEZO_OK;
 }
 
-/* eq 24: v(k) = w'_0 u(k) + sum_i w'_i z'_{r'_i}(k); z_next may be inv->z. */
+/* eq 24: v(k) = w'_0 u(k) + sum_i w'_i z'_{r'_i}(k) (pi_sum); z_next may be inv->z. */
 piezo_status piezo_pi_inverse_eval(const piezo_pi_inverse *inv, double u, double *z_next, double *v)
 {
-    int i;
-    double sum;
     if (!inv || !z_next || !v) return PIEZO_ERR_NULL;
     if (!isfinite(u)) return PIEZO_ERR_NONFINITE;
-    sum = inv->w0 * u;
-    for (i = 0; i < inv->m; ++i) {
-        double z = play(u, inv->r[i], inv->z[i]);
-        z_next[i] = z;
-        sum += inv->w[i] * z;
-    }
-    *v = sum;
+    *v = pi_sum(inv->m, inv->w0, inv->w, inv->r, inv->z, z_next, u);
     return PIEZO_OK;
 }
 

@@ -10,6 +10,11 @@
  *     r'_i = w0 r_i + sum_{j<=i} w_j (r_i - r_j),   w'_0 = 1/w0,
  *     w'_i = -w_i / ((w0 + sum_{j<=i} w_j)(w0 + sum_{j<i} w_j)),
  *     z'_i(0) = (w0 + sum_{j<=i} w_j) z_i(0) + sum_{j>i} w_j z_j(0).
+ *
+ * Summation order of both sums (it fixes the rounding, so it is part of the
+ * definition, the same on every machine): four partial sums over the operators
+ * j = 1..m, lane l = 0..3 taking j - 1 = l mod 4 in increasing j,
+ *     a_l = sum w_j z_{r_j}(k),   u(k) = w0 v(k) + ((a_0 + a_1) + (a_2 + a_3)).
  */
 #ifndef PIEZO_HYSTERESIS_H
 #define PIEZO_HYSTERESIS_H

@@ -69,18 +69,70 @@ static uint64_t rng_next(piezo_rng *rng)
     return result;
 }
 
-/* Top 53 bits, shifted by half an ulp so the result is never 0 or 1. */
-double piezo_rng_uniform(piezo_rng *rng)
+/* Top 53 bits, shifted by half an ulp so the result is never 0 or 1. Static,
+ * so the plant's step inlines it; exported below. */
+static double rng_uniform(piezo_rng *rng)
 {
     return ((double)(rng_next(rng) >> 11) + 0.5) * (1.0 / 9007199254740992.0);
 }
 
-/* Box-Muller; the second variate is dropped so the state stays one generator. */
+/* Taylor coefficients (-1)^n / (2n)! of cos x and (-1)^n / (2n+1)! of sin x / x,
+ * in powers of z = x^2 */
+static const double COS_TAYLOR[10] = {
+    1.0, -1.0 / 2, 1.0 / 24, -1.0 / 720, 1.0 / 40320, -1.0 / 3628800, 1.0 / 479001600,
+    -1.0 / 87178291200.0, 1.0 / 20922789888000.0, -1.0 / 6402373705728000.0};
+static const double SIN_TAYLOR[9] = {
+    1.0, -1.0 / 6, 1.0 / 120, -1.0 / 5040, 1.0 / 362880, -1.0 / 39916800, 1.0 / 6227020800.0,
+    -1.0 / 1307674368000.0, 1.0 / 355687428096000.0};
+
+/*
+ * cos(2 pi u) for u in (0, 1), with basic operations only: the same bits from
+ * every C library and compiler (given no contraction), and no data-dependent
+ * branch (a library cos branches on the argument's range, and a uniform
+ * argument makes those branches unpredictable).
+ * Quadrant: q = round(4u), t = u - q/4 in [-1/8, 1/8] (exact: u and q/4 are
+ * within a factor 2), x = 2 pi t in [-pi/4, pi/4], and
+ *     cos(2 pi u) = cos(x + q pi/2) = cos x, -sin x, -cos x, sin x  for q mod 4 = 0..3.
+ * cos x and sin x by their Taylor series to x^18 and x^17, whose next terms are
+ * below 3e-21 and 8e-20 for |x| <= pi/4, evaluated in z = x^2 by Estrin's
+ * scheme (pairs c_2n + c_2n+1 z, then z^2, z^4, z^8: four steps deep instead of
+ * nine, so the draw's latency does not hold up the sample):
+ *     P(z) = ((c0 + c1 z) + z^2 (c2 + c3 z)) + z^4 ((c4 + c5 z) + z^2 (c6 + c7 z)) + z^8 (c8 + c9 z).
+ */
+static double cos_2pi(double u)
+{
+    const double *c = COS_TAYLOR, *s = SIN_TAYLOR;
+    int q = (int)(4.0 * u + 0.5);
+    double t = u - 0.25 * (double)q;
+    double x = (2.0 * PI_D) * t, z = x * x, z2 = z * z, z4 = z2 * z2, z8 = z4 * z4, r[4];
+    double cos_x = ((c[0] + c[1] * z) + z2 * (c[2] + c[3] * z))
+                   + z4 * ((c[4] + c[5] * z) + z2 * (c[6] + c[7] * z)) + z8 * (c[8] + c[9] * z);
+    double sin_x = x * (((s[0] + s[1] * z) + z2 * (s[2] + s[3] * z))
+                        + z4 * ((s[4] + s[5] * z) + z2 * (s[6] + s[7] * z)) + z8 * s[8]);
+    r[0] = cos_x;
+    r[1] = -sin_x;
+    r[2] = -cos_x;
+    r[3] = sin_x;
+    return r[q & 3];
+}
+
+/* Box-Muller, sqrt(-2 ln u1) cos(2 pi u2); the second variate is dropped so the
+ * state stays one generator. */
+static double rng_normal(piezo_rng *rng)
+{
+    double u1 = rng_uniform(rng);
+    double u2 = rng_uniform(rng);
+    return sqrt(-2.0 * log(u1)) * cos_2pi(u2);
+}
+
+double piezo_rng_uniform(piezo_rng *rng)
+{
+    return rng_uniform(rng);
+}
+
 double piezo_rng_normal(piezo_rng *rng)
 {
-    double u1 = piezo_rng_uniform(rng);
-    double u2 = piezo_rng_uniform(rng);
-    return sqrt(-2.0 * log(u1)) * cos(2.0 * PI_D * u2);
+    return rng_normal(rng);
 }
 
 /* ---- plant --------------------------------------------------------------- */
@@ -126,11 +178,19 @@ piezo_status piezo_plant_init(piezo_plant *plant, const piezo_plant_params *p, p
     return PIEZO_OK;
 }
 
-/* y_meas = quantize(y + noise), quantize(a) = res * round(a / res) */
-static double sense(const piezo_plant *plant, piezo_rng *rng, double y)
+/* The sensor noise of one sample, noise_rms N(0, 1) drawn from *rng; nothing
+ * is drawn (0 returned) when the noise is off. */
+static double sensor_noise(const piezo_plant *plant, piezo_rng *rng)
+{
+    return plant->sensor_noise_rms > 0.0 ? plant->sensor_noise_rms * rng_normal(rng) : 0.0;
+}
+
+/* y_meas = quantize(y + noise), quantize(a) = res * round(a / res); noise from
+ * sensor_noise (not added when the noise is off) */
+static double sense(const piezo_plant *plant, double y, double noise)
 {
     double reading = y;
-    if (plant->sensor_noise_rms > 0.0) reading += plant->sensor_noise_rms * piezo_rng_normal(rng);
+    if (plant->sensor_noise_rms > 0.0) reading += noise;
     if (plant->sensor_resolution > 0.0)
         reading = plant->sensor_resolution * floor(reading / plant->sensor_resolution + 0.5);
     return reading;
@@ -149,7 +209,7 @@ void piezo_plant_reset(piezo_plant *plant)
     plant->out.u = 0.0;
     plant->out.x = 0.0;
     plant->out.y = 0.0;
-    plant->out.y_meas = sense(plant, &plant->rng, 0.0);
+    plant->out.y_meas = sense(plant, 0.0, sensor_noise(plant, &plant->rng));
 }
 
 size_t piezo_plant_history_needed(const piezo_plant *plant)
@@ -168,7 +228,7 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
                               size_t history_capacity, piezo_plant_output *out)
 {
     double z_next[PIEZO_PI_MAX_OPERATORS], soe_next[PIEZO_GL_MAX_TERMS];
-    double u, x, y, y_meas;
+    double u, x, y, y_meas, noise;
     piezo_rng rng;
     if (!plant) return PIEZO_ERR_NULL;
     if (!isfinite(v)) return PIEZO_ERR_NONFINITE;
@@ -176,6 +236,11 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
         if (!creep_history) return PIEZO_ERR_NULL;
         if (history_capacity < piezo_plant_history_needed(plant)) return PIEZO_ERR_CAPACITY;
     }
+    /* The reading's noise first: it does not depend on the sample, so its libm
+     * calls overlap the operators below. The generator advances on a copy until
+     * the sample is accepted. */
+    rng = plant->rng;
+    noise = sensor_noise(plant, &rng);
     /* v is finite, so a non-finite value from here on was computed: overflow, not bad input */
     piezo_pi_eval(&plant->pi, v, z_next, &u);                         /* u(k) = P[v](k) */
     if (!isfinite(u)) return PIEZO_ERR_DIVERGED;
@@ -189,10 +254,8 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
     } else {
         y = x;
     }
-    /* the reading before the commit: quantising a finite y can overflow (y / resolution);
-     * the generator advances on a copy until the sample is accepted */
-    rng = plant->rng;
-    y_meas = sense(plant, &rng, y);
+    /* the reading before the commit: quantising a finite y can overflow (y / resolution) */
+    y_meas = sense(plant, y, noise);
     if (!isfinite(y_meas)) return PIEZO_ERR_DIVERGED;
     /* commit */
     memcpy(plant->pi.z, z_next, (size_t)plant->pi.m * sizeof *z_next);

@@ -9,6 +9,9 @@ void piezo_reference_default_params(piezo_reference_params *p)
 {
     if (!p) return;
     memset(p, 0, sizeof *p);
+    /* a plain run of the FMU shows the paper's 1 Hz, 10 um tone, not a flat line */
+    p->amplitude[0] = 10.0;
+    p->frequency[0] = 1.0;
     p->lead = 2;
     p->preview = 4;
     p->h = 0.0005;

@@ -43,9 +43,10 @@ typedef struct {
     double t_preview;                       /* t0 + (k + preview) h [s] */
 } piezo_reference;
 
-/* All amplitudes 0, lead 2 (the loop delay of a master that exchanges at
- * communication points), preview 4 (covers every loop delay the controller
- * detects, docs/cosimulation.md), h = 0.5 ms. */
+/* The paper's 1 Hz, 10 um tone (amplitude[1] = 10, frequency[1] = 1, the other tones 0),
+ * lead 2 (the loop delay of a master that exchanges at communication points),
+ * preview 4 (covers every loop delay the controller detects, docs/cosimulation.md),
+ * h = 0.5 ms. */
 void piezo_reference_default_params(piezo_reference_params *params);
 /* Validate (diag names the first bad parameter), start at t0, sample 0. */
 piezo_status piezo_reference_init(piezo_reference *ref, const piezo_reference_params *params,

@@ -367,6 +367,28 @@ static int no_references_no_values(const glue_instance *inst, const char *fname,
     return 1;
 }
 
+/*
+ * The hot path of a master's exchange: 1 when every vr[i] is a scalar variable
+ * of the model of the given type (not time, not an array), which
+ * check_references then accepts with nValues = nvr; *any_output says whether
+ * one is an output. Only a yes/no: anything else (and every error with its
+ * message) takes the checks of check_references.
+ */
+static int scalars_of_type(const glue_instance *inst, const uint32_t vr[], size_t nvr, model_type type,
+                           int *any_output)
+{
+    size_t i;
+    int outputs = 0;
+    for (i = 0; i < nvr; i++) {
+        uint32_t r = vr[i];
+        if (r >= (uint32_t)MODEL_N_VARIABLES || inst->n_values[r] != 1 || model_variables[r].type != type)
+            return 0;
+        outputs |= model_variables[r].causality == MODEL_OUTPUT;
+    }
+    *any_output = outputs;
+    return 1;
+}
+
 /* Check the references of a get/set and count their values; 0 when refused. */
 static int check_references(const glue_instance *inst, const char *fname, const uint32_t vr[], size_t nvr,
                             model_type type, size_t n_values, int *any_output)
@@ -634,19 +656,27 @@ glue_status glue_get(void *c, const char *fname, const uint32_t vr[], size_t nvr
 {
     glue_instance *inst = glue_instance_of(c, fname, GLUE_MASK_GET);
     size_t i, j, e;
-    int need_outputs;
+    int need_outputs, scalars;
     if (inst == NULL)
         return GLUE_ERROR;
     if (nvr == 0)
         return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
-    if (!check_references(inst, fname, vr, nvr, kind_type(kind), n_values, &need_outputs))
+    /* scalars of the right type (a master's exchange) pass check_references: skip its bookkeeping */
+    scalars = nvr == n_values && scalars_of_type(inst, vr, nvr, kind_type(kind), &need_outputs);
+    if (!scalars && !check_references(inst, fname, vr, nvr, kind_type(kind), n_values, &need_outputs))
         return GLUE_ERROR;
     if (need_outputs && !refresh_outputs(inst, fname))
         return GLUE_ERROR;
     if (need_outputs)
         inst->outputs_read = 1;
+    if (scalars && kind == GLUE_VALUES_DOUBLE) {
+        /* one double each: the copy of the loop below */
+        for (i = 0; i < nvr; i++)
+            ((double *)values)[i] = *(const double *)value_ptr(inst, vr[i]);
+        return GLUE_OK;
+    }
     for (i = 0, j = 0; i < nvr; i++) {
         if (is_time(inst, vr[i])) {
             ((double *)values)[j++] = glue_time(inst);
@@ -678,6 +708,23 @@ glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr
         return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
+    /* The master's exchange: finite values for scalar Real inputs, with no
+     * feedthrough warning due. Every check below passes and the values are
+     * stored as below; anything else takes the full path. */
+    if (kind == GLUE_VALUES_DOUBLE && nvr == n_values && scalars_of_type(inst, vr, nvr, MODEL_REAL, &any_output)
+        && !(inst->outputs_read && inst->mode == GLUE_MODE_STEP && !inst->warned_read_before_set
+             && model_direct_feedthrough(&inst->data))) {
+        const double *v = (const double *)values;
+        for (i = 0; i < nvr; i++)
+            if (model_variables[vr[i]].causality != MODEL_INPUT || !isfinite(v[i]))
+                break;
+        if (i == nvr) {
+            for (i = 0; i < nvr; i++)
+                *(double *)value_ptr(inst, vr[i]) = v[i];
+            inst->outputs_valid = 0;
+            return GLUE_OK;
+        }
+    }
     /* Check everything first: a refused call changes nothing. */
     for (i = 0, j = 0; i < nvr; i++) {
         const model_variable *var;
@@ -781,6 +828,13 @@ double glue_time(const glue_instance *inst)
     return inst->t0 + (double)inst->k * inst->h;
 }
 
+/* fmax(a, b) inline (a libm call on baseline x86-64): the larger, or the other
+ * argument when one is NaN */
+static double max_of(double a, double b)
+{
+    return a > b || b != b ? a : b;
+}
+
 /* Log what the model asks to say after a step; a warning if anything. */
 static glue_status step_warnings(glue_instance *inst, const char *fname)
 {
@@ -827,7 +881,7 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
     size_t needed;
 
     t = glue_time(inst);
-    tol = 1e-9 * fmax(inst->h, fabs(t));
+    tol = 1e-9 * max_of(inst->h, fabs(t));
     if (tol > 1e-3 * inst->h)
         tol = 1e-3 * inst->h;
     if (!isfinite(currentCommunicationPoint) || fabs(currentCommunicationPoint - t) > tol) {
@@ -844,8 +898,9 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
                        glue_real_text(t2, inst->h));
         return GLUE_ERROR;
     }
-    ratio = communicationStepSize / inst->h;
-    n_real = floor(ratio + 0.5);
+    /* one sample, the usual step: H/h = 1 passes the checks below exactly */
+    ratio = communicationStepSize == inst->h ? 1.0 : communicationStepSize / inst->h;
+    n_real = ratio == 1.0 ? 1.0 : floor(ratio + 0.5);
     if (!(n_real <= (double)MAX_STEP_SAMPLES)) {
         glue_log_error(inst, "%s: communicationStepSize = %s is %s samples of h = %s: refused, one doStep "
                        "computes at most %llu samples (about a second of work: a host must not wait longer in one "
@@ -855,7 +910,7 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
                        glue_real_text(t4, (double)MAX_STEP_SAMPLES * inst->h));
         return GLUE_ERROR;
     }
-    if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * fmax(1.0, n_real) * inst->h) {
+    if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * max_of(1.0, n_real) * inst->h) {
         glue_log_error(inst, "%s: communicationStepSize = %s is not a whole multiple of h = %s "
                        "(H/h = %s; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
                        "time unchanged", fname, glue_real_text(t1, communicationStepSize),
@@ -872,7 +927,9 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
     }
     if (inst->stop_time_defined) {
         double t_end = inst->t0 + (double)(inst->k + n) * inst->h;
-        double tol_end = fmin(1e-9 * fmax(inst->h, fabs(inst->stop_time)), 1e-3 * inst->h);
+        double tol_end = 1e-9 * max_of(inst->h, fabs(inst->stop_time));
+        if (tol_end > 1e-3 * inst->h)
+            tol_end = 1e-3 * inst->h;
         if (t_end > inst->stop_time + tol_end) {
             glue_log_error(inst, "%s: the step from t = %s to t = %s passes stopTime = %s of "
                            "%s: step refused, state and time unchanged", fname,

@@ -3,8 +3,13 @@
 * :mod:`~harness.identify.data`: a user's CSV records (time, v, y) in, validated;
 * :mod:`~harness.identify.model`: the blocks evaluated forward (PI, G, creep);
 * :mod:`~harness.identify.steps`: the paper's three steps, each on its own;
-* :mod:`~harness.identify.fit`: the coupled model from measured v and y (stepwise,
-  then jointly refined), under a documented normalisation;
+* :mod:`~harness.identify.fit`: the coupled model from measured v and y (stepwise as a
+  start, a search, a joint refinement, the check that every parameter is determined),
+  under a documented normalisation;
+* :mod:`~harness.identify.varpro`: the search by variable projection (the PI weights
+  solved, poles, zero and creep order searched from several starts);
+* :mod:`~harness.identify.family`: the method validated on stages drawn from the paper's
+  ranges;
 * :mod:`~harness.identify.params`: parameter files (JSON of FMU variable names);
 * :mod:`~harness.identify.export`: parameterised FMUs;
 * :mod:`~harness.identify.run`, :mod:`~harness.identify.tables`: files in, reports out;

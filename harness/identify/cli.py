@@ -13,8 +13,10 @@
 
     python -m harness identify --pi-data LOW.csv --tf-data MIXED.csv --creep-data A.csv [B.csv ...]
                                [--out params.json] [--sample-period S] [--operators M]
-                               [--v-max V] [--delay N] [--holdout F]
+                               [--v-max V] [--delay N] [--holdout F] [--max-evaluations N]
     python -m harness identify --demo [--duration S] [--noise-free] [--seed N] [--out DIR]
+    python -m harness identify --family N [--record-set standard|two|six] [--duration S]
+                               [--noise-free] [--seed N]
     python -m harness identify --internal-channels [--noise-rms UM] [--seed N] [--free-w0]
                                [--displacement-only]
     python -m harness export --params FILE [--out DIR] [--fmu-dir DIR]
@@ -39,7 +41,7 @@ __all__ = ["add_identify_arguments", "check_identify_arguments", "run_identify",
 
 _DATA = (("pi_data", "--pi-data"), ("tf_data", "--tf-data"), ("creep_data", "--creep-data"))
 _FIT = (("sample_period", "--sample-period"), ("operators", "--operators"), ("v_max", "--v-max"),
-        ("delay", "--delay"), ("holdout", "--holdout"))
+        ("delay", "--delay"), ("holdout", "--holdout"), ("max_evaluations", "--max-evaluations"))
 _DEMO = (("duration", "--duration"), ("noise_free", "--noise-free"))
 _INTERNAL = (("noise_rms", "--noise-rms"), ("free_w0", "--free-w0"),
              ("displacement_only", "--displacement-only"))
@@ -69,16 +71,29 @@ def add_identify_arguments(parser):
                    help="extra input delay of G in samples, tf.delay (default 0; not fitted)")
     g.add_argument("--holdout", type=float, metavar="F",
                    help="fraction of each record held out at its end (default 0.25; 0: none)")
+    g.add_argument("--max-evaluations", type=int, metavar="N",
+                   help="most evaluations of each start of the search (default 500; the search "
+                        "stops earlier, when it no longer improves on the records' noise floor)")
     d = parser.add_argument_group("the virtual experiment")
     d.add_argument("--demo", action="store_true",
                    help="records of the PiezoStage FMU with known parameters, identified like "
                         "user data")
+    d.add_argument("--family", type=int, metavar="N",
+                   help="validate the identification on N stages drawn at random from around "
+                        "the paper's parameter ranges (recorded on the C core, identified from "
+                        "v and y) and print the distribution of the errors and times")
+    d.add_argument("--record-set", choices=("standard", "two", "six"),
+                   help="--family: the records of each stage: standard (1 Hz, 5/40/80 Hz, "
+                        "10 Hz), two (1 Hz, 5/40/80 Hz) or six (the paper's six validation "
+                        "inputs); default standard")
     d.add_argument("--duration", type=float, metavar="S",
-                   help="--demo: length of each record [s] (default 10)")
+                   help="--demo, --family: length of each record [s] (default 10)")
     d.add_argument("--noise-free", action="store_true",
-                   help="--demo: no sensor noise or quantisation (default: 2 nm, 1 nm rms)")
+                   help="--demo, --family: no sensor noise or quantisation (default: 2 nm, "
+                        "1 nm rms)")
     d.add_argument("--seed", type=int, metavar="N",
-                   help="--demo, --internal-channels: base seed of the noise (default 1)")
+                   help="--demo, --internal-channels: base seed of the noise (default 1); "
+                        "--family: seed of the stages (default 2026)")
     i = parser.add_argument_group("each step alone on the model's internal channels")
     i.add_argument("--internal-channels", action="store_true",
                    help="check each step alone on the PiezoStage model's internal outputs u and "
@@ -120,11 +135,13 @@ def _given(args, attr):
 def check_identify_arguments(args):
     """A one-line error about the combination of ``identify``'s options, or None."""
     data = [flag for attr, flag in _DATA if _given(args, attr)]
+    family = getattr(args, "family", None) is not None
     modes = [m for m, on in (("records", bool(data)), ("--demo", args.demo),
-                             ("--internal-channels", args.internal_channels)) if on]
+                             ("--internal-channels", args.internal_channels),
+                             ("--family", family)) if on]
     if len(modes) > 1:
-        return f"identify takes one of: the records, --demo, --internal-channels (got " \
-               f"{' and '.join(modes)})"
+        return f"identify takes one of: the records, --demo, --internal-channels, --family " \
+               f"(got {' and '.join(modes)})"
     if not modes:
         return ("identify needs the records: --pi-data LOW.csv --tf-data MIXED.csv "
                 "--creep-data A.csv [B.csv ...] (or --demo for the virtual experiment)")
@@ -135,12 +152,21 @@ def check_identify_arguments(args):
         for attr, flag in _INTERNAL:
             if _given(args, attr):
                 return f"{flag} is only used by 'identify --internal-channels'"
-    if not args.demo:
+    if not family and _given(args, "record_set"):
+        return "--record-set is only used by 'identify --family'"
+    if family and args.family < 1:
+        return f"--family must be >= 1 stage, got {args.family}"
+    if family:
+        for attr, flag in _FIT[:5]:
+            if _given(args, attr):
+                return f"{flag} is not used by 'identify --family' (the drawn stages fix it)"
+    if not args.demo and not family:
         for attr, flag in _DEMO:
             if _given(args, attr):
-                return f"{flag} is only used by 'identify --demo'"
+                return f"{flag} is only used by 'identify --demo' and 'identify --family'"
         if data and _given(args, "seed"):
-            return "--seed is only used by 'identify --demo' and 'identify --internal-channels'"
+            return ("--seed is only used by 'identify --demo', 'identify --family' and "
+                    "'identify --internal-channels'")
     if args.internal_channels:
         for attr, flag in _FIT:
             if _given(args, attr):
@@ -155,6 +181,7 @@ def check_identify_arguments(args):
         ("v_max", lambda x: math.isfinite(x) and x > 0, "a finite number > 0 (V)"),
         ("delay", lambda x: 0 <= x <= 8, "in 0..8 samples"),
         ("holdout", lambda x: 0 <= x <= 0.9, "in [0, 0.9]"),
+        ("max_evaluations", lambda x: x >= 1, ">= 1"),
         ("duration", lambda x: math.isfinite(x) and x > 0, "a finite number > 0 (s)"),
         ("noise_rms", lambda x: math.isfinite(x) and x >= 0, "a finite number >= 0 (µm)"),
         ("seed", lambda x: x >= 0, ">= 0"),
@@ -174,9 +201,11 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
     harness.checks.RunCheckError
         The fit did not converge, or the virtual experiment failed its checks.
     """
-    from .fit import DEFAULT_HOLDOUT, IdentificationFitError
+    from .fit import DEFAULT_HOLDOUT, DEFAULT_MAX_EVALUATIONS, IdentificationFitError
 
     holdout = DEFAULT_HOLDOUT if args.holdout is None else args.holdout
+    max_evaluations = getattr(args, "max_evaluations", None) or DEFAULT_MAX_EVALUATIONS
+    say = _progress_lines(progress)
     try:
         if args.internal_channels:
             from .. import report
@@ -187,35 +216,76 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
                                       fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
                                       displacement_only=args.displacement_only)
             return 0
+        if getattr(args, "family", None) is not None:
+            return _identify_family(args, stream, say)
         if args.demo:
             from .demo import run_demo
 
             demo = run_demo(args.out, duration=10.0 if args.duration is None else args.duration,
                             noise=not args.noise_free, seed=1 if args.seed is None else args.seed,
                             holdout=holdout, fmu_dir=args.fmu_dir, backend=args.backend,
-                            stream=stream, progress=progress)
+                            stream=stream, progress=progress, max_evaluations=max_evaluations)
             if demo.failures:
                 raise RunCheckError(f"the virtual experiment failed {len(demo.failures)} of its "
                                     f"checks; first: {demo.failures[0]}")
             return 0
-        return _identify_records(args, holdout, stream)
+        return _identify_records(args, holdout, max_evaluations, stream, say)
     except IdentificationFitError as exc:
         raise RunCheckError(str(exc)) from None
 
 
-def _identify_records(args, holdout, stream):
+def _identify_family(args, stream, say):
+    """``identify --family N``: the distribution of the errors over N drawn stages."""
+    from .family import validate_family
+
+    family = validate_family(args.family, seed=2026 if args.seed is None else args.seed,
+                             record_set=args.record_set or "standard",
+                             duration=10.0 if args.duration is None else args.duration,
+                             noise=not args.noise_free, progress=say)
+    if stream is not None:
+        stream.write(family.format() + "\n")
+        stream.flush()
+    bad = [st for st in family.stages if st.undetermined]
+    if bad:
+        raise RunCheckError(f"stage {bad[0].index + 1} of the family: the identification left "
+                            f"{', '.join(bad[0].undetermined)} undetermined")
+    return 0
+
+
+def _progress_lines(stream):
+    """A callable that writes one progress line of the fit to ``stream`` (or nothing)."""
+    if stream is None:
+        return None
+
+    def say(line):
+        stream.write(f"identify: {line}\n")
+        stream.flush()
+
+    return say
+
+
+def _identify_records(args, holdout, max_evaluations, stream, say):
+    from .fit import UndeterminedModelError
     from .run import identify_files, write_outputs
     from .tables import format_report
 
     h = 0.0005 if args.sample_period is None else args.sample_period
     m = 9 if args.operators is None else args.operators
     result, records = identify_files(args.pi_data, args.tf_data, args.creep_data, h=h, m=m,
-                                     v_max=args.v_max, delay=args.delay or 0, holdout=holdout)
+                                     v_max=args.v_max, delay=args.delay or 0, holdout=holdout,
+                                     max_evaluations=max_evaluations, progress=say)
     header = [f"Identification from measured records (v and y only): step 1 {args.pi_data}, "
               f"step 2 {args.tf_data}, step 3 {', '.join(args.creep_data)}; h = {h:g} s, "
               f"m = {m}, v_max = {result.model.v_max:g} V; the last {holdout:.0%} of each "
               f"record held out; {result.elapsed_s:.1f} s."]
     files = write_outputs(result, args.out, records=records, header=header)
+    if result.undetermined:
+        first = result.undetermined[0]
+        more = (f" (and {len(result.undetermined) - 1} more)" if len(result.undetermined) > 1
+                else "")
+        raise UndeterminedModelError(
+            f"the records do not determine {first.text()}{more}; no parameter file written, "
+            f"see {files[1]}")
     if stream is not None:
         stream.write(format_report(result, header=header) + "\n\n")
         stream.write(f"Wrote {files[0]} (parameters, for --plant-params, --controller-params and "
@@ -264,6 +334,7 @@ def apply_param_files(args, registry, progress=sys.stderr):
         else:
             controller, target, model = c, c, CONTROLLER_MODEL
         if progress is not None:
-            progress.write(f"{flag} {path}: {len(target)} parameters applied to the {model} of "
-                           f"every scenario\n")
+            n = len(target)
+            progress.write(f"{flag} {path}: {n} parameter{'' if n == 1 else 's'} applied to the "
+                           f"{model} of every scenario\n")
     return override_scenarios(registry, plant, controller)

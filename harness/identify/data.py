@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import csv
 from dataclasses import dataclass
+import hashlib
 import difflib
 import math
 from pathlib import Path
@@ -55,6 +56,7 @@ __all__ = [
     "count_reversals",
     "read_record",
     "write_record",
+    "sha256_of",
 ]
 
 #: Columns a record file must have, with their units.
@@ -365,3 +367,12 @@ def write_record(path, time, v, y, extra=None):
         fh.write(",".join(cols) + "\n")
         fh.writelines(",".join(map(repr, row)) + "\n" for row in zip(*lists))
     return path
+
+
+def sha256_of(path):
+    """The SHA-256 of a file's bytes, as hex (how a report and an FMU name a record)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

@@ -36,7 +36,7 @@ from .run import identify_files, output_paths, write_outputs
 from .tables import format_report
 
 __all__ = ["DEMO_PLANT", "DEMO_SENSOR", "DEMO_INPUTS", "DemoResult", "demo_truth",
-           "generate_demo_records", "run_demo", "check_demo"]
+           "generate_demo_records", "check_demo_duration", "run_demo", "check_demo"]
 
 #: The virtual stage: PI weights (w_j/w0 differ from the defaults', w7..w9 = 0), the paper's
 #: 10 Hz creep row, and G of the mismatch case (numerator x 1.05, fast pole 0.45).
@@ -193,8 +193,43 @@ def check_demo(result, truth, floors, noise):
     return fail
 
 
+def check_demo_duration(duration, h=0.0005):
+    """Refuse a record length the identification would refuse, before anything is written.
+
+    Each record needs :data:`harness.identify.data.MIN_RECORD_SAMPLES` samples, and the
+    records of steps 1 and 2 need :data:`harness.identify.run.PI_MIN_REVERSALS` voltage
+    reversals (the check :func:`harness.identify.data.read_record` makes on the files).
+
+    Raises
+    ------
+    ValueError
+        One line naming the shortest length that works.
+    """
+    from ..scenarios import get_scenario
+    from .data import MIN_RECORD_SAMPLES, count_reversals
+    from .run import PI_MIN_REVERSALS
+
+    def enough(d):
+        n = int(round(d / h))
+        if n < MIN_RECORD_SAMPLES:
+            return False
+        t = np.arange(n) * h
+        return all(count_reversals(get_scenario(name).signal.evaluate(t)) >= PI_MIN_REVERSALS
+                   for name in (PI_INPUT, TF_INPUT))
+
+    duration = float(duration)
+    if not (math.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration must be a positive number of seconds, got {duration!r}")
+    if not enough(duration):
+        shortest = next(d / 10 for d in range(1, 601) if enough(d / 10))
+        raise ValueError(f"--duration {duration:g} s is too short: each record needs "
+                         f"{MIN_RECORD_SAMPLES} samples and the {_label(get_scenario(PI_INPUT))} "
+                         f"record {PI_MIN_REVERSALS} voltage reversals; use --duration "
+                         f"{shortest:g} or more")
+
+
 def run_demo(out="out", *, duration=10.0, noise=True, seed=1, holdout=0.25, fmu_dir=None,
-             backend="fmpy", stream=sys.stdout, progress=sys.stderr):
+             backend="fmpy", stream=sys.stdout, progress=sys.stderr, max_evaluations=None):
     """The virtual experiment end to end: records, identification, tables, checks.
 
     Parameters
@@ -203,7 +238,8 @@ def run_demo(out="out", *, duration=10.0, noise=True, seed=1, holdout=0.25, fmu_
         A ``.json`` path for the parameter file, or a folder (``params.json``
         in it); the records go to ``demo_records/`` beside it.
     duration : float
-        Record length [s] (>= 10 s in the demo; shorter for tests).
+        Record length [s] (10 s in the demo; at least about 2 s, see
+        :func:`check_demo_duration`).
     noise : bool
         With the 2 nm / 1 nm sensor (default) or noise-free.
     seed : int
@@ -214,6 +250,8 @@ def run_demo(out="out", *, duration=10.0, noise=True, seed=1, holdout=0.25, fmu_
         Generate the records with the FMU (default) or the C core.
     stream, progress : file-like or None
         Where the tables and the progress lines go.
+    max_evaluations : int, optional
+        As :func:`harness.identify.fit.fit_coupled_model`.
 
     Returns
     -------
@@ -221,9 +259,10 @@ def run_demo(out="out", *, duration=10.0, noise=True, seed=1, holdout=0.25, fmu_
     """
     from ..scenarios import get_scenario
 
+    from .fit import DEFAULT_MAX_EVALUATIONS
+
+    check_demo_duration(duration)
     duration = float(duration)
-    if not (math.isfinite(duration) and duration > 0):
-        raise ValueError(f"duration must be a positive number of seconds, got {duration!r}")
     params_path, _, _ = output_paths(out)
     folder = params_path.parent / "demo_records"
     t0 = _time.perf_counter()
@@ -232,8 +271,15 @@ def run_demo(out="out", *, duration=10.0, noise=True, seed=1, holdout=0.25, fmu_
                                           progress=progress)
     t1 = _time.perf_counter()
     pi_label, tf_label = _label(get_scenario(PI_INPUT)), _label(get_scenario(TF_INPUT))
+    say = None
+    if progress is not None:
+        def say(line):
+            progress.write(f"identify: {line}\n")
+            progress.flush()
     result, records = identify_files(paths[pi_label], paths[tf_label], list(paths.values()),
-                                     h=get_scenario(PI_INPUT).step_size, holdout=holdout)
+                                     h=get_scenario(PI_INPUT).step_size, holdout=holdout,
+                                     max_evaluations=max_evaluations or DEFAULT_MAX_EVALUATIONS,
+                                     progress=say)
     t2 = _time.perf_counter()
     truth = demo_truth(result.model.h).normalized()
     failures = check_demo(result, truth, floors, noise)

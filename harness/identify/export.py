@@ -9,7 +9,21 @@ binary checks the GUID it is instantiated with) with
 * ``resources/start_values``: every parameter with its start value, one
   ``name = value`` per line, which the binary reads at ``fmi2Instantiate``
   and applies over its compiled defaults (an FMU must itself use the start
-  values it declares: importers need not set them).
+  values it declares: importers need not set them);
+* ``extra/org.fmi-standard.fmi-ls-ref/``: reference results computed anew on the
+  C core from the FMU's own start values (:data:`harness.fmu_references.EXPORT_EXPERIMENTS`),
+  so that the FMU's regression experiment tests the model it now carries;
+* ``documentation/index.html`` with the variables table of the new model
+  description (the identified start values) and a section saying where they came
+  from, and ``documentation/fmi-ls-ref.html`` for the new experiment;
+* ``extra/piezo_fmus.identification/``: ``provenance.json`` (the parameter file,
+  the identification report and the measured records, each with its SHA-256, the
+  FMU it was made from, the start values changed) and copies of the
+  identification reports when they sit beside the parameter file.
+
+The archive is written as the build writes its FMUs (:mod:`harness.fmu_archive`:
+the same permissions and the built FMU's date), so exporting the same parameters
+twice gives the same bytes.
 
 Values are written as the shortest decimal text that reads back to the same
 double, so the FMU runs exactly the parameters of the file.  Before writing,
@@ -21,6 +35,7 @@ FMUs' own validation); afterwards each FMU is checked with
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from pathlib import Path
@@ -28,12 +43,18 @@ import re
 import tempfile
 import zipfile
 
+from .data import sha256_of
 from .params import CONTROLLER_MODEL, PLANT_MODEL, split_params
 
-__all__ = ["ExportError", "START_VALUES_PATH", "export_fmus", "format_start_value"]
+__all__ = ["ExportError", "START_VALUES_PATH", "PROVENANCE_DIR", "export_fmus",
+           "format_start_value"]
 
 #: Where the start values sit inside an FMU (read by fmu_start_values.c).
 START_VALUES_PATH = "resources/start_values"
+#: Where an exported FMU says where its start values came from.
+PROVENANCE_DIR = "extra/piezo_fmus.identification"
+LS_REF_DIR = "extra/org.fmi-standard.fmi-ls-ref"
+
 
 
 class ExportError(ValueError):
@@ -135,28 +156,113 @@ def _prepare(src, given, source):
     return md, kinds, complete
 
 
-def _write(src, dst, md, kinds, given, complete, source):
-    """Write ``dst``: ``src`` with ``given`` as start values, through a temporary file."""
+def _identification_files(source):
+    """The identification reports beside a parameter file (``<stem>.report.json``, ``.md``)."""
+    from .run import output_paths
+
+    if source is None or not Path(source).is_file():
+        return {}
+    _, md, js = output_paths(source)
+    return {p.name: p for p in (js, md) if p.is_file()}
+
+
+def _provenance(model, src, version, given, originals, source, reports):
+    """``provenance.json`` of an exported FMU: where its start values came from."""
+    doc = {"fmu": f"{model}.fmu", "exported_by": "python -m harness export",
+           "made_from": {"file": Path(src).name, "version": version, "sha256": sha256_of(src)},
+           "parameter_file": None, "identification_report": None, "records": [],
+           "start_values_changed": {n: {"built": originals[n], "exported": v}
+                                    for n, v in given.items() if originals[n] != v}}
+    if source is not None and Path(source).is_file():
+        doc["parameter_file"] = {"file": Path(source).name, "sha256": sha256_of(source)}
+    report = next((p for n, p in reports.items() if n.endswith(".json")), None)
+    if report is not None:
+        doc["identification_report"] = {"file": report.name, "sha256": sha256_of(report)}
+        try:
+            records = json.loads(report.read_text(encoding="utf-8")).get("records", {})
+        except (OSError, ValueError):
+            records = {}
+        doc["records"] = [dict({"label": label}, **info) for label, info in records.items()]
+    return json.dumps(doc, indent=1, sort_keys=False) + "\n"
+
+
+def _documentation_section(model, given, originals, provenance, reports):
+    """The HTML section of an exported FMU's documentation: its start values' origin."""
+    import html
+
+    doc = json.loads(provenance)
+    e = lambda t: html.escape(str(t), quote=True)      # noqa: E731
+    rows = "".join(f"<tr><td><code>{e(n)}</code></td><td class=\"num\">{e(c['built'])}</td>"
+                   f"<td class=\"num\">{e(c['exported'])}</td></tr>"
+                   for n, c in doc["start_values_changed"].items())
+    files = []
+    if doc["parameter_file"]:
+        files.append(f"parameter file <code>{e(doc['parameter_file']['file'])}</code> (SHA-256 "
+                     f"<code>{e(doc['parameter_file']['sha256'])}</code>)")
+    if doc["identification_report"]:
+        files.append(f"identification report <code>{e(doc['identification_report']['file'])}"
+                     f"</code> (SHA-256 <code>{e(doc['identification_report']['sha256'])}"
+                     f"</code>), copied into <code>{PROVENANCE_DIR}/</code>")
+    for r in doc["records"]:
+        files.append(f"record <code>{e(r.get('path', r['label']))}</code>, "
+                     f"{e(r.get('samples', '?'))} samples (SHA-256 "
+                     f"<code>{e(r.get('sha256', 'not recorded'))}</code>)")
+    listing = "".join(f"<li>{f}</li>" for f in files) or "<li>none recorded</li>"
+    return f"""<h2 id="identified">Start values of an identified stage</h2>
+<p>This {e(model)}.fmu was written by <code>python -m harness export</code> from
+<code>{e(doc['made_from']['file'])}</code>: the same binaries and sources, with the start values
+below in place of the built defaults (the variables table shows the new ones; the binary reads
+them from <code>{START_VALUES_PATH}</code>, so an importer that sets nothing runs them). Its
+regression experiment was recomputed from these values. Where they came from (also in
+<code>{PROVENANCE_DIR}/provenance.json</code>):</p>
+<ul>{listing}</ul>
+<table><tr><th>parameter</th><th>built default</th><th>this FMU</th></tr>{rows}</table>
+"""
+
+
+def _write(src, dst, md, kinds, given, complete, source, plant_complete, reports):
+    """Write ``dst``: ``src`` with ``given`` as start values, its references and documentation
+    regenerated and its provenance added (through a temporary file)."""
+    from .. import fmu_documentation, fmu_references
+    from ..fmu_archive import write_fmu_zip
+
     model = md.coSimulation.modelIdentifier
     with zipfile.ZipFile(src) as zin:
-        xml = zin.read("modelDescription.xml").decode("utf-8")
-        new_xml = _rewrite_starts(xml, given, kinds)
-        fd, tmp = tempfile.mkstemp(prefix=f".{model}.", suffix=".fmu", dir=dst.parent)
-        os.close(fd)
-        try:
-            with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
-                for info in zin.infolist():
-                    if info.filename in ("modelDescription.xml", START_VALUES_PATH):
-                        continue
-                    zout.writestr(info, zin.read(info.filename))
-                zout.writestr("modelDescription.xml", new_xml)
-                zout.writestr(START_VALUES_PATH,
-                              _start_values_text(model, complete, kinds, source))
-            _verify(tmp, md, complete, kinds)
-            os.replace(tmp, dst)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        files = {i.filename: zin.read(i.filename) for i in zin.infolist()
+                 if not i.filename.endswith("/")}
+        date = zin.getinfo("modelDescription.xml").date_time
+    originals = {n: _parse_start(v.start, v.type) for n, v in _parameters(md).items()}
+    xml = files["modelDescription.xml"].decode("utf-8")
+    new_xml = _rewrite_starts(xml, given, kinds)
+    files["modelDescription.xml"] = new_xml.encode("utf-8")
+    files[START_VALUES_PATH] = _start_values_text(model, complete, kinds, source).encode("utf-8")
+    with tempfile.TemporaryDirectory(prefix="piezo_export_") as tmp:
+        ls_ref = Path(tmp) / "ls_ref"
+        names = fmu_references.write_reference_results(
+            model, new_xml, ls_ref, start_values=complete, plant_start_values=plant_complete)
+        for name in list(files):
+            if name.startswith(LS_REF_DIR + "/"):
+                del files[name]
+        for name in names:
+            files[f"{LS_REF_DIR}/{name}"] = (ls_ref / name).read_bytes()
+        provenance = _provenance(model, src, md.version, given, originals, source, reports)
+        section = _documentation_section(model, given, originals, provenance, reports)
+        files["documentation/index.html"] = fmu_documentation.exported_index_html(
+            files["documentation/index.html"].decode("utf-8"), new_xml, section).encode("utf-8")
+        files["documentation/fmi-ls-ref.html"] = fmu_documentation.ls_ref_html(
+            new_xml, ls_ref).encode("utf-8")
+    files[f"{PROVENANCE_DIR}/provenance.json"] = provenance.encode("utf-8")
+    for name, path in reports.items():
+        files[f"{PROVENANCE_DIR}/{name}"] = path.read_bytes()
+    fd, tmp = tempfile.mkstemp(prefix=f".{model}.", suffix=".fmu", dir=dst.parent)
+    os.close(fd)
+    try:
+        write_fmu_zip(files, tmp, date)
+        _verify(tmp, md, complete, kinds)
+        Path(tmp).replace(dst)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def _verify(path, original, complete, kinds):
@@ -191,7 +297,9 @@ def export_fmus(params, out_dir, *, fmu_dir=None, source="parameters"):
     fmu_dir : str or Path, optional
         Folder of the built FMUs (default ``build/fmus``).
     source : str
-        Where the parameters come from, for messages and the start_values header.
+        Where the parameters come from: the parameter file (its SHA-256 and the
+        identification reports beside it go into the FMUs' provenance) or a name
+        for messages.
 
     Returns
     -------
@@ -225,9 +333,11 @@ def export_fmus(params, out_dir, *, fmu_dir=None, source="parameters"):
             raise ExportError(f"{dst} is the FMU being parameterised; choose another --out folder")
         jobs.append((model, dst, given, _prepare(sources[model], given, source)))
     # both FMUs checked before either is written
+    plant_complete = jobs[0][3][2]
+    reports = _identification_files(source)
     out.mkdir(parents=True, exist_ok=True)
     result = {}
     for model, dst, given, (md, kinds, complete) in jobs:
-        _write(sources[model], dst, md, kinds, given, complete, source)
+        _write(sources[model], dst, md, kinds, given, complete, source, plant_complete, reports)
         result[model] = (dst, given)
     return result

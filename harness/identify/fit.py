@@ -2,7 +2,7 @@
 
 A real stage gives the applied voltage and the measured displacement, never
 the internal signals ``u = P[v]`` and ``x = G[u]``.  :func:`fit_coupled_model`
-identifies the model from ``v`` and ``y`` in two stages:
+identifies the model from ``v`` and ``y`` in four stages:
 
 1. **Stepwise** (paper section 3), every step fitted to the measured ``y``:
    step 1, the PI weights from the low-frequency record (linear least
@@ -11,11 +11,32 @@ identifies the model from ``v`` and ``y`` in two stages:
    step 3, ``k_c`` and ``alpha`` of each creep record with ``x = G[P[v]]`` of
    steps 1-2 (nonlinear least squares).  Because each step fits ``y``, each
    block absorbs what the later ones would explain (the 1 Hz PI fit takes
-   ``G``'s gain and the creep, ``G`` takes the creep).
-2. **Joint refinement**: every parameter at once, by nonlinear least squares
+   ``G``'s gain and the creep, ``G`` takes the creep, and may come out
+   unstable).  The stepwise result is reported and used as one start of the
+   search; it never ends the run.
+2. **Search** by variable projection (:mod:`harness.identify.varpro`) over
+   all records together: the PI weights enter linearly and are solved (least
+   squares with ``w >= 0``) for every value of the four parameters that do
+   not (the slow pole, the fast pole, the zero and ``alpha``), which are
+   searched from several starts (:data:`harness.identify.varpro.DEFAULT_STARTS`
+   and the stepwise result): at least three, until two have ended at the lowest
+   sum of squares found.
+3. **Joint refinement**: every parameter at once (``G`` in its general form,
+   complex poles allowed), by nonlinear least squares
    (:func:`scipy.optimize.least_squares`, trust region reflective, analytic
-   Jacobian) on the fit windows of all records together, started from the
-   stepwise result.  One PI, one ``G`` and one creep row for the stage.
+   Jacobian), started from the search's result; kept when it lowers the sum
+   of squares.  One PI, one ``G`` and one creep row for the stage.
+4. **Checks**: each parameter's standard error with a noise of at least
+   :data:`SIGMA_FLOOR` (:func:`undetermined_parameters`); a parameter the
+   records do not determine is named in
+   :attr:`IdentificationResult.undetermined`, with the record that would fix it.
+
+Both nonlinear fits stop by a rule relative to the data, not by a count: when
+an iteration lowers the sum of squares by less than ``1e-10`` of itself (at
+convergence the sum of squares is the records' noise floor), or moves the
+parameters by less than ``1e-10`` relative.  ``max_evaluations`` only bounds a
+search that would never settle; a search that reaches it raises
+:class:`IdentificationFitError` saying so.
 
 **Normalisation.**  ``y = C[G[P[v]]]`` is unchanged when the PI weights are
 multiplied by ``c`` and ``G`` or ``k_c`` divided by it, so only the product of
@@ -68,10 +89,16 @@ from .model import (
     play_operator_outputs,
 )
 from .steps import identify_transfer_function
+from .varpro import (DEFAULT_STARTS, FTOL as _FTOL, START_FAST_POLE, START_RHO, ReducedProblem,
+                     Theta, _triangular, fit_multistart, theta_from_g)
 
 __all__ = [
     "DEFAULT_HOLDOUT",
+    "DEFAULT_MAX_EVALUATIONS",
+    "SIGMA_FLOOR",
     "IdentificationFitError",
+    "UndeterminedModelError",
+    "Undetermined",
     "CoupledModel",
     "ParameterEstimate",
     "StepFit",
@@ -82,6 +109,11 @@ __all__ = [
 
 #: Fraction of each record held out by default (its last quarter).
 DEFAULT_HOLDOUT = 0.25
+#: Most evaluations of one local search (a guard; the stopping rule is relative to the data).
+DEFAULT_MAX_EVALUATIONS = 500
+#: Noise [um rms] below which the identifiability check does not trust the records: a
+#: parameter must be determined as if the records carried at least this much noise.
+SIGMA_FLOOR = 1e-3
 #: Fewest samples in a record's fit window.
 MIN_FIT_SAMPLES = 100
 # Central-difference step in alpha for d y / d alpha (see steps._ALPHA_STEP).
@@ -89,7 +121,39 @@ _ALPHA_STEP = 1e-6
 
 
 class IdentificationFitError(RuntimeError):
-    """A least-squares fit stopped without converging (the message says which)."""
+    """The search stopped at its evaluation limit before converging (the message says so)."""
+
+
+class UndeterminedModelError(IdentificationInputError):
+    """The records do not determine a parameter (the message names it and the record to add)."""
+
+
+@dataclass(frozen=True)
+class Undetermined:
+    """A parameter the records do not determine, and what would.
+
+    Attributes
+    ----------
+    parameter : str
+        FMU variable name (``pi.w[3]``, ``creep.alpha``) or a derived quantity
+        (``slow pole``, ``fast pole``, ``zero``).
+    std_error : float
+        Its standard error with the noise of the records, or :data:`SIGMA_FLOOR` if
+        that is larger.
+    limit : float
+        The standard error above which it counts as undetermined.
+    remedy : str
+        The record that would determine it.
+    """
+
+    parameter: str
+    std_error: float
+    limit: float
+    remedy: str
+
+    def text(self):
+        return (f"{self.parameter} (standard error {self.std_error:.3g}, limit {self.limit:g}): "
+                f"{self.remedy}")
 
 
 # ---------------------------------------------------------------------------
@@ -263,6 +327,8 @@ class StepFit:
         Relative error on the fit windows (eq 37, divided by the measured ``y``).
     n_samples : int
         Residuals fitted.
+    note : str
+        Why a step gave no usable result (empty when it did), e.g. an unstable ``G``.
     """
 
     step: str
@@ -271,6 +337,7 @@ class StepFit:
     e_rms: float
     e_r: float
     n_samples: int
+    note: str = ""
 
     def value(self, name):
         """The value of parameter ``name`` (KeyError if the step has none of that name)."""
@@ -303,10 +370,12 @@ class IdentificationResult:
     ----------
     model : CoupledModel
         The jointly refined coupled model, normalised: the one to export.
-    stepwise : CoupledModel
-        The stepwise result, normalised (the start of the refinement).
-    hammerstein : CoupledModel
-        The Hammerstein model (no creep) refined on the same data, normalised.
+    stepwise : CoupledModel or None
+        The stepwise result, normalised (one start of the search); None when a
+        step gave no usable model (e.g. an unstable ``G``, see the step's note).
+    hammerstein : CoupledModel or None
+        The Hammerstein model (no creep) refined on the same data, normalised
+        (None when not asked for).
     steps : tuple of StepFit
         Step 1, step 2, step 3 (one per creep record), the joint refinement
         and the Hammerstein refinement, in that order.
@@ -320,6 +389,10 @@ class IdentificationResult:
     joint : tuple of ParameterEstimate
         The refined parameters and derived quantities (poles, zero, static
         gain) with standard errors.
+    search : harness.identify.varpro.MultiStartFit
+        The search of the coupled model: every start, where it ended, how long.
+    undetermined : tuple of Undetermined
+        Parameters the records do not determine (empty: all are).
     elapsed_s : float
     """
 
@@ -331,6 +404,8 @@ class IdentificationResult:
     held_out: tuple
     holdout: float
     joint: tuple
+    search: object = field(default=None, compare=False)
+    undetermined: tuple = ()
     elapsed_s: float = field(default=0.0, compare=False)
 
     def step(self, name):
@@ -422,7 +497,8 @@ def _step_pi(rec):
     from scipy.optimize import nnls
 
     phi = rec.design[:rec.n_fit]
-    w, _ = nnls(phi, rec.y_fit, maxiter=50 * phi.shape[1])
+    r, qty = _triangular(phi, rec.y_fit)     # the same minimiser, on an m x m system
+    w, _ = nnls(r, qty, maxiter=50 * phi.shape[1])
     resid = phi @ w - rec.y_fit
     se, _ = _std_errors(phi, resid, phi.shape[1])
     e_rms, e_r = _metrics(rec.y_fit, phi @ w)
@@ -441,13 +517,21 @@ def _g_jacobian(u, x, a1, a2, delay):
 
 
 def _step_g(rec, w_free, delay):
-    """Step 2: ``G`` from ``u = P[v]`` (step 1) to the measured ``y`` (ARX, then output error)."""
+    """Step 2: ``G`` from ``u = P[v]`` (step 1) to the measured ``y`` (ARX, then output error).
+
+    Returns ``(a1, a2, b1, b2)`` or None when the fitted ``G`` is unstable or has no
+    positive static gain (the step then carries a note), and the :class:`StepFit`.
+    """
     u = rec.design @ w_free
     a1, a2, b1, b2 = identify_transfer_function(u[:rec.n_fit], rec.y_fit, delay=delay)
-    if not _stable(a1, a2):
-        raise IdentificationInputError(
-            f"step 2 ({rec.label}): the fitted G is unstable (a1 = {a1:.6g}, a2 = {a2:.6g}); "
-            f"the record may not excite the stage's dynamics")
+    params = tuple(ParameterEstimate(n, v) for n, v in
+                   zip(("tf.a1", "tf.a2", "tf.b1", "tf.b2"), (a1, a2, b1, b2)))
+    g1 = (b1 + b2) / (1.0 + a1 + a2) if 1.0 + a1 + a2 != 0 else math.nan
+    if not _stable(a1, a2) or not g1 > 0:
+        why = "unstable" if not _stable(a1, a2) else f"with static gain {g1:.3g}"
+        note = (f"G {why} (a1 = {a1:.6g}, a2 = {a2:.6g}): fitted to y, G absorbs the creep; "
+                f"not used as a start")
+        return None, StepFit("2 G", (rec.label,), params, math.nan, math.nan, rec.n_fit, note)
     x = g_filter(u, a1, a2, b1, b2, delay)[:rec.n_fit]
     jac = _g_jacobian(u[:rec.n_fit], x, a1, a2, delay)
     se, _ = _std_errors(jac, x - rec.y_fit, 4)
@@ -609,22 +693,23 @@ class _Joint:
         return np.vstack(blocks)
 
 
-def _refine(records, start, creep, m, h, delay):
-    """Joint least squares from the normalised ``start``; returns (model, StepFit, theta, cov)."""
+def _refine(records, start, creep, m, h, delay, max_evaluations):
+    """Joint least squares from the normalised ``start`` (the search's result).
+
+    Returns ``(model, StepFit, theta, cov)``: the refined model when it lowers the
+    sum of squares, else ``start`` itself (with its standard errors).
+    """
     from scipy.optimize import least_squares
 
     problem = _Joint(records, m, h, delay, creep)
     theta0 = problem.pack(start)
     lo, hi = problem.bounds()
     theta0 = np.clip(theta0, lo, hi)
+    r0 = problem.residual(theta0)
     res = least_squares(problem.residual, theta0, jac=problem.jacobian, bounds=(lo, hi),
-                        method="trf", x_scale="jac", ftol=1e-12, xtol=1e-12, gtol=1e-12,
-                        max_nfev=300)
-    if res.status == 0:
-        raise IdentificationFitError(
-            f"the {'joint' if creep else 'Hammerstein'} refinement did not converge in "
-            f"{res.nfev} evaluations (cost {res.cost:.3g} um^2); check the records")
-    theta = res.x.copy()
+                        method="trf", x_scale="jac", ftol=_FTOL, xtol=_FTOL, gtol=_FTOL,
+                        max_nfev=int(max_evaluations))
+    theta = res.x.copy() if 2.0 * res.cost <= float(r0 @ r0) else theta0.copy()
     # the reflective solver keeps weights strictly inside w >= 0 (1e-29 and the like):
     # a weight that small is at its bound
     w = theta[:m]
@@ -692,7 +777,8 @@ def _label_set(pi_record, tf_record, creep_records):
 # ---------------------------------------------------------------------------
 
 def fit_coupled_model(pi_record, tf_record, creep_records, *, h=0.0005, m=9, v_max=None,
-                      delay=0, holdout=DEFAULT_HOLDOUT):
+                      delay=0, holdout=DEFAULT_HOLDOUT, max_evaluations=DEFAULT_MAX_EVALUATIONS,
+                      progress=None, hammerstein=True):
     """Identify the coupled model from measured ``v`` and ``y``: stepwise, then jointly.
 
     Parameters
@@ -716,16 +802,27 @@ def fit_coupled_model(pi_record, tf_record, creep_records, *, h=0.0005, m=9, v_m
         Extra input delay of ``G`` [samples] (``tf.delay``), not fitted.
     holdout : float
         Fraction of each record held out at its end, in [0, 0.9].
+    max_evaluations : int
+        Most evaluations of one local search (of each start, and of the joint
+        refinement); a guard, the search stops by a rule relative to the data.
+    progress : callable, optional
+        Called with one line of text per start and stage.
+    hammerstein : bool
+        Also fit the Hammerstein model (no creep) for paper Tables 2-3 (the
+        result's ``hammerstein`` is None without it).
 
     Returns
     -------
     IdentificationResult
+        With :attr:`~IdentificationResult.undetermined` naming any parameter the
+        records do not determine (the result is then not fit for export).
 
     Raises
     ------
     IdentificationInputError
-        A record is malformed or too short for the split, labels collide, or
-        a step gives an unusable model (e.g. an unstable ``G``).
+        A record is malformed or too short for the split, or labels collide.
+    IdentificationFitError
+        The best search stopped at ``max_evaluations`` before converging.
     ValueError
         An argument is out of range.
     """
@@ -745,6 +842,9 @@ def fit_coupled_model(pi_record, tf_record, creep_records, *, h=0.0005, m=9, v_m
     holdout = float(holdout)
     if not 0.0 <= holdout <= 0.9:
         raise ValueError(f"holdout must be in [0, 0.9], got {holdout!r}")
+    max_evaluations = int(max_evaluations)
+    if max_evaluations < 1:
+        raise ValueError(f"max_evaluations must be >= 1, got {max_evaluations}")
     if v_max is None:
         v_max = float(np.max(np.abs(_finite(f"{pi_record.label}: v", pi_record.v))))
     v_max = float(v_max)
@@ -757,22 +857,52 @@ def fit_coupled_model(pi_record, tf_record, creep_records, *, h=0.0005, m=9, v_m
     p_creep = [prepared[r.label] for r in creep_records]
     records = list(prepared.values())
 
-    # stepwise: every step fitted to the measured y (paper section 3)
-    w, step1 = _step_pi(p_pi)
-    (a1, a2, b1, b2), step2 = _step_g(p_tf, w, delay)
-    step3 = []
-    for rec in p_creep:
-        x = g_filter(rec.design[:rec.n_fit] @ w, a1, a2, b1, b2, delay)
-        step3.append(_fit_creep(x, rec.y_fit, h, rec.label, "3 creep"))
-    k_c0 = float(np.median([s.value("creep.k_c") for s in step3]))
-    alpha0 = float(np.median([s.value("creep.alpha") for s in step3]))
-    weights = (float(w[0]), 0.0) + tuple(float(x) for x in w[1:])
-    stepwise = CoupledModel(weights, v_max, a1, a2, b1, b2, k_c0, alpha0, h, delay).normalized()
-    hammer0 = replace(stepwise, creep=False, alpha=0.0)
+    say = progress if progress is not None else (lambda line: None)
 
-    # joint refinement of everything, and of the Hammerstein model for comparison
-    model, joint, _, cov = _refine(records, stepwise, True, m, h, delay)
-    hammerstein, hfit, _, _ = _refine(records, hammer0, False, m, h, delay)
+    # stepwise: every step fitted to the measured y (paper section 3); a report and a start
+    w, step1 = _step_pi(p_pi)
+    g2, step2 = _step_g(p_tf, w, delay)
+    step3, stepwise = [], None
+    for rec in p_creep:
+        if g2 is None:
+            step3.append(StepFit("3 creep", (rec.label,), (), math.nan, math.nan, rec.n_fit,
+                                 "not fitted: step 2 gave no usable G"))
+            continue
+        x = g_filter(rec.design[:rec.n_fit] @ w, *g2, delay)
+        step3.append(_fit_creep(x, rec.y_fit, h, rec.label, "3 creep"))
+    if g2 is not None:
+        k_c0 = float(np.median([s.value("creep.k_c") for s in step3]))
+        alpha0 = float(np.median([s.value("creep.alpha") for s in step3]))
+        weights = (float(w[0]), 0.0) + tuple(float(x) for x in w[1:])
+        if k_c0 > 0:
+            stepwise = CoupledModel(weights, v_max, *g2, k_c0, alpha0, h, delay).normalized()
+    say(f"stepwise (paper section 3): "
+        + ("done" if stepwise is not None else f"no usable model ({step2.note})"))
+
+    # the search by variable projection, then the joint refinement of everything
+    designs = [r.design for r in records]
+    ys = [r.y for r in records]
+    n_fits = [r.n_fit for r in records]
+    coupled = ReducedProblem(designs, ys, n_fits, h, delay, creep=True)
+    search = fit_multistart(coupled, _starts(stepwise, creep=True),
+                            max_evaluations=max_evaluations, progress=say, label="coupled model")
+    _check_converged(search, max_evaluations, "coupled model")
+    model0 = _model_of(search.best, v_max, h, delay, creep=True)
+    model, joint, _, cov = _refine(records, model0, True, m, h, delay, max_evaluations)
+    say(f"joint refinement: rms {joint.e_rms * 1e3:.4g} nm on the fit windows")
+    undetermined = undetermined_parameters(coupled, search.best, v_max)
+
+    # the Hammerstein model (no creep) on the same data, for paper Tables 2-3
+    hammer, hfits = None, ()
+    if hammerstein:
+        plain = ReducedProblem(designs, ys, n_fits, h, delay, creep=False)
+        hsearch = fit_multistart(plain, _starts(stepwise, creep=False),
+                                 max_evaluations=max_evaluations, progress=say,
+                                 label="Hammerstein")
+        _check_converged(hsearch, max_evaluations, "Hammerstein model")
+        hammer0 = _model_of(hsearch.best, v_max, h, delay, creep=False)
+        hammer, hfit, _, _ = _refine(records, hammer0, False, m, h, delay, max_evaluations)
+        hfits = (hfit,)
 
     # paper Table 1: one creep row per creep record, with the joint PI and G
     rows = []
@@ -788,13 +918,136 @@ def fit_coupled_model(pi_record, tf_record, creep_records, *, h=0.0005, m=9, v_m
         for rec in records:
             k = rec.n_fit
             y = rec.y[k:]
-            yh = hammerstein._output(rec.design @ _design_weights(hammerstein))[k:]
             yc = model._output(rec.design @ w_joint)[k:]
-            (eh, rh), (ec, rc) = _metrics(y, yh), _metrics(y, yc)
+            ec, rc = _metrics(y, yc)
+            eh = rh = math.nan
+            if hammer is not None:
+                eh, rh = _metrics(y, hammer._output(rec.design @ _design_weights(hammer))[k:])
             held.append(HeldOutFit(rec.label, eh, rh, ec, rc, int(y.size)))
 
-    estimates = tuple(list(joint.parameters) + _derived(model, cov, m))
+    estimates = tuple(_ordered(joint.parameters, _derived(model, cov, m)))
     return IdentificationResult(
-        model=model, stepwise=stepwise, hammerstein=hammerstein,
-        steps=(step1, step2, *step3, joint, hfit), creep_rows=tuple(rows), held_out=tuple(held),
-        holdout=holdout, joint=estimates, elapsed_s=_time.perf_counter() - t_start)
+        model=model, stepwise=stepwise, hammerstein=hammer,
+        steps=(step1, step2, *step3, joint, *hfits), creep_rows=tuple(rows), held_out=tuple(held),
+        holdout=holdout, joint=estimates, search=search, undetermined=tuple(undetermined),
+        elapsed_s=_time.perf_counter() - t_start)
+
+
+def _ordered(fitted, derived):
+    """The table's order: PI weights, tf.a1 .. tf.b2, creep.alpha, then poles, zero, gain."""
+    fitted, derived = list(fitted), list(derived)
+    alpha = [p for p in fitted if p.name == "creep.alpha"]
+    b2 = [p for p in derived if p.name == "tf.b2"]
+    return ([p for p in fitted if p.name != "creep.alpha"] + b2 + alpha
+            + [p for p in derived if p.name != "tf.b2"])
+
+
+def _starts(stepwise, creep):
+    """Starts of the search: the default grid, then the stepwise result if it has real poles."""
+    grid = DEFAULT_STARTS if creep else tuple(dict.fromkeys((p, 0.0) for p, _ in DEFAULT_STARTS))
+    starts = [Theta(math.log(1.0 - p1), START_FAST_POLE, START_RHO, a if creep else 0.0)
+              for p1, a in grid]
+    if stepwise is not None:
+        th = theta_from_g(stepwise.a1, stepwise.a2, stepwise.b1, stepwise.b2,
+                          stepwise.alpha if creep else 0.0)
+        if th is not None:
+            starts.append(th)
+    return starts
+
+
+def _check_converged(search, max_evaluations, what):
+    best = search.best
+    if not best.converged:
+        raise IdentificationFitError(
+            f"the search of the {what} stopped at its limit of {max_evaluations} evaluations per "
+            f"start before converging (rms {best.rms * 1e3:.4g} nm after {best.evaluations} "
+            f"evaluations); rerun with --max-evaluations {4 * max_evaluations}")
+
+
+def _model_of(fit, v_max, h, delay, creep):
+    """The normalised :class:`CoupledModel` of a search's result."""
+    a1, a2, b1, b2 = fit.theta.g()
+    w = fit.weights
+    weights = (float(w[0]), 0.0) + tuple(float(x) for x in w[1:])
+    return CoupledModel(weights, float(v_max), a1, a2, b1, b2, 1.0,
+                        fit.theta.alpha if creep else 0.0, h, delay, creep)
+
+
+#: Standard errors above which a parameter counts as undetermined (with a noise of at least
+#: SIGMA_FLOOR): (name, index in theta, limit, the record that would determine it).
+_THETA_LIMITS = (
+    ("slow pole", 0, 0.25,
+     "the records do not show the slow settling of G (relative standard error of 1 - p1); add a "
+     "longer record with a step or a low-frequency input (e.g. 10 s of a 1 Hz sine)"),
+    ("fast pole", 1, 0.05,
+     "the records do not excite G's fast dynamics; add a record with content between 20 and "
+     "100 Hz (e.g. the 5/40/80 Hz multi-sine as --tf-data)"),
+    ("zero", 2, 0.05,
+     "the records do not separate G's zero from its slow pole (relative standard error of "
+     "1 - zero); add a longer record with a step or a low-frequency input"),
+    ("creep.alpha", 3, 0.005,
+     "the records are too short to show the creep; add a longer record (e.g. 10 s at 1 Hz as "
+     "--creep-data)"),
+)
+#: A PI weight is undetermined when its standard error exceeds this fraction of the static gain.
+_WEIGHT_LIMIT = 0.05
+
+
+def _unit_std_errors(jac):
+    """``sqrt(diag((J^T J)^-1))``, infinite along directions the Jacobian does not see.
+
+    By the SVD of ``J`` with scaled columns: a singular value below 1e-10 of the
+    largest is a direction the data do not determine, and every parameter with a
+    share in it (a component above 1e-6) gets an infinite standard error (a
+    pseudo-inverse would quietly report a finite one).
+    """
+    norms = np.sqrt(np.einsum("ij,ij->j", jac, jac))
+    scale = np.where(norms > 0, norms, 1.0)
+    _, sv, vt = np.linalg.svd(jac / scale, full_matrices=False)
+    blind = sv <= 1e-10 * sv[0]
+    inv = np.where(blind, 0.0, 1.0 / np.where(blind, 1.0, sv))
+    var = (vt.T ** 2) @ (inv ** 2)
+    unseen = np.any(np.abs(vt[blind]) > 1e-6, axis=0) | (norms == 0)
+    return np.where(unseen, np.inf, np.sqrt(var) / scale)
+
+
+def undetermined_parameters(problem, fit, v_max):
+    """The parameters the records do not determine, with what would (a list of Undetermined).
+
+    Standard errors come from the Jacobian of the search's residual at its result,
+    ``s^2 (J^T J)^-1`` with ``s`` the residual's rms or :data:`SIGMA_FLOOR`, whichever
+    is larger (noise-free records must determine the model robustly, not only
+    because they carry no noise).  The limits are far above what usable records
+    give (README, "Identification"): they catch records that miss a block, not
+    records that are merely short.
+
+    Parameters
+    ----------
+    problem : harness.identify.varpro.ReducedProblem
+    fit : harness.identify.varpro.LocalFit
+    v_max : float
+        Threshold scale [V] (for the message about the PI weights).
+
+    Returns
+    -------
+    list of Undetermined
+    """
+    th = fit.theta
+    x = [th.q1, th.p2, th.rho, th.alpha] if problem.creep else [th.q1, th.p2, th.rho]
+    se = max(fit.rms, SIGMA_FLOOR) * _unit_std_errors(problem.full_jacobian(x))
+    m = problem.m
+    out = []
+    gain = max(float(fit.weights[0]), 1e-300)
+    thresholds = pi_thresholds(m, v_max)
+    for j in range(1, m):
+        if se[j] > _WEIGHT_LIMIT * gain:
+            r = thresholds[j]
+            out.append(Undetermined(
+                f"pi.w[{j + 1}]", float(se[j]), _WEIGHT_LIMIT * gain,
+                f"the records do not move play operator {j + 1} (threshold r_{j + 1} = {r:.3g} V "
+                f"of v_max = {v_max:g} V) on its own; record voltage swings over the whole "
+                f"range (e.g. 0 to {v_max:g} V at 1 Hz as --pi-data), or lower --operators"))
+    for name, i, limit, remedy in _THETA_LIMITS:
+        if i < len(x) and se[m + i] > limit:
+            out.append(Undetermined(name, float(se[m + i]), limit, remedy))
+    return out

@@ -19,8 +19,8 @@ import json
 import math
 from pathlib import Path
 
-from .data import read_record
-from .fit import DEFAULT_HOLDOUT, fit_coupled_model
+from .data import read_record, sha256_of
+from .fit import DEFAULT_HOLDOUT, DEFAULT_MAX_EVALUATIONS, fit_coupled_model
 from .params import write_params
 from .tables import NORMALISATION_NOTE, format_report
 
@@ -71,14 +71,15 @@ def read_records(pi_path, tf_path, creep_paths, *, h=0.0005):
 
 
 def identify_files(pi_path, tf_path, creep_paths, *, h=0.0005, m=9, v_max=None, delay=0,
-                   holdout=DEFAULT_HOLDOUT):
+                   holdout=DEFAULT_HOLDOUT, max_evaluations=DEFAULT_MAX_EVALUATIONS,
+                   progress=None):
     """Read the records and identify the coupled model from their ``v`` and ``y``.
 
     Parameters
     ----------
     pi_path, tf_path, creep_paths, h
         As :func:`read_records`.
-    m, v_max, delay, holdout
+    m, v_max, delay, holdout, max_evaluations, progress
         As :func:`harness.identify.fit.fit_coupled_model`.
 
     Returns
@@ -89,7 +90,8 @@ def identify_files(pi_path, tf_path, creep_paths, *, h=0.0005, m=9, v_max=None, 
     """
     pi, tf, creep = read_records(pi_path, tf_path, creep_paths, h=h)
     result = fit_coupled_model(pi, tf, creep, h=h, m=m, v_max=v_max, delay=delay,
-                               holdout=holdout)
+                               holdout=holdout, max_evaluations=max_evaluations,
+                               progress=progress)
     distinct = []
     for r in [pi, tf, *creep]:
         if all(r is not d for d in distinct):
@@ -113,10 +115,35 @@ def _num(x):
 
 
 def _fit_dict(s):
-    return {"step": s.step, "records": list(s.records), "e_rms_um": _num(s.e_rms),
-            "e_r": _num(s.e_r), "n_samples": s.n_samples,
-            "parameters": {p.name: {"value": _num(p.value), "std_error": _num(p.std_error)}
-                           for p in s.parameters}}
+    d = {"step": s.step, "records": list(s.records), "e_rms_um": _num(s.e_rms),
+         "e_r": _num(s.e_r), "n_samples": s.n_samples,
+         "parameters": {p.name: {"value": _num(p.value), "std_error": _num(p.std_error)}
+                        for p in s.parameters}}
+    if s.note:
+        d["note"] = s.note
+    return d
+
+
+def _theta_dict(th):
+    return {"slow_pole": th.slow_pole, "fast_pole": th.p2, "zero": th.zero, "alpha": th.alpha}
+
+
+def _search_dict(search):
+    if search is None:
+        return None
+    return {"elapsed_s": search.elapsed_s, "agreed": search.agreed,
+            "starts": [{"from": _theta_dict(f.start), "to": _theta_dict(f.theta),
+                        "rms_um": _num(f.rms), "evaluations": f.evaluations,
+                        "converged": f.converged, "elapsed_s": f.elapsed_s}
+                       for f in search.fits]}
+
+
+def _record_dict(record):
+    """A record's file, length and SHA-256 (what the identification was made from)."""
+    d = {"path": str(record.path), "samples": record.n_samples}
+    if Path(record.path).is_file():
+        d["sha256"] = sha256_of(record.path)
+    return d
 
 
 def result_to_dict(result, records=(), truth=None, floors=None):
@@ -124,12 +151,14 @@ def result_to_dict(result, records=(), truth=None, floors=None):
     d = {
         "normalisation": NORMALISATION_NOTE,
         "holdout": result.holdout,
-        "records": {r.label: {"path": str(r.path), "samples": r.n_samples} for r in records},
+        "records": {r.label: _record_dict(r) for r in records},
         "parameters": result.model.plant_params(),
         "joint": {p.name: {"value": _num(p.value), "std_error": _num(p.std_error)}
                   for p in result.joint},
-        "stepwise_parameters": result.stepwise.plant_params(),
-        "hammerstein_parameters": result.hammerstein.plant_params(),
+        "stepwise_parameters": (None if result.stepwise is None
+                                else result.stepwise.plant_params()),
+        "hammerstein_parameters": (None if result.hammerstein is None
+                                   else result.hammerstein.plant_params()),
         "fits": [_fit_dict(s) for s in result.steps],
         "creep_rows": [_fit_dict(s) for s in result.creep_rows],
         "held_out": [{"record": h.label, "samples": h.n_samples,
@@ -137,6 +166,9 @@ def result_to_dict(result, records=(), truth=None, floors=None):
                       "hammerstein_e_r": _num(h.hammerstein_e_r),
                       "coupled_e_rms_um": _num(h.coupled_e_rms),
                       "coupled_e_r": _num(h.coupled_e_r)} for h in result.held_out],
+        "search": _search_dict(result.search),
+        "undetermined": [{"parameter": u.parameter, "std_error": _num(u.std_error),
+                          "limit": u.limit, "remedy": u.remedy} for u in result.undetermined],
         "elapsed_s": result.elapsed_s,
     }
     if truth is not None:
@@ -167,7 +199,10 @@ def write_outputs(result, out, *, records=(), truth=None, floors=None, header=()
     list of Path
     """
     params, md, js = output_paths(out)
-    write_params(params, result.model.plant_params())
+    if result.undetermined:
+        params.unlink(missing_ok=True)      # never leave an older parameter file beside it
+    else:
+        write_params(params, result.model.plant_params())
     md.write_text(format_report(result, truth=truth, floors=floors, header=header,
                                 markdown=True) + "\n")
     js.write_text(json.dumps(result_to_dict(result, records, truth, floors), indent=1) + "\n")

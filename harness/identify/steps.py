@@ -208,7 +208,19 @@ def _refine_output_error(u, x, delay, theta0):
     r0 = residual(theta0)
     if not np.all(np.isfinite(r0)) or np.max(np.abs(r0)) <= 1e-12 * scale:
         return theta0      # noise-free data: ARX is exact already
-    fit = least_squares(residual, theta0, x_scale=np.maximum(np.abs(theta0), 1e-3),
+    def jacobian(theta):
+        # d x_model / d (a1, a2, b1, b2): the shifted output and input through 1/A
+        a1, a2, b1, b2 = theta
+        if not (abs(a2) < 1.0 and abs(a1) < 1.0 + a2):
+            return np.zeros((x.size, 4))
+        xm = lfilter([0.0, b1, b2], [1.0, a1, a2], u_delayed)
+        cols = np.zeros((x.size, 4))
+        cols[1:, 0], cols[2:, 1] = -xm[:-1], -xm[:-2]
+        cols[1:, 2], cols[2:, 3] = u_delayed[:-1], u_delayed[:-2]
+        return lfilter([1.0], [1.0, a1, a2], cols, axis=0)
+
+    fit = least_squares(residual, theta0, jac=jacobian,
+                        x_scale=np.maximum(np.abs(theta0), 1e-3),
                         xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=200)
     return fit.x if np.sum(fit.fun**2) <= np.sum(r0**2) else theta0
 

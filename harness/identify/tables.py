@@ -15,6 +15,8 @@ __all__ = [
     "format_parameters",
     "format_creep_rows",
     "format_held_out",
+    "format_search",
+    "format_undetermined",
     "format_report",
 ]
 
@@ -62,13 +64,46 @@ def _pct(x):
 
 def format_steps(result, markdown=False):
     """One row per fit: step, records, e_rms [nm] and e_r [%] on the fit windows, samples."""
-    rows = []
+    rows, notes = [], []
     for s in result.steps:
         recs = s.records[0] if len(s.records) == 1 else f"{len(s.records)} records"
         rows.append([s.step, recs, _nm(s.e_rms), _pct(s.e_r), str(s.n_samples)])
+        if s.note:
+            notes.append(f"step {s.step} ({recs}): {s.note}")
     head = ["step", "records", "e_rms [nm]", "e_r [%]", "samples"]
-    return _titled("Fits (on the fit windows, against the measured y)",
+    text = _titled("Fits (on the fit windows, against the measured y)",
                    _table(head, rows, markdown), markdown)
+    if notes:
+        text += "\n\n" + "\n".join(("- " if markdown else "  ") + n for n in notes)
+    return text
+
+
+def format_search(result, markdown=False):
+    """The starts of the coupled model's search: where each began and ended, how well."""
+    search = result.search
+    if search is None:
+        return ""
+    rows = []
+    for i, f in enumerate(search.fits, start=1):
+        a, b = f.start, f.theta
+        rows.append([str(i), f"{a.slow_pole:.4g}", f"{a.alpha:+.3g}", f"{b.slow_pole:.6f}",
+                     f"{b.p2:.5f}", f"{b.zero:.6f}", f"{b.alpha:+.6f}", _nm(f.rms),
+                     str(f.evaluations), "yes" if f.converged else "no", f"{f.elapsed_s:.1f}"])
+    head = ["start", "slow pole from", "alpha from", "slow pole", "fast pole", "zero", "alpha",
+            "rms [nm]", "evaluations", "converged", "time [s]"]
+    title = (f"Search by variable projection ({len(search.fits)} starts, {search.agreed} at the "
+             f"lowest minimum, {search.elapsed_s:.1f} s)")
+    return _titled(title, _table(head, rows, markdown), markdown)
+
+
+def format_undetermined(result, markdown=False):
+    """The parameters the records do not determine, and what would (empty if none)."""
+    if not result.undetermined:
+        return ""
+    lines = [("- " if markdown else "  ") + u.text() for u in result.undetermined]
+    title = ("NOT DETERMINED by the records (no parameter file is written; standard errors with "
+             "a noise of at least 1 nm rms)")
+    return (f"### {title}\n\n" if markdown else f"{title}\n") + "\n".join(lines)
 
 
 def _model_value(model, name):
@@ -139,7 +174,11 @@ def format_report(result, *, truth=None, floors=None, header=(), markdown=False)
     parts = []
     if header:
         parts.append(("\n\n" if markdown else "\n").join(header))
+    if result.undetermined:
+        parts.append(format_undetermined(result, markdown))
     parts.append(format_steps(result, markdown))
+    if result.search is not None:
+        parts.append(format_search(result, markdown))
     parts.append(format_parameters(result, truth, markdown))
     parts.append(format_creep_rows(result, truth, markdown))
     if result.held_out:

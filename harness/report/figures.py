@@ -259,9 +259,10 @@ def _error_panels(ax_full, ax_zoom, r, first=False):
     tt, ee = _decimate(t, err)
     ax_full.plot(tt, ee, color="tab:red", lw=0.6)
     _shade_window(ax_full, sc.metric_window, first)
-    _symlog(ax_full, max(2 * e_rms, 1e-9), ee)
-    ax_full.set_ylabel(f"y_d {MINUS} y [{NM}]")
-    ax_full.set_title(f"{_title(r)}: whole run", loc="left")
+    lin = _symlog(ax_full, max(2 * e_rms, 1e-9), ee)
+    ax_full.set_ylabel(f"y_d {MINUS} y [{NM}], symlog")
+    ax_full.set_title(f"{_title(r)}: whole run\nsymlog scale: linear within ±{lin:g} {NM}, "
+                      f"logarithmic beyond", loc="left")
     win = window_mask(t, sc.metric_window, sc.step_size)
     tw, ew = _decimate(t[win], err[win])
     ax_zoom.plot(tw, ew, color="tab:red", lw=0.4, alpha=0.45, label="error")
@@ -287,19 +288,29 @@ def tracking_error_figure(results, out_dir, name="tracking_error", label=""):
     plt = _pyplot()
     _style(plt)
     n = len(results)
-    fig, axes = plt.subplots(n, 2, figsize=(10, 1.75 * n + 0.6), squeeze=False,
+    fig, axes = plt.subplots(n, 2, figsize=(10, 1.95 * n + 1.0), squeeze=False,
                              gridspec_kw={"width_ratios": [1, 1.3]})
     for i, r in enumerate(results):
         _error_panels(axes[i, 0], axes[i, 1], r, first=(i == 0))
     axes[0, 0].legend(loc="upper right", frameon=True, framealpha=0.8)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
+    fig.text(0.5, 1 - 0.45 / fig.get_figheight(), SYMLOG_NOTE, ha="center", va="top",
+             fontsize=7.5, color="0.2")
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.7 / fig.get_figheight()))
     caption = ("Tracking error y_d − y over time. Left: the whole run on a symmetric-log scale "
                "(linear near zero, logarithmic beyond) so the start-up transient and the steady "
                "state both show; the metric window is shaded. Right: the metric window alone, "
                "linear: the error, its 10 ms moving average (what is not sensor noise) and "
                "± e_rms.")
-    return _save(plt, fig, out_dir, name, caption, f"Tracking error: {label}")
+    return _save(plt, fig, out_dir, name, caption, f"Tracking error: {label}", layout=False)
+
+
+#: the symmetric-log scale of the whole-run error panels, said on the figures that use it
+SYMLOG_NOTE = ("Left, the whole run: symmetric-log scale, linear near zero (within the ± value "
+               "in each title) and logarithmic beyond, so the start-up transient (up to 100s of "
+               "nm)\nand the steady state (a few nm) both show; the metric window is shaded. "
+               "Right: the metric window alone, linear.")
 
 
 def _steepest_crossing(t, y_d, margin=0.0):
@@ -328,8 +339,8 @@ def tracking_period_figure(by_condition, out_dir, name="tracking_period"):
     _style(plt)
     first = by_condition[0][1]
     n = len(first)
-    fig, axes = plt.subplots(n, 3, figsize=(11.5, 2.0 * n + 0.6), squeeze=False,
-                             gridspec_kw={"width_ratios": [1.35, 0.75, 1.35]})
+    fig, axes = plt.subplots(n, 3, figsize=(11.5, 2.1 * n + 0.6), squeeze=False,
+                             gridspec_kw={"width_ratios": [1.35, 0.8, 1.35]})
     colors = ["tab:blue", "tab:orange", "tab:purple", "tab:brown", "tab:gray"]
     for i, r0 in enumerate(first):
         d, sc = r0.data, r0.spec
@@ -338,6 +349,7 @@ def tracking_period_figure(by_condition, out_dir, name="tracking_period"):
         a, z, b = axes[i]
         outputs = [(lab, res[i], colors[j % len(colors)])
                    for j, (lab, res) in enumerate(by_condition)]
+        errors = []
         # the zoom: the steepest zero crossing, where a late output shows most
         half = 6 * sc.step_size
         tc = _steepest_crossing(t, d["y_d"][sel], half)
@@ -351,14 +363,22 @@ def tracking_period_figure(by_condition, out_dir, name="tracking_period"):
             z.plot(d["time"][zm], r.data["y"][zm], color=col, lw=1.0, ls="--",
                    label=f"y, {lab}")
             e = (r.data["y_d"] - r.data["y"])[sel] * 1e3
-            b.plot(t, e, color=col, lw=0.9, label=f"{lab}: e_rms {r.e_rms_um * 1e3:.3g} {NM}")
-        a.set_ylabel(f"[{UM}]")
+            b.plot(t, e, color=col, lw=0.9, label=f"{lab} {r.e_rms_um * 1e3:.3g}")
+            errors.append(e)
+        a.set_ylabel(f"y_d, y [{UM}]")
         a.set_title(f"{_title(r0)}: last period", loc="left")
         z.set_title(f"zoom (grey band): ±{half * 1e3:g} ms", loc="left")
+        z.set_ylabel(f"y_d, y [{UM}]")
         z.xaxis.set_major_locator(plt.MaxNLocator(3))
         b.set_ylabel(f"y_d {MINUS} y [{NM}]")
-        b.set_title("error over the period", loc="left")
-        b.legend(loc="upper right", frameon=True, framealpha=0.85, fontsize=6.5)
+        b.set_title(f"error over the period (legend: e_rms [{NM}])", loc="left")
+        # the legend gets a band of its own above the curves, so it hides no peak
+        lo = min(float(np.min(x)) for x in errors)
+        hi = max(float(np.max(x)) for x in errors)
+        span = max(hi - lo, 1e-9)
+        b.set_ylim(lo - 0.05 * span, hi + 0.42 * span)
+        b.legend(loc="upper center", ncol=len(outputs), frameon=False, fontsize=6.5,
+                 handlelength=1.2, columnspacing=0.9, borderaxespad=0.2)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
     _figure_legend(fig, [axes[0, 1]])
@@ -417,6 +437,74 @@ def _dc_gain(a1, a2, b1, b2):
         return (b1 + b2) / (1.0 + a1 + a2)
 
 
+def _pi_gain(params):
+    """w0 + Σ w_j: the PI model's steepest slope, by which a uniform scaling of the weights
+    scales its output."""
+    m = int(params.get("pi.m", 0)) or sum(1 for k in params if k.startswith("pi.w["))
+    return params.get("pi.w0", math.nan) + sum(params.get(f"pi.w[{j}]", 0.0)
+                                                for j in range(1, m + 1))
+
+
+def effective_gain(nominal, plant, freqs, h):
+    """The gain the controller's RLS identifies at each tone: |effective G| from the control
+    q to the displacement y, the plant's chain behind the controller's inverse of its nominal
+    one (the loop "sees" C_p G_p P_p P_n⁻¹ C_n⁻¹, and C_n⁻¹ commutes with G_p)::
+
+        |G_p(e^{iωh})| · c_PI · (k_c,p / k_c,n) · |(1 − e^{−iωh}) / h|^(α_p − α_n)
+
+    with c_PI the ratio of the PI models' w0 + Σ w_j (exact when the plant's weights are the
+    nominal ones times c_PI) and the G-L creep operators' gain ratio at ω = 2π f.
+
+    Parameters
+    ----------
+    nominal, plant : dict
+        The controller's and the plant's parameters by FMU variable name (``tf.*``,
+        ``pi.*``, ``creep.k_c``, ``creep.alpha``).
+    freqs : sequence of float
+        Tone frequencies [Hz].
+    h : float
+        Sample period [s].
+
+    Returns
+    -------
+    ndarray
+        One gain per frequency.
+    """
+    w = 2 * np.pi * np.asarray(freqs, dtype=float) * h
+    z1 = np.exp(-1j * w)
+    a1, a2, b1, b2 = (plant.get(f"tf.{n}", nominal[f"tf.{n}"]) for n in _G_NAMES)
+    g = np.abs((b1 * z1 + b2 * z1 ** 2) / (1 + a1 * z1 + a2 * z1 ** 2))
+    c_pi = _pi_gain({**nominal, **{k: v for k, v in plant.items() if k.startswith("pi.")}}) \
+        / _pi_gain(nominal)
+    k_ratio = plant.get("creep.k_c", nominal["creep.k_c"]) / nominal["creep.k_c"]
+    d_alpha = plant.get("creep.alpha", nominal["creep.alpha"]) - nominal["creep.alpha"]
+    creep = np.abs((1 - z1) / h) ** d_alpha
+    return g * c_pi * k_ratio * creep
+
+
+def _tones(spec):
+    sig = spec.signal
+    if sig.kind != "sines":
+        return []
+    return [f for f, a in zip(sig.frequencies, sig.amplitudes) if f > 0 and a != 0]
+
+
+def _effective_band(ax, runs, nominal, plants):
+    """Shade the effective gain at the tones of the runs (see effective_gain); return its
+    (lo, hi), or None when no run is a sum of tones."""
+    gains = [effective_gain(nominal, pl, _tones(r.spec), r.spec.step_size)
+             for r, pl in zip(runs, plants) if _tones(r.spec)]
+    if not gains:
+        return None
+    allg = np.concatenate(gains)
+    lo, hi = float(allg.min()), float(allg.max())
+    half = max(0.5 * (hi - lo), 0.002 * abs(hi))
+    mid = 0.5 * (lo + hi)
+    ax.axhspan(mid - half, mid + half, color="tab:green", alpha=0.22, lw=0,
+               label="effective gain q → y (what RLS identifies)")
+    return lo, hi
+
+
 def _robust_limits(values, refs, start=0):
     """y limits that hold every series from sample ``start`` on and the reference lines."""
     v = np.concatenate([np.asarray(x)[start:] for x in values] + [np.asarray(refs, float)])
@@ -451,7 +539,7 @@ def rls_figure(results, out_dir, nominal, plants, name="rls_estimates", label=""
     """
     plt = _pyplot()
     _style(plt)
-    fig, axes = plt.subplots(2, 3, figsize=(10.5, 5.8), squeeze=False)
+    fig, axes = plt.subplots(2, 3, figsize=(10.5, 6.6), squeeze=False)
     panels = list(_G_NAMES) + ["dc", "pred"]
     titles = {p: f"estimate of {p}" for p in _G_NAMES}
     titles.update({"dc": "DC gain of the estimated G, (b1 + b2)/(1 + a1 + a2)",
@@ -475,25 +563,46 @@ def rls_figure(results, out_dir, nominal, plants, name="rls_estimates", label=""
             nom, truth = g_nom[j], [g[j] for g in g_plants]
         else:
             nom, truth = float(_dc_gain(*g_nom)), [float(_dc_gain(*g)) for g in g_plants]
+            band = _effective_band(ax, results, nominal, plants)
+            truth = truth + (list(band) if band else [])
         ax.axhline(nom, color="k", ls=":", lw=1.1, label="nominal model (start)")
-        for k, tv in enumerate(truth):
-            ax.axhline(tv, color="k", ls="--", lw=0.9, label="plant's own G" if k == 0 else None)
+        for k, tv in enumerate(truth[:len(g_plants)]):
+            ax.axhline(tv, color="k", ls="--", lw=0.9,
+                       label="plant's own G (not what RLS sees)" if k == 0 else None)
         ax.set_ylim(*_robust_limits(kept, [nom] + truth, 0))
-    handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False,
-               fontsize=7.5)
+    handles = {}
+    for ax in (axes[0, 0], axes[1, 1]):
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(lab, h)
+    fig.legend(list(handles.values()), list(handles.keys()), loc="lower center", ncol=5,
+               frameon=False, fontsize=7.5)
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
-    fig.tight_layout(rect=(0, 0.05, 1, 0.95))
+    explanation = rls_explanation(nominal, plants)
+    fig.text(0.5, 0.925, explanation, ha="center", va="top", fontsize=7.5, color="0.2",
+             linespacing=1.35)
+    fig.tight_layout(rect=(0, 0.075, 1, 0.845))
     caption = ("The RLS estimates of G = (b1 z⁻¹ + b2 z⁻²)/(1 + a1 z⁻¹ + a2 z⁻²) over time for "
                "each reference, starting from the nominal model (dotted); dashed: the plant's "
-               "own G. The loop also sees the PI and creep mismatch, so RLS converges to an "
-               "effective G, not to the plant's: the DC gain and the prediction error settle "
-               "within a fraction of a second, while a single tone leaves directions of "
-               "(a1, a2, b1, b2) unexcited and free to drift slowly. The first 50 ms are outside "
+               "own G. " + explanation.replace("\n", " ") + " The first 50 ms are outside "
                "the vertical range.")
-    return _save(plt, fig, out_dir, name, caption, f"RLS estimates converging: {label}",
+    return _save(plt, fig, out_dir, name, caption, f"RLS estimates of G: {label}",
                  layout=False)
+
+
+def rls_explanation(nominal, plants):
+    """What the RLS estimates converge to, and why (three lines, for the figure itself)."""
+    ratios = sorted({round(_pi_gain({**nominal, **{k: v for k, v in pl.items()
+                                                   if k.startswith("pi.")}})
+                           / _pi_gain(nominal), 4) for pl in plants})
+    pi = "/".join(f"×{c:.3g}" for c in ratios)
+    return ("RLS does not converge to the plant's own G: it identifies the effective G from the "
+            "controller's output q to the measured y, that is\nthe plant's G times what the "
+            "controller's inverse PI and inverse creep leave of the plant's PI and creep (here: "
+            f"PI {pi}, and the creep mismatch).\nIts gain at the tones (green band, DC-gain "
+            "panel) settles within a fraction of a second. One tone fixes G at its frequency "
+            "only, so a1, a2, b1, b2\ndrift along the directions it leaves unexcited; three "
+            "tones (the mixes) fix all four.")
 
 
 # ---------------------------------------------------------------------------
@@ -661,7 +770,7 @@ def draw_scenario_figure(result, out_dir, *, nominal_g=None, plant=None, label="
                      f"{result.scenario}: {_MODEL_VS_MODEL}", layout=False)
 
     d, sc = result.data, result.spec
-    fig, axes = plt.subplots(3, 2, figsize=(10, 7.6), squeeze=False)
+    fig, axes = plt.subplots(3, 2, figsize=(10, 8.4), squeeze=False)
     _error_panels(axes[0, 0], axes[0, 1], result, first=True)
     axes[0, 0].legend(loc="upper right")
     sel = _last_period(d["time"], sc)
@@ -685,18 +794,25 @@ def draw_scenario_figure(result, out_dir, *, nominal_g=None, plant=None, label="
     tt, dc = _decimate(d["time"], _dc_gain(d["a1"], d["a2"], d["b1"], d["b2"]))
     g.plot(tt, dc, color="tab:blue", lw=0.9, label="estimated")
     refs = []
+    note = ""
     if nominal_g is not None:
         nom = float(_dc_gain(*[nominal_g[f"tf.{n}"] for n in _G_NAMES]))
-        g.axhline(nom, color="k", ls=":", label="nominal")
+        g.axhline(nom, color="k", ls=":", label="nominal model (start)")
         refs.append(nom)
         if plant is not None:
             tv = float(_dc_gain(*[plant.get(f"tf.{n}", nominal_g[f"tf.{n}"]) for n in _G_NAMES]))
-            g.axhline(tv, color="k", ls="--", label="plant's G")
+            g.axhline(tv, color="k", ls="--", label="plant's own G")
             refs.append(tv)
+            band = _effective_band(g, [result], nominal_g, [plant])
+            if band:
+                refs += list(band)
+                note = (":\nit settles at the effective gain q → y (band), not the plant's "
+                        "own G:\nthe controller's inverse PI and creep leave the plant's PI and"
+                        "\ncreep mismatch in the loop, and RLS identifies the loop")
     skip = min(d.size - 1, int(round(0.05 / sc.step_size)))
     g.set_ylim(*_robust_limits([_dc_gain(d["a1"], d["a2"], d["b1"], d["b2"])], refs, skip))
-    g.set_title("DC gain of the RLS estimate of G", loc="left")
-    g.legend(loc="best")
+    g.set_title("DC gain of the RLS estimate of G, (b1 + b2)/(1 + a1 + a2)" + note, loc="left")
+    g.legend(loc="lower right", fontsize=6.5, framealpha=0.85)
     for ax in axes[1:].flat:
         ax.set_xlabel("time [s]")
     caption = (f"{result.scenario}: tracking error over the run and in the metric window, one "

@@ -215,7 +215,7 @@ def format_identification_table(rows, title=None, markdown=False):
 def write_identification_csv(rows, path):
     """Write identification rows as CSV (full precision; rel_error empty where the truth is 0)."""
     with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
+        w = csv.writer(fh, lineterminator="\n")
         w.writerow(_IDENT_CSV)
         for r in rows:
             w.writerow([r.parameter, num(r.true), num(r.identified), num(r.abs_error),

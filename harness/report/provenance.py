@@ -2,7 +2,7 @@
 
 :func:`collect_provenance` gathers everything a reader needs to reproduce a
 report: the commit of the harness (and whether the tree had uncommitted
-changes), each FMU's GUID, version and checksum from its modelDescription, the
+changes; for an installed package, the commit it was built from), each FMU's GUID, version and checksum from its modelDescription, the
 versions of Python, fmpy and numpy, the date and the machine.
 """
 
@@ -15,12 +15,13 @@ from importlib import metadata
 import os
 from pathlib import Path
 import platform
-import subprocess
 import sys
+import zipfile
 
 from .._common import REPO_ROOT
 
-__all__ = ["FMUInfo", "Provenance", "collect_provenance", "model_description", "fmu_info"]
+__all__ = ["FMUInfo", "Provenance", "collect_provenance", "model_description", "fmu_info",
+           "fmu_platforms", "missing_windows_binaries"]
 
 _MD_CACHE = {}
 
@@ -57,6 +58,19 @@ class FMUInfo:
     generation_tool: str
     generated: str
     sha256: str
+    platforms: tuple = ()
+
+
+#: the folder of the Windows binary in each FMI version's binaries/
+WINDOWS_PLATFORM = {2: "win64", 3: "x86_64-windows"}
+
+
+def fmu_platforms(path):
+    """The platform folders of an FMU's ``binaries/`` (``linux64``, ``win64``, ...), sorted."""
+    with zipfile.ZipFile(path) as zf:
+        return tuple(sorted({n.split("/")[1] for n in zf.namelist()
+                             if n.startswith("binaries/") and n.count("/") >= 2
+                             and not n.endswith("/")}))
 
 
 def fmu_info(path):
@@ -67,7 +81,36 @@ def fmu_info(path):
                    fmi_version=md.fmiVersion or "",
                    generation_tool=md.generationTool or "",
                    generated=md.generationDateAndTime or "",
-                   sha256=_sha256(path))
+                   sha256=_sha256(path), platforms=fmu_platforms(path))
+
+
+def missing_windows_binaries(fmu_dir=None, fmi_version=2):
+    """A one-line note when the FMUs of `fmu_dir` have no Windows binary, else None.
+
+    The build cross-compiles ``binaries/win64`` (FMI 3.0: ``x86_64-windows``) only when
+    MinGW-w64 is installed; ``pip install .`` hides CMake's output, so the user learns it
+    here. Only the plant FMU is looked at: one build makes all of them.
+    """
+    from .. import _paths
+    from ..cosim import PLANT_MODEL, fmu_path
+
+    try:
+        path = fmu_path(PLANT_MODEL, fmu_dir, fmi_version)
+        platforms = fmu_platforms(path)
+    except (OSError, zipfile.BadZipFile):
+        return None                         # the run itself says what is wrong
+    windows = WINDOWS_PLATFORM[int(fmi_version)]
+    if set(platforms) & set(WINDOWS_PLATFORM.values()):
+        return None                         # (the other edition's: the run refuses it)
+    folder = path.parent
+    if fmu_dir is None and not os.environ.get("PIEZO_FMU_DIR"):
+        fix = (f"then rebuild ({_paths.BUILD_COMMAND})" if _paths.IN_CHECKOUT
+               else f"then reinstall the package from its source folder ({_paths.INSTALL_COMMAND})")
+        fix = f"; for FMUs that also run on Windows install MinGW-w64 (Debian: gcc-mingw-w64-x86-64), {fix}"
+    else:
+        fix = ""
+    return (f"the FMUs in {folder} have no Windows binaries (binaries/{windows}): MinGW-w64 was "
+            f"not found when they were built, so they run on Linux only{fix}")
 
 
 @dataclass
@@ -77,8 +120,8 @@ class Provenance:
     Attributes
     ----------
     commit : str
-        Commit hash of the harness's repository, with `` (uncommitted changes)``
-        when the tracked files differ from it; ``unknown`` outside a git checkout.
+        Commit hash of the harness's repository, with `` with uncommitted changes`` when
+        the tracked files differ from it (see :func:`commit_id`).
     backend : str
     fmi_version : int or None
         The FMI version of the FMUs that ran (None with the core backend, which runs no FMU).
@@ -109,22 +152,25 @@ class Provenance:
         return asdict(self)
 
 
-def _git(*args):
-    try:
-        proc = subprocess.run(["git", "-C", str(REPO_ROOT), *args], capture_output=True,
-                              text=True, timeout=10)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return proc.stdout.strip() if proc.returncode == 0 else None
-
-
 def commit_id():
-    """The harness's commit, or 'unknown' outside a git checkout."""
-    head = _git("rev-parse", "HEAD")
-    if not head:
-        return "unknown (not a git checkout)"
-    dirty = _git("status", "--porcelain", "--untracked-files=no")
-    return head + (" (uncommitted changes)" if dirty else "")
+    """The commit the harness comes from (:mod:`harness._source`).
+
+    A source checkout: git's HEAD, with `` with uncommitted changes`` when the tracked files
+    differ from it. An installed package: the commit recorded when it was built, with
+    `` (recorded at build time, installed package)``. Otherwise ``unknown`` and why.
+    """
+    from .. import _paths, _source
+
+    if _paths.IN_CHECKOUT:
+        here = _source.git_source(REPO_ROOT)
+        if here["commit"]:
+            return _source.describe(here)
+    built = _source.installed_source()
+    if built is None:
+        return "unknown (not a git checkout, and no build record)"
+    if not built["commit"]:
+        return "unknown (the installed package was not built from a git checkout)"
+    return f"{_source.describe(built)} (recorded at build time, installed package)"
 
 
 def _version(dist):

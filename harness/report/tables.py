@@ -205,7 +205,7 @@ def num(x):
 def write_tracking_csv(results, path):
     """Write tracking results as CSV (full precision; e_r as a fraction, lengths in um)."""
     with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
+        w = csv.writer(fh, lineterminator="\n")
         w.writerow(_TRACK_CSV)
         for r in results:
             w.writerow([r.condition, r.scenario, int(r.adaptation), int(r.preview), r.master,
@@ -218,7 +218,7 @@ def write_tracking_csv(results, path):
 def write_validation_csv(results, path):
     """Write validation results as CSV (full precision; e_r as a fraction)."""
     with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
+        w = csv.writer(fh, lineterminator="\n")
         w.writerow(_VALID_CSV)
         for r in results:
             w.writerow([r.scenario] + [num(getattr(r, k)) for k in _VALID_CSV[1:-1]]
@@ -226,11 +226,25 @@ def write_validation_csv(results, path):
     return Path(path)
 
 
+#: rows formatted at a time by :func:`write_timeseries_csv`
+_CSV_BLOCK_ROWS = 8192
+
+
 def write_timeseries_csv(data, path):
-    """Write a structured result array as CSV with a header of its field names."""
+    """Write a structured result array as CSV with a header of its field names.
+
+    Every value is written as the shortest text that reads back as the same double
+    (Python's ``repr``: ``0.0005``, not ``0.00050000000000000001``), with LF line
+    endings on every platform.  Blocks of rows go through ``str`` of a list, which
+    formats each float with ``repr`` in C, as fast as ``numpy.savetxt``.
+    """
     names = data.dtype.names
-    arr = np.column_stack([data[n] for n in names])
-    np.savetxt(path, arr, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+    arr = np.column_stack([np.asarray(data[n], dtype=np.float64) for n in names])
+    with open(path, "w", newline="\n", encoding="ascii") as fh:
+        fh.write(",".join(names) + "\n")
+        for start in range(0, arr.shape[0], _CSV_BLOCK_ROWS):
+            text = str(arr[start:start + _CSV_BLOCK_ROWS].tolist())   # "[[a, b], [c, d]]"
+            fh.write(text[2:-2].replace("], [", "\n").replace(", ", ",") + "\n")
     return Path(path)
 
 

@@ -10,9 +10,11 @@
  * controller's monitor is off (monitor.divergence_samples = 0), the reference
  * signal sums its 8 tones.
  *
+ * Built for the FMI 2.0 editions (-DFMI_VERSION=2 over host.h).
+ *
  * usage: fmu_bound_bench [--runs N] MODEL.xml MODEL.so [MODEL.xml MODEL.so ...]
  */
-#include "fmu_host.h"
+#include "host.h"
 
 #include <time.h>
 
@@ -29,49 +31,46 @@ static int by_value(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
-/* A fresh instance in StepComplete at t0 = 0 (creep.exact as asked), inputs at 3. */
-static fmi2Component start(const host_fmu *f, const fmi2CallbackFunctions *cb, int exact)
+/* A fresh instance in StepComplete at t0 = 0 (creep.exact as asked), inputs at 3;
+ * NULL if not (in is to be freed either way). */
+static void *start(host_inst *in, const host_fmu *f, int exact)
 {
     char name[32];
     int i;
-    fmi2Component c = f->api.Instantiate("bench", fmi2CoSimulation, f->guid, "", cb, fmi2False, fmi2False);
-    if (c == NULL || f->api.SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) != fmi2OK
-        || f->api.EnterInitializationMode(c) != fmi2OK)
+    if (host_instantiate(in, f, "bench") == NULL || host_enter_init(f, in->c, 0.0, 0, 0.0) != HOST_OK)
         return NULL;
     if (exact)
-        host_set_named(f, c, "creep.exact", 1.0);
-    if (host_named(f, "monitor.divergence_samples") != NULL)
-        host_set_named(f, c, "monitor.divergence_samples", 0.0);
+        host_set_named(f, in->c, "creep.exact", 1.0);
+    if (host_named(f, "monitor.divergence_samples", NULL) != NULL)
+        host_set_named(f, in->c, "monitor.divergence_samples", 0.0);
     for (i = 1; i <= 8; i++) {
         snprintf(name, sizeof name, "amplitude[%d]", i);
-        if (host_named(f, name) != NULL) {
-            host_set_named(f, c, name, 1.0);
+        if (host_named(f, name, NULL) != NULL) {
+            host_set_named(f, in->c, name, 1.0);
             snprintf(name, sizeof name, "frequency[%d]", i);
-            host_set_named(f, c, name, 1.5 * i);
+            host_set_named(f, in->c, name, 1.5 * i);
         }
     }
-    if (f->api.ExitInitializationMode(c) != fmi2OK)
+    if (f->api.ExitInitializationMode(in->c) != HOST_OK)
         return NULL;
     for (i = 0; i < f->n_vars; i++)
         if (f->vars[i].causality == VAR_INPUT)
-            host_set(f, c, &f->vars[i], 3.0);
-    return c;
+            host_set(f, in->c, &f->vars[i], 3.0);
+    return in->c;
 }
 
 /* The number after `key` in the refusal of a step of `huge` samples, or 0. */
 static unsigned long long bound_from_refusal(const host_fmu *f, int exact, double huge, const char *key)
 {
-    host_log log;
-    fmi2CallbackFunctions cb = host_callbacks(&log);
-    fmi2Component c = start(f, &cb, exact);
+    host_inst in;
     unsigned long long n = 0;
     const char *p;
-    host_log_clear(&log);
-    if (c != NULL && f->api.DoStep(c, 0.0, huge * f->h, fmi2True) == fmi2Error
-        && (p = strstr(log.last_error, key)) != NULL)
-        n = strtoull(p + strlen(key), NULL, 10);
-    if (c != NULL)
-        f->api.FreeInstance(c);
+    if (start(&in, f, exact) != NULL) {
+        host_log_clear(&in.log);
+        if (host_step(f, in.c, 0.0, huge * f->h) == HOST_ERROR && (p = strstr(in.log.last_error, key)) != NULL)
+            n = strtoull(p + strlen(key), NULL, 10);
+    }
+    host_free_instance(&in);
     return n;
 }
 
@@ -80,23 +79,23 @@ static void time_step(const host_fmu *f, int exact, unsigned long long n, int ru
     double t[32], total;
     int r;
     for (r = 0; r < runs; r++) {
-        host_log log;
-        fmi2CallbackFunctions cb = host_callbacks(&log);
-        fmi2Component c = start(f, &cb, exact);
+        host_inst in;
         double t0;
-        fmi2Status st;
-        if (c == NULL) {
+        host_status st;
+        if (start(&in, f, exact) == NULL) {
             printf("%s: could not start an instance\n", f->id);
+            host_free_instance(&in);
             return;
         }
         t0 = seconds();
-        st = f->api.DoStep(c, 0.0, (double)n * f->h, fmi2True);
+        st = host_step(f, in.c, 0.0, (double)n * f->h);
         t[r] = seconds() - t0;
-        f->api.FreeInstance(c);
-        if (st > fmi2Warning) {
-            printf("%s: the step of %llu samples was refused: %s\n", f->id, n, log.last_error);
+        if (st > HOST_WARNING) {
+            printf("%s: the step of %llu samples was refused: %s\n", f->id, n, in.log.last_error);
+            host_free_instance(&in);
             return;
         }
+        host_free_instance(&in);
     }
     qsort(t, (size_t)runs, sizeof t[0], by_value);
     printf("%-27s %-34s %9llu samples (%8.1f s of model time): median %.3f s, %.1f ns/sample; runs",
@@ -131,7 +130,7 @@ int main(int argc, char **argv)
             continue;
         }
         time_step(f, 0, samples, runs, "longest step");
-        if (host_named(f, "creep.exact") != NULL) {
+        if (host_named(f, "creep.exact", NULL) != NULL) {
             unsigned long long longest = bound_from_refusal(f, 1, (double)samples, "a step of at most ");
             if (longest > 0)
                 time_step(f, 1, longest, runs, "longest step from t0, creep.exact");

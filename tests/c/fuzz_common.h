@@ -39,6 +39,7 @@
 
 #include "fmi2Functions.h"
 #include "fmu_model.h"
+#include "state_format.h"
 
 #define FUZZ_MAX_SAMPLES 1024   /* per input, so one execution stays short (exact creep is O(k^2)) */
 
@@ -70,34 +71,6 @@ static inline double fuzz_value(uint8_t kind, uint64_t bits, double start)
     default:
         return FUZZ_SPECIALS[bits % 16];
     }
-}
-
-static inline uint64_t fuzz_u64(const uint8_t *p)
-{
-    uint64_t v = 0;
-    int i;
-    for (i = 7; i >= 0; i--)
-        v = (v << 8) | p[i];
-    return v;
-}
-
-static inline void fuzz_put_u64(uint8_t *p, uint64_t v)
-{
-    int i;
-    for (i = 0; i < 8; i++)
-        p[i] = (uint8_t)(v >> (8 * i));
-}
-
-/* FNV-1a 64, the serialized state's checksum */
-static inline uint64_t fuzz_fnv1a(const uint8_t *p, size_t n)
-{
-    uint64_t h = 0xcbf29ce484222325ull;
-    size_t i;
-    for (i = 0; i < n; i++) {
-        h ^= p[i];
-        h *= 0x100000001b3ull;
-    }
-    return h;
 }
 
 /* Silent, unless PIEZO_FUZZ_LOG is set (to see why a crash input was refused). */

@@ -9,8 +9,6 @@
  */
 #include "fuzz_common.h"
 
-#define BLOB_HEADER 128u
-
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
@@ -29,12 +27,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         /* n_history with any of its top 3 bits set is absurd; make it agree with the
          * size modulo 2^64 instead, so wrapping size arithmetic is tried:
          * 128 + data size + 8 n + 8 == size (mod 2^64), n + (top - 1) 2^61 */
-        uint64_t n_history = fuzz_u64(blob + 112), data_size = fuzz_u64(blob + 72);
+        uint64_t n_history = blob_get_u64(blob + BLOB_OFF_N_HISTORY);
+        uint64_t data_size = blob_get_u64(blob + BLOB_OFF_DATA_SIZE);
         if (n_history >> 61)
-            fuzz_put_u64(blob + 112, ((uint64_t)size - BLOB_HEADER - 8u - data_size) / 8u
-                                         + (((n_history >> 61) - 1u) << 61));
-        fuzz_put_u64(blob + 16, (uint64_t)size);
-        fuzz_put_u64(blob + size - 8, fuzz_fnv1a(blob, size - 8));
+            blob_put_u64(blob + BLOB_OFF_N_HISTORY, ((uint64_t)size - BLOB_HEADER - 8u - data_size) / 8u
+                                                        + (((n_history >> 61) - 1u) << 61));
+        blob_reseal(blob, size);
     }
     c = fmi2Instantiate("fuzz", fmi2CoSimulation, MODEL_GUID, "", &cb, fmi2False, fmi2False);
     if (c == NULL)
@@ -51,7 +49,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             abort();
         fuzz_outputs_finite(c);
         /* step on from the restored time, if the restored mode allows it */
-        memcpy(&h, blob + 104, sizeof h);
+        memcpy(&h, blob + BLOB_OFF_H, sizeof h);
         for (i = 0; i < 3 && fmi2GetRealStatus(c, fmi2LastSuccessfulTime, &t) == fmi2OK; i++) {
             fmi2Status st = fmi2DoStep(c, t, (double)(i + 1) * h, fmi2True);
             if (st > fmi2Warning)

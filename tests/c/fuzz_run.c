@@ -28,7 +28,7 @@ static uint64_t take_u64(reader *r)
     size_t i;
     for (i = 0; i < 8; i++)
         bytes[i] = take_byte(r);
-    return fuzz_u64(bytes);
+    return blob_get_u64(bytes);     /* little-endian, as the serialized state's integers */
 }
 
 /* Sets variable vr from a fuzzed kind and value (status ignored: refusals are fine). */

@@ -79,16 +79,16 @@ static void save_state(fmi2Component c, const char *name, unsigned force_mode)
     if (blob == NULL || fmi2SerializeFMUstate(c, s, (fmi2Byte *)blob, size) != fmi2OK)
         exit(1);
     if (force_mode != 0) {
-        blob[84] = (uint8_t)force_mode;   /* the mode field; the checksum is the fuzz harness's to fix */
-        fuzz_put_u64(blob + size - 8, fuzz_fnv1a(blob, size - 8));
+        blob[BLOB_OFF_MODE] = (uint8_t)force_mode;
+        blob_reseal(blob, size);
     }
     write_seed("deserialize", name, blob, size);
     if (strcmp(name, "step300") == 0) {
         /* the header alone, with the checksum after it: a truncated real state */
         char header_name[64];
-        memcpy(blob + 128, blob + size - 8, 8);
+        memcpy(blob + BLOB_HEADER, blob + size - 8, 8);
         snprintf(header_name, sizeof header_name, "%s_header_only", name);
-        write_seed("deserialize", header_name, blob, 136);
+        write_seed("deserialize", header_name, blob, BLOB_HEADER + 8u);
     }
     free(blob);
     fmi2FreeFMUstate(c, &s);

@@ -16,12 +16,9 @@ from __future__ import annotations
 
 import html
 from pathlib import Path
-import sys
+import re
 from xml.etree import ElementTree as ET
 
-REPO = Path(__file__).resolve().parents[1]
-if str(REPO) not in sys.path:
-    sys.path.insert(0, str(REPO))
 
 PROJECT = "piezo_fmus"
 CITATION = ('"Coupling Modeling and Adaptive Control for Piezoelectric-Actuated Positioning '
@@ -160,7 +157,7 @@ def _identity_table(root, platforms):
 
 
 def _connection_section(model_identifier, do_step="fmi2DoStep"):
-    from harness.ssp import SSP_COMPONENTS, SSP_CONNECTIONS
+    from .ssp import SSP_COMPONENTS, SSP_CONNECTIONS
 
     fmu_of = {comp: fmu for comp, (fmu, _) in SSP_COMPONENTS.items()}
     units = {(comp, name): unit for comp, (_, conns) in SSP_COMPONENTS.items()
@@ -243,13 +240,15 @@ and <code>sources/buildDescription.xml</code> lists the files to compile, the in
 folder and the definitions{note}. Only the FMI {major}.0 headers
 (<code>fmi{major}Functions.h</code>, <code>fmi{major}FunctionTypes.h</code>,
 <code>fmi{major}{platform_types}.h</code>) come from the importer. With GCC or Clang:</p>
-<pre>cc -shared -fPIC -std=c99 -O2 -I sources -I FMI{major}_HEADERS \\
+<pre>cc -shared -fPIC -std=c99 -O2 -ffp-contract=off -I sources -I FMI{major}_HEADERS \\
    {_e(files)} \\
    -lm -o binaries/{linux}/{_e(model_identifier)}.so</pre>
 <p>For Windows with MinGW-w64, add <code>-D__USE_MINGW_ANSI_STDIO=1 -static-libgcc</code>
 and write <code>binaries/{windows}/{_e(model_identifier)}.dll</code> (the shipped win64
 binary is built this way). The code is plain C99 with no dependency other than the C
-library and its math functions.</p>
+library and its math functions. <code>-ffp-contract=off</code> keeps every multiply and add
+as written (no fused multiply-add), as in the shipped binaries; <code>-ffast-math</code>
+would change the results.</p>
 {optional}
 """
 
@@ -303,6 +302,23 @@ its repository) gives each correction and its reason.</p>
 </body>
 </html>
 """
+
+
+def exported_index_html(index, model_description, section):
+    """``documentation/index.html`` of an exported FMU from the built FMU's ``index``.
+
+    The variables table is generated again from the exported ``model_description`` (its
+    start values are the identified ones), and ``section`` (HTML: where the start values
+    came from) is put before it; the rest of the built page is kept.
+    """
+    root = ET.fromstring(model_description.encode("utf-8"))
+    table = re.compile(r'<table class="variables">.*?</table>', re.DOTALL)
+    if len(table.findall(index)) != 1 or index.count('<h2 id="variables">') != 1:
+        raise ValueError("the built documentation has no single variables table to replace")
+    index = table.sub(lambda m: _variables_table(root), index)
+    old = re.compile(r'<h2 id="identified">.*?(?=<h2 id="variables">)', re.DOTALL)
+    index = old.sub("", index)          # an exported FMU exported again: one section
+    return index.replace('<h2 id="variables">', section + '<h2 id="variables">', 1)
 
 
 def ls_ref_html(model_description, ls_ref_dir):

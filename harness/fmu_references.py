@@ -18,8 +18,18 @@ FMI layer against the core. CSV values are written with Python's shortest round-
 ``repr``, so they read back bit for bit. The tolerance of an experiment means: at every
 sample, ``|y - y_ref| <= tolerance * (1 + |y_ref|)``.
 
-CMake runs this with ``PIEZO_CORE_LIB`` and ``PIEZO_CORE_INCLUDE`` set to the build's
-core library and headers (cmake/PiezoFmu.cmake, ``piezo_fmu_reference_results``).
+Two kinds of FMU have experiments here:
+
+* the built FMUs (no start values given): the experiments of :data:`EXPERIMENTS`, on
+  the project's benchmark (the mismatched plant);
+* an FMU that ``python -m harness export`` parameterised with an identified stage
+  (``start_values``: every parameter of that FMU): the experiments of
+  :data:`EXPORT_EXPERIMENTS`, which run the FMU's own start values, so that its
+  references test the model it now carries.
+
+CMake runs ``python -m harness.fmu_references`` with ``PIEZO_CORE_LIB`` and
+``PIEZO_CORE_INCLUDE`` set to the build's core library and headers
+(cmake/PiezoFmu.cmake, ``piezo_fmu_reference_results``).
 """
 
 from __future__ import annotations
@@ -31,10 +41,6 @@ from pathlib import Path
 import sys
 from xml.etree import ElementTree as ET
 from xml.sax.saxutils import quoteattr
-
-REPO = Path(__file__).resolve().parents[1]
-if str(REPO) not in sys.path:
-    sys.path.insert(0, str(REPO))
 
 LS_REF_VERSION = "1.0.0-alpha.1"
 LS_REF_DESCRIPTION = "Layered Standard providing information on related files included in an FMU."
@@ -67,6 +73,25 @@ EXPERIMENTS = {
         "Three 10 um tones at 1, 5 and 10 Hz with the preview lead = 2 samples and the "
         "stamped preview 4 samples ahead."),
 }
+#: the experiments of an exported (parameterised) FMU: they run its own start values
+EXPORT_EXPERIMENTS = {
+    "PiezoStage": (
+        "exported_stage_mixed_voltage",
+        "Open loop: the paper's mixed validation voltage v = 6 (sin 2 pi 5 t + sin 2 pi 40 t + "
+        "sin 2 pi 80 t) + 18 V on this FMU's own parameters (its start values: the stage it was "
+        "exported for). No parameter is set."),
+    "AdaptiveCompoundController": (
+        "closed_loop_exported_stage_1_5_10hz_d1",
+        "The controller with its own nominal model (its start values: the stage it was exported "
+        "for) and mv.delay = 0 (d = 1), replaying the inputs it received in a closed loop with "
+        "that stage (with a 2 nm resolution, 1 nm rms sensor, seed 1) tracking 10 um at 1, 5 and "
+        "10 Hz, run by a master that hands the plant the controller's post-step output: "
+        "y_ref = y_d(t + h), the plant's y_meas and its time stamp t_meas = t, and the stamped "
+        "preview y_preview = y_d(t + 4 h), t_preview = t + 4 h (used from the second sample on). "
+        "The RLS adapts; the outputs include the estimates."),
+}
+#: the sensor of the exported controller's closed loop
+EXPORT_SENSOR = {"sensor.resolution": 0.002, "sensor.noise_rms": 0.001, "sensor.seed": 1}
 
 
 # ---------------------------------------------------------------------------
@@ -85,8 +110,12 @@ def variable_types(model_description):
     FMI 3.0: the types are named as in SSP 1.0 (Float64 -> Real, Int32 -> Integer), and an
     array variable ``name`` of n elements gives its elements ``name[1]`` .. ``name[n]``, the
     names the experiment's parameter file uses (FMI 3.0 structured names of the elements).
+    ``model_description`` is a path, or the XML text itself.
     """
-    root = ET.parse(model_description).getroot()
+    if isinstance(model_description, str) and model_description.lstrip().startswith("<"):
+        root = ET.fromstring(model_description.encode("utf-8"))
+    else:
+        root = ET.parse(model_description).getroot()
     types = {}
     if root.get("fmiVersion", "").startswith("3"):
         for var in root.find("ModelVariables"):
@@ -115,17 +144,24 @@ def _grid(n):
     return [k * STEP for k in range(n + 1)]
 
 
-def piezo_stage():
-    """(parameters, stimuli columns, reference columns) of the PiezoStage experiment."""
-    from harness import core
-    from harness.scenarios import load_scenarios
+def piezo_stage(start_values=None, plant_start_values=None):
+    """(parameters, stimuli columns, reference columns) of the PiezoStage experiment.
 
-    params = dict(load_scenarios()["mismatch_1_5_10hz"].plant)
+    ``start_values``: every parameter of an exported PiezoStage (its experiment then sets
+    none and runs them); None for the built FMU (the mismatched plant's parameters).
+    """
+    from . import core
+    from .scenarios import load_scenarios
+
+    if start_values is None:
+        params, base = dict(load_scenarios()["mismatch_1_5_10hz"].plant), {}
+    else:
+        params, base = {}, dict(start_values)
     n = int(round(DURATION / STEP))
     time = _grid(n)
     v = [6.0 * (math.sin(2 * math.pi * 5 * t) + math.sin(2 * math.pi * 40 * t)
                 + math.sin(2 * math.pi * 80 * t)) + 18.0 for t in time]
-    plant = core.Plant(dict(params, h=STEP))
+    plant = core.Plant(dict(base, **params, h=STEP))
     names = ("y", "y_meas", "u", "x")
     rows = {name: [] for name in names}
     out = plant.output
@@ -138,9 +174,13 @@ def piezo_stage():
     return params, {"time": time, "v": v}, {"time": time, **rows, "t_meas": list(time)}
 
 
-def adaptive_compound_controller():
+def adaptive_compound_controller(start_values=None, plant_start_values=None):
     """(parameters, stimuli, references) of the controller experiment: the inputs it saw in a
     core closed loop of the mismatch 1/5/10 Hz scenario, sample by sample.
+
+    For an exported controller (``start_values``: its every parameter) the loop's plant is
+    the stage it was exported for (``plant_start_values``, with :data:`EXPORT_SENSOR`),
+    and the controller runs its own start values.
 
     The loop is the one of a master that hands the plant the controller's post-step output
     (the plant applies over [t_k, t_(k+1)) the v computed from the inputs of t_k), so the
@@ -151,19 +191,22 @@ def adaptive_compound_controller():
     compilers. With d = 1 the replay's recursion has its pole at the zero of B (0.992) and a
     relative input change of 1e-15 moves v by about 4e-11 V.
     """
-    from harness import core
-    from harness.scenarios import load_scenarios
+    from . import core
+    from .scenarios import load_scenarios
 
     scenario = load_scenarios()["mismatch_1_5_10hz"]
     params = {"mv.delay": 0}
     n = int(round(DURATION / STEP))
     time = _grid(n)
-    ctrl = core.Controller(dict(params, h=STEP))
+    base = {} if start_values is None else dict(start_values)
+    plant_params = (dict(scenario.plant) if start_values is None
+                    else dict(plant_start_values or {}, **EXPORT_SENSOR))
+    ctrl = core.Controller(dict(base, **params, h=STEP))
     d, preview = 1 + params["mv.delay"], 4
     y_ref = [float(x) for x in scenario.signal.evaluate([(k + d) * STEP for k in range(n + 1)])]
     y_preview = [float(x) for x in scenario.signal.evaluate([(k + preview) * STEP for k in range(n + 1)])]
     t_preview = [(k + preview) * STEP for k in range(n + 1)]
-    plant = core.Plant(dict(scenario.plant, h=STEP))
+    plant = core.Plant(dict(plant_params, h=STEP))
     stimuli = {"time": time, "y_ref": y_ref, "y_meas": [], "y_preview": y_preview,
                "t_preview": t_preview, "t_meas": list(time)}
     fields = (("v", "v"), ("q", "q"), ("est.a1", "a1"), ("est.a2", "a2"), ("est.b1", "b1"),
@@ -189,9 +232,9 @@ def adaptive_compound_controller():
     return params, stimuli, refs
 
 
-def reference_signal():
-    """(parameters, no stimuli, references) of the ReferenceSignal experiment."""
-    from harness import core
+def reference_signal(start_values=None, plant_start_values=None):
+    """(parameters, no stimuli, references) of the ReferenceSignal experiment (never exported)."""
+    from . import core
 
     params = {"lead": 2, "preview": 4}
     for i, f in enumerate((1.0, 5.0, 10.0), start=1):
@@ -312,19 +355,35 @@ def manifest_text(model, has_params, has_stimuli):
     return "\n".join(lines)
 
 
-def write_reference_results(model, model_description, out):
-    """Write the reference-result files of `model` into the folder `out`; return their names."""
+def write_reference_results(model, model_description, out, start_values=None,
+                            plant_start_values=None):
+    """Write the reference-result files of `model` into the folder `out`; return their names.
+
+    Parameters
+    ----------
+    model : str
+        Model identifier.
+    model_description : str or Path
+        The FMU's model description (the types of the parameters).
+    out : str or Path
+        Folder (emptied of files first).
+    start_values : dict, optional
+        Every parameter of an exported FMU by name: write :data:`EXPORT_EXPERIMENTS`'s
+        experiment on them instead of the built FMU's.
+    plant_start_values : dict, optional
+        The exported PiezoStage's parameters (the plant of the exported controller's loop).
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     for old in out.iterdir():
         if old.is_file():
             old.unlink()
     types = variable_types(model_description)
-    params, stimuli, refs = GENERATORS[model]()
+    params, stimuli, refs = GENERATORS[model](start_values, plant_start_values)
     for name in list(params) + list(stimuli or {}) + list(refs):
         if name != "time" and name not in types:
             raise KeyError(f"{model} has no variable '{name}'")
-    experiment, description = EXPERIMENTS[model]
+    experiment, description = (EXPERIMENTS if start_values is None else EXPORT_EXPERIMENTS)[model]
     files = {}
     if params:
         files[f"{model}_params.ssv"] = ssv_text(experiment, params, types)
