@@ -277,11 +277,15 @@ def _add_identify_parser(sub):
     p = sub.add_parser(
         "identify", help="identify the coupled model (paper section 3) from measured records",
         description="Identify the coupled model from measured records of voltage and "
-                    "displacement (the paper's three steps on y, then a joint refinement); or "
-                    "--demo: a virtual experiment on the PiezoStage FMU with known parameters; or "
-                    "--internal-channels: each step alone on the model's internal outputs u and "
-                    "x. Writes a parameter file keyed by FMU variable names, for export, "
-                    "--plant-params and --controller-params.")
+                    "displacement (the PI weights solved for each value of the poles, the zero "
+                    "and the creep order, which are searched from several starts; the paper's "
+                    "stepwise recipe is one start), and say which parameter the records do not "
+                    "determine; or --demo: a virtual experiment on the PiezoStage FMU with known "
+                    "parameters; or --family N: the method checked on N stages drawn from the "
+                    "paper's ranges; or --internal-channels: each of the paper's steps alone on "
+                    "the model's internal outputs u and x. Writes a parameter file keyed by FMU "
+                    "variable names, for export, --plant-params and --controller-params "
+                    "(docs/identification.md).")
     p.add_argument("--out", default="out", metavar="PATH",
                    help="the parameter file (a .json path) or a folder (default: out/)")
     _backend_options(p)
@@ -306,7 +310,11 @@ def _add_export_parser(sub):
         "export", help="parameterised FMUs from a parameter file",
         description="Write PiezoStage.fmu and AdaptiveCompoundController.fmu with the values of "
                     "a parameter file as their start values (the built binaries reused, the "
-                    "modelDescription rewritten, the GUID kept); each FMU takes the names it has.")
+                    "modelDescription rewritten, the GUID kept); each FMU takes the names it has. "
+                    "Each FMU's regression experiment (FMI-LS-REF) and documentation are "
+                    "recomputed for those values, and extra/piezo_fmus.identification/ records "
+                    "where they came from (the parameter file, the identification report and the "
+                    "measured records beside it, with their SHA-256).")
     _output_option(p, "the two FMUs")
     _fmu_dir_option(p, "folder of the built FMUs")
     add_export_arguments(p)
