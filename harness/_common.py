@@ -20,9 +20,39 @@ MASTERS = ("gauss-seidel", "jacobi")
 STEP_ORDERS = ("plant-first", "controller-first")
 
 #: Start value of the controller's ``mv.delay`` (the XML start; a test checks
-#: it against the FMU and the core): d = 2, the loop delay of the default
-#: controller, which publishes v at the end of the step that sampled its inputs.
-DEFAULT_MV_DELAY = 1
+#: it against the FMU and the core): -1, the controller detects its loop delay.
+DEFAULT_MV_DELAY = -1
+#: The loop delay of a master that exchanges values at communication points (every master
+#: here): the plant's one sample plus the controller's publishing at the end of its step.
+EXCHANGE_LOOP_DELAY = 2
+#: Start values of ReferenceSignal's ``lead`` (of ``y_ref``) and ``preview`` (of the stamped
+#: preview ``y_preview``, ``t_preview``); a test checks them against the FMU.
+REFERENCE_LEAD = 2
+REFERENCE_PREVIEW = 4
+
+
+def loop_delay(controller_params, plant_params=None):
+    """The loop delay d the controller runs under the masters here.
+
+    Parameters
+    ----------
+    controller_params, plant_params : dict
+        Parameter overrides by FMU variable name.
+
+    Returns
+    -------
+    int
+        ``1 + mv.delay`` when ``mv.delay`` is set (0 .. 8); with ``mv.delay = -1`` (the
+        default) the delay the controller detects in a master that exchanges values at
+        communication points: 2, one less with ``mv.feedthrough``, plus the plant's
+        ``tf.delay``.
+    """
+    c = controller_params or {}
+    mv_delay = int(c.get("mv.delay", DEFAULT_MV_DELAY))
+    if mv_delay >= 0:
+        return 1 + mv_delay
+    d = EXCHANGE_LOOP_DELAY - (1 if c.get("mv.feedthrough", False) else 0)
+    return d + int((plant_params or {}).get("tf.delay", 0))
 
 CLOSED_LOOP_FIELDS = ("time", "y_d", "y", "y_meas", "v", "q", "a1", "a2", "b1", "b2", "pred_error",
                       "saturated")
@@ -71,9 +101,15 @@ class ClosedLoopSetup:
     y_d : ndarray
         Desired displacement on the grid, ``y_d(k)``.
     y_ref : list of float
-        Controller input per sample: ``y_d(k + d)`` with preview, ``y_d(k)`` without.
+        Controller input per sample: ``y_d(k + lead)`` with preview (``lead`` = ``1 +
+        mv.delay`` when set, else ReferenceSignal's default ``REFERENCE_LEAD``), ``y_d(k)``
+        without.
+    y_preview : list of float or None
+        The stamped preview ``y_d(k + REFERENCE_PREVIEW)`` (with preview), else None.
+    t_preview : list of float or None
+        Its time stamps ``(k + REFERENCE_PREVIEW) h``, else None.
     d : int
-        Loop delay of the controller's model, ``1 + mv.delay``.
+        The loop delay the controller runs (:func:`loop_delay`).
     feedthrough : bool
         The controller's ``mv.feedthrough``: v depends directly on the inputs.
     master : str
@@ -90,6 +126,8 @@ class ClosedLoopSetup:
     time: np.ndarray
     y_d: np.ndarray
     y_ref: list
+    y_preview: list
+    t_preview: list
     d: int
     feedthrough: bool
     master: str
@@ -126,18 +164,27 @@ def prepare_closed_loop(scenario, *, adaptation=None, preview=True, master="gaus
     c.setdefault("h", h)
     if adaptation is not None:
         c["rls.enabled"] = bool(adaptation)
-    # Every master here exchanges values at communication points, so the loop
-    # delay is the controller's own d = 1 + mv.delay (2 by default); the
-    # master is not a parameter of the loop.
-    d = 1 + int(c.get("mv.delay", DEFAULT_MV_DELAY))
+    # Every master here exchanges values at communication points: the controller
+    # detects d = 2 (+ tf.delay), or runs the d = 1 + mv.delay it is given. Like
+    # ReferenceSignal, the setup gives y_ref = y_d(k + lead) and the stamped
+    # preview y_d(k + REFERENCE_PREVIEW) at (k + REFERENCE_PREVIEW) h.
+    d = loop_delay(c, p)
+    mv_delay = int(c.get("mv.delay", DEFAULT_MV_DELAY))
+    lead = 1 + mv_delay if mv_delay >= 0 else REFERENCE_LEAD
     feedthrough = bool(c.get("mv.feedthrough", False))
 
     time = np.arange(n, dtype=float) * h
-    ext = np.arange(n + d, dtype=float) * h
+    ahead = max(lead, REFERENCE_PREVIEW)
+    ext = np.arange(n + ahead, dtype=float) * h
     y_d_ext = sc.signal.evaluate(ext)
     y_d = y_d_ext[:n].copy()
-    y_ref = (y_d_ext[d:d + n] if preview else y_d).tolist()
-    return ClosedLoopSetup(sc, n, h, time, y_d, y_ref, d, feedthrough, master, step_order, p, c)
+    y_ref = (y_d_ext[lead:lead + n] if preview else y_d).tolist()
+    y_preview = t_preview = None
+    if preview:
+        y_preview = y_d_ext[REFERENCE_PREVIEW:REFERENCE_PREVIEW + n].tolist()
+        t_preview = ext[REFERENCE_PREVIEW:REFERENCE_PREVIEW + n].tolist()
+    return ClosedLoopSetup(sc, n, h, time, y_d, y_ref, y_preview, t_preview, d, feedthrough, master,
+                           step_order, p, c)
 
 
 def sample_blocks(n, h, progress=None):

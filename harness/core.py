@@ -210,6 +210,9 @@ def _raise_step(status: int, what: str, inputs: dict) -> None:
         desc = ", ".join(f"{k} = {v!r}" for k, v in inputs.items())
         raise CoreDivergedError(f"{what}: diverged: a computed value is not finite although the "
                                 f"inputs are ({desc}); step refused, state unchanged")
+    if status == PIEZO_ERR_PARAM:
+        desc = ", ".join(f"{k} = {v!r}" for k, v in inputs.items())
+        raise ValueError(f"{what}: an input is out of its range ({desc}); state unchanged")
     if status == PIEZO_ERR_UNSTABLE:
         raise CoreUnstableError(f"{what}: the loop is unstable: |pred_error| stayed above "
                                 f"monitor.pred_error_max for monitor.divergence_samples consecutive "
@@ -261,7 +264,9 @@ _CONTROLLER_TABLE = {
     "h": (("h",), "float"),
     "mv.delay": (("mv_delay",), "int"),
     "mv.feedthrough": (("mv_feedthrough",), "bool"),
+    "mv.hold_inputs": (("mv_hold_inputs",), "bool"),
     "mv.lambda_u": (("mv_lambda_u",), "float"),
+    "mv.observer": (("mv_observer",), "float"),
     "rls.enabled": (("rls_enabled",), "bool"),
     "rls.forgetting": (("rls_forgetting",), "float"),
     "rls.p0": (("rls_p0",), "float"),
@@ -533,14 +538,17 @@ class Plant:
 # --------------------------------------------------------------------------
 # Controller
 # --------------------------------------------------------------------------
-ControllerOutput = namedtuple("ControllerOutput", "v q a1 a2 b1 b2 pred_error saturated")
+ControllerOutput = namedtuple("ControllerOutput", "v q a1 a2 b1 b2 pred_error saturated delay preview")
 ControllerOutput.__doc__ = """Controller result of one sample: v [V], q [um], the estimates
-a1, a2, b1, b2 used for q, the RLS one-step prediction error [um], saturated (bool)."""
+a1, a2, b1, b2 used for q, the RLS one-step prediction error [um], saturated (bool), the loop
+delay d of the law (int, 0 while it is being detected), preview (bool: the law used a stamped
+preview rather than y_ref)."""
 
 
 def _ctrl_out(o) -> ControllerOutput:
     t = o.theta
-    return ControllerOutput(o.v, o.q, t[0], t[1], t[2], t[3], o.pred_error, bool(o.saturated))
+    return ControllerOutput(o.v, o.q, t[0], t[1], t[2], t[3], o.pred_error, bool(o.saturated),
+                            int(o.delay), bool(o.preview))
 
 
 class Controller:
@@ -569,6 +577,7 @@ class Controller:
                     "piezo_controller_init", diag)
         self._hist = _History()
         self._out = ffi.new("piezo_controller_output *")
+        self._in = ffi.new("piezo_controller_input *")
 
     @property
     def params(self) -> dict:
@@ -638,6 +647,34 @@ class Controller:
             If an input is NaN or infinite (the state is left unchanged).
         """
         return self._call(self._lib.piezo_controller_step, "piezo_controller_step", y_ref, y_meas)
+
+    def step_input(self, y_ref: float, y_meas: float, y_preview: float = 0.0,
+                   preview_lead: int = 0) -> ControllerOutput:
+        """:meth:`step` with a stamped preview (``piezo_controller_step_input``).
+
+        Parameters
+        ----------
+        y_ref, y_meas : float
+            As :meth:`step`; ``y_ref`` is used when no stamped preview covers ``k + d``.
+        y_preview : float
+            ``y_d`` at the measurement's sample plus ``preview_lead`` [um].
+        preview_lead : int
+            1 .. ``PIEZO_PREVIEW_RING - 1``; 0: no stamped preview this sample.
+
+        Returns
+        -------
+        ControllerOutput
+        """
+        inp = self._in
+        inp.y_ref, inp.y_meas = float(y_ref), float(y_meas)
+        inp.y_preview, inp.preview_lead = float(y_preview), int(preview_lead)
+        self._hist.ensure(self._lib.piezo_controller_history_needed(self._c))
+        st = self._lib.piezo_controller_step_input(self._c, inp, self._hist.ptr, self._hist.capacity,
+                                                   self._out)
+        _raise_step(st, "piezo_controller_step_input",
+                    {"y_ref": inp.y_ref, "y_meas": inp.y_meas, "y_preview": inp.y_preview,
+                     "preview_lead": inp.preview_lead})
+        return _ctrl_out(self._out)
 
 
 # --------------------------------------------------------------------------

@@ -13,6 +13,7 @@ from ._common import (
     CLOSED_LOOP_DTYPE,
     CLOSED_LOOP_FIELDS,
     OPEN_LOOP_DTYPE,
+    REFERENCE_PREVIEW,
     as_structured,
     open_loop_grid,
     prepare_closed_loop,
@@ -63,38 +64,48 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
     rows[:, 0] = setup.time
     rows[:, 1] = setup.y_d
     y_ref = setup.y_ref
+    # the stamped preview as the FMU sees it: its time stamps (and t_meas) count from the
+    # second sample on, when they have advanced by h; it is REFERENCE_PREVIEW samples ahead
+    # of the measurement (every master here exchanges at communication points)
+    y_preview = setup.y_preview if setup.y_preview is not None else [0.0] * n
+    lead = REFERENCE_PREVIEW if setup.y_preview is not None else 0
     out = plant.output
-    c_step, p_step = ctrl.step, plant.step
-    published = ctrl.output          # the controller's outputs before its first step
+    step_input, p_step = ctrl.step_input, plant.step
+
+    def c_step(k, y_meas):
+        return step_input(y_ref[k], y_meas, y_preview[k], lead if k > 0 else 0)[:8]
+
+    published = ctrl.output[:8]      # the controller's outputs before its first step
     if not setup.feedthrough:
         # v computed from the inputs of t_k is published at t_(k+1) (FMU default)
         for k in samples:
             rows[k, 2] = out.y
             rows[k, 3] = out.y_meas
             rows[k, 4:] = published
-            applied = published.v
-            published = c_step(y_ref[k], out.y_meas)
+            applied = published[0]
+            published = c_step(k, out.y_meas)
             out = p_step(applied)
     elif setup.master == "gauss-seidel":
         # direct feedthrough read after the inputs are set: v(k) from the inputs of t_k
         for k in samples:
-            c = c_step(y_ref[k], out.y_meas)
+            c = c_step(k, out.y_meas)
             rows[k, 2] = out.y
             rows[k, 3] = out.y_meas
             rows[k, 4:] = c
-            out = p_step(c.v)
+            out = p_step(c[0])
     else:
         # direct feedthrough under a Jacobi master: the v read at t_k is a peek with the
-        # inputs held from t_(k-1); the step then commits v from the inputs of t_k
+        # inputs held from t_(k-1) (their stamps have not advanced since: no stamped
+        # preview); the step then commits v from the inputs of t_k
         held = (0.0, 0.0)
         for k in samples:
-            c = ctrl.peek(*held)
+            c = ctrl.peek(*held)[:8]
             rows[k, 2] = out.y
             rows[k, 3] = out.y_meas
             rows[k, 4:] = c
             held = (y_ref[k], out.y_meas)
-            c_step(*held)
-            out = p_step(c.v)
+            c_step(k, out.y_meas)
+            out = p_step(c[0])
     return as_structured(rows, CLOSED_LOOP_DTYPE)
 
 

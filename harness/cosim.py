@@ -6,9 +6,14 @@ Semantics: both FMUs step on the grid ``t_k = k h``.  PiezoStage has no
 direct feedthrough: at ``t_k`` it reports ``y(k)``, ``y_meas(k)``, ``x(k)``
 and ``u = u(k-1)``; the ``v`` set at ``t_k`` acts over ``[t_k, t_k + h)``.
 The default controller has none either: a doStep from ``t_k`` samples
-``y_ref = y_d(k+d)`` and ``y_meas(k)`` and publishes the control it computed
+``y_ref``, ``y_meas(k)`` and the time stamps and publishes the control it computed
 at ``t_(k+1)``, so the plant applies it over ``[t_(k+1), t_(k+2))`` and the
-loop delay is d = 2 (``mv.delay = 1``).
+loop delay is d = 2, which the controller detects (``mv.delay = -1``).
+
+Both masters also wire what the closed-loop SSP wires: the plant's ``t_meas`` to the
+controller's ``t_meas``, and the stamped preview of ReferenceSignal (``y_preview =
+y_d(k + 4)``, ``t_preview = (k + 4) h``; computed here) to the controller's ``y_preview``
+and ``t_preview``.
 
 Both masters exchange values at communication points only:
 
@@ -72,6 +77,7 @@ __all__ = [
     "fmu_path",
     "simulate_closed_loop",
     "simulate_open_loop",
+    "TIMING_OUTPUTS",
 ]
 
 PLANT_MODEL = "PiezoStage"
@@ -547,7 +553,7 @@ def _step_error(inst, what, k, h, exc):
 def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
                          plant_params=None, controller_params=None, fmu_dir=None,
                          duration=None, registry=None, step_order="plant-first", progress=None,
-                         fmi_version=2):
+                         fmi_version=2, timing=None):
     """Run a tracking scenario through both FMUs with fmpy.
 
     Parameters
@@ -558,8 +564,9 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
         Force the controller's RLS on (True) or off (False); ``None`` keeps the
         scenario's / FMU's setting (on by default).
     preview : bool
-        Feed the controller ``y_ref = y_d(k + d)`` (True, docs/model.md, controller)
-        or ``y_d(k)`` (False; gives a lag error).
+        Feed the controller ``y_ref = y_d(k + lead)`` and the stamped preview (True,
+        docs/model.md, controller) or ``y_ref = y_d(k)`` and no stamped preview (False;
+        gives a lag error).
     master : {"gauss-seidel", "jacobi"}
         Co-simulation algorithm (see the module docstring); both run the same
         loop with the default controller.
@@ -568,6 +575,10 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
     fmu_dir : str or Path, optional
         Folder holding ``PiezoStage.fmu`` and ``AdaptiveCompoundController.fmu``
         (default ``build/fmus`` or ``$PIEZO_FMU_DIR``).
+    timing : dict, optional
+        When given, filled at the end of the run with the controller's timing outputs
+        ``loop_delay``, ``loop_delay_time``, ``preview_lead``, ``meas_offset`` (what it
+        detected; docs/cosimulation.md).
     duration : float, optional
         Override the scenario's duration [s].
     registry : dict, optional
@@ -604,10 +615,26 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
     setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
                                 plant_params=plant_params, controller_params=controller_params,
                                 duration=duration, registry=registry, step_order=step_order)
-    return _simulate(setup, fmu_dir, progress=progress, fmi_version=_check_fmi_version(fmi_version))
+    return _simulate(setup, fmu_dir, progress=progress, fmi_version=_check_fmi_version(fmi_version),
+                     timing=timing)
 
 
-def _simulate(setup, fmu_dir=None, block=0, block_ns=None, progress=None, fmi_version=2):
+#: the controller's outputs that say what it detected (Integer, except loop_delay_time)
+TIMING_OUTPUTS = ("loop_delay", "loop_delay_time", "preview_lead", "meas_offset")
+
+
+def _read_timing(inst):
+    """The controller's TIMING_OUTPUTS now, as a dict (ints and a float [s])."""
+    f, info = inst.fmu, inst.info
+    ints = [info.vr(n) for n in TIMING_OUTPUTS if n != "loop_delay_time"]
+    values = f.getInt32(ints) if inst.fmi3 else f.getInteger(ints)
+    get_real = f.getFloat64 if inst.fmi3 else f.getReal
+    out = dict(zip([n for n in TIMING_OUTPUTS if n != "loop_delay_time"], (int(v) for v in values)))
+    out["loop_delay_time"] = float(get_real([info.vr("loop_delay_time")])[0])
+    return {n: out[n] for n in TIMING_OUTPUTS}
+
+
+def _simulate(setup, fmu_dir=None, block=0, block_ns=None, progress=None, fmi_version=2, timing=None):
     """Run a prepared closed loop (see :func:`_run_closed_loop` for the timing and progress
     arguments)."""
     p_info = _load(fmu_path(PLANT_MODEL, fmu_dir, fmi_version), fmi_version)
@@ -625,6 +652,8 @@ def _simulate(setup, fmu_dir=None, block=0, block_ns=None, progress=None, fmi_ve
         plant.initialize(setup.plant_params, stop)
         ctrl.initialize(setup.controller_params, stop)
         _run_closed_loop(plant, ctrl, setup, rows, block, block_ns, progress)
+        if timing is not None:
+            timing.update(_read_timing(ctrl))
     finally:
         if ctrl is not None:
             ctrl.close()
@@ -679,8 +708,9 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
     """Run the whole loop into ``rows`` (n x 12, the CLOSED_LOOP_FIELDS).
 
     Every value goes straight from the FMU into its place in memory: the plant
-    writes ``y_meas, y`` of sample k next to ``y_ref(k)`` in an exchange array,
-    whose first two entries are then exactly the controller's inputs; the
+    writes ``y_meas, t_meas, y`` of sample k next to ``y_ref, y_preview, t_preview`` of
+    sample k in an exchange array, whose first five entries are then exactly the
+    controller's inputs; the
     controller writes ``v, q, a1..b2, pred_error`` into row k, and the plant
     takes its ``v`` from there. ``block``/``block_ns``: thread CPU time [ns]
     of every complete block of ``block`` samples is appended to the list.
@@ -705,16 +735,21 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
         keep.append(arr)
         return ctypes.addressof(arr)
 
-    vr_p_out = addr([pi.vr("y_meas"), pi.vr("y")])
+    vr_p_out = addr([pi.vr("y_meas"), pi.vr("t_meas"), pi.vr("y")])
     vr_p_in = addr([pi.vr("v")])
-    vr_c_in = addr([ci.vr("y_ref"), ci.vr("y_meas")])
+    vr_c_in = addr([ci.vr(name) for name in ("y_ref", "y_preview", "t_preview", "y_meas", "t_meas")])
     vr_c_out = addr([ci.vr(name) for name in _CTRL_OUTPUTS])
     vr_c_sat = addr([ci.vr("saturated")])
     n_c = len(_CTRL_OUTPUTS)
 
     n, h = setup.n, setup.h
-    exchange = np.zeros((n, 3))          # y_ref(k), y_meas(k), y(k)
+    # y_ref, y_preview, t_preview, y_meas, t_meas, y of sample k; without preview the
+    # stamped preview stays 0 (a time stamp that does not advance: not connected)
+    exchange = np.zeros((n, 6))
     exchange[:, 0] = setup.y_ref
+    if setup.y_preview is not None:
+        exchange[:, 1] = setup.y_preview
+        exchange[:, 2] = setup.t_preview
     # fmi2Boolean is an int, fmi3Boolean a C bool (one byte)
     saturated = np.zeros(n, dtype=np.uint8 if plant.fmi3 else np.dtype(fmi2Boolean))
     row_bytes, ex_bytes, sat_bytes = rows.strides[0], exchange.strides[0], saturated.strides[0]
@@ -737,7 +772,7 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
         for k in range(k0, min(k0 + block, n)):
             ex = ex0 + k * ex_bytes
             out = rows_v + k * row_bytes
-            status = p_get(pc, vr_p_out, 2, ex + 8)                    # y_meas(k), y(k)
+            status = p_get(pc, vr_p_out, 3, ex + 24)                   # y_meas, t_meas, y
             if status > 1:
                 inst, stage = plant, GET
                 break
@@ -755,13 +790,13 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
                 if status > 1:
                     inst, stage = plant, SET
                     break
-                status = c_set(cc, vr_c_in, 2, ex)                      # y_ref(k), y_meas(k)
+                status = c_set(cc, vr_c_in, 5, ex)                      # y_ref .. t_meas
                 if status > 1:
                     inst, stage = ctrl, SET
                     break
             else:
                 # Gauss-Seidel in ModelStructure order: plant -> controller -> plant
-                status = c_set(cc, vr_c_in, 2, ex)
+                status = c_set(cc, vr_c_in, 5, ex)
                 if status > 1:
                     inst, stage = ctrl, SET
                     break
@@ -803,8 +838,8 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
         if progress is not None:
             progress(min(k0 + block, n), n)
     del keep
-    rows[:, 2] = exchange[:, 2]
-    rows[:, 3] = exchange[:, 1]
+    rows[:, 2] = exchange[:, 5]
+    rows[:, 3] = exchange[:, 3]
     rows[:, -1] = saturated != 0
     if status > 1:
         raise _step_error(inst, stage, k, h, FMUError(f"{stage} returned status {status}"))

@@ -178,18 +178,21 @@ computes the voltage, PiezoStage moves. The connections (rows of this FMU in bol
 {''.join(rows)}</table>
 <ul>
 <li>Step all three FMUs with the same fixed communication step <code>h</code> = 0.5 ms
-(the <code>h</code> parameter of each; a communication step may be any whole multiple of
-<code>h</code>, the inputs are then held).</li>
-<li>Exchange values at the communication points: read every output at <code>t_k</code>,
-set every input, then call <code>{do_step}</code> for each FMU, in any order. No output
-depends directly on an input (the ModelStructure says so), so Jacobi, Gauss-Seidel, SSP
-players and container FMUs all run the same loop. The loop delay from the controller's
-virtual input to the displacement is then d = 2 samples, the default
-<code>mv.delay</code> = 1 of the controller and the default <code>lead</code> = 2 of
-ReferenceSignal.</li>
-<li>A master that hands an FMU another FMU's <em>post-step</em> output inside the same
-step runs a loop with one sample less delay: set the controller's <code>mv.delay</code>
-= 0 and ReferenceSignal's <code>lead</code> = 1 there.</li>
+(the <code>h</code> parameter of each). The controller computes one control per
+measurement: it refuses a longer step at the first <code>{do_step}</code>, naming it and
+<code>h</code>.</li>
+<li>Wire every pair of equal names, as in the table, the time stamps included
+(<code>t_meas</code>, <code>t_preview</code>). With the defaults the controller then finds
+its own timing under any master: it detects the loop delay (2 samples where values are
+exchanged at communication points, 1 where a master hands an FMU another's
+<em>post-step</em> output, one more for a plant with an input delay) within a few
+milliseconds, with a start-up law that is stable for each, and aligns the stamped preview
+with it. Its outputs <code>loop_delay</code>, <code>loop_delay_time</code>,
+<code>preview_lead</code> and <code>meas_offset</code> say what it found.</li>
+<li>Wired with <code>y_ref</code> and <code>y_meas</code> alone, the controller still
+detects its delay and takes <code>y_ref</code> as the reference d samples ahead
+(ReferenceSignal's <code>lead</code>, 2 by default). <code>mv.delay</code> = 0..8 sets
+d = 1 + <code>mv.delay</code> instead of detecting it.</li>
 <li>In Simulink (FMU import block), Dymola or any SSP tool: three FMU blocks with the
 sample time <code>h</code>, wired as in the table. The project's repository ships the
 same loop as an SSP 1.0 file (<code>PiezoStageClosedLoop.ssp</code>) with the mismatch

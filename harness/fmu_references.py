@@ -62,13 +62,16 @@ EXPERIMENTS = {
         "closed_loop_mismatch_1_5_10hz_d1",
         "The controller with mv.delay = 0 (d = 1) replaying the inputs it received in a closed "
         "loop with the mismatched plant tracking 10 um at 1, 5 and 10 Hz, run by a master that "
-        "hands the plant the controller's post-step output: y_ref = y_d(t + h) and the plant's "
-        "noisy y_meas. The RLS adapts; the outputs include the estimates. (The default d = 2 "
-        "is not replayable: without the plant's feedback its law is unstable and a last-bit "
-        "difference grows to volts within 50 samples.)"),
+        "hands the plant the controller's post-step output: y_ref = y_d(t + h), the plant's "
+        "noisy y_meas and its time stamp t_meas = t, and ReferenceSignal's stamped preview "
+        "y_preview = y_d(t + 4 h), t_preview = t + 4 h (used from the second sample on: "
+        "preview_lead = 4). The RLS adapts; the outputs include the estimates. (The detected "
+        "delay and the default d = 2 are not replayable: without the plant's feedback a "
+        "last-bit difference grows to volts within 50 samples.)"),
     "ReferenceSignal": (
         "sines_1_5_10hz",
-        "Three 10 um tones at 1, 5 and 10 Hz with the preview lead = 2 samples."),
+        "Three 10 um tones at 1, 5 and 10 Hz with the preview lead = 2 samples and the "
+        "stamped preview 4 samples ahead."),
 }
 #: the experiments of an exported (parameterised) FMU: they run its own start values
 EXPORT_EXPERIMENTS = {
@@ -83,8 +86,9 @@ EXPORT_EXPERIMENTS = {
         "for) and mv.delay = 0 (d = 1), replaying the inputs it received in a closed loop with "
         "that stage (with a 2 nm resolution, 1 nm rms sensor, seed 1) tracking 10 um at 1, 5 and "
         "10 Hz, run by a master that hands the plant the controller's post-step output: "
-        "y_ref = y_d(t + h) and the plant's y_meas. The RLS adapts; the outputs include the "
-        "estimates."),
+        "y_ref = y_d(t + h), the plant's y_meas and its time stamp t_meas = t, and the stamped "
+        "preview y_preview = y_d(t + 4 h), t_preview = t + 4 h (used from the second sample on). "
+        "The RLS adapts; the outputs include the estimates."),
 }
 #: the sensor of the exported controller's closed loop
 EXPORT_SENSOR = {"sensor.resolution": 0.002, "sensor.noise_rms": 0.001, "sensor.seed": 1}
@@ -166,7 +170,8 @@ def piezo_stage(start_values=None, plant_start_values=None):
             rows[name].append(getattr(out, name))
         if k < n:
             out = plant.step(v[k])
-    return params, {"time": time, "v": v}, {"time": time, **rows}
+    # t_meas: the time of the outputs, t0 + k h
+    return params, {"time": time, "v": v}, {"time": time, **rows, "t_meas": list(time)}
 
 
 def adaptive_compound_controller(start_values=None, plant_start_values=None):
@@ -197,22 +202,33 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
     plant_params = (dict(scenario.plant) if start_values is None
                     else dict(plant_start_values or {}, **EXPORT_SENSOR))
     ctrl = core.Controller(dict(base, **params, h=STEP))
-    d = 1 + params["mv.delay"]
+    d, preview = 1 + params["mv.delay"], 4
     y_ref = [float(x) for x in scenario.signal.evaluate([(k + d) * STEP for k in range(n + 1)])]
+    y_preview = [float(x) for x in scenario.signal.evaluate([(k + preview) * STEP for k in range(n + 1)])]
+    t_preview = [(k + preview) * STEP for k in range(n + 1)]
     plant = core.Plant(dict(plant_params, h=STEP))
-    stimuli = {"time": time, "y_ref": y_ref, "y_meas": []}
+    stimuli = {"time": time, "y_ref": y_ref, "y_meas": [], "y_preview": y_preview,
+               "t_preview": t_preview, "t_meas": list(time)}
     fields = (("v", "v"), ("q", "q"), ("est.a1", "a1"), ("est.a2", "a2"), ("est.b1", "b1"),
               ("est.b2", "b2"), ("pred_error", "pred_error"), ("saturated", "saturated"))
-    refs = {"time": time, **{name: [] for name, _ in fields}}
-    published, out = ctrl.output, plant.output
+    refs = {"time": time, **{name: [] for name, _ in fields},
+            "loop_delay": [], "loop_delay_time": [], "preview_lead": [], "meas_offset": []}
+    published, out, lead_used = ctrl.output, plant.output, 0
     for k in range(n + 1):
         stimuli["y_meas"].append(out.y_meas)
         for name, field in fields:
             value = getattr(published, field)
             refs[name].append(int(value) if name == "saturated" else value)
+        # the set delay holds from t0; the stamps count once they have advanced (sample 1 on)
+        refs["loop_delay"].append(d)
+        refs["loop_delay_time"].append(0.0)
+        refs["preview_lead"].append(lead_used)
+        refs["meas_offset"].append(0)
         if k < n:
-            published = ctrl.step(y_ref[k], out.y_meas)     # published at t_(k+1) ...
-            out = plant.step(published.v)                   # ... applied over [t_k, t_(k+1))
+            lead = preview if k > 0 else 0
+            published = ctrl.step_input(y_ref[k], out.y_meas, y_preview[k], lead)  # published at t_(k+1) ...
+            out = plant.step(published.v)                                         # ... applied over [t_k, t_(k+1))
+            lead_used = lead if published.preview else 0
     return params, stimuli, refs
 
 
@@ -220,7 +236,7 @@ def reference_signal(start_values=None, plant_start_values=None):
     """(parameters, no stimuli, references) of the ReferenceSignal experiment (never exported)."""
     from . import core
 
-    params = {"lead": 2}
+    params = {"lead": 2, "preview": 4}
     for i, f in enumerate((1.0, 5.0, 10.0), start=1):
         params[f"amplitude[{i}]"] = 10.0
         params[f"frequency[{i}]"] = f
@@ -229,6 +245,7 @@ def reference_signal(start_values=None, plant_start_values=None):
     lib.piezo_reference_default_params(p)
     p.h = STEP
     p.lead = params["lead"]
+    p.preview = params["preview"]
     for i in range(3):
         p.amplitude[i] = params[f"amplitude[{i + 1}]"]
         p.frequency[i] = params[f"frequency[{i + 1}]"]
@@ -238,10 +255,11 @@ def reference_signal(start_values=None, plant_start_values=None):
         raise RuntimeError("piezo_reference_init refused the experiment's parameters")
     n = int(round(DURATION / STEP))
     time = _grid(n)
-    refs = {"time": time, "y_d": [], "y_ref": []}
+    refs = {"time": time, "y_d": [], "y_ref": [], "y_preview": [], "t_preview": []}
     for k in range(n + 1):
-        refs["y_d"].append(ref.y_d)
-        refs["y_ref"].append(ref.y_ref)
+        for name in refs:
+            if name != "time":
+                refs[name].append(getattr(ref, name))
         if k < n and lib.piezo_reference_step(ref) != core.PIEZO_OK:
             raise RuntimeError(f"piezo_reference_step failed at sample {k}")
     return params, None, refs

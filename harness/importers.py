@@ -46,7 +46,8 @@ __all__ = [
     "MissingImporterError",
 ]
 
-IMPORTER_FIELDS = ("time", "y_d", "y", "y_meas", "v")
+IMPORTER_FIELDS = ("time", "y_d", "y", "y_meas", "v", "loop_delay", "loop_delay_time", "preview_lead",
+                   "meas_offset")
 _DTYPE = np.dtype([(f, "f8") for f in IMPORTER_FIELDS])
 #: FMU files of the loop, in the topological order of its links (reference -> controller -> plant)
 CONTAINER_ORDER = ("ReferenceSignal.fmu", "AdaptiveCompoundController.fmu", "PiezoStage.fmu")
@@ -63,7 +64,8 @@ def _fmu_dir(fmu_dir):
     return Path(fmu_dir) if fmu_dir is not None else default_fmu_dir()
 
 
-def simulate_ssp_scenario(scenario, *, fmu_dir=None, registry=None, workdir=None):
+def simulate_ssp_scenario(scenario, *, fmu_dir=None, registry=None, workdir=None, plant_params=None,
+                          controller_params=None, reference_params=None):
     """Write the closed-loop SSP of a scenario and run it with fmpy's SSP player.
 
     Parameters
@@ -74,16 +76,26 @@ def simulate_ssp_scenario(scenario, *, fmu_dir=None, registry=None, workdir=None
     registry : dict, optional
     workdir : str or Path, optional
         Where the SSP is written (default: a temporary folder, removed).
+    plant_params, controller_params, reference_params : dict, optional
+        Overrides on top of the scenario's, written into the bound SSV.
 
     Returns
     -------
     ndarray
-        ``time, y_d, y, y_meas, v`` at ``t_1 .. t_n`` (the player reports the values
-        after each step; it has no row for the initial values).
+        ``time, y_d, y, y_meas, v`` and the controller's timing outputs (``loop_delay``,
+        ``loop_delay_time``, ``preview_lead``, ``meas_offset``) at ``t_1 .. t_n`` (the player
+        reports the values after each step; it has no row for the initial values).
     """
+    import dataclasses
+
     from .ssp import parameter_set_for_scenario, simulate_closed_loop_ssp, write_closed_loop_ssp
 
     pset = parameter_set_for_scenario(scenario, registry)
+    values = dict(pset.values)
+    for comp, over in (("plant", plant_params), ("controller", controller_params),
+                       ("reference", reference_params)):
+        values.update({f"{comp}.{k}": v for k, v in (over or {}).items()})
+    pset = dataclasses.replace(pset, values=values)
     tmp = None
     if workdir is None:
         tmp = workdir = tempfile.mkdtemp(prefix="harness_ssp_")
@@ -102,6 +114,8 @@ def simulate_ssp_scenario(scenario, *, fmu_dir=None, registry=None, workdir=None
     out["y"] = res["plant.y"]
     out["y_meas"] = res["plant.y_meas"]
     out["v"] = res["controller.v"]       # published at t_(k+1): applied over [t_(k+1), t_(k+2))
+    for name in IMPORTER_FIELDS[5:]:
+        out[name] = res[f"controller.{name}"]
     return out
 
 
@@ -124,8 +138,8 @@ def _start_text(value):
 
 
 def build_closed_loop_container(scenario, path, *, sequential=False, order=CONTAINER_ORDER,
-                                controller_params=None, reference_params=None, fmu_dir=None,
-                                registry=None):
+                                controller_params=None, reference_params=None, plant_params=None,
+                                fmu_dir=None, registry=None):
     """Build an FMU container (fmu-manipulation-toolbox) of the closed loop of a scenario.
 
     Parameters
@@ -138,8 +152,9 @@ def build_closed_loop_container(scenario, path, *, sequential=False, order=CONTA
         The container's sequential mode (true Gauss-Seidel in ``order``); parallel otherwise.
     order : sequence of str
         The embedded FMU files in the container's order.
-    controller_params, reference_params : dict, optional
-        Overrides on top of the scenario's (e.g. ``{"mv.delay": 0}``, ``{"lead": 0}``).
+    controller_params, reference_params, plant_params : dict, optional
+        Overrides on top of the scenario's (e.g. ``{"mv.delay": 0}``, ``{"lead": 0}``,
+        ``{"tf.delay": 1}``).
     fmu_dir : str or Path, optional
     registry : dict, optional
 
@@ -149,7 +164,8 @@ def build_closed_loop_container(scenario, path, *, sequential=False, order=CONTA
     """
     import logging
 
-    from .ssp import parameter_set_for_scenario
+    from .cosim import TIMING_OUTPUTS
+    from .ssp import SSP_CONNECTIONS, parameter_set_for_scenario
 
     FMUContainer = _container_class()
     pset = parameter_set_for_scenario(scenario, registry)
@@ -159,6 +175,7 @@ def build_closed_loop_container(scenario, path, *, sequential=False, order=CONTA
         starts[comp][var] = value
     starts["controller"].update(controller_params or {})
     starts["reference"].update(reference_params or {})
+    starts["plant"].update(plant_params or {})
     path = Path(path)
     work = Path(tempfile.mkdtemp(prefix="harness_container_"))
     quiet = logging.getLogger("fmu_manipulation_toolbox")
@@ -171,11 +188,11 @@ def build_closed_loop_container(scenario, path, *, sequential=False, order=CONTA
         c = FMUContainer(path.stem, work, fmi_version=2)
         for fmu in order:
             c.get_fmu(fmu)
-        c.add_link("ReferenceSignal.fmu", "y_ref", "AdaptiveCompoundController.fmu", "y_ref")
-        c.add_link("PiezoStage.fmu", "y_meas", "AdaptiveCompoundController.fmu", "y_meas")
-        c.add_link("AdaptiveCompoundController.fmu", "v", "PiezoStage.fmu", "v")
+        for a, ac, b, bc in SSP_CONNECTIONS:
+            c.add_link(_FMU_OF[a], ac, _FMU_OF[b], bc)
         for fmu, port in (("ReferenceSignal.fmu", "y_d"), ("PiezoStage.fmu", "y"),
-                          ("PiezoStage.fmu", "y_meas"), ("AdaptiveCompoundController.fmu", "v")):
+                          ("PiezoStage.fmu", "y_meas"), ("AdaptiveCompoundController.fmu", "v"),
+                          *(("AdaptiveCompoundController.fmu", name) for name in TIMING_OUTPUTS)):
             c.add_output(fmu, port, port)
         for comp, values in starts.items():
             for var, value in values.items():
@@ -203,13 +220,14 @@ def simulate_container(container_path, stop_time, step_size, *, sequential=False
     Returns
     -------
     ndarray
-        ``time, y_d, y, y_meas, v`` at ``t_0 .. t_(n-1)``.
+        ``time, y_d, y, y_meas, v`` and the controller's timing outputs (with ``v``'s
+        timing) at ``t_0 .. t_(n-1)``.
     """
     from fmpy import simulate_fmu
 
     n = int(round(stop_time / step_size))
     res = simulate_fmu(str(container_path), stop_time=stop_time, step_size=step_size,
-                       output_interval=step_size, output=["y_d", "y", "y_meas", "v"])
+                       output_interval=step_size, output=list(IMPORTER_FIELDS[1:]))
     if res.shape[0] < n + 1 or not math.isclose(res["time"][n], stop_time, rel_tol=1e-9):
         raise RuntimeError(f"{container_path}: expected {n + 1} rows up to t = {stop_time}, "
                            f"got {res.shape[0]}")
@@ -218,4 +236,6 @@ def simulate_container(container_path, stop_time, step_size, *, sequential=False
     for f in ("y_d", "y", "y_meas"):
         out[f] = res[f][:n]
     out["v"] = res["v"][1:n + 1] if sequential else res["v"][:n]
+    for name in IMPORTER_FIELDS[5:]:
+        out[name] = res[name][1:n + 1] if sequential else res[name][:n]
     return out

@@ -3,8 +3,8 @@
 A small C co-simulation master loads the binaries of both FMUs through the FMI 2.0
 API and runs the loop of :func:`harness.cosim.simulate_closed_loop` at native speed:
 the same schedule (Gauss-Seidel in ModelStructure order, either doStep order, or
-textbook Jacobi), the same ``y_ref`` (computed here, with preview), the same result,
-bit for bit. The FMUs are the same files the fmpy master runs (extracted once per
+textbook Jacobi), the same ``y_ref`` and stamped preview (computed here), the same time
+stamps (the plant's ``t_meas`` to the controller), the same result, bit for bit. The FMUs are the same files the fmpy master runs (extracted once per
 process by :mod:`harness.cosim`).
 
 FMU errors never end the process: a failing call stops the run and comes back with
@@ -151,7 +151,10 @@ class NativeLoop:
         pi, ci = self.plant_info, self.controller_info
         refs = ffi.new("piezo_runner_refs *")
         refs.plant_y, refs.plant_y_meas, refs.plant_v = pi.vr("y"), pi.vr("y_meas"), pi.vr("v")
+        refs.plant_t_meas = pi.vr("t_meas")
         refs.ctrl_y_ref, refs.ctrl_y_meas = ci.vr("y_ref"), ci.vr("y_meas")
+        refs.ctrl_y_preview, refs.ctrl_t_preview = ci.vr("y_preview"), ci.vr("t_preview")
+        refs.ctrl_t_meas = ci.vr("t_meas")
         for i, name in enumerate(_CTRL_REALS):
             refs.ctrl_reals[i] = ci.vr(name)
         refs.ctrl_saturated = ci.vr("saturated")
@@ -228,11 +231,16 @@ class NativeLoop:
         ffi, lib, r, res = self._ffi, self._lib, self._runner, self._result
         n, h = setup.n, setup.h
         y_ref = np.ascontiguousarray(setup.y_ref, dtype=np.float64)
+        stamped = setup.y_preview is not None
+        y_preview = np.ascontiguousarray(setup.y_preview if stamped else [], dtype=np.float64)
+        t_preview = np.ascontiguousarray(setup.t_preview if stamped else [], dtype=np.float64)
         master = 1 if setup.master == "jacobi" else 0
         order = 1 if setup.step_order == "controller-first" else 0
         block_ns = np.zeros(n // block if block > 0 else 0)
         timing = ffi.from_buffer("double[]", block_ns) if block_ns.size else ffi.NULL
         st = lib.piezo_runner_run(r, n, h, master, order, ffi.from_buffer("double[]", y_ref),
+                                  ffi.from_buffer("double[]", y_preview) if stamped else ffi.NULL,
+                                  ffi.from_buffer("double[]", t_preview) if stamped else ffi.NULL,
                                   rows_ptr, stride, block if block_ns.size else 0, timing, res)
         self.last_block_ns = block_ns if block_ns.size else None
         if st > 1:

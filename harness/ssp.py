@@ -4,8 +4,11 @@ An SSP is a zip with ``SystemStructure.ssd`` (the system: components,
 connectors, connections, default experiment) and ``resources/`` (the FMUs
 and parameter files, SSV).  :func:`write_closed_loop_ssp` writes::
 
-    reference (ReferenceSignal.fmu)   y_ref  --> controller.y_ref
-    plant (PiezoStage.fmu)            y_meas --> controller.y_meas
+    reference (ReferenceSignal.fmu)   y_ref     --> controller.y_ref
+                                      y_preview --> controller.y_preview
+                                      t_preview --> controller.t_preview
+    plant (PiezoStage.fmu)            y_meas    --> controller.y_meas
+                                      t_meas    --> controller.t_meas
     controller (AdaptiveCompoundController.fmu)  v --> plant.v
 
 with one SSV per parameter set (names ``<component>.<variable>``, bound at
@@ -13,13 +16,14 @@ the system level; the first one is bound, the others ship beside it), a
 default experiment over the scenario's duration, and the OpenModelica
 annotation that makes OMSimulator's fixed-step master step at h.
 
-The loop needs a master that exchanges values at communication points with a
-fixed step h (what every SSP player, Jacobi master and container in parallel
-mode does): the default controller has no direct feedthrough and publishes
-the control of the step that sampled its inputs, so the loop delay is d = 2,
-and the reference's ``lead`` is 2.  :func:`simulate_closed_loop_ssp` runs the
-file with :func:`fmpy.ssp.simulation.simulate_ssp`, applying the bound SSV
-(fmpy's player does not apply bindings by itself).
+The loop needs a master with a fixed communication step h. The controller detects
+the loop delay the master's schedule makes (d = 2 where values are exchanged at
+communication points, as every SSP player, Jacobi master and container in parallel
+mode does; d = 1 where the plant gets the controller's post-step output) and, from
+the time stamps ``t_preview`` and ``t_meas``, aligns the stamped preview with it
+(docs/cosimulation.md).  :func:`simulate_closed_loop_ssp` runs the file with
+:func:`fmpy.ssp.simulation.simulate_ssp`, applying the bound SSV (fmpy's player does
+not apply bindings by itself).
 
 The build writes ``build/fmus/PiezoStageClosedLoop.ssp`` with
 ``python -m harness.ssp --fmu-dir build/fmus --out build/fmus/PiezoStageClosedLoop.ssp``.
@@ -53,24 +57,38 @@ SSP_SCENARIO = "mismatch_1_5_10hz"
 #: component name -> (FMU file, connectors as (name, kind, SSP type, unit))
 SSP_COMPONENTS = {
     "reference": ("ReferenceSignal.fmu", (("y_d", "output", "Real", "um"),
-                                          ("y_ref", "output", "Real", "um"))),
+                                          ("y_ref", "output", "Real", "um"),
+                                          ("y_preview", "output", "Real", "um"),
+                                          ("t_preview", "output", "Real", "s"))),
     "controller": ("AdaptiveCompoundController.fmu", (("y_ref", "input", "Real", "um"),
                                                       ("y_meas", "input", "Real", "um"),
+                                                      ("y_preview", "input", "Real", "um"),
+                                                      ("t_preview", "input", "Real", "s"),
+                                                      ("t_meas", "input", "Real", "s"),
                                                       ("v", "output", "Real", "V"),
                                                       ("q", "output", "Real", "um"),
-                                                      ("pred_error", "output", "Real", "um"))),
+                                                      ("pred_error", "output", "Real", "um"),
+                                                      ("loop_delay", "output", "Integer", ""),
+                                                      ("loop_delay_time", "output", "Real", "s"),
+                                                      ("preview_lead", "output", "Integer", ""),
+                                                      ("meas_offset", "output", "Integer", ""))),
     "plant": ("PiezoStage.fmu", (("v", "input", "Real", "V"),
                                  ("y", "output", "Real", "um"),
-                                 ("y_meas", "output", "Real", "um"))),
+                                 ("y_meas", "output", "Real", "um"),
+                                 ("t_meas", "output", "Real", "s"))),
 }
 #: (start component, connector, end component, connector)
 SSP_CONNECTIONS = (
     ("reference", "y_ref", "controller", "y_ref"),
+    ("reference", "y_preview", "controller", "y_preview"),
+    ("reference", "t_preview", "controller", "t_preview"),
     ("plant", "y_meas", "controller", "y_meas"),
+    ("plant", "t_meas", "controller", "t_meas"),
     ("controller", "v", "plant", "v"),
 )
 _UNITS = {"um": '<ssc:BaseUnit m="1" factor="1e-06"/>',
-          "V": '<ssc:BaseUnit kg="1" m="2" s="-3" A="-1"/>'}
+          "V": '<ssc:BaseUnit kg="1" m="2" s="-3" A="-1"/>',
+          "s": '<ssc:BaseUnit s="1"/>'}
 _NS = ('xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
        'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
        'xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" '
@@ -105,7 +123,8 @@ class SspParameterSet:
 
 def parameter_set_for_scenario(name, registry=None):
     """The SSV of a sines tracking scenario: its plant and controller overrides and its
-    reference as ReferenceSignal parameters, ``lead`` = the controller's d.
+    reference as ReferenceSignal parameters; ``lead`` = 1 + ``mv.delay`` when the scenario
+    sets ``mv.delay`` (the stamped preview needs no setting).
 
     Parameters
     ----------
@@ -147,7 +166,9 @@ def parameter_set_for_scenario(name, registry=None):
         values[f"reference.amplitude[{i}]"] = float(a)
         values[f"reference.frequency[{i}]"] = float(f)
         values[f"reference.phase[{i}]"] = float(p)
-    values["reference.lead"] = 1 + int(sc.controller.get("mv.delay", DEFAULT_MV_DELAY))
+    mv_delay = int(sc.controller.get("mv.delay", DEFAULT_MV_DELAY))
+    if mv_delay >= 0:
+        values["reference.lead"] = 1 + mv_delay
     return SspParameterSet(sc.name, sc.description, values, float(sc.duration),
                            float(sc.step_size))
 
@@ -179,9 +200,9 @@ def _ssd_text(bound, step_size, stop_time):
     c.append('<?xml version="1.0" encoding="UTF-8"?>')
     c.append(f'<ssd:SystemStructureDescription {_NS} name="PiezoStageClosedLoop" version="1.0">')
     c.append('  <ssd:System name="PiezoStageClosedLoop" description='
-             + quoteattr("Piezo stage closed loop: reference with preview, adaptive compound "
-                         "controller, stage. Fixed communication step h; exchange at "
-                         "communication points (loop delay d = 2).") + '>')
+             + quoteattr("Piezo stage closed loop: reference with stamped preview, adaptive "
+                         "compound controller, stage. Fixed communication step h; the controller "
+                         "detects the loop delay (1 to 3 samples) and aligns the preview.") + '>')
     c.append('    <ssd:ParameterBindings>')
     c.append(f'      <ssd:ParameterBinding source="resources/{bound}.ssv"/>')
     c.append('    </ssd:ParameterBindings>')
@@ -191,7 +212,8 @@ def _ssd_text(bound, step_size, stop_time):
                  f'source="resources/{fmu}">')
         c.append('        <ssd:Connectors>')
         for cname, kind, typ, unit in connectors:
-            c.append(f'          <ssd:Connector name="{cname}" kind="{kind}"><ssc:{typ} unit="{unit}"/>'
+            unit_attr = f' unit="{unit}"' if unit else ""
+            c.append(f'          <ssd:Connector name="{cname}" kind="{kind}"><ssc:{typ}{unit_attr}/>'
                      f'</ssd:Connector>')
         c.append('        </ssd:Connectors>')
         c.append('      </ssd:Component>')

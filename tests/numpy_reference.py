@@ -26,7 +26,8 @@ DOC_DEFAULTS = {
 # mv.delay 1); voltage limits on at +-150 V (the paper's amplifier range; every paper
 # scenario stays below 62 V); the divergence monitor at 1 um for 200 samples.
 CONTROLLER_DOC_DEFAULTS = {
-    "mv.delay": 1, "mv.feedthrough": False, "mv.lambda_u": 0.0, "rls.enabled": True,
+    "mv.delay": -1, "mv.feedthrough": False, "mv.hold_inputs": False, "mv.lambda_u": 0.0,
+    "mv.observer": 0.4, "rls.enabled": True,
     "rls.forgetting": 0.995, "rls.p0": 1.0, "rls.trace_max": 100.0, "sat.enabled": True,
     "sat.v_min": -150.0, "sat.v_max": 150.0, "monitor.pred_error_max": 1.0,
     "monitor.divergence_samples": 200,
@@ -186,12 +187,13 @@ def tracking_references():
 
 
 # ---------------------------------------------------------------- controller pieces
-def diophantine(a, d: int):
-    """1 = A(z^-1) E(z^-1) + z^-d Gd(z^-1) by long division of 1 by A (A monic, powers of
-    z^-1). Returns (E[0..d-1], Gd[0..len(A)-2])."""
+def diophantine(a, d: int, t: float = 0.0):
+    """T = A(z^-1) E(z^-1) + z^-d Gd(z^-1), T = 1 - t z^-1, by long division of T by A (A
+    monic, powers of z^-1). Returns (E[0..d-1], Gd[0..len(A)-2])."""
     a = np.asarray(a, dtype=float)
     rem = np.zeros(d + len(a))
     rem[0] = 1.0
+    rem[1] = -t
     e = np.zeros(d)
     for i in range(d):
         e[i] = rem[i]
@@ -200,15 +202,16 @@ def diophantine(a, d: int):
     return e, g
 
 
-def mv_controller(y_ref, y_meas, theta, d: int, lambda_u: float = 0.0):
+def mv_controller(y_ref, y_meas, theta, d: int, lambda_u: float = 0.0, observer: float = 0.0):
     """Minimum-variance law with fixed model theta = (a1, a2, b1, b2) (docs/model.md, controller):
-    predictor y(k+d) = Gd y(k) + F q(k), F = B E; q(k) chosen so the prediction equals
-    y_ref(k). With the control weighting lambda_u of the generalised MV law, q(k) minimises
-    J(q) = (y(k+d|k) - y_ref(k))^2 + lambda_u q^2, solved here as the least-squares problem
-    [f0; sqrt(lambda_u)] q ~ [y_ref - rest; 0] (rest: the prediction without the f0 q(k) term),
-    not by a closed-form transcription."""
+    with the observer polynomial T = 1 - observer z^-1, predictor
+    T y(k+d) = Gd y(k) + F q(k), F = B E; q(k) chosen so the prediction equals
+    T y_ref(k) = y_ref(k) - observer y_ref(k-1). With the control weighting lambda_u of the
+    generalised MV law, q(k) minimises J(q) = (T y(k+d|k) - T y_ref(k))^2 + lambda_u q^2,
+    solved here as the least-squares problem [f0; sqrt(lambda_u)] q ~ [T y_ref - rest; 0]
+    (rest: the prediction without the f0 q(k) term), not by a closed-form transcription."""
     a1, a2, b1, b2 = theta
-    e, g = diophantine([1.0, a1, a2], d)
+    e, g = diophantine([1.0, a1, a2], d, observer)
     f = np.convolve([b1, b2], e)                  # F = B E, deg d
     n = len(y_ref)
     q = np.zeros(n)
@@ -216,7 +219,8 @@ def mv_controller(y_ref, y_meas, theta, d: int, lambda_u: float = 0.0):
     for k in range(n):
         rest = g[0] * y_meas[k] + (g[1] * y_meas[k - 1] if k >= 1 else 0.0)
         rest += sum(f[i] * q[k - i] for i in range(1, len(f)) if k - i >= 0)
-        sol, *_ = np.linalg.lstsq(design, np.array([y_ref[k] - rest, 0.0]), rcond=None)
+        t_ref = y_ref[k] - (observer * y_ref[k - 1] if k >= 1 else 0.0)
+        sol, *_ = np.linalg.lstsq(design, np.array([t_ref - rest, 0.0]), rcond=None)
         q[k] = sol[0]
     return q
 

@@ -16,10 +16,12 @@ D = ref.DOC_DEFAULTS
 THETA = np.array([D["tf.a1"], D["tf.a2"], D["tf.b1"], D["tf.b2"]])
 
 # The core algorithm as these tests drive it: v applied in the same sample (loop delay
-# d = 1 + mv.delay counted from the plant's one-sample delay alone), no voltage limits
-# and no divergence monitor unless a test sets them. The FMU defaults (mv.delay = 1 for
-# the published-at-end timing, +-150 V limits, monitor on) are tested where they apply.
-ALGORITHM = {"mv.delay": 0, "sat.enabled": False, "monitor.divergence_samples": 0}
+# d = 1 + mv.delay counted from the plant's one-sample delay alone, set: no detection),
+# the plain MV law (observer pole 0: deadbeat, so exactness is exact), no voltage limits
+# and no divergence monitor unless a test sets them. The FMU defaults (mv.delay = -1:
+# detected, observer 0.4, +-150 V limits, monitor on) are tested where they apply
+# (the observer here and in test_core_delay_detection.py).
+ALGORITHM = {"mv.delay": 0, "mv.observer": 0.0, "sat.enabled": False, "monitor.divergence_samples": 0}
 
 
 def controller(params=None):
@@ -115,26 +117,29 @@ def run_closed_loop_core(plant_params, ctrl_params, y_d, n, d):
     return y, ym, outs
 
 
+@pytest.mark.parametrize("observer", [0.0, 0.4, 0.9])
 @pytest.mark.parametrize("exact", [True, False], ids=["exact", "soe"])
-def test_mv_law_and_feedforward_against_numpy(exact):
-    """Reference: numpy_reference.mv_controller (Diophantine by long division, F = B E, the
-    MV law with lambda_u = 0.3) and numpy_reference.controller_feedforward (exact inverse
-    creep of order -alpha, then the inverse PI of the corrected eqs 25-28), recomputed from
-    the recorded y_ref and y_meas of a closed loop with adaptation off and d = 2
-    (mv.delay = 1). q within 1e-9 um; v within 1e-9 V in exact creep mode (in SOE mode the
-    inverse creep differs from the exact one by its SOE error: held to 1e-5 V)."""
+def test_mv_law_and_feedforward_against_numpy(exact, observer):
+    """Reference: numpy_reference.mv_controller (Diophantine T = A E + z^-d Gd by long
+    division of T = 1 - t z^-1 by A, F = B E, the MV law with lambda_u = 0.3 on
+    T y_ref) and numpy_reference.controller_feedforward (exact inverse creep of order -alpha,
+    then the inverse PI of the corrected eqs 25-28), recomputed from the recorded y_ref and
+    y_meas of a closed loop with adaptation off and d = 2 (mv.delay = 1), for the plain law
+    (t = 0), the default observer (0.4) and the start-up law's (0.9). q within 1e-9 um; v
+    within 1e-9 V in exact creep mode (in SOE mode the inverse creep differs from the exact
+    one by its SOE error: held to 1e-5 V)."""
     k_c, alpha = ROWS["10 Hz row"]
     pp = {"creep.k_c": k_c, "creep.alpha": alpha, "tf.delay": 1,
           "pi.w[1]": 0.08, "tf.b1": 0.6}                     # some mismatch so y_meas is not trivial
     cp = {"creep.k_c": k_c, "creep.alpha": alpha, "creep.exact": exact,
-          "rls.enabled": False, "mv.delay": 1, "mv.lambda_u": 0.3}
+          "rls.enabled": False, "mv.delay": 1, "mv.lambda_u": 0.3, "mv.observer": observer}
     n, d = 2000, 2
     y_d = lambda t: 5 * np.sin(2 * np.pi * 5 * t) + 3 * np.sin(2 * np.pi * 13 * t)  # noqa: E731
     _, ym, outs = run_closed_loop_core(pp, cp, y_d, n, d)
     y_ref = np.array([y_d((k + d) * H) for k in range(n)])
     q = np.array([o.q for o in outs])
     v = np.array([o.v for o in outs])
-    q_ref = ref.mv_controller(y_ref, ym, THETA, d, 0.3)
+    q_ref = ref.mv_controller(y_ref, ym, THETA, d, 0.3, observer)
     v_ref = ref.controller_feedforward(q, ref.plant_params(**{"creep.k_c": k_c, "creep.alpha": alpha}))
     eq, ev = np.max(np.abs(q - q_ref)), np.max(np.abs(v - v_ref))
     print(f"\nMV law |q - q_ref| {eq:.2e} um, feedforward |v - v_ref| {ev:.2e} V")
@@ -360,7 +365,8 @@ def test_saturation_clips_and_freezes_adaptation():
 
 
 BAD = [
-    ("mv.delay", -1), ("mv.delay", 9), ("mv.lambda_u", -0.1), ("mv.lambda_u", float("nan")),
+    ("mv.delay", -2), ("mv.delay", 9), ("mv.lambda_u", -0.1), ("mv.lambda_u", float("nan")),
+    ("mv.observer", -0.1), ("mv.observer", 1.0), ("mv.observer", float("nan")),
     ("rls.forgetting", 0.0), ("rls.forgetting", 1.01), ("rls.forgetting", float("nan")),
     ("rls.p0", 0.0), ("rls.p0", -1.0),
     ("creep.alpha", 2.0), ("creep.k_c", 0.0), ("pi.w0", 0.0), ("pi.m", 17), ("pi.m", 0),
@@ -646,31 +652,33 @@ def test_rls_projection_bounds_hold_and_are_reached(case):
 
 
 # ------------------------------------------------------------------ generalised MV (lambda_u)
-def _diophantine_by_impulse_response(a1, a2, d):
-    """Independent Diophantine: E = first d samples of the impulse response of 1/A
-    (scipy.signal.lfilter), Gd = z^d (1 - A E) by numpy.polymul."""
+def _diophantine_by_impulse_response(a1, a2, d, t=0.0):
+    """Independent Diophantine: E = first d samples of the impulse response of T/A,
+    T = 1 - t z^-1 (scipy.signal.lfilter), Gd = z^d (T - A E) by numpy.polymul."""
     impulse = np.r_[1.0, np.zeros(d - 1)]
-    e = signal.lfilter([1.0], [1.0, a1, a2], impulse)
-    rem = np.r_[1.0, np.zeros(d + 1)] - np.polymul([1.0, a1, a2], e)
+    e = signal.lfilter([1.0, -t], [1.0, a1, a2], impulse)
+    rem = np.r_[1.0, -t, np.zeros(d)] - np.polymul([1.0, a1, a2], e)
     assert np.max(np.abs(rem[:d])) <= 1e-12
     return e, rem[d:d + 2]
 
 
+@pytest.mark.parametrize("observer", [0.0, 0.4])
 @pytest.mark.parametrize("d", [1, 2])
 @pytest.mark.parametrize("lambda_u", [0.01, 1.0])
-def test_generalised_mv_minimises_its_cost(lambda_u, d):
+def test_generalised_mv_minimises_its_cost(lambda_u, d, observer):
     """Reference: the defining property of the generalised MV law (docs/model.md, controller,
     'control weighting lambda_u on q'): q(k) minimises
-    J(q) = (Gd y(k) + F q - y_ref)^2 + lambda_u q^2 (F q = f0 q + sum_i f_i q(k-i)), i.e.
-    dJ/dq / 2 = f0 (pred(q) - y_ref) + lambda_u q = 0, with Gd and F = B E from an independent
-    Diophantine (impulse response of 1/A) and the estimate theta(k) the core used.
+    J(q) = (Gd y(k) + F q - T y_ref)^2 + lambda_u q^2 (F q = f0 q + sum_i f_i q(k-i),
+    T y_ref(k) = y_ref(k) - t y_ref(k-1)), i.e. dJ/dq / 2 = f0 (pred(q) - T y_ref) + lambda_u q
+    = 0, with Gd and F = B E from an independent Diophantine (impulse response of T/A) and
+    the estimate theta(k) the core used; t = 0 (plain law) and 0.4 (the default observer).
     Closed loop on a mismatched plant (PI +10 %, adaptation on, so theta varies), 1/5/10 Hz,
     1.5 s. |f0 (pred - y_ref) + lambda_u q| <= 1e-12 um at every sample (measured ~5e-15),
     while the weighting term |lambda_u q| itself reaches >= 0.1 um (it matters)."""
     n = 3000
     y_d = SCENARIOS["1/5/10 Hz"]
     plant = core.Plant({"tf.delay": d - 1, **_pi_scaled(1.1)})
-    ctrl = controller({"mv.delay": d - 1, "mv.lambda_u": lambda_u})
+    ctrl = controller({"mv.delay": d - 1, "mv.lambda_u": lambda_u, "mv.observer": observer})
     ym, q, y_ref, theta = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, 4))
     for k in range(n):
         ym[k] = plant.output.y_meas
@@ -681,11 +689,12 @@ def test_generalised_mv_minimises_its_cost(lambda_u, d):
     grad = np.zeros(n)
     for k in range(n):
         a1, a2, b1, b2 = theta[k]
-        e, g = _diophantine_by_impulse_response(a1, a2, d)
+        e, g = _diophantine_by_impulse_response(a1, a2, d, observer)
         f = np.convolve([b1, b2], e)
         pred = g[0] * ym[k] + (g[1] * ym[k - 1] if k else 0.0) + f[0] * q[k]
         pred += sum(f[i] * q[k - i] for i in range(1, d + 1) if k - i >= 0)
-        grad[k] = f[0] * (pred - y_ref[k]) + lambda_u * q[k]
+        t_ref = y_ref[k] - (observer * y_ref[k - 1] if k else 0.0)
+        grad[k] = f[0] * (pred - t_ref) + lambda_u * q[k]
     moved = np.max(np.abs(theta - THETA))
     print(f"\nlambda_u={lambda_u} d={d}: max|f0 (pred - y_ref) + lambda_u q| {np.max(np.abs(grad)):.1e} um, "
           f"max|lambda_u q| {np.max(np.abs(lambda_u * q)):.3g} um, theta moved {moved:.3g}")

@@ -140,21 +140,43 @@ class PlantRef:
 class ControllerRef:
     """piezo_controller.h/.c: RLS (sums over i = 0..3, one reciprocal of the denominator,
     1/lambda from init, the update (P phi)_i (P phi)_j / denom symmetric by itself),
-    projection, Diophantine, MV law, inverse creep, inverse PI, saturation with
-    back-calculation, monitor counts."""
+    projection, delay detection (one RLS per candidate d = 1, 2, 3, sums of squared
+    a-priori errors per trial, the clear-leader rule, probes, restarts), Diophantine with
+    the observer polynomial T, MV law on T r, inverse creep, inverse PI, saturation with
+    back-calculation, monitor counts. Written from the header's and the docs' description,
+    operation by operation in the C order."""
+
+    START_D, START_T, N, CONFIRM, TRIAL, REDETECT, PROBES = 2, 0.9, 3, 3, 20, 10, 8
 
     def __init__(self, ctrl):
         c = ctrl.raw
-        self.d, self.lam_u = c.d, c.lambda_u
-        self.rls, self.lam, self.trace_max = c.rls_enabled, c.forgetting, c.trace_max
+        self.auto = bool(c.auto_delay)
+        self.d, self.lam_u, self.observer = c.d, c.lambda_u, c.observer
+        self.rls, self.lam, self.trace_max, self.p0 = c.rls_enabled, c.forgetting, c.trace_max, c.p0
         self.sat, self.v_min, self.v_max = c.sat_enabled, c.sat_v_min, c.sat_v_max
+        self.pe_max, self.window = c.pred_error_max, c.divergence_samples
         self.theta, self.nominal = list(c.theta), list(c.theta_nominal)
         self.P = [[c.P[4 * i + j] for j in range(4)] for i in range(4)]
         self.y_prev = [0.0, 0.0]
         self.q_past = [0.0] * 11                # q(k-1), q(k-2), ...
+        self.r_prev = 0.0
         self.sat_hold = 0
         self.creep, self.inv, self.fwd = SOERef(c.inv_creep), PIRef(c.inv_pi), PIRef(c.fwd_pi)
         self.n_saturated = 0
+        self.k, self.k_delay, self.n_detections, self.run_large = 0, 0, 0, 0
+        self.detecting = False
+        if self.auto:
+            self.start_detection()
+
+    def start_detection(self):
+        self.detecting, self.d = True, self.START_D
+        self.leader, self.run = -1, 0
+        self.trial, self.probe, self.probes = self.k, 0.0, 0
+        self.n_detections += 1
+        self.scores = [0.0] * self.N
+        self.det_theta = [list(self.nominal) for _ in range(self.N)]
+        self.det_P = [[[self.p0 if i == j else 0.0 for j in range(4)] for i in range(4)]
+                      for _ in range(self.N)]
 
     def project(self, th):
         m = 1e-4
@@ -171,14 +193,15 @@ class ControllerRef:
         if abs(th[3]) > 0.999 * th[2]:
             th[3] = math.copysign(0.999 * th[2], th[3])
 
-    def rls_update(self, y):
-        phi = [-self.y_prev[0], -self.y_prev[1], self.q_past[self.d - 1], self.q_past[self.d]]
+    def rls_step(self, theta, P, d, y, update):
+        """(a-priori error, theta, P) of one RLS under delay d."""
+        phi = [-self.y_prev[0], -self.y_prev[1], self.q_past[d - 1], self.q_past[d]]
         e = y
         for i in range(4):
-            e -= phi[i] * self.theta[i]
-        if not self.rls or self.sat_hold > 0:
-            return e
-        P, denom, pphi = self.P, self.lam, []
+            e -= phi[i] * theta[i]
+        if not update:
+            return e, theta, P
+        denom, pphi = self.lam, []
         for i in range(4):
             acc = 0.0
             for j in range(4):
@@ -187,36 +210,82 @@ class ControllerRef:
         for i in range(4):
             denom += phi[i] * pphi[i]
         inv_denom, inv_lam = 1.0 / denom, 1.0 / self.lam
-        self.theta = [self.theta[i] + pphi[i] * inv_denom * e for i in range(4)]
+        theta = [theta[i] + pphi[i] * inv_denom * e for i in range(4)]
         new = [[(P[i][j] - pphi[i] * pphi[j] * inv_denom) * inv_lam for j in range(4)]
                for i in range(4)]
         trace = ((new[0][0] + new[1][1]) + new[2][2]) + new[3][3]
         if trace > self.trace_max:
             scale = self.trace_max / trace
             new = [[v * scale for v in row] for row in new]
-        self.P = new
-        self.project(self.theta)
-        return e
+        self.project(theta)
+        return e, theta, new
+
+    def detect(self, y):
+        """One sample of the detection; returns the leader's a-priori error."""
+        update = self.rls and not self.sat_hold > 0
+        errs = []
+        for i in range(self.N):
+            e, self.det_theta[i], self.det_P[i] = self.rls_step(self.det_theta[i], self.det_P[i], i + 1,
+                                                                y, update)
+            errs.append(e)
+            self.scores[i] = self.scores[i] + e * e
+        order = [self.START_D - 1, 0, 2]
+        best = order[0]
+        for i in order[1:]:
+            if self.scores[i] < self.scores[best]:
+                best = i
+        second = -1
+        for i in range(self.N):
+            if i != best and (second < 0 or self.scores[i] < self.scores[second]):
+                second = i
+        if self.scores[second] > 0.0 and self.scores[best] <= (1.0 / 10) * self.scores[second]:
+            self.run = self.run + 1 if self.leader == best else 1
+            self.leader = best
+        else:
+            self.run, self.leader = 0, -1
+        self.detecting = self.run < self.CONFIRM
+        self.new_trial = self.detecting and self.k + 1 - self.trial >= self.TRIAL
+        if self.new_trial:
+            p = 20.0 * math.sqrt(self.scores[best] / self.TRIAL) / self.nominal[2]
+            if p < 2.0 * self.probe:
+                p = 2.0 * self.probe
+            self.next_probe = 0.0 if self.probes >= self.PROBES else (1e-3 if p < 1e-3 else (1.0 if p > 1.0 else p))
+        if not self.detecting:
+            self.d, self.k_delay = best + 1, self.k
+            self.theta, self.P = list(self.det_theta[best]), self.det_P[best]
+        return errs[best]
 
     def step(self, y_ref, y_meas):
-        pred_error = self.rls_update(y_meas)
-        a1, a2, b1, b2 = self.theta
+        was_detecting = self.detecting
+        self.new_trial = False
+        if was_detecting:
+            pred_error = self.detect(y_meas)
+        else:
+            pred_error, self.theta, self.P = self.rls_step(self.theta, self.P, self.d, y_meas,
+                                                           self.rls and not self.sat_hold > 0)
         d = self.d
+        a1, a2, b1, b2 = self.nominal if self.detecting else self.theta
+        t = self.START_T if self.detecting else self.observer
+        r = y_ref
         e = []
         for n in range(d):
             e1 = e[n - 1] if n >= 1 else 0.0
             e2 = e[n - 2] if n >= 2 else 0.0
-            e.append((1.0 if n == 0 else 0.0) - a1 * e1 - a2 * e2)
+            t_n = 1.0 if n == 0 else (-t if n == 1 else 0.0)
+            e.append(t_n - a1 * e1 - a2 * e2)
         e_dm2 = e[d - 2] if d >= 2 else 0.0
-        g0, g1 = -(a1 * e[d - 1] + a2 * e_dm2), -a2 * e[d - 1]
+        g0 = (-t if d == 1 else 0.0) - (a1 * e[d - 1] + a2 * e_dm2)
+        g1 = -a2 * e[d - 1]
         f = [b1 * (e[i] if i < d else 0.0) + b2 * (e[i - 1] if i >= 1 else 0.0) for i in range(d + 1)]
-        num = y_ref - g0 * y_meas - g1 * self.y_prev[0]
+        num = (r - t * self.r_prev) - g0 * y_meas - g1 * self.y_prev[0]
         for i in range(1, d + 1):
             num -= f[i] * self.q_past[i - 1]
         q = f[0] * num / (f[0] * f[0] + self.lam_u)
-        r, s_next, x_next = self.creep.evaluate(q)
+        if self.detecting and self.k - self.trial < 2:
+            q += self.probe if self.k == self.trial else -self.probe
+        r_c, s_next, x_next = self.creep.evaluate(q)
         inv_z = list(self.inv.z)
-        v = self.inv.step(r)
+        v = self.inv.step(r_c)
         saturated = self.sat and (v > self.v_max or v < self.v_min)
         if saturated:
             v = self.v_max if v > self.v_max else self.v_min
@@ -225,17 +294,32 @@ class ControllerRef:
             self.inv.step(r_eff)
             memory = self.creep.evaluate(0.0)[0]
             q = (r_eff - memory) / self.creep.gain
-            r, s_next, x_next = self.creep.evaluate(q)
-            self.sat_hold = d + 1
+            r_c, s_next, x_next = self.creep.evaluate(q)
+            self.sat_hold = (self.N if self.detecting else d) + 1
             self.n_saturated += 1
         else:
             self.fwd.step(v)
             if self.sat_hold > 0:
                 self.sat_hold -= 1
+        self.run_large = self.run_large + 1 if abs(pred_error) > self.pe_max else 0
+        restart = (self.auto and not self.detecting and self.run_large >= self.REDETECT
+                   and self.k + 1 - self.k_delay >= self.REDETECT)
         self.creep.s, self.creep.x = s_next, x_next
         self.q_past = [q] + self.q_past[:-1]
         self.y_prev = [y_meas, self.y_prev[0]]
-        return (v, q, *self.theta, pred_error, saturated)
+        self.r_prev = r
+        theta_out = list(self.nominal if self.detecting else self.theta)
+        delay = 0 if self.detecting else d
+        if self.new_trial:
+            self.trial, self.probe = self.k + 1, self.next_probe
+            self.probes += self.next_probe > 0.0
+            self.leader, self.run = -1, 0
+            self.scores = [0.0] * self.N
+        self.k += 1
+        if restart:
+            self.start_detection()
+            self.k_delay = self.k
+        return (v, q, *theta_out, pred_error, saturated, delay)
 
 
 def core_normals(seed):
@@ -270,19 +354,22 @@ def test_plant_step_equals_scalar_transcription_bitwise(params):
     assert np.array_equal(bits(got), bits(want))
 
 
-@pytest.mark.parametrize("cparams", [{}, {"sat.v_max": 25.0, "sat.v_min": -2.0},
-                                     {"mv.delay": 2, "mv.lambda_u": 0.003, "rls.trace_max": 8.0}],
-                         ids=["default", "saturating", "d3-lambda-tracebound"])
-def test_closed_loop_equals_scalar_transcription_bitwise(cparams):
-    """Reference: ControllerRef and PlantRef closed with the loop delay the controller
-    assumes (d = 1 + mv.delay: the FMUs' default timing for d = 2), mismatched noisy plant,
-    2000 samples of a 1+5+10 Hz reference: every controller output (v, q, estimates,
-    pred_error, saturated) and every plant output equal bit for bit. The saturating case
-    must clip (and adapt around it), the third must move the estimates and hit the trace
-    bound."""
+@pytest.mark.parametrize("cparams, d", [
+    ({}, 2), ({"sat.v_max": 25.0, "sat.v_min": -2.0}, 2),
+    ({"mv.delay": 2, "mv.lambda_u": 0.003, "rls.trace_max": 8.0, "mv.observer": 0.0}, 3),
+    ({}, 1), ({}, 3), ({"mv.delay": 0, "mv.observer": 0.7}, 1)],
+    ids=["default", "saturating", "d3-lambda-tracebound-plain", "detect-d1", "detect-d3",
+         "set-d1-observer0.7"])
+def test_closed_loop_equals_scalar_transcription_bitwise(cparams, d):
+    """Reference: ControllerRef and PlantRef closed with a loop delay d (the plant's own
+    sample plus d - 1 samples before v is applied), mismatched noisy plant, 2000 samples of
+    a 1+5+10 Hz reference y_d(k + d): every controller output (v, q, estimates, pred_error,
+    saturated, the delay of the law) and every plant output equal bit for bit. The default
+    controller detects d (1, 2 and 3 here: the transcription must choose the same at the
+    same sample); the saturating case must clip (and adapt around it); the third must move
+    the estimates and hit the trace bound; the last sets d = 1 and another observer pole."""
     plant, ctrl = core.Plant(MISMATCH), core.Controller(cparams)
     pref, cref = PlantRef(plant, core_normals(plant.raw.sensor_seed)), ControllerRef(ctrl)
-    d = ctrl.raw.d
     k = np.arange(2000 + d)
     y_d = 4 * np.sin(2 * np.pi * k * H) + 2 * np.sin(2 * np.pi * 5 * k * H) \
         + 1.5 * np.sin(2 * np.pi * 10 * k * H) + 5
@@ -293,14 +380,16 @@ def test_closed_loop_equals_scalar_transcription_bitwise(cparams):
         out = ctrl.step(y_d[j + d], y_meas)
         want = cref.step(y_d[j + d], y_meas_ref)
         assert np.array_equal(bits(tuple(out)[:7]), bits(want[:7])), j
-        assert out.saturated == want[7], j
+        assert (out.saturated, out.delay) == want[7:9], j
+        pending.append(out.v)
+        pending_ref.append(want[0])
         p = plant.step(pending.pop(0))
         p_ref = pref.step(pending_ref.pop(0))
         assert np.array_equal(bits(tuple(p)), bits(p_ref)), j
-        pending.append(out.v)
-        pending_ref.append(want[0])
         y_meas, y_meas_ref = p.y_meas, p_ref[3]
     assert ctrl.raw.n_saturated == cref.n_saturated
+    if ctrl.raw.auto_delay:
+        assert ctrl.raw.d == d and not ctrl.raw.detecting     # detected the loop's own d
     if "sat.v_max" in cparams:
         assert cref.n_saturated > 10
     if "rls.trace_max" in cparams:
@@ -429,6 +518,12 @@ def test_step_is_peek_then_commit_also_when_clipping(exact):
     assert clipped > 20
 
 
+def _input(y_ref, y_meas, y_preview=0.0, preview_lead=0):
+    """A piezo_controller_input (cffi)."""
+    return core.ffi.new("piezo_controller_input *", {"y_ref": y_ref, "y_meas": y_meas,
+                                                    "y_preview": y_preview, "preview_lead": preview_lead})
+
+
 @pytest.mark.parametrize("exact", [False, True], ids=["soe", "exact"])
 def test_evaluate_then_commit_is_the_step(exact):
     """Reference: an identical twin stepped with piezo_controller_step. Each sample is
@@ -449,8 +544,8 @@ def test_evaluate_then_commit_is_the_step(exact):
         y_ref = 6 + 5 * math.sin(2 * math.pi * 9 * (k + 2) * H)
         ym = plant.output.y_meas
         before = raw_bytes(ctrl)
-        assert L.piezo_controller_evaluate(ctrl.raw, y_ref + 1.0, ym, hp, 4000, sample) == 0
-        assert L.piezo_controller_evaluate(ctrl.raw, y_ref, ym, hp, 4000, sample) == 0
+        assert L.piezo_controller_evaluate(ctrl.raw, _input(y_ref + 1.0, ym), hp, 4000, sample) == 0
+        assert L.piezo_controller_evaluate(ctrl.raw, _input(y_ref, ym), hp, 4000, sample) == 0
         assert raw_bytes(ctrl) == before
         assert (sample.k, sample.y_ref, sample.y_meas) == (k, y_ref, ym)
         if k == 100:
@@ -477,7 +572,7 @@ def test_commit_refuses_the_sample_that_completes_the_divergence_window():
                          "monitor.pred_error_max": 1.0, "monitor.divergence_samples": 25})
     sample = ffi.new("piezo_controller_sample *")
     for k in range(25):
-        assert L.piezo_controller_evaluate(c.raw, 0.0, 5.0, ffi.NULL, 0, sample) == 0
+        assert L.piezo_controller_evaluate(c.raw, _input(0.0, 5.0), ffi.NULL, 0, sample) == 0
         assert sample.reaches_window == (k == 24)
         before = raw_bytes(c)
         st = L.piezo_controller_commit(c.raw, sample, ffi.NULL)

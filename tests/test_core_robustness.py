@@ -169,19 +169,27 @@ def test_controller_refuses_pi_parameters_without_a_finite_inverse(params, param
 
 
 def test_controller_refuses_a_sample_that_overflows_its_covariance_and_keeps_its_state():
-    """y_meas = 1e200: at the second sample phi = [-1e200, 0, q, 0], so phi^T P phi = 1e400
-    overflows; P - P phi phi^T P / (lambda + phi^T P phi) is Inf / Inf = NaN while theta
-    and every output stay finite (the update K e is 1e200 / Inf = 0). That sample is
-    refused as divergence and the controller is the one before it. (Voltage limits off:
-    a clipped first sample would pause the adaptation over the second.)"""
+    """y_meas = 1e200 with mv.delay set (no detection): at the second sample
+    phi = [-1e200, 0, q, 0], so phi^T P phi = 1e400 overflows; P - P phi phi^T P /
+    (lambda + phi^T P phi) is Inf / Inf = NaN while theta and every output stay finite (the
+    update K e is 1e200 / Inf = 0). That sample is refused as divergence and the controller
+    is the one before it. With the delay detected (the default) the first sample already
+    overflows: its squared a-priori error, 1e400, enters the candidates' sums; it is refused
+    the same way. (Voltage limits off: a clipped first sample would pause the adaptation
+    over the second.)"""
     assert 1e200 * 1e200 == math.inf
-    ctrl = core.Controller({"sat.enabled": False})
+    ctrl = core.Controller({"sat.enabled": False, "mv.delay": 1})
     ctrl.step(0.0, 1e200)
     before = snapshot(ctrl.raw, "piezo_controller")
     with pytest.raises(core.CoreDivergedError):
         ctrl.step(0.0, 1e200)
     assert snapshot(ctrl.raw, "piezo_controller") == before
     assert ctrl.k == 1
+    detecting = core.Controller({"sat.enabled": False})
+    before = snapshot(detecting.raw, "piezo_controller")
+    with pytest.raises(core.CoreDivergedError):
+        detecting.step(0.0, 1e200)
+    assert snapshot(detecting.raw, "piezo_controller") == before and detecting.k == 0
 
 
 def test_controller_check_accepts_runs_and_names_tampered_fields():
@@ -194,7 +202,11 @@ def test_controller_check_accepts_runs_and_names_tampered_fields():
         assert check_text(lib.piezo_controller_check(ctrl.raw)) is None, params
     raw = ctrl.raw
     for field, value, fragment in [("d", 10, "loop delay"), ("head", -1, "q ring"), ("sat_hold", 99, "adaptation"),
-                                   ("n_saturated", 10 ** 6, "monitor counts"), ("k", 5, "sample counter")]:
+                                   ("n_saturated", 10 ** 6, "monitor counts"), ("k", 5, "sample counter"),
+                                   ("detecting", 1, "delay detection flags"), ("det_leader", 3, "leader"),
+                                   ("det_run", 4, "leader"), ("det_trial", 10 ** 6, "trial"),
+                                   ("det_probe", -1.0, "trial"), ("k_delay", 10 ** 6, "counters"),
+                                   ("r_prev", math.inf, "not finite")]:
         old = getattr(raw, field)
         setattr(raw, field, value)
         assert fragment in (check_text(lib.piezo_controller_check(raw)) or ""), field
@@ -210,6 +222,17 @@ def test_controller_check_accepts_runs_and_names_tampered_fields():
     assert "symmetric" in (check_text(lib.piezo_controller_check(raw)) or "")
     raw.P[1] = old
     assert check_text(lib.piezo_controller_check(raw)) is None
+    # ... and so is each delay candidate's (the same update), while detecting or after
+    auto = core.Controller({"monitor.divergence_samples": 0})
+    for k in range(5):
+        auto.step(2.0 * math.sin(0.01 * (k + 2)), 2.0 * math.sin(0.01 * k))
+    det = auto.raw
+    assert det.auto_delay == 1 and check_text(lib.piezo_controller_check(det)) is None
+    old = det.det_P[16 + 1]
+    det.det_P[16 + 1] = det.det_P[16 + 4] * (1 + 2 ** -52) if det.det_P[16 + 4] != 0 else 1e-300
+    assert "candidate's covariance not symmetric" in (check_text(lib.piezo_controller_check(det)) or "")
+    det.det_P[16 + 1] = old
+    assert check_text(lib.piezo_controller_check(det)) is None
     raw.P[5] = math.nan
     assert "covariance" in check_text(lib.piezo_controller_check(raw))
 
@@ -246,8 +269,8 @@ def test_reference_refuses_a_step_whose_time_overflows_and_keeps_its_state():
     2e308 is not, and sin(0 * Inf) is NaN. The second step is refused and the reference
     keeps sample 1."""
     lib = core.lib()
-    status, ref, _ = reference_init(h=1e308, lead=0, **{"amplitude[1]": 1.0, "frequency[1]": 0.0,
-                                                         "phase[1]": 0.5})
+    status, ref, _ = reference_init(h=1e308, lead=0, preview=0,
+                                    **{"amplitude[1]": 1.0, "frequency[1]": 0.0, "phase[1]": 0.5})
     assert status == core.PIEZO_OK
     assert lib.piezo_reference_step(ref) == core.PIEZO_OK and ref.k == 1
     before = snapshot(ref, "piezo_reference")

@@ -16,7 +16,9 @@ from fmpy.validation import validate_fmu
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from harness import core  # noqa: E402
 
-OUTPUTS = ["v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error"]   # the Real outputs
+OUTPUTS = ["v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error"]   # the Real outputs of the law
+TIMING = ["loop_delay", "loop_delay_time", "preview_lead", "meas_offset"]   # what it detected
+INPUTS = ["y_ref", "y_meas", "y_preview", "t_preview", "t_meas"]
 H = 0.0005
 # The direct-feedthrough option (d = 1): v at t_k from the inputs set at t_k.
 FEEDTHROUGH = {"mv.feedthrough": True, "mv.delay": 0}
@@ -72,14 +74,16 @@ def test_model_description_matches_design(controller, piezo_stage):
     de = md.defaultExperiment
     assert (float(de.startTime), float(de.stopTime), float(de.stepSize)) == (0.0, 3.0, 0.0005)
 
-    assert [n for n, x in v.items() if x.causality == "input"] == ["y_ref", "y_meas"]
-    assert [n for n, x in v.items() if x.causality == "output"] == OUTPUTS + ["saturated"]
+    assert [n for n, x in v.items() if x.causality == "input"] == INPUTS
+    assert [n for n, x in v.items() if x.causality == "output"] == OUTPUTS + ["saturated"] + TIMING
     assert v["saturated"].type == "Boolean"
-    for name in ("y_ref", "y_meas", "q", "pred_error"):
+    assert [v[n].type for n in TIMING] == ["Integer", "Real", "Integer", "Integer"]
+    for name in ("y_ref", "y_meas", "y_preview", "q", "pred_error"):
         assert v[name].unit == "um" and v[name].displayUnit == "µm", name
     for name in ("v", "sat.v_min", "sat.v_max", "pi.v_max"):
         assert v[name].unit == "V", name
-    assert v["h"].unit == "s"
+    for name in ("h", "t_preview", "t_meas", "loop_delay_time"):
+        assert v[name].unit == "s", name
 
     # the nominal model uses the plant's names, types and defaults: one parameter set fits both
     shared = ["pi.m", "pi.v_max", "pi.w0"] + [f"pi.w[{j}]" for j in range(1, 17)] + \
@@ -88,8 +92,10 @@ def test_model_description_matches_design(controller, piezo_stage):
         a, b = v[name], piezo_stage.variables[name]
         assert (a.causality, a.variability, a.type, a.unit, a.start) == \
             (b.causality, b.variability, b.type, b.unit, b.start), name
-    # the drop-in defaults: no feedthrough (d = 2), limits on at +-150 V, monitor on
-    own = {"mv.delay": ("Integer", 1), "mv.feedthrough": ("Boolean", False),
+    # the drop-in defaults: loop delay detected, no feedthrough, one sample per step, the
+    # observer pole 0.4, limits on at +-150 V, monitor on
+    own = {"mv.delay": ("Integer", -1), "mv.feedthrough": ("Boolean", False),
+           "mv.hold_inputs": ("Boolean", False), "mv.observer": ("Real", 0.4),
            "mv.lambda_u": ("Real", 0.0), "rls.enabled": ("Boolean", True),
            "rls.forgetting": ("Real", 0.995), "sat.enabled": ("Boolean", True),
            "sat.v_min": ("Real", -150.0), "sat.v_max": ("Real", 150.0),
@@ -103,7 +109,7 @@ def test_model_description_matches_design(controller, piezo_stage):
 
     # honest for the default: no output depends directly on an input
     deps = {u.variable.name: sorted(d.name for d in u.dependencies) for u in md.outputs}
-    assert deps == {name: [] for name in OUTPUTS + ["saturated"]}
+    assert deps == {name: [] for name in OUTPUTS + ["saturated"] + TIMING}
 
 
 def test_start_values_in_the_binary_match_the_xml(controller, make_fmu):
@@ -252,7 +258,7 @@ def test_many_samples_per_step_equal_one_sample_per_step(controller, make_fmu, e
     blocks = rng.integers(1, 30, size=50)
     fine = make_fmu(controller)
     coarse = make_fmu(controller)
-    params = {"creep.exact": exact, "creep.alpha": -0.0085, "creep.k_c": 1.0497}
+    params = {"creep.exact": exact, "creep.alpha": -0.0085, "creep.k_c": 1.0497, "mv.hold_inputs": True}
     fine.initialize(params)
     coarse.initialize(params)
     for i, n in enumerate(blocks):
@@ -302,7 +308,8 @@ NON_DEFAULT_PARAMETERS = {
     **{f"pi.w[{j}]": 0.001 * j for j in range(1, 17)},
     "tf.a1": -1.30, "tf.a2": 0.35, "tf.b1": 0.60, "tf.b2": -0.55,
     "creep.k_c": 1.0497, "creep.alpha": -0.0085, "creep.exact": True, "h": 0.001,
-    "mv.delay": 2, "mv.feedthrough": True, "mv.lambda_u": 0.01, "rls.enabled": False,
+    "mv.delay": 2, "mv.feedthrough": True, "mv.lambda_u": 0.01, "mv.observer": 0.7,
+    "mv.hold_inputs": True, "rls.enabled": False,
     "rls.forgetting": 0.99, "rls.p0": 2.0, "rls.trace_max": 50.0, "sat.enabled": False,
     "sat.v_min": -40.0, "sat.v_max": 60.0, "monitor.pred_error_max": 5.0,
     "monitor.divergence_samples": 0,
@@ -382,8 +389,9 @@ BAD_PARAMETERS = [
     ({"rls.trace_max": 0.01}, "rls.trace_max = 0.01 is out of range"),
     ({"sat.enabled": True, "sat.v_min": 5.0, "sat.v_max": 5.0}, "sat.v_max = 5 is out of range: valid range finite, > sat.v_min"),
     ({"sat.enabled": True, "sat.v_min": 10.0, "sat.v_max": -10.0}, "sat.v_max = -10 is out of range"),
-    ({"mv.delay": -1}, "mv.delay = -1 is out of range: valid range 0..8"),
-    ({"mv.delay": 9}, "mv.delay = 9 is out of range: valid range 0..8"),
+    ({"mv.delay": -2}, "mv.delay = -2 is out of range: valid range -1 (detect d in 1..3) or 0..8"),
+    ({"mv.delay": 9}, "mv.delay = 9 is out of range: valid range -1 (detect d in 1..3) or 0..8"),
+    ({"mv.observer": 1.0}, "mv.observer = 1 is out of range: valid range [0, 1)"),
     ({"mv.lambda_u": -1.0}, "mv.lambda_u = -1 is out of range"),
     ({"creep.alpha": 2.0}, "creep.alpha = 2 is out of range: valid range [-1, 1]"),
     ({"creep.k_c": 0.0}, "creep.k_c = 0 is out of range"),
@@ -441,7 +449,7 @@ def test_step_size_not_a_multiple_of_h_is_refused(controller, make_fmu):
     """Refused steps (not a multiple of h = 1 ms, or from the wrong time) change nothing.
     Reference: an uninterrupted run with h = 1 ms, which the samples before and after the
     refusals must equal bitwise; then a 3-sample step equals three 1-sample steps."""
-    params = {"h": 0.001}
+    params = {"h": 0.001, "mv.hold_inputs": True}
     reference = make_fmu(controller)
     reference.initialize(params)
     expected = run(reference, 40)
@@ -593,7 +601,8 @@ def test_a_refused_sample_rolls_the_whole_step_back(controller, make_fmu, exact)
     output equals the one read before the step, and a continuation from there equals a twin
     that never tried the step (bitwise). Reference for the sample count: the same inputs
     stepped one sample at a time fail exactly at the third sample."""
-    params = {"monitor.divergence_samples": 3, "rls.enabled": False, "creep.exact": exact}
+    params = {"monitor.divergence_samples": 3, "rls.enabled": False, "creep.exact": exact,
+              "mv.hold_inputs": True, "mv.delay": 1, "mv.observer": 0.0}
     inputs = {"y_ref": 0.0, "y_meas": 5.0}
     single = make_fmu(controller)
     single.initialize(params)
@@ -629,3 +638,111 @@ def test_a_refused_sample_rolls_the_whole_step_back(controller, make_fmu, exact)
     # of the refused samples are written but not committed; the next step rewrites them.
     size = int.from_bytes(blob[72:80], "little")
     assert blob[128:128 + size] == twin_blob[128:128 + size]
+
+
+# ---------------------------------------------------------------------------- timing (issue 21)
+
+def _loop_with_stamps(controller, piezo_stage, make_fmu, *, t_meas_ahead=0, preview=4,
+                      stamps=True, start_time=0.0, n=400, params=None, logging_on=False):
+    """The exchange loop (read all outputs, set all inputs, step both) on the nominal plant
+    with a 10 Hz reference, the controller's stamps as the FMUs would wire them: t_meas the
+    plant's time plus t_meas_ahead samples (1: what a master that steps the plant first
+    hands over), the stamped preview y_d(t_preview), t_preview = t_k + preview h. Returns
+    the controller and its outputs (with the timing outputs) per sample."""
+    ctrl, plant = make_fmu(controller, logging_on=logging_on), make_fmu(piezo_stage)
+    ctrl.initialize(params, start_time=start_time)
+    plant.initialize(None, start_time=start_time)
+    rows = []
+    for k in range(n):
+        t_k = start_time + k * H
+        v = ctrl.get("v")
+        inputs = {"y_ref": y_d(k + 2), "y_meas": plant.get("y_meas")}
+        if stamps:
+            inputs.update({"y_preview": y_d(k + preview), "t_preview": t_k + preview * H,
+                           "t_meas": plant.get("t_meas") + t_meas_ahead * H})
+        ctrl.set(inputs)
+        plant.set({"v": v})
+        plant.step()
+        ctrl.step()
+        rows.append({name: ctrl.get(name) for name in TIMING + ["v"]})
+    return ctrl, rows
+
+
+def test_a_step_of_several_samples_is_refused_naming_the_step_and_h(controller, make_fmu):
+    """Reference: the issue's requirement (a communication step that is not h is refused at
+    the first doStep with a message naming the step and h, not a divergence later) and
+    docs/cosimulation.md. OMSimulator's default 1e-3 s = 2 h: the first doStep fails with
+    fmi2Error, the message names 0.001, 2 samples, h = 0.0005 and mv.hold_inputs, and
+    nothing changed: a one-sample step afterwards gives the outputs of a twin that never
+    tried (bitwise). With mv.hold_inputs = true the same step passes."""
+    fmu, twin = make_fmu(controller), make_fmu(controller)
+    for f in (fmu, twin):
+        f.initialize()
+        f.set({"y_ref": 1.0, "y_meas": 0.5})
+    message = assert_refused(lambda: fmu.slave.doStep(0.0, 0.001), fmu, "communicationStepSize = 0.001",
+                             "2 samples of h = 0.0005", "mv.hold_inputs = true")
+    assert "state and time unchanged" in message
+    fmu.step()
+    twin.step()
+    assert fmu.get_reals(OUTPUTS + ["loop_delay_time"]) == twin.get_reals(OUTPUTS + ["loop_delay_time"])
+    held = make_fmu(controller)
+    held.initialize({"mv.hold_inputs": True})
+    held.slave.doStep(0.0, 0.001)
+
+
+@pytest.mark.parametrize("t_meas_ahead, preview, lead", [(0, 4, 4), (1, 4, 3), (0, 6, 6)])
+def test_time_stamps_set_the_preview_lead_and_the_measurement_offset(
+        controller, piezo_stage, make_fmu, t_meas_ahead, preview, lead):
+    """Reference: the stamps' definition (config.h, docs/cosimulation.md): meas_offset =
+    (t_meas - t_k) / h, preview_lead = (t_preview - t_meas) / h once both stamps have
+    advanced by h (from the second sample on), 0 before. Also with a start time of 10 s (the
+    stamps are times, not sample counts)."""
+    for start in (0.0, 10.0):
+        _, rows = _loop_with_stamps(controller, piezo_stage, make_fmu, t_meas_ahead=t_meas_ahead,
+                                    preview=preview, start_time=start, n=30)
+        assert (rows[0]["preview_lead"], rows[0]["meas_offset"]) == (0, 0)
+        assert {(r["preview_lead"], r["meas_offset"]) for r in rows[5:]} == {(lead, t_meas_ahead)}
+
+
+def test_unconnected_stamps_keep_y_ref(controller, piezo_stage, make_fmu):
+    """Reference: the core controller stepped with y_ref and y_meas only
+    (harness.core.Controller.step, today's inputs): an FMU whose new inputs are never set
+    gives the same v at every sample bit for bit, reports preview_lead = meas_offset = 0,
+    and still detects its loop delay (2 in this exchange loop)."""
+    ctrl, rows = _loop_with_stamps(controller, piezo_stage, make_fmu, stamps=False, n=300)
+    core_ctrl, core_plant = core.Controller(), core.Plant()
+    published = 0.0
+    for k in range(300):
+        out = core_ctrl.step(y_d(k + 2), core_plant.output.y_meas)
+        core_plant.step(published)
+        published = out.v
+        assert rows[k]["v"] == out.v, k
+    assert {(r["preview_lead"], r["meas_offset"]) for r in rows} == {(0, 0)}
+    assert rows[-1]["loop_delay"] == 2
+
+
+def test_the_chosen_delay_and_its_time_are_outputs_and_an_event(controller, piezo_stage, make_fmu):
+    """Reference: the core controller's own record of the choice (harness.core: the first
+    sample whose output delay is not 0) in the same loop. loop_delay is 0 with
+    loop_delay_time = start time while detecting, then 2 with loop_delay_time = the time of
+    that sample; with debug logging on, one logEvents message says
+    'loop delay d = 2 chosen at t = ...'. A set mv.delay = 1 reports 2 from the start, with
+    no such message."""
+    ctrl, rows = _loop_with_stamps(controller, piezo_stage, make_fmu, n=50, logging_on=True)
+    core_ctrl, core_plant = core.Controller(), core.Plant()
+    published, delays = 0.0, []
+    for k in range(50):
+        out = core_ctrl.step_input(y_d(k + 2), core_plant.output.y_meas, y_d(k + 4), 4 if k else 0)
+        core_plant.step(published)
+        published = out.v
+        delays.append(out.delay)
+    chosen = delays.index(2)
+    assert all(r["loop_delay"] == 0 and r["loop_delay_time"] == 0.0 for r in rows[:chosen])
+    assert all(r["loop_delay"] == 2 and r["loop_delay_time"] == chosen * H for r in rows[chosen:])
+    events = [text for status, category, text in ctrl.messages if category == "logEvents"
+              and "loop delay d = 2 chosen" in text]
+    assert len(events) == 1 and f"t = {chosen * H:.9g} s" in events[0]
+    fixed, rows = _loop_with_stamps(controller, piezo_stage, make_fmu, n=20, params={"mv.delay": 1},
+                                    logging_on=True)
+    assert {(r["loop_delay"], r["loop_delay_time"]) for r in rows} == {(2, 0.0)}
+    assert not [text for _, _, text in fixed.messages if "loop delay" in text]

@@ -68,7 +68,8 @@ def test_model_description_matches_design(piezo_stage):
     assert {c.name for c in md.logCategories} == {"logEvents", "logStatusWarning", "logStatusError", "logAll"}
 
     assert [n for n, x in v.items() if x.causality == "input"] == ["v"]
-    assert sorted(n for n, x in v.items() if x.causality == "output") == sorted(OUTPUTS)
+    assert sorted(n for n, x in v.items() if x.causality == "output") == sorted(OUTPUTS + ["t_meas"])
+    assert v["t_meas"].unit == "s"
     assert v["v"].unit == "V"
     for name in OUTPUTS + ["sensor.resolution", "sensor.noise_rms"]:
         assert v[name].unit == "um" and v[name].displayUnit == "µm", name
@@ -91,7 +92,7 @@ def test_model_description_matches_design(piezo_stage):
         assert start_value == start, name
 
     # no output depends on the input (no direct feedthrough)
-    assert {u.variable.name: u.dependencies for u in md.outputs} == {n: [] for n in OUTPUTS}
+    assert {u.variable.name: u.dependencies for u in md.outputs} == {n: [] for n in OUTPUTS + ["t_meas"]}
 
 
 def test_start_values_in_the_binary_match_the_xml(piezo_stage, make_fmu):
@@ -286,6 +287,8 @@ def test_start_time_and_accumulated_master_time(piezo_stage, make_fmu):
     # time is kept as t0 + k h (k integer): bitwise the same double as this expression,
     # not the master's accumulated t (which has drifted by rounding)
     assert fmu.slave.getRealStatus(FMI2_LAST_SUCCESSFUL_TIME) == 1.25 + 2000 * H
+    # t_meas, the time stamp of the outputs, is that same time
+    assert fmu.get("t_meas") == 1.25 + 2000 * H
 
 
 # ---------------------------------------------------------------------------- FMU states

@@ -32,7 +32,7 @@ def numpy_reference(t, params):
 def record(fmu, n):
     rows = []
     for _ in range(n):
-        rows.append(fmu.get_reals(["y_d", "y_ref"]))
+        rows.append(fmu.get_reals(["y_d", "y_ref", "y_preview", "t_preview"]))
         fmu.step()
     return np.array(rows)
 
@@ -42,41 +42,50 @@ def test_validate_fmu_reports_nothing(fmu_paths):
 
 
 def test_interface(reference_signal):
-    """The documented interface: outputs y_d, y_ref [um] with no dependencies; parameters
-    offset, amplitude/frequency/phase[1..8] (0, except the paper's 1 Hz, 10 um tone:
-    amplitude[1] = 10, frequency[1] = 1), lead (2, the default controller's d), h."""
+    """The documented interface: outputs y_d, y_ref, y_preview [um] and t_preview [s] with no
+    dependencies; parameters offset, amplitude/frequency/phase[1..8] (0, except the paper's
+    1 Hz, 10 um tone: amplitude[1] = 10, frequency[1] = 1), lead (2, the loop delay of a
+    master that exchanges at communication points), h, preview (4)."""
     v = reference_signal.variables
     md = reference_signal.md
     assert md.coSimulation.modelIdentifier == "ReferenceSignal"
-    assert [n for n, x in v.items() if x.causality == "output"] == ["y_d", "y_ref"]
+    assert [n for n, x in v.items() if x.causality == "output"] == ["y_d", "y_ref", "y_preview", "t_preview"]
     assert [n for n, x in v.items() if x.causality == "input"] == []
     names = ["offset"] + [f"{k}[{i}]" for k in ("amplitude", "frequency", "phase") for i in range(1, 9)]
     tone = {"amplitude[1]": 10.0, "frequency[1]": 1.0}
     for name in names:
         assert v[name].causality == "parameter" and float(v[name].start) == tone.get(name, 0.0), name
     assert v["lead"].type == "Integer" and int(v["lead"].start) == 2
+    assert v["preview"].type == "Integer" and int(v["preview"].start) == 4
     assert float(v["h"].start) == H
-    assert v["y_d"].unit == v["y_ref"].unit == "um" and v["frequency[1]"].unit == "Hz"
-    assert {u.variable.name: list(u.dependencies) for u in md.outputs} == {"y_d": [], "y_ref": []}
+    assert v["y_d"].unit == v["y_ref"].unit == v["y_preview"].unit == "um" and v["frequency[1]"].unit == "Hz"
+    assert v["t_preview"].unit == "s"
+    assert {u.variable.name: list(u.dependencies) for u in md.outputs} == \
+        {"y_d": [], "y_ref": [], "y_preview": [], "t_preview": []}
 
 
 @pytest.mark.parametrize("lead", [0, 1, 2, 7])
 @pytest.mark.parametrize("t0", [0.0, 0.25])
 def test_values_and_preview_against_numpy(reference_signal, make_fmu, lead, t0):
-    """Reference: numpy_reference (the equation in NumPy) at t_k = t0 + k h: y_d(k) and
-    y_ref(k) = y_d(t0 + (k + lead) h), 2000 samples, three tones up to 999.9 Hz (just below
-    Nyquist), tolerance 1e-12 um; one many-sample step equals single steps bitwise."""
-    params = {**THREE_TONES, "lead": lead}
+    """Reference: numpy_reference (the equation in NumPy) at t_k = t0 + k h: y_d(k),
+    y_ref(k) = y_d(t0 + (k + lead) h) and the stamped preview y_preview(k) =
+    y_d(t_preview(k)), t_preview(k) = t0 + (k + preview) h (preview = lead + 3 here), 2000
+    samples, three tones up to 999.9 Hz (just below Nyquist), tolerance 1e-12 um (the stamp
+    1e-12 s); one many-sample step equals single steps bitwise."""
+    params = {**THREE_TONES, "lead": lead, "preview": lead + 3}
     fmu = make_fmu(reference_signal)
     fmu.initialize(params, start_time=t0)
     got = record(fmu, 2000)
     k = np.arange(2000)
     np.testing.assert_allclose(got[:, 0], numpy_reference(t0 + k * H, params), rtol=0, atol=1e-12)
     np.testing.assert_allclose(got[:, 1], numpy_reference(t0 + (k + lead) * H, params), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got[:, 3], t0 + (k + lead + 3) * H, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got[:, 2], numpy_reference(t0 + (k + lead + 3) * H, params), rtol=0, atol=1e-12)
     coarse = make_fmu(reference_signal)
     coarse.initialize(params, start_time=t0)
     coarse.step(2000)
-    assert coarse.get_reals(["y_d", "y_ref"]) == fmu.get_reals(["y_d", "y_ref"])
+    assert coarse.get_reals(["y_d", "y_ref", "y_preview", "t_preview"]) == \
+        fmu.get_reals(["y_d", "y_ref", "y_preview", "t_preview"])
 
 
 def test_paper_references_equal_the_harness_signal(reference_signal, make_fmu):

@@ -89,7 +89,7 @@ def test_report_leads_with_the_headline_table(report):
         ours, paper = float(r["e_rms_um"]) * 1e3, float(r["paper_e_rms_um"]) * 1e3
         assert float(b[1]) == pytest.approx(ours, rel=1e-3)
         assert float(b[2]) == pytest.approx(paper, rel=1e-12)
-        assert float(b[3]) == pytest.approx(ours / paper, rel=2e-3)
+        assert float(b[3]) == pytest.approx(ours / paper, rel=5e-3)   # 3 digits: half a unit in the last is up to 5e-3
         assert float(b[5]) == pytest.approx(float(r["paper_e_r"]) * 100, rel=1e-12)
 
 

@@ -133,7 +133,7 @@ def test_main_job_prints_the_headline_table_first(main_job):
     headline (mismatch, adaptation on, preview on): every scenario line shows our e_rms and
     e_r equal to the CSV's to the 4 printed digits (rel. 1e-3), the paper's e_rms (7.6, 25.4,
     56, 115.3, 60.0, 178.7 nm) and e_r (0.11, 0.36, 0.80, 1.63, 0.49, 1.46 %) exactly, and
-    ratio = ours / paper to its 3 printed digits."""
+    ratio = ours / paper to its 3 printed digits (5e-3 relative)."""
     proc, _, tracking = main_job
     rows = _rows(tracking, "mismatch")
     lines = proc.stdout.splitlines()
@@ -147,8 +147,9 @@ def test_main_job_prints_the_headline_table_first(main_job):
         ours_nm, ours_pct = float(rows[s]["e_rms_um"]) * 1e3, float(rows[s]["e_r"]) * 100
         assert float(cells[1]) == pytest.approx(ours_nm, rel=1e-3)
         assert float(cells[4]) == pytest.approx(ours_pct, rel=1e-3)
-        assert float(cells[3]) == pytest.approx(ours_nm / PAPER[s][0], rel=2e-3)
-        assert float(cells[6]) == pytest.approx(ours_pct / PAPER[s][1], rel=2e-3)
+        # the ratio has 3 printed digits: half a unit in the last is up to 5e-3 relative
+        assert float(cells[3]) == pytest.approx(ours_nm / PAPER[s][0], rel=5e-3)
+        assert float(cells[6]) == pytest.approx(ours_pct / PAPER[s][1], rel=5e-3)
 
 
 def test_main_job_prints_every_condition_side_by_side(main_job):

@@ -1,22 +1,32 @@
-"""The closed loop under every master that installs here, on the mismatch case of docs/model.md.
+"""The closed loop under every master that installs here, on the mismatch case of docs/model.md,
+with every FMU at its defaults (issue 21: the loop finds its own timing).
 
 Masters (their real schedules read in their sources, see harness/importers.py):
   * ours (harness.cosim): Gauss-Seidel in ModelStructure order with either doStep order,
     and a textbook Jacobi master;
   * fmu-manipulation-toolbox's container FMU, parallel mode (set all, step all, get all);
   * fmpy's SSP player (Jacobi, connectors start at 0 instead of the initial outputs);
-  * the same container in sequential mode (each FMU gets the post-step outputs of the
-    ones before it: true Gauss-Seidel, one sample less loop delay).
+  * the same container in sequential mode, each of the 6 orders of its FMU list (each FMU
+    gets the post-step outputs of the ones before it: true Gauss-Seidel, one sample less
+    loop delay);
+each also with a plant whose input is one sample late (tf.delay = 1).
 
-Reference for the first three: our Gauss-Seidel run (tolerance 1e-12 um, measured 0).
-fmpy's player: a textbook Jacobi loop written here on the core binding that starts its
-exchanged values at 0 as the player does. Sequential container: our Gauss-Seidel run of the
-direct-feedthrough d = 1 loop. Every run: e_rms <= 3 nm over [1, 3) s (the issue's bound).
+Independent references: the loop delay and the stamps each schedule makes, worked out from
+the schedule (docs/cosimulation.md, section 2): d = 2 where values are exchanged at
+communication points, 1 in true Gauss-Seidel, plus tf.delay; the measurement is one sample
+ahead of the controller's time when the plant is stepped before it, the stamped preview
+4 + (1 if ReferenceSignal is stepped before the controller) samples ahead of the controller's
+time. For the exchange masters: our Gauss-Seidel run (tolerance 1e-12 um, measured 0); for
+fmpy's player a Jacobi loop written here on the core binding that starts its exchanged
+values at 0 as the player does. Every run: e_rms <= 3 nm over [1, 3) s (the issue's bound).
 """
+import itertools
+
 import numpy as np
 import pytest
 
 from harness import core, importers
+from harness._common import REFERENCE_LEAD, REFERENCE_PREVIEW
 from harness.cosim import simulate_closed_loop
 from harness.metrics import compute_metrics
 from harness.scenarios import MISMATCH_SCENARIOS, get_scenario
@@ -25,6 +35,8 @@ FIELDS = ("y_d", "y", "y_meas", "v")
 TOL = 1e-12          # um (V for v)
 E_RMS_MAX = 3e-3     # um
 D1 = {"mv.delay": 0, "mv.feedthrough": True}
+R, C, P = importers.CONTAINER_ORDER
+ORDERS = list(itertools.permutations((R, C, P)))
 
 
 def e_rms(name, run):
@@ -36,22 +48,32 @@ def max_diff(a, b):
     return max(float(np.max(np.abs(a[f] - b[f]))) for f in FIELDS)
 
 
-def zero_start_jacobi(name):
+def detected(run):
+    """The controller's timing outputs at the end of an importer's run."""
+    return {f: run[f][-1] for f in ("loop_delay", "preview_lead", "meas_offset")}
+
+
+def zero_start_jacobi(name, tf_delay=0):
     """fmpy's SSP player, rewritten on the core binding: per step, every component steps with
     the current connector values, then outputs are copied to inputs; the connectors start at
-    0. The reference's preview is y_d(t_(k+1) + 2 h) (lead 2), computed with NumPy. Rows are
-    the values after the step from t_k, i.e. at t_(k+1), as the player records them."""
+    0. The reference's outputs after its step from t_k: y_ref = y_d(t_(k+1) + 2 h), the stamped
+    preview y_d(t_(k+1) + 4 h) at t_(k+1) + 4 h; the plant's t_meas = t_(k+1). The FMU counts a
+    time stamp once it advanced by h since the last sample: t_meas from the player's first real
+    value on (0 -> h), t_preview from the second (0 -> 5 h is no advance of h), so the preview
+    lead is 4 from sample 2 on. Rows are the values after the step from t_k, i.e. at t_(k+1),
+    as the player records them."""
     sc = get_scenario(name)
     h, n = sc.step_size, sc.n_samples
-    plant = core.Plant({**sc.plant, "h": h})
+    plant = core.Plant({**sc.plant, "h": h, "tf.delay": tf_delay})
     ctrl = core.Controller({**sc.controller, "h": h})
-    y_d = sc.signal.evaluate(np.arange(n + 3) * h)
-    c_y_ref = c_y_meas = c_v = 0.0
+    y_d = sc.signal.evaluate(np.arange(n + 6) * h)
+    c_y_ref = c_y_preview = c_y_meas = c_v = 0.0
     rows = np.zeros(n, dtype=[(f, "f8") for f in ("time",) + FIELDS])
     for k in range(n):
-        published = ctrl.step(c_y_ref, c_y_meas)
+        published = ctrl.step_input(c_y_ref, c_y_meas, c_y_preview, REFERENCE_PREVIEW if k >= 2 else 0)
         out = plant.step(c_v)
-        c_y_ref, c_y_meas, c_v = y_d[k + 3], out.y_meas, published.v
+        c_y_ref, c_y_preview = y_d[k + 1 + REFERENCE_LEAD], y_d[k + 1 + REFERENCE_PREVIEW]
+        c_y_meas, c_v = out.y_meas, published.v
         rows[k] = ((k + 1) * h, y_d[k + 1], out.y, out.y_meas, published.v)
     return rows
 
@@ -61,44 +83,78 @@ def workdir(tmp_path_factory):
     return tmp_path_factory.mktemp("masters")
 
 
+@pytest.mark.parametrize("tf_delay", [0, 1])
 @pytest.mark.parametrize("name", MISMATCH_SCENARIOS)
-def test_exchange_at_communication_points_gives_the_same_samples(name, workdir):
+def test_exchange_at_communication_points_gives_the_same_samples(name, tf_delay, workdir):
     """Our Gauss-Seidel in both doStep orders, our Jacobi and the parallel container run the
-    same d = 2 loop: every sample within 1e-12 of the Gauss-Seidel run."""
-    gs = simulate_closed_loop(name)
-    runs = {"gauss-seidel controller-first": simulate_closed_loop(name, step_order="controller-first"),
-            "jacobi": simulate_closed_loop(name, master="jacobi")}
+    same loop: every sample within 1e-12 of the Gauss-Seidel run. The controller detects
+    d = 2 + tf.delay there (and in our runs), the preview 4 samples ahead of a measurement of
+    its own time."""
+    plant = {"tf.delay": tf_delay}
+    timing = {}
+    gs = simulate_closed_loop(name, plant_params=plant, timing=timing)
+    assert (timing["loop_delay"], timing["preview_lead"], timing["meas_offset"]) == (2 + tf_delay, 4, 0)
+    runs = {"gauss-seidel controller-first": simulate_closed_loop(name, step_order="controller-first",
+                                                                  plant_params=plant),
+            "jacobi": simulate_closed_loop(name, master="jacobi", plant_params=plant)}
     sc = get_scenario(name)
-    path = importers.build_closed_loop_container(name, workdir / f"{name}_par.fmu")
+    path = importers.build_closed_loop_container(name, workdir / f"{name}_{tf_delay}_par.fmu",
+                                                 plant_params=plant)
     runs["container parallel"] = importers.simulate_container(path, sc.duration, sc.step_size)
+    assert detected(runs["container parallel"]) == {"loop_delay": 2 + tf_delay, "preview_lead": 4,
+                                                    "meas_offset": 0}
     for master, run in runs.items():
         assert max_diff(run, gs) <= TOL, master
     assert e_rms(name, gs) <= E_RMS_MAX
 
 
+@pytest.mark.parametrize("tf_delay", [0, 1])
 @pytest.mark.parametrize("name", MISMATCH_SCENARIOS)
-def test_fmpy_ssp_player_runs_our_loop_from_its_zero_start(name):
+def test_fmpy_ssp_player_runs_our_loop_from_its_zero_start(name, tf_delay):
     """fmpy's SSP player equals the zero-start Jacobi loop within 1e-12 at every sample and
-    stays within the bound. Its start differs from our loop (its first control sees
-    y_ref = 0 instead of y_d(2 h)): measured, the samples differ by more than 1 nm."""
-    ssp = importers.simulate_ssp_scenario(name)
-    ref = zero_start_jacobi(name)
+    stays within the bound; the controller detects d = 2 + tf.delay. Its start differs from
+    our loop (its first control sees y_ref = 0 instead of y_d(2 h)): measured, the samples
+    differ by more than 1 nm."""
+    ssp = importers.simulate_ssp_scenario(name, plant_params={"tf.delay": tf_delay})
+    ref = zero_start_jacobi(name, tf_delay)
     assert max_diff(ssp, ref) <= TOL
     assert e_rms(name, ssp) <= E_RMS_MAX
-    ours = simulate_closed_loop(name)
-    assert np.max(np.abs(ssp["y"][:-1] - ours["y"][1:])) > 1e-3
+    assert detected(ssp) == {"loop_delay": 2 + tf_delay, "preview_lead": 4, "meas_offset": 0}
+    if tf_delay == 0:
+        ours = simulate_closed_loop(name)
+        assert np.max(np.abs(ssp["y"][:-1] - ours["y"][1:])) > 1e-3
 
 
+@pytest.mark.parametrize("tf_delay", [0, 1])
+@pytest.mark.parametrize("order", ORDERS, ids=["".join(f[0] for f in o) for o in ORDERS])
 @pytest.mark.parametrize("name", MISMATCH_SCENARIOS)
-def test_sequential_container_runs_the_d1_loop_when_configured_for_it(name, workdir):
-    """True Gauss-Seidel (the sequential container in the links' order reference ->
-    controller -> plant) configured for its one-sample loop (controller mv.delay = 0, no
-    feedthrough; reference lead 0, since the controller gets its post-step output) equals our
-    Gauss-Seidel run of the direct-feedthrough loop (mv.feedthrough, mv.delay = 0, preview
-    d = 1) within 1e-12 at every sample, and stays within the bound."""
+def test_sequential_container_in_every_order_tracks_with_the_defaults(name, order, tf_delay, workdir):
+    """True Gauss-Seidel (the sequential container) in each of the 6 orders of its FMU list,
+    every FMU at its defaults: the controller detects d = 1 + tf.delay, the measurement one
+    sample ahead when the plant is stepped before it, the stamped preview 4 + (1 if the
+    reference is stepped before it) samples ahead of its time, and the loop tracks within
+    3 nm; no run is stopped by the monitor (a stopped run raises). The figures are in the
+    table of docs/cosimulation.md (python -m harness.timing_table)."""
+    sc = get_scenario(name)
+    path = importers.build_closed_loop_container(name, workdir / "seq.fmu", sequential=True, order=order,
+                                                 plant_params={"tf.delay": tf_delay})
+    seq = importers.simulate_container(path, sc.duration, sc.step_size, sequential=True)
+    o = 1 if order.index(P) < order.index(C) else 0
+    r = 1 if order.index(R) < order.index(C) else 0
+    assert detected(seq) == {"loop_delay": 1 + tf_delay, "preview_lead": REFERENCE_PREVIEW + r - o,
+                             "meas_offset": o}
+    assert e_rms(name, seq) <= E_RMS_MAX
+
+
+@pytest.mark.parametrize("name", ["mismatch_5hz", "mismatch_1_5_10hz"])
+def test_sequential_container_configured_by_hand_still_runs_the_d1_loop(name, workdir):
+    """The explicit configuration of today keeps working: the sequential container in the
+    links' order reference -> controller -> plant with mv.delay = 0 and lead = 0 (the
+    controller gets the reference's post-step output) equals our Gauss-Seidel run of the
+    direct-feedthrough loop (mv.feedthrough, mv.delay = 0) within 1e-12 at every sample."""
     sc = get_scenario(name)
     path = importers.build_closed_loop_container(
-        name, workdir / f"{name}_seq.fmu", sequential=True,
+        name, workdir / f"{name}_seq_set.fmu", sequential=True,
         controller_params={"mv.delay": 0}, reference_params={"lead": 0})
     seq = importers.simulate_container(path, sc.duration, sc.step_size, sequential=True)
     d1 = simulate_closed_loop(name, controller_params=D1)
@@ -106,15 +162,28 @@ def test_sequential_container_runs_the_d1_loop_when_configured_for_it(name, work
     assert e_rms(name, seq) <= E_RMS_MAX
 
 
-def test_sequential_container_with_the_default_controller_is_stopped_loudly(workdir):
-    """With the default controller (d = 2) the sequential container runs a loop with one
-    sample less delay than the controller assumes: it is unstable, and the controller's
-    monitor makes the container's doStep fail within 0.2 s (fmpy raises), instead of
-    running to 1e6 V."""
-    from fmpy.fmi1 import FMICallException
+def test_a_master_stepping_two_samples_is_refused_at_its_first_step(monkeypatch):
+    """OMSimulator's default fixed step 1e-3 s = 2 h (docs/cosimulation.md, section 3): fmpy's
+    SSP player run with it fails at its first doStep of the controller, at t = 0 (before, the
+    loop ran and the monitor stopped it at 0.105 s)."""
+    import fmpy.ssp.simulation as player
+    from harness.ssp import parameter_set_for_scenario, write_closed_loop_ssp
+    from harness.cosim import default_fmu_dir
 
-    name = "mismatch_1_5_10hz"
-    sc = get_scenario(name)
-    path = importers.build_closed_loop_container(name, workdir / "seq_default.fmu", sequential=True)
-    with pytest.raises(FMICallException):
-        importers.simulate_container(path, 0.2, sc.step_size, sequential=True)
+    calls = []
+    original = player.do_step
+
+    def spy(component, time, step_size):
+        calls.append((component.name, time))
+        return original(component, time, step_size)
+
+    monkeypatch.setattr(player, "do_step", spy)
+    pset = parameter_set_for_scenario("mismatch_1hz")
+    import tempfile
+    from pathlib import Path
+    with tempfile.TemporaryDirectory() as tmp:
+        path = write_closed_loop_ssp(Path(tmp) / "loop.ssp", default_fmu_dir(), [pset])
+        with pytest.raises(Exception):
+            player.simulate_ssp(str(path), stop_time=0.2, step_size=0.001,
+                                parameter_set=None)
+    assert calls[-1] == ("controller", 0.0)

@@ -33,7 +33,10 @@ def test_structure(built):
     links = {(c.startElement, c.startConnector, c.endElement, c.endConnector)
              for c in ssd.system.connections}
     assert links == {("reference", "y_ref", "controller", "y_ref"),
+                     ("reference", "y_preview", "controller", "y_preview"),
+                     ("reference", "t_preview", "controller", "t_preview"),
                      ("plant", "y_meas", "controller", "y_meas"),
+                     ("plant", "t_meas", "controller", "t_meas"),
                      ("controller", "v", "plant", "v")}
     assert [b.source for b in ssd.system.parameterBindings] == ["resources/mismatch_1_5_10hz.ssv"]
     with zipfile.ZipFile(built) as zf:
@@ -48,7 +51,8 @@ def test_structure(built):
 
 def test_bound_parameters_are_the_scenario(built):
     """Reference: the mismatch_1_5_10hz scenario (harness.scenarios): every plant override,
-    the three tones, lead = d = 2 and h, read back through fmpy's SSV reader."""
+    the three tones and h, read back through fmpy's SSV reader; no lead and no mv.delay (the
+    FMUs' defaults: the controller detects its delay and aligns the stamped preview)."""
     pset = ssp.read_bound_parameter_set(built)
     values = {p.name: p.value for p in pset.parameters}
     sc = get_scenario("mismatch_1_5_10hz")
@@ -59,7 +63,7 @@ def test_bound_parameters_are_the_scenario(built):
         assert float(values[f"reference.frequency[{i}]"]) == f
     for i in range(4, 9):       # the unused tones are set to 0, not left to the FMU's defaults
         assert float(values[f"reference.amplitude[{i}]"]) == 0.0
-    assert values["reference.lead"] == "2"
+    assert "reference.lead" not in values and "controller.mv.delay" not in values
     assert float(values["plant.h"]) == float(values["controller.h"]) == 0.0005
 
 

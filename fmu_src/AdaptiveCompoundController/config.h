@@ -9,9 +9,12 @@
 #include "piezo_controller.h"
 
 #define MODEL_IDENTIFIER_STRING "AdaptiveCompoundController"
-/* optional hooks of fmu_model.h: it has direct feedthrough (mv.feedthrough) and messages */
+/* optional hooks of fmu_model.h: it has direct feedthrough (mv.feedthrough), messages,
+ * events (the loop delay it chose) and a check of the step size (one sample per step) */
 #define MODEL_HAS_FEEDTHROUGH 1
 #define MODEL_HAS_MESSAGES 1
+#define MODEL_HAS_EVENTS 1
+#define MODEL_HAS_STEP_CHECK 1
 
 #define MODEL_GUID "{16db41db-eca1-4957-ad18-19b12743e5cb}"
 
@@ -51,6 +54,15 @@ typedef enum {
     vr_sat_v_max,
     vr_monitor_pred_error_max,
     vr_monitor_divergence_samples,  /* Integer */
+    vr_y_preview,           /* input  [um] stamped preview: y_d(t_preview) */
+    vr_t_preview,           /* input  [s] the time y_preview refers to */
+    vr_t_meas,              /* input  [s] the time y_meas refers to */
+    vr_loop_delay,          /* output Integer: d of the law, 0 while detecting */
+    vr_loop_delay_time,     /* output [s] the time loop_delay took its value */
+    vr_preview_lead,        /* output Integer: lead of the stamped preview used, 0: y_ref used */
+    vr_meas_offset,         /* output Integer: t_meas - t_k in samples (0 without a t_meas stamp) */
+    vr_mv_observer,
+    vr_mv_hold_inputs,      /* Boolean */
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -59,6 +71,24 @@ typedef struct {
     piezo_controller_params params; /* parameters as set through the FMI */
     double y_ref;                   /* inputs, held over the communication step */
     double y_meas;
+    double y_preview;
+    double t_preview;
+    double t_meas;
+    double t0;                      /* start time [s] */
+    double last_t_preview;          /* the stamps of the last committed sample: a stamp is */
+    double last_t_meas;             /* trusted when it advanced by h since (connected) */
+    int have_last;                  /* 1 once a sample was committed */
+    int loop_delay;                 /* outputs: d of the law (0 while detecting) ... */
+    double loop_delay_time;         /* ... and the time of the sample from which it has held */
+    int preview_lead;               /* lead of the stamped preview used (0: y_ref) */
+    int meas_offset;                /* t_meas - t_k in samples */
+    int track_delay;                /* the same four for the committed samples: the outputs */
+    double track_time;              /* of the default timing, the base of the feedthrough's */
+    int track_lead;
+    int track_offset;
+    int said_delay;                 /* track_delay's value last logged as an event */
+    int said_redetect;              /* the restarted-detection warning was logged */
+
     piezo_controller ctrl;          /* core state (committed samples only) */
     piezo_controller_output out;    /* outputs: the last committed sample, or with
                                        mv.feedthrough a peek with the held inputs */

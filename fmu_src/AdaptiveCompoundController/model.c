@@ -12,9 +12,16 @@
  * With mv.feedthrough = true the outputs at t_k are piezo_controller_peek
  * with the held inputs of t_k (committed by the doStep from t_k): d = 1 for a
  * master that reads v after setting the inputs.
+ *
+ * Time stamps (docs/cosimulation.md): t_meas (PiezoStage's) says which sample
+ * y_meas is, t_preview (ReferenceSignal's) which sample y_preview is. A stamp
+ * counts only when it advanced by h since the last sample (a connected one
+ * does; an unconnected input keeps its start value), so an FMU wired as
+ * before, y_ref and y_meas only, runs today's loop.
  */
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <stddef.h>
 #include "fmu_model.h"
 
@@ -23,6 +30,11 @@
 #define PARAM_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_PARAMETER, offsetof(ModelData, params.field) }
 #define OUTPUT_REAL(name, field) { name, MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, out.field) }
 #define OUTPUT_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_OUTPUT, offsetof(ModelData, out.field) }
+#define INPUT_REAL(name, field) { name, MODEL_REAL, MODEL_INPUT, offsetof(ModelData, field) }
+#define MODEL_OUTPUT_INT(name, field) { name, MODEL_INTEGER, MODEL_OUTPUT, offsetof(ModelData, field) }
+
+/* a stamped measurement more than this many samples off the controller's time is ignored */
+#define MEAS_OFFSET_MAX 8
 
 const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_y_ref] = { "y_ref", MODEL_REAL, MODEL_INPUT, offsetof(ModelData, y_ref) },
@@ -74,6 +86,15 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_sat_v_max] = PARAM_REAL("sat.v_max", sat_v_max),
     [vr_monitor_pred_error_max] = PARAM_REAL("monitor.pred_error_max", monitor_pred_error_max),
     [vr_monitor_divergence_samples] = PARAM_INT("monitor.divergence_samples", monitor_divergence_samples),
+    [vr_y_preview] = INPUT_REAL("y_preview", y_preview),
+    [vr_t_preview] = INPUT_REAL("t_preview", t_preview),
+    [vr_t_meas] = INPUT_REAL("t_meas", t_meas),
+    [vr_loop_delay] = MODEL_OUTPUT_INT("loop_delay", loop_delay),
+    [vr_loop_delay_time] = { "loop_delay_time", MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, loop_delay_time) },
+    [vr_preview_lead] = MODEL_OUTPUT_INT("preview_lead", preview_lead),
+    [vr_meas_offset] = MODEL_OUTPUT_INT("meas_offset", meas_offset),
+    [vr_mv_observer] = PARAM_REAL("mv.observer", mv_observer),
+    [vr_mv_hold_inputs] = PARAM_BOOL("mv.hold_inputs", mv_hold_inputs),
 };
 
 void model_set_start_values(ModelData *data)
@@ -81,14 +102,93 @@ void model_set_start_values(ModelData *data)
     piezo_controller_default_params(&data->params);
     data->y_ref = 0.0;
     data->y_meas = 0.0;
+    data->y_preview = 0.0;
+    data->t_preview = 0.0;
+    data->t_meas = 0.0;
+}
+
+/* t_k = t0 + k h, the FMU's time (the glue computes it the same way) */
+static double sample_time(const ModelData *data, uint64_t k)
+{
+    return data->t0 + (double)k * data->params.h;
 }
 
 piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
 {
-    (void)start_time;   /* time-invariant */
+    piezo_status st;
     data->said_saturated = 0;
     data->said_large_error = 0;
-    return piezo_controller_init(&data->ctrl, &data->params, diag);
+    data->said_redetect = 0;
+    /* the controller is time-invariant; t0 places the time stamps on its grid */
+    data->t0 = start_time;
+    data->last_t_preview = data->last_t_meas = 0.0;
+    data->have_last = 0;
+    st = piezo_controller_init(&data->ctrl, &data->params, diag);
+    if (st != PIEZO_OK)
+        return st;
+    data->track_delay = data->ctrl.detecting ? 0 : data->ctrl.d;
+    data->track_time = start_time;
+    data->track_lead = data->track_offset = 0;
+    data->said_delay = data->track_delay;
+    data->loop_delay = data->track_delay;
+    data->loop_delay_time = start_time;
+    data->preview_lead = data->meas_offset = 0;
+    return PIEZO_OK;
+}
+
+/* A time stamp input is connected when it advanced by one sample h since the
+ * last committed sample (an unconnected input keeps its start value). */
+static int stamp_advanced(const ModelData *data, double t, double last)
+{
+    double h = data->params.h;
+    return data->have_last && fabs((t - last) - h) <= 1e-3 * h;
+}
+
+/*
+ * The inputs of the current sample k: with a connected t_meas, the
+ * measurement is of sample k + offset, offset = (t_meas - t_k) / h; with a
+ * connected t_preview, y_preview is lead = (t_preview - t_meas) / h samples
+ * ahead of the measurement (t_meas replaced by t_k without its stamp). The
+ * core uses it when 1 <= lead < PIEZO_PREVIEW_RING.
+ */
+static piezo_controller_input sample_input(const ModelData *data, int *meas_offset)
+{
+    piezo_controller_input in;
+    double h = data->params.h, t_k = sample_time(data, data->ctrl.k), origin = t_k;
+    *meas_offset = 0;
+    if (stamp_advanced(data, data->t_meas, data->last_t_meas)) {
+        double o = floor((data->t_meas - t_k) / h + 0.5);
+        if (fabs(o) <= MEAS_OFFSET_MAX) {
+            *meas_offset = (int)o;
+            origin = data->t_meas;
+        }
+    }
+    in.y_ref = data->y_ref;
+    in.y_meas = data->y_meas;
+    in.y_preview = data->y_preview;
+    in.preview_lead = 0;
+    if (stamp_advanced(data, data->t_preview, data->last_t_preview)) {
+        double a = floor((data->t_preview - origin) / h + 0.5);
+        if (a >= 1.0 && a < (double)PIEZO_PREVIEW_RING)
+            in.preview_lead = (int)a;
+    }
+    return in;
+}
+
+/* After sample k was committed with these inputs: the stamps it saw, and the
+ * timing outputs of the default (published) timing. */
+static void after_commit(ModelData *data, const piezo_controller_input *in, int meas_offset)
+{
+    const piezo_controller_output *o = &data->ctrl.out;
+    data->last_t_preview = data->t_preview;
+    data->last_t_meas = data->t_meas;
+    data->have_last = 1;
+    data->track_lead = o->preview ? in->preview_lead : 0;
+    data->track_offset = meas_offset;
+    if (o->delay != data->track_delay) {
+        data->track_delay = o->delay;
+        data->track_time = sample_time(data, data->ctrl.k - 1);
+    }
 }
 
 double model_sample_period(const ModelData *data)
@@ -104,24 +204,45 @@ size_t model_history_needed(const ModelData *data)
 piezo_status model_step(ModelData *data, double *history, size_t history_capacity,
                         int outputs_current)
 {
+    int meas_offset;
+    piezo_controller_input in = sample_input(data, &meas_offset);
+    piezo_status st;
     /* mv.feedthrough: the sample the outputs were read from is committed as is
-     * (computed once); the commit refuses it if it is not this sample's */
+     * (computed once, from these inputs); the commit refuses it if it is not
+     * this sample's */
     if (outputs_current && data->params.mv_feedthrough)
-        return piezo_controller_commit(&data->ctrl, &data->pending, NULL);
-    return piezo_controller_step(&data->ctrl, data->y_ref, data->y_meas,
-                                 history, history_capacity, NULL);
+        st = piezo_controller_commit(&data->ctrl, &data->pending, NULL);
+    else
+        st = piezo_controller_step_input(&data->ctrl, &in, history, history_capacity, NULL);
+    if (st == PIEZO_OK)
+        after_commit(data, &in, meas_offset);
+    return st;
 }
 
 piezo_status model_update_outputs(ModelData *data, double *history, size_t history_capacity)
 {
     if (data->params.mv_feedthrough) {
-        piezo_status st = piezo_controller_evaluate(&data->ctrl, data->y_ref, data->y_meas,
-                                                    history, history_capacity, &data->pending);
-        if (st == PIEZO_OK)
-            data->out = data->pending.out;
-        return st;
+        int meas_offset;
+        piezo_controller_input in = sample_input(data, &meas_offset);
+        piezo_status st = piezo_controller_evaluate(&data->ctrl, &in, history, history_capacity,
+                                                    &data->pending);
+        if (st != PIEZO_OK)
+            return st;
+        /* the outputs of sample k itself */
+        data->out = data->pending.out;
+        data->preview_lead = data->out.preview ? in.preview_lead : 0;
+        data->meas_offset = meas_offset;
+        data->loop_delay = data->out.delay;
+        data->loop_delay_time = data->out.delay == data->track_delay ? data->track_time
+                                                                     : sample_time(data, data->ctrl.k);
+        return PIEZO_OK;
     }
-    data->out = data->ctrl.out;     /* published at the end of the last step */
+    /* published at the end of the last step */
+    data->out = data->ctrl.out;
+    data->preview_lead = data->track_lead;
+    data->meas_offset = data->track_offset;
+    data->loop_delay = data->track_delay;
+    data->loop_delay_time = data->track_time;
     return PIEZO_OK;
 }
 
@@ -130,20 +251,24 @@ int model_direct_feedthrough(const ModelData *data)
     return data->params.mv_feedthrough != 0;
 }
 
-static double sample_time(const ModelData *data, double start_time, uint64_t k)
-{
-    return start_time + (double)k * data->params.h;
-}
-
 int model_step_warning(ModelData *data, double start_time, char *text, size_t size)
 {
     const piezo_controller *c = &data->ctrl;
+    (void)start_time;   /* data->t0 is the same */
+    if (c->n_detections > 1 && !data->said_redetect) {
+        data->said_redetect = 1;
+        snprintf(text, size, "the chosen loop delay no longer predicts the measurement (|pred_error| above "
+                 "monitor.pred_error_max = %g um for %d samples): delay detection restarted at t = %.9g s with "
+                 "the start-up law; later restarts are not logged (the terminate call counts them)",
+                 c->pred_error_max, PIEZO_DETECT_REDETECT, sample_time(data, c->k_delay));
+        return 1;
+    }
     if (c->n_saturated > 0 && !data->said_saturated) {
         data->said_saturated = 1;
         snprintf(text, size, "v was clipped to [sat.v_min, sat.v_max] = [%g, %g] V, first at "
                  "t = %.9g s (adaptation pauses while a clipped sample is in the regressor); "
                  "further clipping is counted, not logged: the terminate call reports the count",
-                 c->sat_v_min, c->sat_v_max, sample_time(data, start_time, c->k_first_saturated));
+                 c->sat_v_min, c->sat_v_max, sample_time(data, c->k_first_saturated));
         return 1;
     }
     if (c->n_large_error > 0 && !data->said_large_error) {
@@ -159,22 +284,54 @@ int model_step_warning(ModelData *data, double start_time, char *text, size_t si
                      "declared unstable, however long it stays above");
         snprintf(text, size, "|pred_error| exceeded monitor.pred_error_max = %g um, first at t = %.9g s: "
                  "the model of G no longer predicts the measurement. %s; further exceedances are counted, "
-                 "not logged", c->pred_error_max, sample_time(data, start_time, c->k_first_large_error),
+                 "not logged", c->pred_error_max, sample_time(data, c->k_first_large_error),
                  consequence);
         return 1;
     }
     return 0;
 }
 
+int model_step_event(ModelData *data, char *text, size_t size)
+{
+    const piezo_controller *c = &data->ctrl;
+    if (data->track_delay == data->said_delay)
+        return 0;
+    data->said_delay = data->track_delay;
+    if (data->track_delay > 0)
+        snprintf(text, size, "loop delay d = %d chosen at t = %.9g s (sample %llu): its sum of squared "
+                 "prediction errors was at most %g times every other candidate's (d = 1, 2, 3) for %d samples; "
+                 "the law uses d = %d and the observer pole mv.observer = %g from then on",
+                 data->track_delay, data->track_time,
+                 (unsigned long long)((data->track_time - data->t0) / data->params.h + 0.5),
+                 1.0 / PIEZO_DETECT_RATIO_INV, PIEZO_DETECT_CONFIRM, data->track_delay, c->observer);
+    else
+        snprintf(text, size, "loop delay detection restarted at t = %.9g s: the start-up law runs until "
+                 "a delay is chosen", data->track_time);
+    return 1;
+}
+
+int model_check_step(const ModelData *data, uint64_t n, char *text, size_t size)
+{
+    if (n <= 1 || data->params.mv_hold_inputs)
+        return 0;
+    snprintf(text, size, "the controller computes one control per measurement, so a closed loop needs an "
+             "exchange of y_meas and v every sample: a step of %llu samples would hold y_meas over them and run "
+             "another loop, which is unstable. Set the master's communication step to h = %g s (OMSimulator: "
+             "the fixed-step master's step size), or set mv.hold_inputs = true to hold the inputs over the step "
+             "outside a closed loop", (unsigned long long)n, data->params.h);
+    return 1;
+}
+
 int model_terminate_warning(const ModelData *data, char *text, size_t size)
 {
     const piezo_controller *c = &data->ctrl;
-    if (c->n_saturated == 0 && c->n_large_error == 0)
+    if (c->n_saturated == 0 && c->n_large_error == 0 && c->n_detections <= 1)
         return 0;
     snprintf(text, size, "of %llu samples, v was clipped in %llu; |pred_error| exceeded "
-             "monitor.pred_error_max = %g um in %llu (largest %.6g um)",
+             "monitor.pred_error_max = %g um in %llu (largest %.6g um); delay detection ran %llu times",
              (unsigned long long)c->k, (unsigned long long)c->n_saturated, c->pred_error_max,
-             (unsigned long long)c->n_large_error, c->max_abs_pred_error);
+             (unsigned long long)c->n_large_error, c->max_abs_pred_error,
+             (unsigned long long)c->n_detections);
     return 1;
 }
 
@@ -185,17 +342,19 @@ int model_failure_text(const ModelData *data, piezo_status st, char *text, size_
         snprintf(text, size, "the closed loop is unstable: |pred_error| stayed above "
                  "monitor.pred_error_max = %g um for monitor.divergence_samples = %llu consecutive "
                  "samples (largest so far %.6g um). Usual causes: the controller's loop delay "
-                 "d = 1 + mv.delay = %d does not match the loop (a master that hands the plant the "
+                 "d = %d %s does not match the loop (a master that hands the plant the "
                  "controller's post-step output removes a sample, as does mv.feedthrough; an extra "
                  "plant or actuation delay adds one), or the plant is far from the nominal model",
                  c->pred_error_max, (unsigned long long)c->divergence_samples,
-                 c->max_abs_pred_error, c->d);
+                 c->max_abs_pred_error, c->d,
+                 !c->auto_delay ? "(1 + mv.delay, set)"
+                 : c->detecting ? "(the start-up law's, still detecting)" : "(detected)");
         return 1;
     }
     if (st == PIEZO_ERR_DIVERGED) {
         snprintf(text, size, "the closed loop diverged: a value computed by the controller is not "
-                 "finite although its inputs are (d = 1 + mv.delay = %d; check it against the master "
-                 "and the plant)", c->d);
+                 "finite although its inputs are (loop delay d = %d%s; check it against the master "
+                 "and the plant)", c->d, c->auto_delay ? ", mv.delay = -1: detected" : " = 1 + mv.delay");
         return 1;
     }
     return 0;
@@ -208,10 +367,19 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
     const piezo_controller_params *q = &data->params;
     piezo_controller scratch;
     const char *fault;
-    (void)t0;           /* time-invariant: the controller keeps no time */
     if ((data->said_saturated != 0 && data->said_saturated != 1)
-        || (data->said_large_error != 0 && data->said_large_error != 1))
+        || (data->said_large_error != 0 && data->said_large_error != 1)
+        || (data->said_redetect != 0 && data->said_redetect != 1) || (data->have_last != 0 && data->have_last != 1))
         return "warning flags are not 0 or 1";
+    if (!(isfinite(data->t0) && isfinite(data->last_t_preview) && isfinite(data->last_t_meas)
+          && isfinite(data->track_time)))
+        return "time stamps not finite";
+    if (data->loop_delay < 0 || data->loop_delay > PIEZO_MV_MAX_D || data->track_delay < 0
+        || data->track_delay > PIEZO_MV_MAX_D || data->said_delay < 0 || data->said_delay > PIEZO_MV_MAX_D
+        || data->preview_lead < 0 || data->preview_lead >= PIEZO_PREVIEW_RING || data->track_lead < 0
+        || data->track_lead >= PIEZO_PREVIEW_RING || abs(data->meas_offset) > MEAS_OFFSET_MAX
+        || abs(data->track_offset) > MEAS_OFFSET_MAX)
+        return "timing outputs out of range";
     if (!core_initialized)
         return NULL;    /* parameters are validated by model_init later */
     /* a live core runs on parameters that passed init ... */
@@ -221,8 +389,12 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         return fault;
     if (c->k != k)
         return "controller sample counter differs from the FMU's k";
+    if (data->t0 != t0 || data->have_last != (k > 0) || data->track_time < t0
+        || data->track_time > sample_time(data, k))
+        return "controller time stamps differ from t0 + k h";
     /* ... and on the copies init made of them */
-    if (c->d != 1 + q->mv_delay || c->fwd_pi.m != q->pi.m || c->inv_creep.exact != (q->creep_exact ? 1 : 0)
+    if ((q->mv_delay == PIEZO_MV_AUTO_DELAY) != c->auto_delay || (!c->auto_delay && c->d != 1 + q->mv_delay)
+        || c->observer != q->mv_observer || c->fwd_pi.m != q->pi.m || c->inv_creep.exact != (q->creep_exact ? 1 : 0)
         || c->inv_creep.alpha != -q->creep_alpha || c->lambda_u != q->mv_lambda_u
         || c->rls_enabled != (q->rls_enabled ? 1 : 0) || c->sat_enabled != (q->sat_enabled ? 1 : 0)
         || c->forgetting != q->rls_forgetting || c->p0 != q->rls_p0 || c->trace_max != q->rls_trace_max

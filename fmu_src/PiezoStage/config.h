@@ -45,6 +45,7 @@ typedef enum {
     vr_sensor_noise_rms,
     vr_sensor_seed,         /* Integer */
     vr_h,
+    vr_t_meas,              /* output [s] the time of the outputs, t0 + k h */
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -57,6 +58,8 @@ typedef struct {
     uint64_t k_first_clamped;   /* the first of them (valid when n_clamped > 0) */
     double v_first_clamped;     /* the v held then */
     int said_clamped;           /* the first-clamping warning was logged */
+    double t0;                  /* start time [s] */
+    double t_meas;              /* output: t0 + k h, the time y_meas (every output) belongs to */
 } ModelData;
 
 #endif

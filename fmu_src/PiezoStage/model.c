@@ -31,6 +31,7 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_y_meas] = OUTPUT_REAL("y_meas", y_meas),
     [vr_u] = OUTPUT_REAL("u", u),
     [vr_x] = OUTPUT_REAL("x", x),
+    [vr_t_meas] = { "t_meas", MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, t_meas) },
     [vr_pi_m] = PARAM_INT("pi.m", pi.m),
     [vr_pi_v_max] = PARAM_REAL("pi.v_max", pi.v_max),
     [vr_pi_w0] = PARAM_REAL("pi.w0", pi.w0),
@@ -69,11 +70,20 @@ void model_set_start_values(ModelData *data)
 {
     piezo_plant_default_params(&data->params);
     data->v = 0.0;
+    data->t0 = data->t_meas = 0.0;
+}
+
+/* t_k = t0 + k h, the FMU's time (the glue computes it the same way) */
+static double sample_time(const ModelData *data, uint64_t k)
+{
+    return data->t0 + (double)k * data->params.h;
 }
 
 piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
 {
-    (void)start_time;   /* time-invariant: the plant starts at rest whatever t0 */
+    /* time-invariant: the plant starts at rest whatever t0; t0 only stamps the outputs */
+    data->t0 = start_time;
+    data->t_meas = start_time;
     data->n_clamped = 0;
     data->k_first_clamped = 0;
     data->v_first_clamped = 0.0;
@@ -107,6 +117,7 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
         }
         data->n_clamped += 1;
     }
+    data->t_meas = sample_time(data, data->plant.k);
     return st;
 }
 
@@ -157,7 +168,6 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
     const piezo_plant_params *q = &data->params;
     piezo_plant scratch;
     const char *fault;
-    (void)t0;           /* time-invariant: the plant keeps no time */
     /* the clamp counters: as model_init leaves them, or counting committed samples */
     if (data->said_clamped != 0 && data->said_clamped != 1)
         return "clamp warning flag is not 0 or 1";
@@ -176,6 +186,8 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         return fault;
     if (p->k != k)
         return "plant sample counter differs from the FMU's k";
+    if (data->t0 != t0 || data->t_meas != sample_time(data, k))
+        return "time stamp t_meas differs from t0 + k h";
     /* ... and on the copies init made of them */
     if (p->pi.m != q->pi.m || p->tf.delay != q->tf.delay || p->creep.exact != (q->creep_exact ? 1 : 0)
         || p->creep_enabled != (q->creep_enabled ? 1 : 0) || p->creep.alpha != q->creep_alpha

@@ -27,6 +27,9 @@ typedef enum {
     vr_phase5, vr_phase6, vr_phase7, vr_phase8,
     vr_lead,                /* Integer [samples] */
     vr_h,
+    vr_y_preview,           /* output [um] reference at t_preview */
+    vr_t_preview,           /* output [s] t_(k+preview): the time y_preview refers to */
+    vr_preview,             /* Integer [samples] */
     MODEL_N_VARIABLES
 } ValueReference;
 

@@ -4,8 +4,10 @@
  * lives in the shared glue (fmu_src/fmi/: fmu_glue_core.c
  * shared by fmi2_glue.c and fmi3_glue.c), so this file serves both FMI versions.
  *
- * At t_k = t0 + k h the outputs are y_d(t_k) and y_ref = y_d(t_(k+lead)), the
- * preview the controller's y_ref input needs (lead = d of the controller).
+ * At t_k = t0 + k h the outputs are y_d(t_k), y_ref = y_d(t_(k+lead)), the
+ * preview the controller's y_ref input needs (lead = its loop delay d), and
+ * the stamped preview y_preview = y_d(t_preview), t_preview = t_(k+preview),
+ * which the controller aligns with the loop delay it detects.
  * No inputs, so no feedthrough: any master order gives the same values.
  */
 #include <stddef.h>
@@ -44,6 +46,9 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_phase8] = PARAM_REAL("phase[8]", phase[7]),
     [vr_lead] = { "lead", MODEL_INTEGER, MODEL_PARAMETER, offsetof(ModelData, params.lead) },
     [vr_h] = PARAM_REAL("h", h),
+    [vr_y_preview] = OUTPUT_REAL("y_preview", y_preview),
+    [vr_t_preview] = OUTPUT_REAL("t_preview", t_preview),
+    [vr_preview] = { "preview", MODEL_INTEGER, MODEL_PARAMETER, offsetof(ModelData, params.preview) },
 };
 
 void model_set_start_values(ModelData *data)
@@ -105,7 +110,7 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
     if (r->k != k || r->t0 != t0)
         return "reference time (t0, k) differs from the FMU's";
     /* the core's parameters are a copy of the FMU's */
-    if (r->p.offset != q->offset || r->p.lead != q->lead || r->p.h != q->h)
+    if (r->p.offset != q->offset || r->p.lead != q->lead || r->p.preview != q->preview || r->p.h != q->h)
         return "reference state does not match its parameters";
     for (i = 0; i < PIEZO_REF_MAX_TONES; i++)
         if (r->p.amplitude[i] != q->amplitude[i] || r->p.frequency[i] != q->frequency[i]
@@ -113,7 +118,9 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
             return "reference state does not match its parameters";
     /* the outputs are a function of (parameters, t0, k): they must be that value */
     if (r->y_d != piezo_reference_value(r, t0 + (double)k * r->p.h)
-        || r->y_ref != piezo_reference_value(r, t0 + (double)(k + (uint64_t)r->p.lead) * r->p.h))
+        || r->y_ref != piezo_reference_value(r, t0 + (double)(k + (uint64_t)r->p.lead) * r->p.h)
+        || r->t_preview != t0 + (double)(k + (uint64_t)r->p.preview) * r->p.h
+        || r->y_preview != piezo_reference_value(r, r->t_preview))
         return "reference outputs differ from y_d at t0 + k h";
     return NULL;
 }

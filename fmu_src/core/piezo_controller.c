@@ -14,6 +14,34 @@
  * weights the loop then diverged (a1, a2 -> 1e12 within 0.6 s). m is 50x
  * below the nominal A(1) = 0.0049, so every plausible stage fits inside. */
 #define A_STABILITY_MARGIN 1e-4
+/* Observer pole t of T = 1 - t z^-1 (docs/model.md, controller): the
+ * measurement noise reaches y through Gd / T, whose norm falls from 1.6 (t = 0)
+ * to 0.96 (t = 0.4) for d = 2. Measured on the mismatch case (six scenarios,
+ * d = 1, 2, 3, four sensor seeds): t = 0.4 has the lowest median e_rms, its
+ * worst case is within 0.01 nm of t = 0.3's (2.653 vs 2.647 nm), and t = 0.5
+ * raises the worst case (2.83 nm). */
+#define DEFAULT_OBSERVER 0.4
+/* The start-up law while the delay is detected: the nominal model, d = 2 and
+ * t = 0.9. Its closed loop is stable for a loop delay of 1, 2 or 3 samples,
+ * also with the mismatch case's plant and gains from 0.6 to 1.5 times the
+ * model's (roots in docs/cosimulation.md); t = 0 (plain MV) is unstable for
+ * every wrong d. */
+#define START_OBSERVER 0.9
+/* A candidate is chosen when its sum of squared a-priori errors is at most
+ * DETECT_RATIO times every other candidate's, for PIEZO_DETECT_CONFIRM
+ * consecutive samples. */
+#define DETECT_RATIO (1.0 / PIEZO_DETECT_RATIO_INV)
+/* A trial of PIEZO_DETECT_TRIAL samples that chooses nothing is followed by
+ * one that starts with a probe: the doublet +p, -p added to q on its first two
+ * samples. Its first response, b1 p, is PROBE_SNR times the rms a-priori
+ * error of the best candidate in the trial before (noise and model error),
+ * p within [PROBE_MIN, PROBE_MAX] um; each further trial doubles it. After
+ * PIEZO_DETECT_PROBES probes a detection probes no more (a measurement that
+ * never answers, e.g. a controller driven open loop): its trials go on, and a
+ * kink of the reference can still decide. */
+#define PROBE_SNR 20.0
+#define PROBE_MIN 1e-3
+#define PROBE_MAX 1.0
 
 void piezo_controller_default_params(piezo_controller_params *p)
 {
@@ -33,9 +61,11 @@ void piezo_controller_default_params(piezo_controller_params *p)
     p->h = plant.h;
     /* No direct feedthrough by default: the control computed from the inputs
      * of sample k is published at t_(k+1), so the loop delay is d = 2. */
-    p->mv_delay = 1;
+    p->mv_delay = PIEZO_MV_AUTO_DELAY;   /* detected: 2 in a master that exchanges at
+                                            communication points, 1 in true Gauss-Seidel */
     p->mv_feedthrough = 0;
     p->mv_lambda_u = 0.0;
+    p->mv_observer = DEFAULT_OBSERVER;
     /* RLS tuning measured on the mismatch case of docs/model.md (1.2-1.9 nm rms in all
      * six tracking scenarios); a trace bound of 1e3 degrades its 1 Hz run to
      * 111 nm and 1e4 makes it diverge. */
@@ -50,9 +80,15 @@ void piezo_controller_default_params(piezo_controller_params *p)
     p->monitor_divergence_samples = PIEZO_MONITOR_DEFAULT_SAMPLES;
 }
 
-/* 1 = A E + z^-d Gd: e_0 = 1, e_n = -a1 e_{n-1} - a2 e_{n-2} (n < d),
- * Gd = -(a1 e_{d-1} + a2 e_{d-2}) - a2 e_{d-1} z^-1. */
 piezo_status piezo_diophantine(double a1, double a2, int d, double *e, double *g)
+{
+    return piezo_diophantine_observer(a1, a2, 0.0, d, e, g);
+}
+
+/* T = A E + z^-d Gd with T = 1 + t_1 z^-1, t_1 = -t (t_n = 0 for n >= 2):
+ * e_0 = 1, e_n = t_n - a1 e_{n-1} - a2 e_{n-2} (n < d),
+ * Gd = (t_d - a1 e_{d-1} - a2 e_{d-2}) + (t_{d+1} - a2 e_{d-1}) z^-1. */
+piezo_status piezo_diophantine_observer(double a1, double a2, double t, int d, double *e, double *g)
 {
     int n;
     double e_dm1, e_dm2;
@@ -61,11 +97,12 @@ piezo_status piezo_diophantine(double a1, double a2, int d, double *e, double *g
     for (n = 0; n < d; ++n) {
         double e1 = n >= 1 ? e[n - 1] : 0.0;
         double e2 = n >= 2 ? e[n - 2] : 0.0;
-        e[n] = (n == 0 ? 1.0 : 0.0) - a1 * e1 - a2 * e2;
+        double t_n = n == 0 ? 1.0 : (n == 1 ? -t : 0.0);
+        e[n] = t_n - a1 * e1 - a2 * e2;
     }
     e_dm1 = e[d - 1];
     e_dm2 = d >= 2 ? e[d - 2] : 0.0;
-    g[0] = -(a1 * e_dm1 + a2 * e_dm2);
+    g[0] = (d == 1 ? -t : 0.0) - (a1 * e_dm1 + a2 * e_dm2);
     g[1] = -a2 * e_dm1;
     return PIEZO_OK;
 }
@@ -94,12 +131,17 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     if (!(p->tf_b1 > 0.0)) return piezo_refuse(diag, "tf.b1", "(0, inf) (MV divides by b1)", p->tf_b1);
     if (!(fabs(p->tf_b2) <= ZERO_RADIUS_MAX * p->tf_b1))
         return piezo_refuse(diag, "tf.b2", "|tf.b2| <= 0.999 tf.b1 (zero of B inside the unit circle)", p->tf_b2);
-    if (p->mv_delay < 0 || p->mv_delay > PIEZO_MV_MAX_EXTRA_DELAY)
-        return piezo_refuse(diag, "mv.delay", "0..8 samples", (double)p->mv_delay);
+    if (p->mv_delay < PIEZO_MV_AUTO_DELAY || p->mv_delay > PIEZO_MV_MAX_EXTRA_DELAY)
+        return piezo_refuse(diag, "mv.delay", "-1 (detect d in 1..3) or 0..8 samples (d = 1 + mv.delay)",
+                            (double)p->mv_delay);
     if (p->mv_feedthrough != 0 && p->mv_feedthrough != 1)
         return piezo_refuse(diag, "mv.feedthrough", "false or true", (double)p->mv_feedthrough);
+    if (p->mv_hold_inputs != 0 && p->mv_hold_inputs != 1)
+        return piezo_refuse(diag, "mv.hold_inputs", "false or true", (double)p->mv_hold_inputs);
     if (!(isfinite(p->mv_lambda_u) && p->mv_lambda_u >= 0.0))
         return piezo_refuse(diag, "mv.lambda_u", "[0, inf)", p->mv_lambda_u);
+    if (!(isfinite(p->mv_observer) && p->mv_observer >= 0.0 && p->mv_observer < 1.0))
+        return piezo_refuse(diag, "mv.observer", "[0, 1) (pole of the observer polynomial T)", p->mv_observer);
     if (!(isfinite(p->rls_forgetting) && p->rls_forgetting > 0.0 && p->rls_forgetting <= 1.0))
         return piezo_refuse(diag, "rls.forgetting", "(0, 1]", p->rls_forgetting);
     if (!(isfinite(p->rls_p0) && p->rls_p0 > 0.0))
@@ -125,8 +167,10 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     st = piezo_gl_init(&c->inv_creep, -p->creep_alpha, pow(p->h, p->creep_alpha) / p->creep_k_c,
                        p->creep_exact, diag);
     if (st != PIEZO_OK) return st;
-    c->d = 1 + p->mv_delay;
+    c->auto_delay = p->mv_delay == PIEZO_MV_AUTO_DELAY;
+    c->d = c->auto_delay ? PIEZO_DETECT_START_D : 1 + p->mv_delay;
     c->lambda_u = p->mv_lambda_u;
+    c->observer = p->mv_observer;
     c->rls_enabled = p->rls_enabled ? 1 : 0;
     c->forgetting = p->rls_forgetting;
     c->inv_forgetting = 1.0 / p->rls_forgetting;
@@ -162,6 +206,26 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     return PIEZO_OK;
 }
 
+/* (Re)start delay detection: every candidate from the nominal model and the
+ * initial covariance, sums at 0, the start-up law. */
+static void detection_start(piezo_controller *c)
+{
+    int i, j;
+    c->detecting = 1;
+    c->d = PIEZO_DETECT_START_D;
+    c->det_leader = -1;
+    c->det_run = 0;
+    c->det_trial = c->k;
+    c->det_probe = 0.0;
+    c->det_probes = 0;
+    c->n_detections += 1;
+    for (i = 0; i < PIEZO_DETECT_N; ++i) {
+        c->det_score[i] = 0.0;
+        memcpy(&c->det_theta[4 * i], c->theta_nominal, 4 * sizeof(double));
+        for (j = 0; j < 16; ++j) c->det_P[16 * i + j] = j % 5 == 0 ? c->p0 : 0.0;
+    }
+}
+
 void piezo_controller_reset(piezo_controller *c)
 {
     int i;
@@ -175,6 +239,14 @@ void piezo_controller_reset(piezo_controller *c)
     c->y_prev[0] = c->y_prev[1] = 0.0;
     memset(c->q_ring, 0, sizeof c->q_ring);
     c->head = 0;
+    c->r_prev = 0.0;
+    memset(c->preview_value, 0, sizeof c->preview_value);
+    memset(c->preview_tag, 0, sizeof c->preview_tag);
+    c->k_delay = 0;
+    c->n_detections = 0;
+    c->detecting = 0;
+    if (c->auto_delay)
+        detection_start(c);
     c->sat_hold = 0;
     c->n_saturated = c->n_large_error = 0;
     c->run_saturated = c->run_large_error = 0;
@@ -231,22 +303,23 @@ static void project(const piezo_controller *c, double *th)
  * from the diagonal P0 on: (P phi)_i (P phi)_j is the same product as
  * (P phi)_j (P phi)_i, so P_new[ij] = P_new[ji] with no mirroring, and
  * P phi = sum_j phi_j (row j of P), four-element rows the compiler vectorises.
- * Returns the a-priori prediction error; the updated theta and P go to *s.
+ * The same update serves the chosen loop and each delay candidate: the
+ * a-priori prediction error of (theta_in, P) under delay d; with update set,
+ * the updated estimates and covariance go to theta, P_new (not P's storage).
  */
-static double rls_update(const piezo_controller *c, double y, piezo_controller_sample *s)
+static double rls_step(const piezo_controller *c, const double *theta_in, const double *P, int d, double y,
+                       int update, double *theta, double *P_new)
 {
     double phi[4], Pphi[4] = {0.0, 0.0, 0.0, 0.0}, denom, inv_denom, e, trace;
-    double *P_new = s->P, *theta = s->theta;
-    const double *P = c->P, inv_lambda = c->inv_forgetting;
+    const double inv_lambda = c->inv_forgetting;
     int i, j;
     phi[0] = -c->y_prev[0];
     phi[1] = -c->y_prev[1];
-    phi[2] = q_past(c, c->d);
-    phi[3] = q_past(c, c->d + 1);
+    phi[2] = q_past(c, d);
+    phi[3] = q_past(c, d + 1);
     e = y;
-    for (i = 0; i < 4; ++i) e -= phi[i] * c->theta[i];
-    s->rls_updated = c->rls_enabled && !(c->sat_hold > 0);
-    if (!s->rls_updated) return e;
+    for (i = 0; i < 4; ++i) e -= phi[i] * theta_in[i];
+    if (!update) return e;
 
     /* (P phi)_i = sum_j P_ij phi_j in increasing j, P_ij read as P_ji (symmetric) */
     for (j = 0; j < 4; ++j) {
@@ -259,9 +332,9 @@ static double rls_update(const piezo_controller *c, double y, piezo_controller_s
     denom = c->forgetting;
     for (i = 0; i < 4; ++i) denom += phi[i] * Pphi[i];
     inv_denom = 1.0 / denom;
-    for (i = 0; i < 4; ++i) theta[i] = c->theta[i] + Pphi[i] * inv_denom * e;
+    for (i = 0; i < 4; ++i) theta[i] = theta_in[i] + Pphi[i] * inv_denom * e;
     for (i = 0; i < 4; ++i) {
-        /* the row is read before the new one is written (s->P is not c->P) */
+        /* the row is read before the new one is written (P_new is not P) */
         const double *row = P + 4 * i;
         double n0 = (row[0] - Pphi[i] * Pphi[0] * inv_denom) * inv_lambda;
         double n1 = (row[1] - Pphi[i] * Pphi[1] * inv_denom) * inv_lambda;
@@ -279,6 +352,96 @@ static double rls_update(const piezo_controller *c, double y, piezo_controller_s
     }
     project(c, theta);
     return e;
+}
+
+/* The chosen loop's RLS: the a-priori prediction error; the updated theta and
+ * P go to *s when the update runs. */
+static double rls_update(const piezo_controller *c, double y, piezo_controller_sample *s)
+{
+    s->rls_updated = c->rls_enabled && !(c->sat_hold > 0);
+    return rls_step(c, c->theta, c->P, c->d, y, s->rls_updated, s->theta, s->P);
+}
+
+/*
+ * Delay detection, one sample (docs/cosimulation.md): each candidate
+ * d = i + 1 predicts y(k) with its own RLS, adds its squared a-priori error to
+ * its sum, and adapts. The candidate with the smallest sum leads clearly when
+ * that sum is at most DETECT_RATIO times every other candidate's; it is chosen
+ * after leading clearly for PIEZO_DETECT_CONFIRM consecutive samples, and its
+ * estimates and covariance become the loop's (s->theta, s->P, s->rls_updated).
+ * Returns the a-priori error of the leader by sum (ties: the start-up law's d).
+ */
+static double detect_update(const piezo_controller *c, double y, piezo_controller_sample *s)
+{
+    static const int order[PIEZO_DETECT_N] = { PIEZO_DETECT_START_D - 1, 0, 2 };
+    double err[PIEZO_DETECT_N];
+    int i, best = order[0], second = -1, update = c->rls_enabled && !(c->sat_hold > 0);
+    for (i = 0; i < PIEZO_DETECT_N; ++i) {
+        err[i] = rls_step(c, &c->det_theta[4 * i], &c->det_P[16 * i], i + 1, y, update,
+                          &s->det_theta[4 * i], &s->det_P[16 * i]);
+        if (!update) {
+            memcpy(&s->det_theta[4 * i], &c->det_theta[4 * i], 4 * sizeof(double));
+            memcpy(&s->det_P[16 * i], &c->det_P[16 * i], 16 * sizeof(double));
+        }
+        s->det_score[i] = c->det_score[i] + err[i] * err[i];
+    }
+    for (i = 1; i < PIEZO_DETECT_N; ++i)
+        if (s->det_score[order[i]] < s->det_score[best]) best = order[i];
+    for (i = 0; i < PIEZO_DETECT_N; ++i)
+        if (i != best && (second < 0 || s->det_score[i] < s->det_score[second])) second = i;
+    if (s->det_score[second] > 0.0 && s->det_score[best] <= DETECT_RATIO * s->det_score[second]) {
+        s->det_run = c->det_leader == best ? c->det_run + 1 : 1;
+        s->det_leader = best;
+    } else {
+        s->det_run = 0;
+        s->det_leader = -1;
+    }
+    s->detecting = s->det_run < PIEZO_DETECT_CONFIRM;
+    /* a trial that chose nothing: the next starts with a probe */
+    s->new_trial = s->detecting && c->k + 1 - c->det_trial >= PIEZO_DETECT_TRIAL;
+    if (s->new_trial) {
+        double p = PROBE_SNR * sqrt(s->det_score[best] / PIEZO_DETECT_TRIAL) / c->theta_nominal[2];
+        if (p < 2.0 * c->det_probe) p = 2.0 * c->det_probe;
+        s->next_probe = c->det_probes >= PIEZO_DETECT_PROBES ? 0.0
+                        : p < PROBE_MIN ? PROBE_MIN : (p > PROBE_MAX ? PROBE_MAX : p);
+    }
+    s->d = s->detecting ? PIEZO_DETECT_START_D : best + 1;
+    s->k_delay = s->detecting ? c->k_delay : c->k;
+    s->rls_updated = !s->detecting;
+    if (!s->detecting) {
+        memcpy(s->theta, &s->det_theta[4 * best], sizeof s->theta);
+        memcpy(s->P, &s->det_P[16 * best], sizeof s->P);
+    }
+    return err[best];
+}
+
+/* The detection state of k+1 when nothing is detected this sample (the
+ * candidates' sums, estimates and covariances are not used then: neither
+ * copied here nor committed). */
+static void detect_carry(const piezo_controller *c, piezo_controller_sample *s)
+{
+    s->d = c->d;
+    s->detecting = c->detecting;
+    s->det_leader = c->det_leader;
+    s->det_run = c->det_run;
+    s->k_delay = c->k_delay;
+    s->new_trial = 0;
+    s->next_probe = 0.0;
+}
+
+/* The reference r(k) = y_d(k + d): the stamped preview for sample k + d when
+ * this sample's input or the ring holds it, else y_ref. */
+static double reference(const piezo_controller *c, const piezo_controller_input *in, int d, int *stamped)
+{
+    uint64_t want = c->k + (uint64_t)d;
+    int slot = (int)(want % PIEZO_PREVIEW_RING);
+    *stamped = 1;
+    if (in->preview_lead == d)
+        return in->y_preview;
+    if (c->preview_tag[slot] == want + 1)
+        return c->preview_value[slot];
+    *stamped = 0;
+    return in->y_ref;
 }
 
 /* 1 when every x[i] is finite: x * 0 is +-0 for a finite x and NaN for Inf or
@@ -305,7 +468,9 @@ static int all_finite(const double *x, int n)
  * finite states. */
 static int sample_state_finite(const piezo_controller_sample *s)
 {
-    return all_finite(s->out.theta, 4) && (!s->rls_updated || all_finite(s->P, 16));
+    return all_finite(s->out.theta, 4) && (!s->rls_updated || all_finite(s->P, 16))
+           && (!s->detecting || (all_finite(s->det_theta, PIEZO_DETECT_THETA)
+                                 && all_finite(s->det_P, PIEZO_DETECT_P) && all_finite(s->det_score, PIEZO_DETECT_N)));
 }
 
 /* Evaluate sample k into *s without changing *c (the caller guarantees
@@ -314,32 +479,53 @@ static int sample_state_finite(const piezo_controller_sample *s)
  * the way means divergence. A run of large prediction errors that reaches
  * the divergence window is only marked (s->reaches_window): the commit
  * refuses it, a peek reports the values. */
-static piezo_status controller_eval(const piezo_controller *c, double y_ref, double y_meas,
+static piezo_status controller_eval(const piezo_controller *c, const piezo_controller_input *in,
                                     double *history, size_t capacity, piezo_controller_sample *s)
 {
     double e[PIEZO_MV_MAX_D] = {0.0}, g[2] = {0.0, 0.0}, f[PIEZO_MV_MAX_D + 1];
-    double pred_error, numerator, q, r, v;
+    double pred_error, numerator, q, r, v, t, y_meas = in->y_meas;
     const double *theta;
     piezo_status st;
-    int i, d = c->d, saturated = 0, operators_finite;
+    int i, d, stamped, saturated = 0, operators_finite;
 
     memset(&s->out, 0, sizeof s->out);   /* defined padding: FMU states are hashed bytewise */
     s->k = c->k;
-    s->y_ref = y_ref;
+    s->y_ref = in->y_ref;
     s->y_meas = y_meas;
+    s->y_preview = in->y_preview;
+    s->preview_lead = in->preview_lead;
     s->reaches_window = 0;
-    pred_error = rls_update(c, y_meas, s);
-    theta = s->rls_updated ? s->theta : c->theta;
+    s->restarted = 0;
+    if (c->detecting) {
+        pred_error = detect_update(c, y_meas, s);
+    } else {
+        pred_error = rls_update(c, y_meas, s);
+        detect_carry(c, s);
+    }
+    /* the law: the start-up law (nominal model, d = 2, t = 0.9) while detecting,
+     * else the loop's estimates, d and observer */
+    d = s->d;
+    theta = s->detecting ? c->theta_nominal : (s->rls_updated ? s->theta : c->theta);
+    t = s->detecting ? START_OBSERVER : c->observer;
+    r = reference(c, in, d, &stamped);
 
     /* Diophantine with the current estimate; F = B E: f_n = b1 e_n + b2 e_{n-1} */
-    piezo_diophantine(theta[0], theta[1], d, e, g);
+    piezo_diophantine_observer(theta[0], theta[1], t, d, e, g);
     for (i = 0; i <= d; ++i)
         f[i] = theta[2] * (i < d ? e[i] : 0.0) + theta[3] * (i >= 1 ? e[i - 1] : 0.0);
 
-    /* MV: y(k+d) = Gd y(k) + F q(k) := y_ref, weighted by lambda_u */
-    numerator = y_ref - g[0] * y_meas - g[1] * c->y_prev[0];
+    /* MV: T y(k+d) = Gd y(k) + F q(k) := T r(k), weighted by lambda_u */
+    numerator = (r - t * c->r_prev) - g[0] * y_meas - g[1] * c->y_prev[0];
     for (i = 1; i <= d; ++i) numerator -= f[i] * q_past(c, i);
     q = f[0] * numerator / (f[0] * f[0] + c->lambda_u);
+    /* the probe doublet on the first two samples of a detection trial */
+    s->probe = 0.0;
+    if (s->detecting && c->k - c->det_trial < 2)
+        s->probe = c->k == c->det_trial ? c->det_probe : -c->det_probe;
+    q += s->probe;
+    s->r = r;
+    s->out.delay = s->detecting ? 0 : d;
+    s->out.preview = stamped;
 
     /* feedforward: inverse creep, then inverse PI */
     st = piezo_gl_eval(&c->inv_creep, q, history, capacity, s->creep_next, &r);
@@ -363,7 +549,9 @@ static piezo_status controller_eval(const piezo_controller *c, double y_ref, dou
         st = piezo_gl_eval(&c->inv_creep, q, history, capacity, s->creep_next, &r);
         if (st != PIEZO_OK) return PIEZO_ERR_DIVERGED;
         operators_finite = isfinite(r_eff) && isfinite(v_resync) && isfinite(r);
-        s->sat_hold = d + 1;   /* no adaptation until the clipped sample leaves the regressor */
+        /* no adaptation until the clipped sample leaves the regressor (while
+         * detecting, the longest candidate's) */
+        s->sat_hold = (s->detecting ? PIEZO_DETECT_N : d) + 1;
     } else {
         piezo_pi_eval(&c->fwd_pi, v, s->fwd_z, &r);
         operators_finite = isfinite(r);   /* v is checked below; r of the inverse creep made it */
@@ -372,6 +560,10 @@ static piezo_status controller_eval(const piezo_controller *c, double y_ref, dou
 
     s->large_error = fabs(pred_error) > c->pred_error_max;
     s->run_large_error = s->large_error ? c->run_large_error + 1 : 0;
+    /* a chosen loop whose prediction error stays beyond the bound since the
+     * choice goes back to detection (from the next sample) */
+    s->restarted = c->auto_delay && !s->detecting && s->run_large_error >= PIEZO_DETECT_REDETECT
+                   && c->k + 1 - s->k_delay >= PIEZO_DETECT_REDETECT;
     s->out.v = v;
     s->out.q = q;
     memcpy(s->out.theta, theta, sizeof s->out.theta);
@@ -384,6 +576,37 @@ static piezo_status controller_eval(const piezo_controller *c, double y_ref, dou
         return PIEZO_ERR_DIVERGED;
     s->reaches_window = c->divergence_samples > 0 && s->run_large_error >= c->divergence_samples;
     return PIEZO_OK;
+}
+
+/* The delay detection's and the preview ring's part of a commit (c->k is
+ * still the sample's). */
+static void commit_timing(piezo_controller *c, const piezo_controller_sample *s)
+{
+    if (s->preview_lead >= 1 && s->preview_lead < PIEZO_PREVIEW_RING) {
+        uint64_t at = c->k + (uint64_t)s->preview_lead;
+        int slot = (int)(at % PIEZO_PREVIEW_RING);
+        c->preview_value[slot] = s->y_preview;
+        c->preview_tag[slot] = at + 1;
+    }
+    c->d = s->d;
+    c->detecting = s->detecting;
+    c->det_leader = s->det_leader;
+    c->det_run = s->det_run;
+    c->k_delay = s->k_delay;
+    if (c->detecting) {
+        memcpy(c->det_score, s->det_score, sizeof c->det_score);
+        memcpy(c->det_theta, s->det_theta, sizeof c->det_theta);
+        memcpy(c->det_P, s->det_P, sizeof c->det_P);
+    }
+    if (s->new_trial) {
+        int i;
+        c->det_trial = c->k + 1;
+        c->det_probe = s->next_probe;
+        c->det_probes += s->next_probe > 0.0;
+        c->det_leader = -1;
+        c->det_run = 0;
+        for (i = 0; i < PIEZO_DETECT_N; ++i) c->det_score[i] = 0.0;
+    }
 }
 
 /* Make the evaluated sample k the controller's state (k -> k+1). */
@@ -419,15 +642,23 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
     c->q_ring[c->head] = q;
     c->y_prev[1] = c->y_prev[0];
     c->y_prev[0] = y_meas;
+    c->r_prev = s->r;
+    commit_timing(c, s);
     c->k += 1;
     c->out = s->out;
+    if (s->restarted) {
+        detection_start(c);
+        c->k_delay = c->k;
+    }
 }
 
 /* Refusals that must leave the state untouched, checked before any work. */
-static piezo_status check_step_inputs(const piezo_controller *c, double y_ref, double y_meas,
+static piezo_status check_step_inputs(const piezo_controller *c, const piezo_controller_input *in,
                                       const double *history, size_t capacity)
 {
-    if (!(isfinite(y_ref) && isfinite(y_meas))) return PIEZO_ERR_NONFINITE;
+    if (!(isfinite(in->y_ref) && isfinite(in->y_meas))) return PIEZO_ERR_NONFINITE;
+    if (in->preview_lead != 0 && !isfinite(in->y_preview)) return PIEZO_ERR_NONFINITE;
+    if (in->preview_lead < 0 || in->preview_lead >= PIEZO_PREVIEW_RING) return PIEZO_ERR_PARAM;
     if (c->inv_creep.exact) {
         if (!history) return PIEZO_ERR_NULL;
         if (capacity < piezo_controller_history_needed(c)) return PIEZO_ERR_CAPACITY;
@@ -435,14 +666,25 @@ static piezo_status check_step_inputs(const piezo_controller *c, double y_ref, d
     return PIEZO_OK;
 }
 
-piezo_status piezo_controller_evaluate(const piezo_controller *c, double y_ref, double y_meas,
+/* The inputs of a sample without a stamped preview. */
+static piezo_controller_input plain_input(double y_ref, double y_meas)
+{
+    piezo_controller_input in;
+    in.y_ref = y_ref;
+    in.y_meas = y_meas;
+    in.y_preview = 0.0;
+    in.preview_lead = 0;
+    return in;
+}
+
+piezo_status piezo_controller_evaluate(const piezo_controller *c, const piezo_controller_input *in,
                                        double *history, size_t capacity, piezo_controller_sample *sample)
 {
     piezo_status st;
-    if (!c || !sample) return PIEZO_ERR_NULL;
-    st = check_step_inputs(c, y_ref, y_meas, history, capacity);
+    if (!c || !in || !sample) return PIEZO_ERR_NULL;
+    st = check_step_inputs(c, in, history, capacity);
     if (st != PIEZO_OK) return st;
-    return controller_eval(c, y_ref, y_meas, history, capacity, sample);
+    return controller_eval(c, in, history, capacity, sample);
 }
 
 piezo_status piezo_controller_commit(piezo_controller *c, const piezo_controller_sample *sample,
@@ -457,14 +699,14 @@ piezo_status piezo_controller_commit(piezo_controller *c, const piezo_controller
 }
 
 /* evaluate + commit, without the exported entry points (no PLT in the hot path) */
-piezo_status piezo_controller_step(piezo_controller *c, double y_ref, double y_meas,
-                                   double *history, size_t capacity, piezo_controller_output *out)
+piezo_status piezo_controller_step_input(piezo_controller *c, const piezo_controller_input *in,
+                                         double *history, size_t capacity, piezo_controller_output *out)
 {
     piezo_controller_sample s;
     piezo_status st;
-    if (!c) return PIEZO_ERR_NULL;
-    st = check_step_inputs(c, y_ref, y_meas, history, capacity);
-    if (st == PIEZO_OK) st = controller_eval(c, y_ref, y_meas, history, capacity, &s);
+    if (!c || !in) return PIEZO_ERR_NULL;
+    st = check_step_inputs(c, in, history, capacity);
+    if (st == PIEZO_OK) st = controller_eval(c, in, history, capacity, &s);
     if (st != PIEZO_OK) return st;
     if (s.reaches_window) return PIEZO_ERR_UNSTABLE;
     controller_commit(c, &s);
@@ -472,13 +714,21 @@ piezo_status piezo_controller_step(piezo_controller *c, double y_ref, double y_m
     return PIEZO_OK;
 }
 
+piezo_status piezo_controller_step(piezo_controller *c, double y_ref, double y_meas,
+                                   double *history, size_t capacity, piezo_controller_output *out)
+{
+    piezo_controller_input in = plain_input(y_ref, y_meas);
+    return piezo_controller_step_input(c, &in, history, capacity, out);
+}
+
 piezo_status piezo_controller_peek(const piezo_controller *c, double y_ref, double y_meas,
                                    double *history, size_t capacity, piezo_controller_output *out)
 {
     piezo_controller_sample s;
+    piezo_controller_input in = plain_input(y_ref, y_meas);
     piezo_status st;
     if (!c || !out) return PIEZO_ERR_NULL;
-    st = piezo_controller_evaluate(c, y_ref, y_meas, history, capacity, &s);
+    st = piezo_controller_evaluate(c, &in, history, capacity, &s);
     if (st == PIEZO_OK) *out = s.out;
     return st;
 }
@@ -488,7 +738,7 @@ const char *piezo_controller_check(const piezo_controller *c)
 {
     const char *fault;
     const piezo_controller_output *o;
-    int i, j;
+    int i, j, m;
     if (!c) return "controller missing";
     if ((fault = piezo_pi_check(&c->fwd_pi)) != NULL) return fault;
     if ((fault = piezo_pi_inverse_check(&c->inv_pi)) != NULL) return fault;
@@ -497,7 +747,28 @@ const char *piezo_controller_check(const piezo_controller *c)
     if (c->inv_creep.k != c->k) return "inverse creep sample counter differs from the controller's";
     if (c->d < 1 || c->d > PIEZO_MV_MAX_D) return "loop delay d outside 1..9";
     if (c->head < 0 || c->head >= PIEZO_MV_Q_RING) return "q ring index out of range";
-    if (c->sat_hold < 0 || c->sat_hold > c->d + 1) return "adaptation pause outside 0..d+1";
+    if (c->sat_hold < 0 || c->sat_hold > (c->d > PIEZO_DETECT_N ? c->d : PIEZO_DETECT_N) + 1)
+        return "adaptation pause outside 0..max(d, 3)+1";
+    if ((c->auto_delay != 0 && c->auto_delay != 1) || (c->detecting != 0 && c->detecting != 1)
+        || (c->detecting && !c->auto_delay) || (c->auto_delay && c->d > PIEZO_DETECT_N)
+        || (c->detecting && c->d != PIEZO_DETECT_START_D))
+        return "delay detection flags or d inconsistent";
+    /* a choice leaves its leader with a run of PIEZO_DETECT_CONFIRM */
+    if (c->det_leader < -1 || c->det_leader >= PIEZO_DETECT_N || c->det_run < 0
+        || c->det_run > PIEZO_DETECT_CONFIRM || (c->detecting && c->det_run == PIEZO_DETECT_CONFIRM)
+        || (c->det_leader < 0 && c->det_run != 0))
+        return "delay detection leader out of range";
+    if (c->det_trial > c->k || !(isfinite(c->det_probe) && c->det_probe >= 0.0 && c->det_probe <= PROBE_MAX)
+        || c->det_probes < 0 || c->det_probes > PIEZO_DETECT_PROBES)
+        return "delay detection trial out of range";
+    if (c->k_delay > c->k || (c->auto_delay && (c->n_detections < 1 || c->n_detections > c->k + 1))
+        || (!c->auto_delay && c->n_detections != 0))
+        return "delay detection counters out of range";
+    if (!all_finite(c->det_theta, PIEZO_DETECT_THETA) || !all_finite(c->det_P, PIEZO_DETECT_P)
+        || !all_finite(c->det_score, PIEZO_DETECT_N) || !isfinite(c->r_prev)
+        || !all_finite(c->preview_value, PIEZO_PREVIEW_RING))
+        return "delay detection or preview values not finite";
+    if (!(isfinite(c->observer) && c->observer >= 0.0 && c->observer < 1.0)) return "mv.observer out of range";
     if ((c->rls_enabled != 0 && c->rls_enabled != 1) || (c->sat_enabled != 0 && c->sat_enabled != 1))
         return "rls.enabled or sat.enabled is not 0 or 1";
     if (!(isfinite(c->lambda_u) && c->lambda_u >= 0.0)) return "mv.lambda_u out of range";
@@ -513,10 +784,14 @@ const char *piezo_controller_check(const piezo_controller *c)
     if (!all_finite(c->theta, 4) || !all_finite(c->P, 16) || !all_finite(c->y_prev, 2)
         || !all_finite(c->q_ring, PIEZO_MV_Q_RING))
         return "estimates, covariance or past values not finite";
-    for (i = 0; i < 4; ++i)
-        for (j = 0; j < i; ++j)
-            if (memcmp(&c->P[4 * i + j], &c->P[4 * j + i], sizeof c->P[0]) != 0)
-                return "covariance not symmetric";
+    /* the loop's covariance and each candidate's stay bitwise symmetric (rls_step) */
+    for (m = 0; m <= PIEZO_DETECT_N; ++m) {
+        const double *P = m == 0 ? c->P : &c->det_P[16 * (m - 1)];
+        for (i = 0; i < 4; ++i)
+            for (j = 0; j < i; ++j)
+                if (memcmp(&P[4 * i + j], &P[4 * j + i], sizeof P[0]) != 0)
+                    return m == 0 ? "covariance not symmetric" : "a delay candidate's covariance not symmetric";
+    }
     if (!(isfinite(c->max_abs_pred_error) && c->max_abs_pred_error >= 0.0)) return "largest |pred_error| not finite";
     if (c->n_saturated > c->k || c->n_large_error > c->k || c->run_saturated > c->n_saturated
         || c->run_large_error > c->n_large_error)
@@ -530,5 +805,7 @@ const char *piezo_controller_check(const piezo_controller *c)
     if (!(isfinite(o->v) && isfinite(o->q) && isfinite(o->pred_error) && all_finite(o->theta, 4)))
         return "controller outputs not finite";
     if (o->saturated != 0 && o->saturated != 1) return "saturated output is not 0 or 1";
+    if (o->delay < 0 || o->delay > PIEZO_MV_MAX_D || (o->preview != 0 && o->preview != 1))
+        return "delay or preview output out of range";
     return NULL;
 }

@@ -5,11 +5,26 @@
  *               -> inverse PI -> v(k) [-> saturation]
  *
  * Loop model seen from q: y(k) = -a1 y(k-1) - a2 y(k-2) + b1 q(k-d) + b2 q(k-d-1),
- * d = 1 + mv_delay, i.e. A(z^-1) y = z^-d B(z^-1) q.
- * Diophantine: 1 = A E + z^-d Gd, deg E = d-1, deg Gd = 1, F = B E (deg d).
- * Predictor: y(k+d) = Gd y(k) + F q(k). MV (with control weighting lambda_u):
- *     q(k) = f0 (y_ref - Gd y(k) - sum_{i=1..d} f_i q(k-i)) / (f0^2 + lambda_u)
- * where y_ref = y_d(k+d) (reference preview).
+ * i.e. A(z^-1) y = z^-d B(z^-1) q, d = 1 + mv_delay, or detected (mv_delay = -1).
+ * Diophantine with the observer polynomial T = 1 - t z^-1 (t = mv_observer):
+ *     T = A E + z^-d Gd, deg E = d-1, deg Gd = 1, F = B E (deg d).
+ * Predictor: T y(k+d) = Gd y(k) + F q(k). MV (with control weighting lambda_u):
+ *     q(k) = f0 (T r(k) - Gd y(k) - sum_{i=1..d} f_i q(k-i)) / (f0^2 + lambda_u)
+ * where r(k) = y_d(k+d) (reference preview) and T r(k) = r(k) - t r(k-1).
+ * On the model, T (y(k+d) - r(k)) = 0: the tracking error decays like t^k;
+ * the measurement noise reaches y through Gd / T (docs/cosimulation.md).
+ *
+ * Delay detection (mv_delay = -1, docs/cosimulation.md): until d is chosen, one
+ * RLS per candidate d = 1..3 runs on its own regressor and sums its squared
+ * a-priori errors; the law meanwhile is the start-up law (nominal model,
+ * d = 2, t = 0.9), stable for each candidate. A candidate is chosen once its
+ * sum stays below a tenth of every other's for 3 consecutive samples; its RLS
+ * becomes the controller's. A chosen loop whose |pred_error| stays above the
+ * monitor bound for 10 samples goes back to detection.
+ *
+ * Preview alignment: the input may carry a stamped preview, y_d at the
+ * measurement's sample + preview_lead. The controller keeps them in a ring
+ * and uses y_d(k + d) from it when present, y_ref otherwise.
  */
 #ifndef PIEZO_CONTROLLER_H
 #define PIEZO_CONTROLLER_H
@@ -27,6 +42,17 @@
 #define PIEZO_SAT_DEFAULT_V 150   /* default voltage limits +-150 V */
 #define PIEZO_MONITOR_DEFAULT_ERROR 1   /* default bound on |pred_error| [um] */
 #define PIEZO_MONITOR_DEFAULT_SAMPLES 200   /* default divergence window [samples] */
+#define PIEZO_MV_AUTO_DELAY -1   /* mv_delay: detect the loop delay */
+#define PIEZO_DETECT_N 3         /* candidates d = 1, 2, 3 */
+#define PIEZO_DETECT_THETA 12    /* PIEZO_DETECT_N * 4 */
+#define PIEZO_DETECT_P 48        /* PIEZO_DETECT_N * 16 */
+#define PIEZO_DETECT_START_D 2   /* the start-up law's d */
+#define PIEZO_DETECT_CONFIRM 3   /* samples a clear leader must lead before it is chosen */
+#define PIEZO_DETECT_RATIO_INV 10 /* clear: sum at most 1/10 of every other candidate's */
+#define PIEZO_DETECT_REDETECT 10 /* samples beyond the monitor bound that restart detection */
+#define PIEZO_DETECT_TRIAL 20    /* samples of one detection trial (the next one starts with a probe) */
+#define PIEZO_DETECT_PROBES 8    /* probes per detection at most (then trials without probes) */
+#define PIEZO_PREVIEW_RING 16    /* stamped previews kept: leads 1..15 samples */
 
 typedef struct {
     piezo_pi_params pi;          /* nominal hysteresis model */
@@ -35,9 +61,13 @@ typedef struct {
     double creep_alpha;          /* [-1, 1] */
     int creep_exact;             /* 1: full-memory inverse creep */
     double h;                    /* [s], > 0 */
-    int mv_delay;                /* loop delay beyond one sample, 0..8; d = 1 + mv_delay */
+    int mv_delay;                /* loop delay beyond one sample, 0..8: d = 1 + mv_delay;
+                                    -1 (PIEZO_MV_AUTO_DELAY): d detected in 1..3 */
     int mv_feedthrough;          /* 1: v(k) from the inputs of sample k (direct feedthrough) */
+    int mv_hold_inputs;          /* FMU: 1 lets a doStep of n > 1 samples hold the inputs
+                                    over them (validated here, used by the FMU) */
     double mv_lambda_u;          /* control weighting, >= 0 */
+    double mv_observer;          /* t of the observer polynomial T = 1 - t z^-1, [0, 1) */
     int rls_enabled;
     double rls_forgetting;       /* (0, 1] */
     double rls_p0;               /* initial covariance P = p0 I, > 0 */
@@ -55,14 +85,40 @@ typedef struct {
     double theta[4];             /* estimates a1, a2, b1, b2 used for q(k) */
     double pred_error;           /* RLS one-step prediction error at k [um] */
     int saturated;               /* 1 if v(k) was clipped */
+    int delay;                   /* loop delay d of the law; 0 while it is being detected */
+    int preview;                 /* 1 if the law used a stamped preview, 0 if y_ref */
 } piezo_controller_output;
+
+/* The inputs of one sample. */
+typedef struct {
+    double y_ref;                /* y_d(k + d) [um], used when no stamped preview covers k + d */
+    double y_meas;               /* measured displacement [um] */
+    double y_preview;            /* y_d at the measurement's sample + preview_lead [um] */
+    int preview_lead;            /* 1..PIEZO_PREVIEW_RING-1; 0: no stamped preview this sample */
+} piezo_controller_input;
 
 typedef struct {
     piezo_pi fwd_pi;             /* nominal forward PI: tracks the plant's hysteresis state */
     piezo_pi_inverse inv_pi;
     piezo_gl inv_creep;          /* order -alpha, gain h^alpha / k_c */
-    int d;
+    int d;                       /* loop delay of the law (PIEZO_DETECT_START_D while detecting) */
     double lambda_u;
+    double observer;             /* t of T after detection (mv_observer) */
+    int auto_delay;              /* 1: d is detected */
+    int detecting;               /* 1 until d is chosen: the start-up law runs */
+    uint64_t k_delay;            /* sample at which d took its current value */
+    uint64_t n_detections;       /* detections started (1 at reset in auto mode, +1 per restart) */
+    int det_leader;              /* candidate leading clearly (index, d - 1), -1: none */
+    int det_run;                 /* consecutive samples it has led */
+    uint64_t det_trial;          /* sample at which the current trial started */
+    double det_probe;            /* the trial's probe amplitude [um] on q (0: none) */
+    int det_probes;              /* probes started in this detection */
+    double det_score[PIEZO_DETECT_N];        /* sums of squared a-priori errors in the trial */
+    double det_theta[PIEZO_DETECT_THETA];    /* each candidate's estimates, 4 per candidate */
+    double det_P[PIEZO_DETECT_P];            /* each candidate's covariance, 16 per candidate */
+    double r_prev;               /* reference r(k-1) of the law */
+    double preview_value[PIEZO_PREVIEW_RING];/* stamped previews by sample (index modulo the ring) */
+    uint64_t preview_tag[PIEZO_PREVIEW_RING];/* 1 + the sample each value is for; 0: empty */
     int rls_enabled;
     double forgetting, p0, trace_max;
     double inv_forgetting;       /* 1 / forgetting, set at init (the RLS multiplies by it) */
@@ -100,6 +156,8 @@ typedef struct {
 typedef struct {
     uint64_t k;                  /* the sample evaluated (ctrl->k at the evaluation) */
     double y_ref, y_meas;        /* its inputs */
+    double y_preview;
+    int preview_lead;
     int reaches_window;          /* committing it would complete the divergence window */
     piezo_controller_output out; /* its outputs */
     double theta[4], P[16];      /* RLS result (valid when rls_updated) */
@@ -110,6 +168,15 @@ typedef struct {
     int sat_hold;
     int large_error;             /* |pred_error| > monitor_pred_error_max */
     uint64_t run_large_error;
+    double r;                    /* the reference the law used */
+    /* delay detection: the states of k+1 */
+    int d, detecting, det_leader, det_run, restarted, new_trial;
+    uint64_t k_delay;
+    double probe;                /* probe added to q this sample [um] */
+    double next_probe;           /* probe amplitude of the trial starting at k+1 (new_trial) */
+    double det_score[PIEZO_DETECT_N];
+    double det_theta[PIEZO_DETECT_THETA];
+    double det_P[PIEZO_DETECT_P];
 } piezo_controller_sample;
 
 /* Defaults of docs/fmus.md (nominal plant model). */
@@ -128,6 +195,10 @@ void piezo_controller_reset(piezo_controller *ctrl);
 piezo_status piezo_controller_step(piezo_controller *ctrl, double y_ref, double y_meas,
                                    double *history, size_t history_capacity,
                                    piezo_controller_output *out);
+/* piezo_controller_step with every input of the sample, the stamped preview included. */
+piezo_status piezo_controller_step_input(piezo_controller *ctrl, const piezo_controller_input *in,
+                                         double *history, size_t history_capacity,
+                                         piezo_controller_output *out);
 /* Same result as piezo_controller_step without committing anything
  * (exact mode may write the unused slots history[2k], history[2k+1]); the
  * divergence window is not applied (the step that commits the sample does). */
@@ -142,7 +213,7 @@ piezo_status piezo_controller_peek(const piezo_controller *ctrl, double y_ref, d
  * the divergence window. Commit only the latest evaluation of the sample, with
  * the state it was evaluated on (exact mode: history[2k..2k+1] are its own).
  */
-piezo_status piezo_controller_evaluate(const piezo_controller *ctrl, double y_ref, double y_meas,
+piezo_status piezo_controller_evaluate(const piezo_controller *ctrl, const piezo_controller_input *in,
                                        double *history, size_t history_capacity,
                                        piezo_controller_sample *sample);
 piezo_status piezo_controller_commit(piezo_controller *ctrl, const piezo_controller_sample *sample,
@@ -160,5 +231,7 @@ const char *piezo_controller_check(const piezo_controller *ctrl);
 /* Diophantine 1 = A E + z^-d Gd for A = 1 + a1 z^-1 + a2 z^-2, 1 <= d <= 9:
  * e[0..d-1] (e[0] = 1), g[0..1]. */
 piezo_status piezo_diophantine(double a1, double a2, int d, double *e, double *g);
+/* The same with the observer polynomial: T = A E + z^-d Gd, T = 1 - t z^-1. */
+piezo_status piezo_diophantine_observer(double a1, double a2, double t, int d, double *e, double *g);
 
 #endif

@@ -13,6 +13,7 @@ void piezo_reference_default_params(piezo_reference_params *p)
     p->amplitude[0] = 10.0;
     p->frequency[0] = 1.0;
     p->lead = 2;
+    p->preview = 4;
     p->h = 0.0005;
 }
 
@@ -53,6 +54,8 @@ static piezo_status validate(const piezo_reference_params *p, double t0, piezo_d
     }
     if (p->lead < 0 || p->lead > PIEZO_REF_MAX_LEAD)
         return piezo_refuse(diag, "lead", "0..1000000 samples", (double)p->lead);
+    if (p->preview < 0 || p->preview > PIEZO_REF_MAX_LEAD)
+        return piezo_refuse(diag, "preview", "0..1000000 samples", (double)p->preview);
     if (!isfinite(t0)) return piezo_refuse(diag, "startTime", "finite values (s)", t0);
     return PIEZO_OK;
 }
@@ -77,13 +80,14 @@ piezo_status piezo_reference_init(piezo_reference *ref, const piezo_reference_pa
     if (!ref || !p) return PIEZO_ERR_NULL;
     st = validate(p, t0, diag);
     if (st != PIEZO_OK) return st;
-    /* sample 0 needs y_d(t0) and y_d(t0 + lead h) */
+    /* sample 0 needs y_d(t0), y_d(t0 + lead h) and y_d(t0 + preview h) */
     tone = overflowing_tone(p, t0);
     if (tone < 0) tone = overflowing_tone(p, t0 + (double)p->lead * p->h);
+    if (tone < 0) tone = overflowing_tone(p, t0 + (double)p->preview * p->h);
     if (tone >= 0)
         return piezo_refuse(diag, frequency_names[tone],
-                            "[0, 1/(2 h)) Hz with 2 pi frequency t finite at t = startTime and startTime + lead h",
-                            p->frequency[tone]);
+                            "[0, 1/(2 h)) Hz with 2 pi frequency t finite at t = startTime, startTime + lead h "
+                            "and startTime + preview h", p->frequency[tone]);
     memset(ref, 0, sizeof *ref);
     ref->p = *p;
     ref->t0 = t0;
@@ -108,10 +112,14 @@ static int update(piezo_reference *ref, uint64_t k)
 {
     double t = ref->t0 + (double)k * ref->p.h;
     double t_lead = ref->t0 + (double)(k + (uint64_t)ref->p.lead) * ref->p.h;
-    if (overflowing_tone(&ref->p, t) >= 0 || overflowing_tone(&ref->p, t_lead) >= 0)
+    double t_preview = ref->t0 + (double)(k + (uint64_t)ref->p.preview) * ref->p.h;
+    if (overflowing_tone(&ref->p, t) >= 0 || overflowing_tone(&ref->p, t_lead) >= 0
+        || overflowing_tone(&ref->p, t_preview) >= 0)
         return 0;
     ref->y_d = piezo_reference_value(ref, t);
     ref->y_ref = piezo_reference_value(ref, t_lead);
+    ref->y_preview = piezo_reference_value(ref, t_preview);
+    ref->t_preview = t_preview;
     ref->k = k;
     return 1;
 }
@@ -122,7 +130,7 @@ void piezo_reference_reset(piezo_reference *ref)
     /* init checked sample 0; a struct that never passed init gets 0, 0 */
     if (!update(ref, 0)) {
         ref->k = 0;
-        ref->y_d = ref->y_ref = 0.0;
+        ref->y_d = ref->y_ref = ref->y_preview = ref->t_preview = 0.0;
     }
 }
 
@@ -137,6 +145,7 @@ const char *piezo_reference_check(const piezo_reference *ref)
 {
     if (!ref) return "reference missing";
     if (validate(&ref->p, ref->t0, NULL) != PIEZO_OK) return "reference parameters out of range";
-    if (!(isfinite(ref->y_d) && isfinite(ref->y_ref))) return "reference outputs not finite";
+    if (!(isfinite(ref->y_d) && isfinite(ref->y_ref) && isfinite(ref->y_preview) && isfinite(ref->t_preview)))
+        return "reference outputs not finite";
     return NULL;
 }

@@ -5,6 +5,9 @@
  *     y_d(t) = offset + sum_{i=1..8} a_i sin(2 pi f_i t + phi_i)      [um]
  *     y_d(k)   = y_d(t0 + k h)              (the reference at t_k)
  *     y_ref(k) = y_d(t0 + (k + lead) h)     (lead samples ahead, lead = d)
+ *     y_preview(k) = y_d(t_preview(k)),  t_preview(k) = t0 + (k + preview) h
+ *                                         (the stamped preview: the controller
+ *                                          aligns it with its own loop delay)
  *
  * Frequencies must lie in [0, 1/(2h)): a tone at or above the Nyquist
  * frequency aliases on the sample grid and is refused at init. So must
@@ -26,6 +29,7 @@ typedef struct {
     double frequency[PIEZO_REF_MAX_TONES];  /* [Hz], [0, 1/(2h)) */
     double phase[PIEZO_REF_MAX_TONES];      /* [rad] */
     int lead;                               /* preview [samples], 0..PIEZO_REF_MAX_LEAD */
+    int preview;                            /* lead of the stamped preview [samples], same range */
     double h;                               /* sample period [s], > 0 */
 } piezo_reference_params;
 
@@ -35,10 +39,14 @@ typedef struct {
     uint64_t k;                             /* current sample */
     double y_d;                             /* y_d(k) [um] */
     double y_ref;                           /* y_d(k + lead) [um] */
+    double y_preview;                       /* y_d(k + preview) [um] */
+    double t_preview;                       /* t0 + (k + preview) h [s] */
 } piezo_reference;
 
 /* The paper's 1 Hz, 10 um tone (amplitude[1] = 10, frequency[1] = 1, the other tones 0),
- * lead 2 (the default controller's d), h = 0.5 ms. */
+ * lead 2 (the loop delay of a master that exchanges at communication points),
+ * preview 4 (covers every loop delay the controller detects, docs/cosimulation.md),
+ * h = 0.5 ms. */
 void piezo_reference_default_params(piezo_reference_params *params);
 /* Validate (diag names the first bad parameter), start at t0, sample 0. */
 piezo_status piezo_reference_init(piezo_reference *ref, const piezo_reference_params *params,

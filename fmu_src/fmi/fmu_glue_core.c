@@ -841,6 +841,8 @@ static glue_status step_warnings(glue_instance *inst, const char *fname)
     char text[512];
     glue_status status = GLUE_OK;
     int i;
+    for (i = 0; i < 4 && model_step_event(&inst->data, text, sizeof text); i++)
+        glue_log_event(inst, "%s: %s", fname, text);
     for (i = 0; i < 4 && model_step_warning(&inst->data, inst->t0, text, sizeof text); i++) {
         glue_log_warning(inst, "%s: %s", fname, text);
         status = GLUE_WARNING;
@@ -933,6 +935,15 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
                            "%s: step refused, state and time unchanged", fname,
                            glue_real_text(t1, t), glue_real_text(t2, t_end), glue_real_text(t3, inst->stop_time),
                            inst->version->stop_time_source);
+            return GLUE_ERROR;
+        }
+    }
+    if (n > 0) {
+        char why[512];
+        if (model_check_step(&inst->data, n, why, sizeof why)) {
+            glue_log_error(inst, "%s: communicationStepSize = %s is %llu samples of h = %s: refused: %s; "
+                           "state and time unchanged", fname, glue_real_text(t1, communicationStepSize),
+                           (unsigned long long)n, glue_real_text(t2, inst->h), why);
             return GLUE_ERROR;
         }
     }

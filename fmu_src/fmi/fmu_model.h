@@ -128,6 +128,31 @@ static inline int model_failure_text(const ModelData *data, piezo_status st, cha
 }
 #endif
 
+#ifdef MODEL_HAS_EVENTS
+/* After a successful doStep: write at most one event worth a log line (e.g. a
+ * choice the model made) into text and return 1, else 0. Logged with status
+ * OK in the category logEvents (debug logging). */
+int model_step_event(ModelData *data, char *text, size_t size);
+#else
+static inline int model_step_event(ModelData *data, char *text, size_t size)
+{
+    (void)data; (void)text; (void)size;
+    return 0;
+}
+#endif
+
+#ifdef MODEL_HAS_STEP_CHECK
+/* Before a doStep of n >= 1 samples: 1 with the reason in text when the model
+ * refuses a step of n samples (the step is then refused, nothing changes). */
+int model_check_step(const ModelData *data, uint64_t n, char *text, size_t size);
+#else
+static inline int model_check_step(const ModelData *data, uint64_t n, char *text, size_t size)
+{
+    (void)data; (void)n; (void)text; (void)size;
+    return 0;
+}
+#endif
+
 /* Validation of restored (deserialized, untrusted) data against the model's
  * invariants, the one place that knows them: NULL when data could have been
  * saved by a live instance, else a static description of the first fault.

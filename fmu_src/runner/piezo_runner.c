@@ -90,10 +90,10 @@ typedef struct {
 
 struct piezo_runner {
     slave fmu[2];               /* PIEZO_RUNNER_PLANT, PIEZO_RUNNER_CONTROLLER */
-    fmi2ValueReference p_out[2];        /* y, y_meas */
+    fmi2ValueReference p_out[3];        /* y, y_meas, t_meas */
     fmi2ValueReference p_y_meas;
     fmi2ValueReference p_in;            /* v */
-    fmi2ValueReference c_in[2];         /* y_ref, y_meas */
+    fmi2ValueReference c_in[5];         /* y_ref, y_meas, y_preview, t_preview, t_meas */
     fmi2ValueReference c_out[PIEZO_RUNNER_CTRL_REALS];
     fmi2ValueReference c_sat;
     double start_time;
@@ -218,10 +218,14 @@ piezo_runner *piezo_runner_new(const piezo_runner_fmu *plant, const piezo_runner
     }
     r->p_out[0] = (fmi2ValueReference)refs->plant_y;
     r->p_out[1] = (fmi2ValueReference)refs->plant_y_meas;
+    r->p_out[2] = (fmi2ValueReference)refs->plant_t_meas;
     r->p_y_meas = (fmi2ValueReference)refs->plant_y_meas;
     r->p_in = (fmi2ValueReference)refs->plant_v;
     r->c_in[0] = (fmi2ValueReference)refs->ctrl_y_ref;
     r->c_in[1] = (fmi2ValueReference)refs->ctrl_y_meas;
+    r->c_in[2] = (fmi2ValueReference)refs->ctrl_y_preview;
+    r->c_in[3] = (fmi2ValueReference)refs->ctrl_t_preview;
+    r->c_in[4] = (fmi2ValueReference)refs->ctrl_t_meas;
     for (i = 0; i < PIEZO_RUNNER_CTRL_REALS; ++i) r->c_out[i] = (fmi2ValueReference)refs->ctrl_reals[i];
     r->c_sat = (fmi2ValueReference)refs->ctrl_saturated;
     for (i = 0; i < 2; ++i) {
@@ -342,21 +346,23 @@ static double thread_ns(void)
     do { if (failed(res, (expr), (role), (call))) goto stop; } while (0)
 
 int piezo_runner_run(piezo_runner *r, size_t n, double h, int master, int step_order,
-                     const double *y_ref, double *rows, size_t row_stride,
+                     const double *y_ref, const double *y_preview, const double *t_preview,
+                     double *rows, size_t row_stride,
                      size_t timing_block, double *block_ns, piezo_runner_result *res)
 {
     piezo_runner_result local;
     fmi2Component pc, cc;
     const fmi2_api *pa, *ca;
     const int plant = PIEZO_RUNNER_PLANT, ctrl = PIEZO_RUNNER_CONTROLLER;
-    double c_in[2], minimal[2], t_block = 0.0;
+    double c_in[5], p_out[3], minimal[2], t_block = 0.0;
     fmi2Boolean sat;
     size_t k;
     int jacobi = master == PIEZO_RUNNER_JACOBI, ctrl_first = step_order == PIEZO_RUNNER_CONTROLLER_FIRST;
     int timing = block_ns != NULL && timing_block > 0;
     if (res == NULL) res = &local;
     result_start(res);
-    if (r == NULL || (n > 0 && y_ref == NULL) || (rows != NULL && row_stride < PIEZO_RUNNER_ROW)
+    if (r == NULL || (n > 0 && y_ref == NULL) || (y_preview != NULL && t_preview == NULL)
+        || (rows != NULL && row_stride < PIEZO_RUNNER_ROW)
         || (master != PIEZO_RUNNER_GAUSS_SEIDEL && !jacobi)
         || (step_order != PIEZO_RUNNER_PLANT_FIRST && !ctrl_first))
         return res->status = fmi2Error;
@@ -370,16 +376,22 @@ int piezo_runner_run(piezo_runner *r, size_t n, double h, int master, int step_o
         double t = r->start_time + (double)(r->k + k) * h;
         if (rows != NULL) {
             double *row = rows + k * row_stride;
-            CALL(pa->get_real(pc, r->p_out, 2, row), plant, PIEZO_RUNNER_CALL_GET_REAL);  /* y, y_meas */
+            CALL(pa->get_real(pc, r->p_out, 3, p_out), plant, PIEZO_RUNNER_CALL_GET_REAL);  /* y, y_meas, t_meas */
+            row[0] = p_out[0];
+            row[1] = p_out[1];
             c_in[0] = y_ref[k];
-            c_in[1] = row[1];
+            c_in[1] = p_out[1];
+            /* the stamped preview (0, 0 without one: a stamp that does not advance) */
+            c_in[2] = y_preview != NULL ? y_preview[k] : 0.0;
+            c_in[3] = y_preview != NULL ? t_preview[k] : 0.0;
+            c_in[4] = p_out[2];
             if (jacobi) {
                 CALL(ca->get_real(cc, r->c_out, PIEZO_RUNNER_CTRL_REALS, row + 2), ctrl, PIEZO_RUNNER_CALL_GET_REAL);
                 CALL(ca->get_boolean(cc, &r->c_sat, 1, &sat), ctrl, PIEZO_RUNNER_CALL_GET_BOOLEAN);
                 CALL(pa->set_real(pc, &r->p_in, 1, row + 2), plant, PIEZO_RUNNER_CALL_SET_REAL);
-                CALL(ca->set_real(cc, r->c_in, 2, c_in), ctrl, PIEZO_RUNNER_CALL_SET_REAL);
+                CALL(ca->set_real(cc, r->c_in, 5, c_in), ctrl, PIEZO_RUNNER_CALL_SET_REAL);
             } else {
-                CALL(ca->set_real(cc, r->c_in, 2, c_in), ctrl, PIEZO_RUNNER_CALL_SET_REAL);
+                CALL(ca->set_real(cc, r->c_in, 5, c_in), ctrl, PIEZO_RUNNER_CALL_SET_REAL);
                 CALL(ca->get_real(cc, r->c_out, PIEZO_RUNNER_CTRL_REALS, row + 2), ctrl, PIEZO_RUNNER_CALL_GET_REAL);
                 CALL(ca->get_boolean(cc, &r->c_sat, 1, &sat), ctrl, PIEZO_RUNNER_CALL_GET_BOOLEAN);
                 CALL(pa->set_real(pc, &r->p_in, 1, row + 2), plant, PIEZO_RUNNER_CALL_SET_REAL);

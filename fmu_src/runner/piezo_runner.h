@@ -8,12 +8,14 @@
  * communication points only, per sample k at t_k = k h:
  *
  *   Gauss-Seidel (ModelStructure order):
- *     plant.get(y, y_meas) -> ctrl.set(y_ref(k), y_meas) -> ctrl.get(outputs)
+ *     plant.get(y, y_meas, t_meas) -> ctrl.set(y_ref(k), y_meas, y_preview(k),
+ *     t_preview(k), t_meas) -> ctrl.get(outputs)
  *     -> plant.set(v) -> doStep of both (plant first, or controller first)
  *   Jacobi (textbook): every output first (plant, then controller), then
  *     every input (plant.v, then the controller's), then both doSteps.
  *
- * y_ref(k) is given by the caller (the harness computes it, with preview).
+ * y_ref(k) and the stamped preview y_preview(k), t_preview(k) are given by
+ * the caller (the harness computes them, as ReferenceSignal would publish).
  * Each row of the result holds, at t_k: y, y_meas, v, q, est.a1, est.a2,
  * est.b1, est.b2, pred_error, saturated (0 or 1) - the values the fmpy master
  * records, bit for bit.
@@ -72,8 +74,12 @@ typedef struct {
     int plant_y;
     int plant_y_meas;
     int plant_v;
+    int plant_t_meas;
     int ctrl_y_ref;
     int ctrl_y_meas;
+    int ctrl_y_preview;
+    int ctrl_t_preview;
+    int ctrl_t_meas;
     int ctrl_reals[PIEZO_RUNNER_CTRL_REALS];
     int ctrl_saturated;
 } piezo_runner_refs;
@@ -109,15 +115,18 @@ int piezo_runner_initialize(piezo_runner *runner, double start_time, double stop
 /*
  * Run n samples of h from the current time (start_time + k h, k counted
  * since initialization) with the given master and doStep order.
- * rows: n * row_stride doubles, PIEZO_RUNNER_ROW written per row at
+ * y_preview, t_preview: the stamped preview per sample, or NULL (the
+ * controller's y_preview and t_preview inputs are then set to 0: no stamped
+ * preview). rows: n * row_stride doubles, PIEZO_RUNNER_ROW written per row at
  * rows[k * row_stride]; NULL runs the loop with the minimal exchange
- * (y_meas and v only, nothing recorded: the cost of the FMI loop itself).
+ * (y_ref, y_meas and v only, nothing recorded: the cost of the FMI loop itself).
  * block_ns: when not NULL and timing_block > 0, the thread CPU time [ns] of
  * every complete block of timing_block samples (n / timing_block values).
  * Returns result->status.
  */
 int piezo_runner_run(piezo_runner *runner, size_t n, double h, int master, int step_order,
-                     const double *y_ref, double *rows, size_t row_stride,
+                     const double *y_ref, const double *y_preview, const double *t_preview,
+                     double *rows, size_t row_stride,
                      size_t timing_block, double *block_ns, piezo_runner_result *result);
 
 /* fmi2Terminate on both (the controller's summary comes as a warning). */

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
-from .._common import DEFAULT_MV_DELAY
+from .._common import loop_delay as _loop_delay
 from ..scenarios import MISMATCH_SCENARIOS, TRACKING_SCENARIOS, get_scenario
 
 __all__ = [
@@ -140,8 +140,9 @@ def user_condition(names, adaptation=None, preview=True, master="gauss-seidel"):
 
 
 def loop_delay(scenario):
-    """The loop delay d = 1 + mv.delay of a tracking scenario's controller."""
-    return 1 + int(scenario.controller.get("mv.delay", DEFAULT_MV_DELAY))
+    """The loop delay d of a tracking scenario's loop under the harness's masters (see
+    :func:`harness._common.loop_delay`)."""
+    return _loop_delay(scenario.controller, scenario.plant)
 
 
 def lag_error_rms(scenario):

@@ -6,9 +6,10 @@
  * longer step, so this program holds no copy of them. A benchmark: it prints
  * figures (wall seconds of each run and their median), it asserts nothing.
  *
- * The inputs are held at 3 over the step (a doStep holds them anyway); the
- * controller's monitor is off (monitor.divergence_samples = 0), the reference
- * signal sums its 8 tones.
+ * The inputs are held at 3 over the step (the controller with mv.hold_inputs =
+ * true, without which it refuses a step of several samples); the controller's
+ * monitor is off (monitor.divergence_samples = 0), the reference signal sums
+ * its 8 tones.
  *
  * Built for the FMI 2.0 editions (-DFMI_VERSION=2 over host.h).
  *
@@ -37,7 +38,9 @@ static void *start(host_inst *in, const host_fmu *f, int exact)
 {
     char name[32];
     int i;
-    if (host_instantiate(in, f, "bench") == NULL || host_enter_init(f, in->c, 0.0, 0, 0.0) != HOST_OK)
+    /* the controller holds its inputs over a step of several samples only when asked */
+    if (host_instantiate(in, f, "bench") == NULL || !host_hold_inputs(f, in->c)
+        || host_enter_init(f, in->c, 0.0, 0, 0.0) != HOST_OK)
         return NULL;
     if (exact)
         host_set_named(f, in->c, "creep.exact", 1.0);

@@ -231,6 +231,7 @@ static void defect3_stop_time(const host_fmu *f)
 {
     host_inst in;
     host_instantiate(&in, f, "stop");
+    host_hold_inputs(f, in.c);
     host_enter_init(f, in.c, 0.0, 1, 10 * f->h);
     f->api.ExitInitializationMode(in.c);
     check(host_step(f, in.c, 0.0, 10 * f->h) <= HOST_WARNING, "defect 3 %s: a step to stopTime passes", f->id);

@@ -2,7 +2,8 @@
  * fuzz_seeds.c - writes the seed corpora of the fuzz targets of the FMU it is
  * compiled with: real serialized states (every mode: Instantiated,
  * InitializationMode, StepComplete at several times, exact-mode creep where the
- * FMU has it, feedthrough where it has it, Terminated, Error) for
+ * FMU has it, feedthrough and time-stamped inputs (a chosen loop delay, a filled
+ * preview ring) where it has them, Terminated, Error) for
  * fuzz_deserialize, and programs for fuzz_run (defaults, each parameter nudged,
  * exact creep, state round trips and restores).
  *
@@ -93,6 +94,8 @@ static void save_state(fmi2Component c, const char *name, unsigned force_mode)
     fmi2FreeFMUstate(c, &s);
 }
 
+static int stamped;   /* run(): set the time stamp inputs t_meas, t_preview as a master would */
+
 /* An instance initialized with up to two named parameters, stepped n samples. */
 static fmi2Component run(const char *p1, double v1, const char *p2, double v2, int n)
 {
@@ -112,6 +115,12 @@ static fmi2Component run(const char *p1, double v1, const char *p2, double v2, i
     fmi2GetReal(c, &h_ref, 1, &h);
     for (k = 0; k < n; k++) {
         set_inputs(c, k, h);
+        if (stamped) {
+            /* the controller's time stamps as a master wires them: the measurement of
+             * t_k, the stamped preview 4 samples ahead */
+            set_named(c, "t_meas", k * h);
+            set_named(c, "t_preview", (k + 4) * h);
+        }
         if (fmi2DoStep(c, k * h, h, fmi2True) > fmi2Warning)
             exit(1);
     }
@@ -152,6 +161,13 @@ static void deserialize_seeds(void)
     if (vr_named("mv.feedthrough") >= 0) {
         c = run("mv.feedthrough", 1, "mv.delay", 0, 100);
         save_state(c, "feedthrough100", 0);
+        fmi2FreeInstance(c);
+    }
+    if (vr_named("t_preview") >= 0) {
+        stamped = 1;
+        c = run(NULL, 0, NULL, 0, 300);
+        stamped = 0;
+        save_state(c, "stamped300", 0);
         fmi2FreeInstance(c);
     }
     if (vr_named("amplitude[1]") >= 0) {

@@ -146,6 +146,15 @@ static inline int host_apply_config(const host_fmu *f, void *c, int i)
     return 1;
 }
 
+/* The controller refuses a doStep of several samples unless mv.hold_inputs is
+ * true (a closed loop needs one exchange per sample); a suite that steps
+ * several samples at once to test the FMI layer sets it on an instance in
+ * Instantiated or InitializationMode, wherever the FMU has it. 0 if refused. */
+static inline int host_hold_inputs(const host_fmu *f, void *c)
+{
+    return host_named(f, "mv.hold_inputs", NULL) == NULL || host_set_named(f, c, "mv.hold_inputs", 1.0) == HOST_OK;
+}
+
 /* Sets the j-th Real input of f to host_drive(i, j, k, h). */
 static inline int host_set_inputs(const host_fmu *f, void *c, int i, int k)
 {
