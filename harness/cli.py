@@ -15,7 +15,7 @@
   (:mod:`harness.sweep`).
 
 ``--backend`` of ``all`` and ``run``: ``auto`` (default) runs long closed loops
-(``harness.native.LONG_RUN_SAMPLES``) on the native C master and the rest with
+(``harness.masters.LONG_RUN_SAMPLES``) on the native C master and the rest with
 fmpy; ``fmpy``, ``native`` (closed loops; the plant alone still runs in fmpy) and
 ``core`` (the C core without FMI) force one. ``--fmi 3`` runs the FMI 3.0 editions of
 the FMUs (with fmpy; ``auto`` then means fmpy, ``native`` and ``core`` refuse it).
@@ -45,13 +45,12 @@ import os
 import sys
 
 from . import masters, report
-from ._paths import describe_fmu_dir
+from .paths import describe_fmu_dir
 from .bench import add_bench_arguments, run_bench
 from .checks import EXIT_RUN_FAILED, RunCheckError
-from .cosim import FMUError, UnknownParameterError
+from .fmu import FMUError, UnknownParameterError, missing_windows_binaries
 from .identify.cli import (add_export_arguments, add_identify_arguments, add_param_file_arguments,
                            apply_param_files, check_identify_arguments, run_export, run_identify)
-from .report.provenance import missing_windows_binaries
 from .scenarios import ScenarioError, format_scenario_list, get_scenario, load_scenarios
 from .sweep import add_sweep_arguments, run_sweep_command
 

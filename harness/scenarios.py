@@ -83,6 +83,7 @@ __all__ = [
     "get_scenario",
     "list_scenarios",
     "format_scenario_list",
+    "reference_label",
     "read_signal_csv",
 ]
 
@@ -764,6 +765,14 @@ def list_scenarios(registry=None, kind=None):
     """
     registry = load_scenarios() if registry is None else registry
     return [n for n, s in registry.items() if kind is None or s.kind == kind]
+
+
+def reference_label(scenario):
+    """'1 Hz', '1/5/10 Hz' for a sine reference; the scenario name otherwise."""
+    sig = scenario.signal
+    if sig.kind == "sines" and sig.frequencies:
+        return "/".join(f"{f:g}" for f in sig.frequencies) + " Hz"
+    return scenario.name
 
 
 def format_scenario_list(registry):

@@ -1,7 +1,7 @@
 """Monte Carlo sweeps (harness.sweep, ``python -m harness sweep``).
 
 References: NumPy's own generator and np.roots for the draws and the pole/zero moves;
-harness.native runs (the native master, itself checked bit for bit against fmpy) for the
+harness.masters.native runs (the native master, itself checked bit for bit against fmpy) for the
 sweep's errors and for the worst parameter file; a real ``dask scheduler`` and ``dask
 worker`` on 127.0.0.1 for ``--scheduler``.
 """
@@ -20,7 +20,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-from harness import native, sweep  # noqa: E402
+from harness import sweep  # noqa: E402
+from harness.masters import native  # noqa: E402
 from harness.scenarios import load_scenarios  # noqa: E402
 from harness.sweep.store import RunStore  # noqa: E402
 
@@ -110,7 +111,7 @@ def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path):
     once, reports the not-ok ones without stopping, its e_rms equal fresh native runs of the
     same parameters bit for bit, and the worst parameter file, loaded as a scenario file,
     reproduces the worst e_rms exactly."""
-    from harness._common import prepare_closed_loop
+    from harness.loop import prepare_closed_loop
     from harness.metrics import compute_metrics
 
     spreads = ["tf.poles=0.01", "pi.weights=60%", "tf.zero=0.01"]

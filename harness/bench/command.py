@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from .._paths import describe_fmu_dir
+from ..paths import describe_fmu_dir
 from ..scenarios import load_scenarios
 from .measure import BLOCK, CHECKPOINTS, measure
 from .report import format_figures

@@ -13,10 +13,10 @@ import time
 import numpy as np
 
 from .. import core, masters
-from .._common import prepare_closed_loop
-from ..cosim import _simulate
-from ..native import NativeLoop, live_bytes
-from .._paths import bench_include_dir, bench_library, where_to_get_it
+from ..loop import prepare_closed_loop
+from ..masters.fmpy import simulate_setup
+from ..masters.native import NativeLoop, live_bytes
+from ..paths import bench_include_dir, bench_library, where_to_get_it
 
 __all__ = ["CHECKPOINTS", "BLOCK", "WINDOW", "EXACT_WINDOW", "timing_library", "measure",
            "machine_description"]
@@ -128,8 +128,8 @@ def measure(scenario="mismatch_1_5_10hz", *, n_max=CHECKPOINTS[-1], repeat=5, fm
     setup = prepare_closed_loop(scenario, registry=registry, duration=n_max * h)
     n = setup.n
     ffi, blib = timing_library()
-    pp = core._plant_params_struct(setup.plant_params)
-    cp = core._controller_params_struct(setup.controller_params)
+    pp = core.plant_params_struct(setup.plant_params)
+    cp = core.controller_params_struct(setup.controller_params)
     y_ref = np.ascontiguousarray(setup.y_ref, dtype=float)
     y_meas, v = np.zeros(n), np.zeros(n)
     status = ffi.new("int *")
@@ -174,7 +174,7 @@ def measure(scenario="mismatch_1_5_10hz", *, n_max=CHECKPOINTS[-1], repeat=5, fm
         say(f"fmpy loop, {fmpy_repeat} x {n} samples")
         for r in range(fmpy_repeat):
             block_ns = []
-            _simulate(setup, fmu_dir, BLOCK, block_ns)
+            simulate_setup(setup, fmu_dir, BLOCK, block_ns)
             col.add("fmpy loop", block_ns)
 
     say("end-to-end 3 s runs, exact creep")

@@ -48,7 +48,7 @@ import fmpy
 from fmpy.validation import validate_fmu
 
 from .. import core, fmu_documentation, fmu_references
-from ..cosim import fmu_path
+from ..fmu import fmu_path, parameter_types
 from ..fmu_archive import write_fmu_zip
 from .data import sha256_of
 from .params import CONTROLLER_MODEL, PLANT_MODEL, split_params
@@ -311,8 +311,7 @@ def export_fmus(params, out_dir, *, fmu_dir=None, source="parameters"):
         refused by the model), or the written FMU fails its checks.
     """
     sources = {m: fmu_path(m, fmu_dir) for m in (PLANT_MODEL, CONTROLLER_MODEL)}
-    kinds = {m: {v.name: v.type for v in fmpy.read_model_description(str(p)).modelVariables
-                 if v.causality == "parameter"} for m, p in sources.items()}
+    kinds = {m: parameter_types(m, fmu_dir) for m in sources}
     plant, controller = split_params(params, kinds[PLANT_MODEL], kinds[CONTROLLER_MODEL],
                                      source=source)
     out = Path(out_dir)

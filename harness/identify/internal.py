@@ -20,7 +20,7 @@ import numpy as np
 
 from .. import core, masters
 from ..progress import Progress
-from ..scenarios import VALIDATION_SCENARIOS, get_scenario
+from ..scenarios import VALIDATION_SCENARIOS, get_scenario, reference_label
 from ..text_tables import markdown_table, num, text_table
 from .steps import IdentificationRecord, identify_coupled_model
 
@@ -89,12 +89,6 @@ class IdentificationRun:
     elapsed_s: float
 
 
-def _record_label(sc):
-    if sc.signal.kind == "sines" and sc.signal.frequencies:
-        return "/".join(f"{f:g}" for f in sc.signal.frequencies) + " Hz"
-    return sc.name
-
-
 def _true_params(sc):
     """The plant parameters that define a record: core defaults, then the scenario's overrides."""
     d = core.default_plant_params()
@@ -150,7 +144,7 @@ def generate_identification_records(*, backend="fmpy", noise_rms_um=0.0, seed=1,
     for i, name in enumerate(IDENTIFICATION_CREEP_SCENARIOS):
         t0 = _time.perf_counter()
         sc = get_scenario(name)
-        label = _record_label(sc)
+        label = reference_label(sc)
         params = _true_params(sc)
         v = sc.signal.evaluate(sc.time_grid())
         run = open_loop({**{k: p for k, p in params.items() if isinstance(p, float)},
@@ -279,8 +273,8 @@ def run_identification(out_dir="out", *, backend="fmpy", noise_rms_um=0.0, seed=
     if displacement_only:
         records = [replace(r, u=None, x=None) for r in records]
     by_label = {r.label: r for r in records}
-    pi_label = _record_label(get_scenario(IDENTIFICATION_PI_SCENARIO))
-    tf_label = _record_label(get_scenario(IDENTIFICATION_TF_SCENARIO))
+    pi_label = reference_label(get_scenario(IDENTIFICATION_PI_SCENARIO))
+    tf_label = reference_label(get_scenario(IDENTIFICATION_TF_SCENARIO))
     t_pi = truth[pi_label]
     est = identify_coupled_model(by_label[pi_label], by_label[tf_label], records, t_pi["h"],
                                  m=t_pi["pi.m"], v_max=t_pi["pi.v_max"],

@@ -23,10 +23,8 @@ import json
 import math
 from pathlib import Path
 
-import fmpy
-
 from .. import core
-from ..cosim import fmu_path
+from ..fmu import parameter_types as fmu_parameter_types
 
 __all__ = [
     "PLANT_MODEL",
@@ -165,8 +163,7 @@ def parameter_types(model, *, fmu_dir=None, backend="fmpy"):
                     else core.default_controller_params())
         return {n: ("Boolean" if isinstance(v, bool) else "Integer" if isinstance(v, int)
                     else "Real") for n, v in defaults.items()}
-    md = fmpy.read_model_description(str(fmu_path(model, fmu_dir)))
-    return {v.name: v.type for v in md.modelVariables if v.causality == "parameter"}
+    return fmu_parameter_types(model, fmu_dir)
 
 
 def _check_type(name, value, kind, model, source):

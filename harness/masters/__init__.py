@@ -28,8 +28,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 import functools
 
+from ..fmu import FMI_VERSIONS
 from ..scenarios import get_scenario
-from .. import core_loop as core, cosim as fmpy, native   # until the masters move here
+from . import container, core, fmpy, native, ssp
 
 __all__ = ["Master", "MASTERS", "BACKENDS", "OPEN_LOOP_BACKENDS", "SWEEP_BACKENDS",
            "LONG_RUN_SAMPLES", "get", "closed_loop", "open_loop", "prepared_loop",
@@ -119,46 +120,57 @@ def simulate_closed_loop_auto(scenario, *, registry=None, duration=None, fmi_ver
                                      fmi_version=fmi_version, **kwargs)
 
 
-def _check_backend(backend, fmi_version):
-    if fmi_version not in fmpy.FMI_VERSIONS:
+def _check(name, fmi_version):
+    """Refuse an unknown master, or an FMI version it does not run (ValueError)."""
+    if fmi_version not in FMI_VERSIONS:
         raise ValueError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
-    if fmi_version != 2 and backend == "core":
-        raise ValueError("the core backend runs the C core without FMI: an FMI version does "
-                         "not apply to it")
-    if fmi_version != 2 and backend == "native":
-        raise ValueError(native.FMI3_REFUSAL)
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    if name not in MASTERS:
+        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {name!r}")
+    if fmi_version not in MASTERS[name].fmi_versions and fmi_version != 2:
+        if name == "core":
+            raise ValueError("the core backend runs the C core without FMI: an FMI version does "
+                             "not apply to it")
+        if name == "native":
+            raise ValueError(native.FMI3_REFUSAL)
+        raise ValueError(f"the {name} master runs the FMI 2.0 editions only")
 
 
-def closed_loop(backend, fmi_version=2):
-    """The closed-loop function of a ``--backend`` choice: ``f(scenario, *, adaptation,
-    preview, master, fmu_dir, progress, ...)`` (see :func:`harness.masters.fmpy.simulate_closed_loop`).
+def closed_loop(name, fmi_version=2):
+    """The closed-loop function of a master.
+
+    For the ``--backend`` choices: ``f(scenario, *, adaptation, preview, master, fmu_dir,
+    progress, ...)`` (see :func:`harness.masters.fmpy.simulate_closed_loop`); ``ssp-player``:
+    :func:`harness.masters.ssp.simulate_ssp_scenario`; ``container``:
+    :func:`harness.masters.container.simulate_closed_loop_container`.
 
     Raises
     ------
     ValueError
-        An unknown backend, or an FMI version the backend does not run (the core runs no
-        FMU; the native master only the FMI 2.0 editions).
+        An unknown master, or an FMI version it does not run (the core runs no FMU; the
+        native master and other tools' only the FMI 2.0 editions).
     """
-    _check_backend(backend, fmi_version)
-    if backend == "core":
+    _check(name, fmi_version)
+    if name == "core":
         return core.simulate_closed_loop_core
+    if name == "ssp-player":
+        return ssp.simulate_ssp_scenario
+    if name == "container":
+        return container.simulate_closed_loop_container
     if fmi_version != 2:                 # fmpy (also for auto): the FMI 3.0 editions
         return functools.partial(fmpy.simulate_closed_loop, fmi_version=fmi_version)
-    if backend == "native":
+    if name == "native":
         return native.simulate_closed_loop_native
-    if backend == "auto":
+    if name == "auto":
         return simulate_closed_loop_auto
     return fmpy.simulate_closed_loop
 
 
-def open_loop(backend, fmi_version=2):
-    """The plant-alone function of a ``--backend`` choice: ``f(plant_params, v, *, step_size,
-    fmu_dir, progress)`` (see :func:`harness.masters.fmpy.simulate_open_loop`); a master without
-    an open loop of its own (native, auto) gives fmpy's. Raises ValueError as :func:`closed_loop`."""
-    _check_backend(backend, fmi_version)
-    if backend == "core":
+def open_loop(name, fmi_version=2):
+    """The plant-alone function of a master: ``f(plant_params, v, *, step_size, fmu_dir,
+    progress)`` (see :func:`harness.masters.fmpy.simulate_open_loop`); a master without an
+    open loop of its own gives fmpy's. Raises ValueError as :func:`closed_loop`."""
+    _check(name, fmi_version)
+    if name == "core":
         return core.simulate_open_loop_core
     if fmi_version != 2:
         return functools.partial(fmpy.simulate_open_loop, fmi_version=fmi_version)
@@ -196,4 +208,4 @@ def prepared_loop(backend, fmu_dir=None):
     check_sweep_backend(backend)
     if backend == "native":
         return native.native_loop(fmu_dir).run
-    return functools.partial(fmpy._simulate, fmu_dir=fmu_dir)
+    return functools.partial(fmpy.simulate_setup, fmu_dir=fmu_dir)

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..metrics import window_mask
-from .conditions import reference_label
+from ..scenarios import reference_label
 
 __all__ = [
     "DPI",

@@ -20,7 +20,7 @@ import sys
 import textwrap
 
 from .. import masters
-from ..cosim import CONTROLLER_MODEL, PLANT_MODEL
+from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, WINDOWS_PLATFORM
 from ..progress import Progress
 from ..scenarios import VALIDATION_SCENARIOS, get_scenario, load_scenarios
 from . import document as doc_
@@ -32,7 +32,7 @@ from .conditions import (
     user_condition,
 )
 from .figures import draw_main_figures, draw_scenario_figure
-from .provenance import WINDOWS_PLATFORM, collect_provenance
+from .provenance import collect_provenance
 from .run import evaluate_tracking, evaluate_validation, parameter_defaults, validation_series
 
 __all__ = ["run_all", "run_scenario", "check_out_dir", "prepare_out_dir", "VALIDATION_NOTES",

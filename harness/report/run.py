@@ -15,10 +15,9 @@ import numpy as np
 
 from .. import core, masters
 from ..checks import RunDivergedError, check_tracking_run
-from ..cosim import CONTROLLER_MODEL, PLANT_MODEL, LoopDivergedError, fmu_path
+from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, LoopDivergedError, parameter_starts
 from ..metrics import compute_metrics, window_mask
 from ..scenarios import get_scenario
-from .provenance import model_description
 
 __all__ = [
     "TrackingResult",
@@ -41,7 +40,7 @@ class TrackingResult:
 
     ``paper_*`` are ``nan`` for a scenario that is not one of the paper's.
     ``data`` is the run's structured array (fields of
-    :func:`harness.cosim.simulate_closed_loop`) when kept.
+    :func:`harness.masters.fmpy.simulate_closed_loop`) when kept.
     """
 
     condition: str
@@ -111,8 +110,8 @@ def parameter_defaults(model, backend="fmpy", fmu_dir=None, fmi_version=2):
     model : {"PiezoStage", "AdaptiveCompoundController"}
     backend : {"auto", "fmpy", "native", "core"}
         The FMU backends: the ``start`` of every Real/Integer/Boolean parameter in the FMU's
-        modelDescription; core: :func:`harness.core.default_plant_params` or
-        :func:`harness.core.default_controller_params`.
+        modelDescription (:func:`harness.fmu.parameter_starts`); core:
+        :func:`harness.core.default_plant_params` or :func:`harness.core.default_controller_params`.
     fmu_dir : str or Path, optional
     fmi_version : {2, 3}
         The edition whose modelDescription is read; the elements of an FMI 3.0 array variable
@@ -128,27 +127,7 @@ def parameter_defaults(model, backend="fmpy", fmu_dir=None, fmi_version=2):
     if backend == "core":
         return dict(core.default_plant_params() if model == PLANT_MODEL
                     else core.default_controller_params())
-    md = model_description(fmu_path(model, fmu_dir, fmi_version))
-    out = {}
-    for v in md.modelVariables:
-        if v.causality != "parameter" or v.start is None:
-            continue
-        if v.type in ("Real", "Float64"):
-            convert = float
-        elif v.type in ("Integer", "Int32"):
-            convert = int
-        elif v.type == "Boolean":
-            def convert(text):
-                return text.lower() in ("true", "1")
-        else:
-            continue
-        starts = str(v.start).split()
-        if getattr(v, "dimensions", None):          # an FMI 3.0 array: one start per element
-            for i, text in enumerate(starts):
-                out[f"{v.name}[{i + 1}]"] = convert(text)
-        else:
-            out[v.name] = convert(str(v.start))
-    return out
+    return parameter_starts(model, fmu_dir, fmi_version)
 
 
 def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=True,
@@ -162,7 +141,7 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
     condition : str
         Label stored in the result.
     adaptation, preview, master, fmu_dir, registry
-        See :func:`harness.cosim.simulate_closed_loop`.
+        See :func:`harness.masters.fmpy.simulate_closed_loop`.
     backend : {"auto", "fmpy", "native", "core"}
         Run the FMUs (default) or the C core directly.
     fmi_version : {2, 3}

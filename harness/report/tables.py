@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..scenarios import reference_label
 from ..text_tables import fmt, num, titled_table
-from .conditions import reference_label
 
 __all__ = [
     "TIMESERIES_FORMATS",

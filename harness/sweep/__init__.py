@@ -5,7 +5,7 @@ distributions the user gives (``--vary``), run by Dask: a local cluster of worke
 processes by default (one per core), or an existing cluster with ``--scheduler ADDRESS``.
 Each worker loads the FMUs once (the client ships the FMU files, so every worker runs
 exactly the client's build) and reuses its instances from run to run through
-``fmi2Reset`` (:class:`harness.native.NativeLoop`).
+``fmi2Reset`` (:class:`harness.masters.native.NativeLoop`).
 
 A spread is ``KEY=SPEC``. SPEC is ``[uniform:|normal:]WIDTH[%]``: ``uniform`` (default)
 draws from [-WIDTH, WIDTH], ``normal`` from N(0, WIDTH^2); with ``%`` the change is

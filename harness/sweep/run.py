@@ -12,8 +12,8 @@ import tempfile
 import time
 
 from .. import masters
-from .._common import normalize_master
-from ..cosim import CONTROLLER_MODEL, PLANT_MODEL, _load, fmu_path
+from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, fmu_path, load, starts_of
+from ..loop import normalize_master
 from ..scenarios import get_scenario
 from .manifest import prepare_folder, sweep_identity, write_manifest
 from .spreads import Spread, parse_spread, varied_keys, varies_something
@@ -28,19 +28,9 @@ class SweepIncompleteError(RuntimeError):
 
 
 def plant_start_values(fmu_dir=None):
-    """The PiezoStage parameters' start values from its model description (name -> value)."""
-    info = _load(fmu_path(PLANT_MODEL, fmu_dir))
-    out = {}
-    for name, var in info.variables.items():
-        if var.causality != "parameter":
-            continue
-        if var.type == "Real":
-            out[name] = float(var.start)
-        elif var.type == "Integer":
-            out[name] = int(var.start)
-        elif var.type == "Boolean":
-            out[name] = str(var.start).lower() in ("true", "1")
-    return out
+    """The PiezoStage parameters' start values from its model description (name -> value),
+    the FMU checked to be an FMI 2.0 Co-Simulation FMU."""
+    return starts_of(load(fmu_path(PLANT_MODEL, fmu_dir)).md)
 
 
 def _chunks_of(indices, size):
@@ -124,7 +114,7 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
         Runs per task (default: about four tasks per worker and scenario, at most 50).
     backend : {"native", "fmpy"}
     adaptation, preview, master
-        As :func:`harness.cosim.simulate_closed_loop`.
+        As :func:`harness.masters.fmpy.simulate_closed_loop`.
     fmu_dir, registry
         FMU folder and scenario registry.
     progress : file, optional

@@ -15,8 +15,8 @@ from types import MappingProxyType
 
 from .. import masters
 from ..checks import RunCheckError, RunSaturatedError, check_tracking_run
-from ..cosim import FMUError, FMUInitializationError, LoopDivergedError, UnknownParameterError
-from .._common import prepare_closed_loop
+from ..fmu import FMUError, FMUInitializationError, LoopDivergedError, UnknownParameterError
+from ..loop import prepare_closed_loop
 from ..metrics import compute_metrics
 from ..scenarios import Scenario
 from .spreads import apply_spreads, run_deltas
