@@ -55,20 +55,19 @@ class Master:
         What must be installed or built for it.
     backend : bool
         One of the command line's ``--backend`` choices.
-    reuses_instances : bool
-        It runs a prepared loop on instances kept from run to run (:func:`prepared_loop`).
     fmi_note : str
         Why it runs only the FMI versions it runs (for messages), or "".
     """
 
     name: str
     summary: str
+    # what it runs
     closed_loop: bool
     open_loop: bool
     fmi_versions: tuple
+    # what it takes, and whether the command line offers it
     needs: str
     backend: bool = True
-    reuses_instances: bool = False
     fmi_note: str = ""
 
 
@@ -76,9 +75,9 @@ MASTERS = {m.name: m for m in (
     Master("auto", "the native master for runs of LONG_RUN_SAMPLES and more, fmpy otherwise",
            True, False, (2, 3), "the native runner for long runs (else fmpy)"),
     Master("fmpy", "the FMUs through fmpy, values exchanged at communication points",
-           True, True, (2, 3), "fmpy", reuses_instances=True),
+           True, True, (2, 3), "fmpy"),
     Master("native", "the same FMUs and loop in the C master of fmu_src/runner",
-           True, False, (2,), "build/libpiezo_runner.so", reuses_instances=True,
+           True, False, (2,), "build/libpiezo_runner.so",
            fmi_note="the native master calls the fmi2 functions"),
     Master("core", "the C core through cffi, no FMI", True, True, (), "build/libpiezo_core.so",
            fmi_note="the core backend runs no FMU"),
@@ -93,6 +92,7 @@ BACKENDS = tuple(n for n, m in MASTERS.items() if m.backend)
 #: ``--backend`` where only the plant runs (``identify``)
 OPEN_LOOP_BACKENDS = tuple(n for n in BACKENDS if MASTERS[n].open_loop)
 #: ``--backend`` of ``sweep``: the masters that keep their instances from run to run
+#: (:func:`prepared_loop`), the default first
 SWEEP_BACKENDS = ("native", "fmpy")
 
 #: Runs of at least this many samples (10 s at 2 kHz) use the native master under ``auto``.
