@@ -43,6 +43,7 @@ from xml.etree import ElementTree as ET
 from xml.sax.saxutils import quoteattr
 
 from . import core
+from .loop import REFERENCE_PREVIEW, loop_delay
 from .scenarios import load_scenarios
 
 LS_REF_VERSION = "1.0.0-alpha.1"
@@ -199,7 +200,7 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
     plant_params = (dict(scenario.plant) if start_values is None
                     else dict(plant_start_values or {}, **EXPORT_SENSOR))
     ctrl = core.Controller(dict(base, **params, h=STEP))
-    d, preview = 1 + params["mv.delay"], 4
+    d, preview = loop_delay(params), REFERENCE_PREVIEW
     y_ref = [float(x) for x in scenario.signal.evaluate([(k + d) * STEP for k in range(n + 1)])]
     y_preview = [float(x) for x in scenario.signal.evaluate([(k + preview) * STEP for k in range(n + 1)])]
     t_preview = [(k + preview) * STEP for k in range(n + 1)]
