@@ -2,7 +2,7 @@
 
 Public API
 ----------
-Simulation
+Simulation (package :mod:`harness.masters`, whose registry says which master runs what)
     :func:`simulate_closed_loop` (FMUs through fmpy), :func:`simulate_open_loop`,
     :func:`simulate_closed_loop_native` (the same FMUs and loop in the native C master),
     :func:`simulate_closed_loop_core` / :func:`simulate_open_loop_core` (C core, no FMI).
@@ -24,52 +24,53 @@ Reports
     :func:`run_all` (the main job), :func:`run_scenario`, :func:`evaluate_tracking`,
     :func:`evaluate_validation` (package :mod:`harness.report`).
 
-Heavy dependencies (fmpy, cffi, matplotlib) are imported on first use.
+The layers and each module's job: docs/harness.md. scipy, matplotlib and dask are imported
+on first use (the package imports with fmpy, cffi and numpy alone).
 """
 
-from .cosim import (
-    FMUError,
-    FMUInitializationError,
-    UnknownParameterError,
-    simulate_closed_loop,
-    simulate_open_loop,
-)
-from .core_loop import simulate_closed_loop_core, simulate_open_loop_core
-from .identify import (
-    CoupledModel,
-    CoupledModelEstimate,
-    IdentificationInputError,
-    IdentificationRecord,
-    fit_coupled_model,
-    identify_coupled_model,
-    identify_creep,
-    identify_pi,
-    identify_transfer_function,
-    read_params,
-    read_record,
-)
-from .identify.export import export_fmus
-from .native import simulate_closed_loop_native
-from .sweep import run_sweep
-from .metrics import Metrics, compute_metrics, relative_error, rms_error
-from .report import (
-    evaluate_tracking,
-    evaluate_validation,
-    run_all,
-    run_identification,
-    run_scenario,
-)
-from .scenarios import (
-    Scenario,
-    ScenarioError,
-    ScenarioFileError,
-    Signal,
-    UnknownScenarioError,
-    get_scenario,
-    list_scenarios,
-    load_scenario_file,
-    load_scenarios,
-)
+import importlib
+
+#: where each public name lives (the package imports its modules when a name is first used, so
+#: that ``python -m harness.ssp`` and ``python -m harness.fmu_references``, the build's entry
+#: points, do not import themselves twice, and ``import harness.scenarios`` stays light)
+_HOMES = {
+    "fmu": ("FMUError", "FMUInitializationError", "UnknownParameterError"),
+    "masters.core": ("simulate_closed_loop_core", "simulate_open_loop_core"),
+    "masters.fmpy": ("simulate_closed_loop", "simulate_open_loop"),
+    "masters.native": ("simulate_closed_loop_native",),
+    "identify": ("CoupledModel", "CoupledModelEstimate", "IdentificationInputError",
+                 "IdentificationRecord", "fit_coupled_model", "identify_coupled_model",
+                 "identify_creep", "identify_pi", "identify_transfer_function", "read_params",
+                 "read_record", "run_identification"),
+    "identify.export": ("export_fmus",),
+    "sweep": ("run_sweep",),
+    "metrics": ("Metrics", "compute_metrics", "relative_error", "rms_error"),
+    "report": ("evaluate_tracking", "evaluate_validation", "run_all", "run_scenario"),
+    "scenarios": ("Scenario", "ScenarioError", "ScenarioFileError", "Signal",
+                  "UnknownScenarioError", "get_scenario", "list_scenarios", "load_scenario_file",
+                  "load_scenarios"),
+}
+_MODULE_OF = {name: module for module, names in _HOMES.items() for name in names}
+
+
+def __getattr__(name):
+    """A public name (imported from its module on first use), or a submodule."""
+    module = _MODULE_OF.get(name)
+    if module is not None:
+        value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+        globals()[name] = value
+        return value
+    try:
+        return importlib.import_module(f"{__name__}.{name}")
+    except ModuleNotFoundError as exc:
+        if exc.name != f"{__name__}.{name}":
+            raise
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_MODULE_OF))
+
 
 __all__ = [
     "simulate_closed_loop",

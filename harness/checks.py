@@ -8,7 +8,7 @@
   :data:`MAX_SATURATED_FRACTION` of the samples of the metric window.
 
 A run the controller itself stopped (its monitor found the loop unstable, or a
-computed value overflowed) raises :class:`harness.cosim.LoopDivergedError`
+computed value overflowed) raises :class:`harness.fmu.LoopDivergedError`
 during the run.  The command line turns both into exit code
 :data:`EXIT_RUN_FAILED` and one line saying why.
 """
@@ -52,7 +52,7 @@ def check_tracking_run(run, scenario, label=None):
     Parameters
     ----------
     run : ndarray
-        A structured result of :func:`harness.cosim.simulate_closed_loop` (fields
+        A structured result of :func:`harness.masters.fmpy.simulate_closed_loop` (fields
         ``time, y_d, y, v`` and, when present, ``saturated``).
     scenario : Scenario
         For the metric window and the sample period.

@@ -15,7 +15,7 @@
   (:mod:`harness.sweep`).
 
 ``--backend`` of ``all`` and ``run``: ``auto`` (default) runs long closed loops
-(``harness.native.LONG_RUN_SAMPLES``) on the native C master and the rest with
+(``harness.masters.LONG_RUN_SAMPLES``) on the native C master and the rest with
 fmpy; ``fmpy``, ``native`` (closed loops; the plant alone still runs in fmpy) and
 ``core`` (the C core without FMI) force one. ``--fmi 3`` runs the FMI 3.0 editions of
 the FMUs (with fmpy; ``auto`` then means fmpy, ``native`` and ``core`` refuse it).
@@ -44,8 +44,15 @@ import argparse
 import os
 import sys
 
-from .identify.cli import (add_export_arguments, add_identify_arguments,
-                           add_param_file_arguments)
+from . import masters, report
+from .paths import describe_fmu_dir
+from .bench import add_bench_arguments, run_bench
+from .checks import EXIT_RUN_FAILED, RunCheckError
+from .fmu import FMUError, UnknownParameterError, missing_windows_binaries
+from .identify.cli import (add_export_arguments, add_identify_arguments, add_param_file_arguments,
+                           apply_param_files, check_identify_arguments, run_export, run_identify)
+from .scenarios import ScenarioError, format_scenario_list, get_scenario, load_scenarios
+from .sweep import add_sweep_arguments, run_sweep_command
 
 __all__ = ["build_parser", "main", "SUBCOMMANDS", "UsageError"]
 
@@ -75,19 +82,17 @@ def _output_option(p, what):
 
 
 def _fmu_dir_option(p, what):
-    from ._paths import describe_fmu_dir
-
     p.add_argument("--fmu-dir", metavar="DIR", help=f"{what} (default: {describe_fmu_dir()})")
 
 
 def _backend_options(p, closed_loop=False):
     if closed_loop:
-        p.add_argument("--backend", choices=("auto", "fmpy", "native", "core"), default="auto",
+        p.add_argument("--backend", choices=masters.BACKENDS, default="auto",
                        help="auto (default): the native C master for long closed loops, fmpy "
                             "otherwise; fmpy or native: that master for the FMUs; core: the C "
                             "core through cffi, no FMI")
     else:
-        p.add_argument("--backend", choices=("fmpy", "core"), default="fmpy",
+        p.add_argument("--backend", choices=masters.OPEN_LOOP_BACKENDS, default="fmpy",
                        help="fmpy: run the FMUs (default); core: the C core through cffi, no FMI")
     _fmu_dir_option(p, "folder of PiezoStage.fmu and AdaptiveCompoundController.fmu")
     if closed_loop:
@@ -119,29 +124,24 @@ def _plots_option(p):
 def _out_dir(args):
     """Check --out now (creating nothing), so a path that cannot be a folder fails before
     any run."""
-    from .report import check_out_dir
-
     try:
-        return check_out_dir(args.out)
+        return report.check_out_dir(args.out)
     except OSError as exc:
         raise UsageError(f"--out: {exc}") from None
 
 
 def _fmi_version(args):
     """The --fmi version, checked against --backend before any run."""
-    if args.fmi == 3 and args.backend in ("native", "core"):
-        why = ("the native master calls the fmi2 functions" if args.backend == "native"
-               else "the core backend runs no FMU")
-        raise UsageError(f"--fmi 3 does not apply to --backend {args.backend} ({why}); use "
-                         f"--backend fmpy or auto")
+    master = masters.get(args.backend)
+    if args.fmi != 2 and args.fmi not in master.fmi_versions:
+        raise UsageError(f"--fmi {args.fmi} does not apply to --backend {args.backend} "
+                         f"({master.fmi_note}); use --backend fmpy or auto")
     return args.fmi
 
 
 def _warn_if_linux_only(args, fmi_version=2):
     """One warning line on stderr when the FMUs to be run have no Windows binaries (a build
     without MinGW-w64; pip hides CMake's note of it)."""
-    from .report.provenance import missing_windows_binaries
-
     note = missing_windows_binaries(args.fmu_dir, fmi_version)
     if note:
         sys.stderr.write(f"{args.prog}: warning: {note}\n")
@@ -175,10 +175,6 @@ def _add_all_parser(sub):
 
 
 def _cmd_all(args, command):
-    from . import report
-    from .identify.cli import apply_param_files
-    from .scenarios import load_scenarios
-
     registry = load_scenarios(args.scenario_file)
     builtin = load_scenarios()
     extra = [n for n in registry if n not in builtin]
@@ -219,10 +215,6 @@ def _add_run_parser(sub):
 
 
 def _cmd_run(args, command):
-    from . import report
-    from .identify.cli import apply_param_files
-    from .scenarios import get_scenario, load_scenarios
-
     registry = load_scenarios(args.scenario_file)
     sc = get_scenario(args.scenario, registry)
     if sc.kind != "tracking":
@@ -254,22 +246,9 @@ def _add_list_parser(sub):
 
 
 def _cmd_list(args, command):
-    from .scenarios import SCENARIO_DIR, load_scenarios
-    from pathlib import Path
-
-    registry = load_scenarios(args.scenario_file)
-    kinds = {"tracking": "Tracking (closed loop, reference y_d in µm)",
-             "validation": "Validation (plant alone, input v in V)"}
-    for kind, title in kinds.items():
-        names = [n for n, s in registry.items() if s.kind == kind]
-        if not names:
-            continue
-        print(title)
-        width = max(len(n) for n in names)
-        for n in names:
-            sc = registry[n]
-            user = "" if Path(sc.source).parent == SCENARIO_DIR else f" [{sc.source}]"
-            print(f"  {n:<{width}}  {sc.description}{user}")
+    text = format_scenario_list(load_scenarios(args.scenario_file))
+    if text:
+        print(text)
     return EXIT_OK
 
 
@@ -295,8 +274,6 @@ def _add_identify_parser(sub):
 
 
 def _cmd_identify(args, command):
-    from .identify.cli import check_identify_arguments, run_identify
-
     problem = check_identify_arguments(args)
     if problem:
         raise UsageError(problem)
@@ -323,16 +300,12 @@ def _add_export_parser(sub):
 
 
 def _cmd_export(args, command):
-    from .identify.cli import run_export
-
     _out_dir(args)
     _warn_if_linux_only(args)
     return run_export(args)
 
 
 def _add_bench_parser(sub):
-    from .bench import add_bench_arguments
-
     p = sub.add_parser(
         "bench", help="speed and memory figures",
         description="Speed and memory of the core, the FMI layer and the masters: ns/sample at "
@@ -345,14 +318,10 @@ def _add_bench_parser(sub):
 
 
 def _cmd_bench(args, command):
-    from .bench import run_bench
-
     return run_bench(args)
 
 
 def _add_sweep_parser(sub):
-    from .sweep import add_sweep_arguments
-
     p = sub.add_parser(
         "sweep", help="Monte Carlo robustness sweeps on Dask",
         description="Monte Carlo robustness sweep: N closed-loop runs per scenario with the "
@@ -366,8 +335,6 @@ def _add_sweep_parser(sub):
 
 
 def _cmd_sweep(args, command):
-    from .sweep import run_sweep_command
-
     _out_dir(args)
     return run_sweep_command(args)
 
@@ -482,10 +449,6 @@ def main(argv=None, prog=None):
         return fail(str(exc))
     except SystemExit as exc:                    # --help
         return exc.code if isinstance(exc.code, int) else EXIT_OK
-
-    from .checks import EXIT_RUN_FAILED, RunCheckError
-    from .cosim import FMUError, UnknownParameterError
-    from .scenarios import ScenarioError
 
     command = " ".join([prog, *argv])
     args.prog = prog

@@ -4,7 +4,7 @@ The C declarations are read from the headers in ``fmu_src/core/`` at import
 time (comments, ``#include`` lines and include guards dropped, integer
 ``#define`` constants kept), so the binding cannot drift from the headers.
 The shared library itself is loaded lazily, once per process. Both are found by
-:mod:`harness._paths`: ``$PIEZO_CORE_LIB`` / ``$PIEZO_CORE_INCLUDE``, else the copies
+:mod:`harness.paths`: ``$PIEZO_CORE_LIB`` / ``$PIEZO_CORE_INCLUDE``, else the copies
 ``pip install .`` put inside the package, else ``<repo>/build/libpiezo_core.so`` and
 ``<repo>/fmu_src/core`` of a source checkout.
 
@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from cffi import FFI
 
-from . import _paths
+from . import paths
 
 __all__ = [
     "CoreParameterError", "CoreInputError", "CoreDivergedError", "CoreUnstableError", "Plant",
@@ -38,16 +38,14 @@ __all__ = [
     "TransferFunction", "GLOperator", "pi_model", "transfer_function",
     "gl_operator", "gl_weights", "diophantine", "default_plant_params",
     "default_controller_params", "PLANT_PARAMETER_NAMES",
-    "CONTROLLER_PARAMETER_NAMES", "ffi", "lib", "library_path", "REPO_ROOT",
-    "BUILD_COMMAND",
+    "CONTROLLER_PARAMETER_NAMES", "ffi", "lib", "library_path", "plant_params_struct",
+    "controller_params_struct",
 ]
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
 # The headers are read at import (PIEZO_CORE_INCLUDE overrides their directory).
-CORE_DIR = _paths.core_include_dir()
+CORE_DIR = paths.core_include_dir()
 HEADER_ORDER = ("piezo_status.h", "piezo_hysteresis.h", "piezo_tf.h",
                 "piezo_creep.h", "piezo_plant.h", "piezo_controller.h", "piezo_reference.h")
-BUILD_COMMAND = "cmake -S . -B build && cmake --build build"
 
 PIEZO_OK = 0
 PIEZO_ERR_NULL = 1
@@ -119,8 +117,8 @@ _LIB_LOCK = threading.Lock()
 
 def library_path() -> Path:
     """Path of the shared library: ``$PIEZO_CORE_LIB``, the installed copy, or
-    ``<repo>/build/libpiezo_core.so`` (see :mod:`harness._paths`)."""
-    return _paths.core_library()
+    ``<repo>/build/libpiezo_core.so`` (see :mod:`harness.paths`)."""
+    return paths.core_library()
 
 
 def lib():
@@ -138,7 +136,7 @@ def lib():
                 path = library_path()
                 if not path.is_file():
                     raise FileNotFoundError(
-                        f"piezo core library not found: {path}; {_paths.where_to_get_it()} "
+                        f"piezo core library not found: {path}; {paths.where_to_get_it()} "
                         f"(or set PIEZO_CORE_LIB to the library path)")
                 _LIB = ffi.dlopen(str(path))
     return _LIB
@@ -333,14 +331,18 @@ def _to_dict(table: dict, struct) -> dict:
     return out
 
 
-def _plant_params_struct(params: dict | None):
+def plant_params_struct(params: dict | None):
+    """A ``piezo_plant_params`` (cffi, owned by Python): the core's defaults with ``params``
+    (FMU variable names) applied."""
     p = ffi.new("piezo_plant_params *")
     lib().piezo_plant_default_params(p)
     _apply(_PLANT_TABLE, p, params, "plant")
     return p
 
 
-def _controller_params_struct(params: dict | None):
+def controller_params_struct(params: dict | None):
+    """A ``piezo_controller_params`` (cffi, owned by Python): the core's defaults with
+    ``params`` (FMU variable names) applied."""
     p = ffi.new("piezo_controller_params *")
     lib().piezo_controller_default_params(p)
     _apply(_CONTROLLER_TABLE, p, params, "controller")
@@ -349,12 +351,12 @@ def _controller_params_struct(params: dict | None):
 
 def default_plant_params() -> dict:
     """Return the core's plant defaults as a dict keyed by FMU variable name."""
-    return _to_dict(_PLANT_TABLE, _plant_params_struct(None))
+    return _to_dict(_PLANT_TABLE, plant_params_struct(None))
 
 
 def default_controller_params() -> dict:
     """Return the core's controller defaults as a dict keyed by FMU variable name."""
-    return _to_dict(_CONTROLLER_TABLE, _controller_params_struct(None))
+    return _to_dict(_CONTROLLER_TABLE, controller_params_struct(None))
 
 
 # --------------------------------------------------------------------------
@@ -428,7 +430,7 @@ class Plant:
 
     def __init__(self, params: dict | None = None):
         self._lib = lib()
-        self._params = _plant_params_struct(params)
+        self._params = plant_params_struct(params)
         self._p = ffi.new("piezo_plant *")
         diag = ffi.new("piezo_diag *")
         _raise_init(self._lib.piezo_plant_init(self._p, self._params, diag), "piezo_plant_init", diag)
@@ -570,7 +572,7 @@ class Controller:
 
     def __init__(self, params: dict | None = None):
         self._lib = lib()
-        self._params = _controller_params_struct(params)
+        self._params = controller_params_struct(params)
         self._c = ffi.new("piezo_controller *")
         diag = ffi.new("piezo_diag *")
         _raise_init(self._lib.piezo_controller_init(self._c, self._params, diag),

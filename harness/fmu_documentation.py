@@ -19,6 +19,8 @@ from pathlib import Path
 import re
 from xml.etree import ElementTree as ET
 
+from .ssp import SSP_COMPONENTS, SSP_CONNECTIONS
+
 
 PROJECT = "piezo_fmus"
 CITATION = ('"Coupling Modeling and Adaptive Control for Piezoelectric-Actuated Positioning '
@@ -157,8 +159,7 @@ def _identity_table(root, platforms):
 
 
 def _connection_section(model_identifier, do_step="fmi2DoStep"):
-    from .ssp import SSP_COMPONENTS, SSP_CONNECTIONS
-
+    """The HTML section on wiring the closed loop, this model's connections in bold."""
     fmu_of = {comp: fmu for comp, (fmu, _) in SSP_COMPONENTS.items()}
     units = {(comp, name): unit for comp, (_, conns) in SSP_COMPONENTS.items()
              for name, _, _, unit in conns}

@@ -42,6 +42,10 @@ import sys
 from xml.etree import ElementTree as ET
 from xml.sax.saxutils import quoteattr
 
+from . import core
+from .loop import REFERENCE_PREVIEW, loop_delay
+from .scenarios import load_scenarios
+
 LS_REF_VERSION = "1.0.0-alpha.1"
 LS_REF_DESCRIPTION = "Layered Standard providing information on related files included in an FMU."
 EXPERIMENTS_FILE = "experiments.exp"
@@ -150,9 +154,6 @@ def piezo_stage(start_values=None, plant_start_values=None):
     ``start_values``: every parameter of an exported PiezoStage (its experiment then sets
     none and runs them); None for the built FMU (the mismatched plant's parameters).
     """
-    from . import core
-    from .scenarios import load_scenarios
-
     if start_values is None:
         params, base = dict(load_scenarios()["mismatch_1_5_10hz"].plant), {}
     else:
@@ -191,9 +192,6 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
     compilers. With d = 1 the replay's recursion has its pole at the zero of B (0.992) and a
     relative input change of 1e-15 moves v by about 4e-11 V.
     """
-    from . import core
-    from .scenarios import load_scenarios
-
     scenario = load_scenarios()["mismatch_1_5_10hz"]
     params = {"mv.delay": 0}
     n = int(round(DURATION / STEP))
@@ -202,7 +200,7 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
     plant_params = (dict(scenario.plant) if start_values is None
                     else dict(plant_start_values or {}, **EXPORT_SENSOR))
     ctrl = core.Controller(dict(base, **params, h=STEP))
-    d, preview = 1 + params["mv.delay"], 4
+    d, preview = loop_delay(params), REFERENCE_PREVIEW
     y_ref = [float(x) for x in scenario.signal.evaluate([(k + d) * STEP for k in range(n + 1)])]
     y_preview = [float(x) for x in scenario.signal.evaluate([(k + preview) * STEP for k in range(n + 1)])]
     t_preview = [(k + preview) * STEP for k in range(n + 1)]
@@ -234,8 +232,6 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
 
 def reference_signal(start_values=None, plant_start_values=None):
     """(parameters, no stimuli, references) of the ReferenceSignal experiment (never exported)."""
-    from . import core
-
     params = {"lead": 2, "preview": 4}
     for i, f in enumerate((1.0, 5.0, 10.0), start=1):
         params[f"amplitude[{i}]"] = 10.0

@@ -82,6 +82,8 @@ __all__ = [
     "load_scenarios",
     "get_scenario",
     "list_scenarios",
+    "format_scenario_list",
+    "reference_label",
     "read_signal_csv",
 ]
 
@@ -763,6 +765,33 @@ def list_scenarios(registry=None, kind=None):
     """
     registry = load_scenarios() if registry is None else registry
     return [n for n, s in registry.items() if kind is None or s.kind == kind]
+
+
+def reference_label(scenario):
+    """'1 Hz', '1/5/10 Hz' for a sine reference; the scenario name otherwise."""
+    sig = scenario.signal
+    if sig.kind == "sines" and sig.frequencies:
+        return "/".join(f"{f:g}" for f in sig.frequencies) + " Hz"
+    return scenario.name
+
+
+def format_scenario_list(registry):
+    """The scenarios of a registry by kind, one line each with its description (and the
+    file it came from, for a user's scenario): what ``python -m harness list`` prints."""
+    kinds = {"tracking": "Tracking (closed loop, reference y_d in µm)",
+             "validation": "Validation (plant alone, input v in V)"}
+    lines = []
+    for kind, title in kinds.items():
+        names = [n for n, s in registry.items() if s.kind == kind]
+        if not names:
+            continue
+        lines.append(title)
+        width = max(len(n) for n in names)
+        for n in names:
+            sc = registry[n]
+            user = "" if Path(sc.source).parent == SCENARIO_DIR else f" [{sc.source}]"
+            lines.append(f"  {n:<{width}}  {sc.description}{user}")
+    return "\n".join(lines)
 
 
 def get_scenario(name, registry=None):

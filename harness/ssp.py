@@ -1,4 +1,5 @@
-"""The closed loop as an SSP 1.0 file: write it, and run it with fmpy's SSP player.
+"""The closed loop as an SSP 1.0 file: written, and its bound parameter set read back (fmpy's
+SSP player runs it: :mod:`harness.masters.ssp`).
 
 An SSP is a zip with ``SystemStructure.ssd`` (the system: components,
 connectors, connections, default experiment) and ``resources/`` (the FMUs
@@ -21,9 +22,7 @@ the loop delay the master's schedule makes (d = 2 where values are exchanged at
 communication points, as every SSP player, Jacobi master and container in parallel
 mode does; d = 1 where the plant gets the controller's post-step output) and, from
 the time stamps ``t_preview`` and ``t_meas``, aligns the stamped preview with it
-(docs/cosimulation.md).  :func:`simulate_closed_loop_ssp` runs the file with
-:func:`fmpy.ssp.simulation.simulate_ssp`, applying the bound SSV (fmpy's player does
-not apply bindings by itself).
+(docs/cosimulation.md).
 
 The build writes ``build/fmus/PiezoStageClosedLoop.ssp`` with
 ``python -m harness.ssp --fmu-dir build/fmus --out build/fmus/PiezoStageClosedLoop.ssp``.
@@ -39,6 +38,12 @@ import sys
 from xml.sax.saxutils import quoteattr
 import zipfile
 
+from fmpy.ssp.ssd import read_ssd
+
+from .fmu import fmu_path
+from .loop import reference_lead
+from .scenarios import get_scenario
+
 __all__ = [
     "SSP_FILENAME",
     "SSP_SCENARIO",
@@ -47,7 +52,6 @@ __all__ = [
     "parameter_set_for_scenario",
     "write_closed_loop_ssp",
     "read_bound_parameter_set",
-    "simulate_closed_loop_ssp",
     "main",
 ]
 
@@ -141,9 +145,6 @@ def parameter_set_for_scenario(name, registry=None):
     ValueError
         Not a tracking scenario, a table reference, or more than 8 tones.
     """
-    from ._common import DEFAULT_MV_DELAY
-    from .scenarios import get_scenario
-
     sc = get_scenario(name, registry)
     sig = sc.signal
     if sc.kind != "tracking" or sig.kind != "sines":
@@ -166,9 +167,9 @@ def parameter_set_for_scenario(name, registry=None):
         values[f"reference.amplitude[{i}]"] = float(a)
         values[f"reference.frequency[{i}]"] = float(f)
         values[f"reference.phase[{i}]"] = float(p)
-    mv_delay = int(sc.controller.get("mv.delay", DEFAULT_MV_DELAY))
-    if mv_delay >= 0:
-        values["reference.lead"] = 1 + mv_delay
+    lead = reference_lead(sc.controller)
+    if lead is not None:
+        values["reference.lead"] = lead
     return SspParameterSet(sc.name, sc.description, values, float(sc.duration),
                            float(sc.step_size))
 
@@ -278,8 +279,6 @@ def write_closed_loop_ssp(path, fmu_dir, parameter_sets=None):
     FileNotFoundError
         An FMU is missing (the message says how to build it).
     """
-    from .cosim import fmu_path
-
     path = Path(path)
     sets = list(parameter_sets or [parameter_set_for_scenario(SSP_SCENARIO)])
     fmus = {fmu: fmu_path(Path(fmu).stem, fmu_dir).read_bytes() for fmu, _ in SSP_COMPONENTS.values()}
@@ -303,45 +302,11 @@ def read_bound_parameter_set(ssp_path):
     -------
     fmpy.ssp.ssd.ParameterSet or None
     """
-    from fmpy.ssp.ssd import read_ssd
-
     ssd = read_ssd(str(ssp_path))
     for binding in ssd.system.parameterBindings:
         for pset in binding.parameterValues:
             return pset
     return None
-
-
-def simulate_closed_loop_ssp(ssp_path, stop_time=None, step_size=None):
-    """Run an SSP with fmpy's SSP player, applying its bound parameter set.
-
-    fmpy's player (``fmpy.ssp.simulation.simulate_ssp``) steps every component, then
-    copies outputs to inputs (a Jacobi master), starting from connector values of 0.
-
-    Parameters
-    ----------
-    ssp_path : str or Path
-    stop_time, step_size : float, optional
-        Default: the SSP's default experiment and the OMSimulator step annotation.
-
-    Returns
-    -------
-    ndarray
-        fmpy's structured result: ``time`` and one field per connector
-        (``reference.y_d``, ``plant.y``, ``controller.v``, ...); the row of time
-        ``t_k`` holds the values after the step from ``t_k``.
-    """
-    import re
-    from fmpy.ssp.simulation import simulate_ssp
-
-    with zipfile.ZipFile(ssp_path) as zf:
-        ssd = zf.read("SystemStructure.ssd").decode("utf-8")
-    if stop_time is None:
-        stop_time = float(re.search(r'<ssd:DefaultExperiment[^>]*stopTime="([^"]+)"', ssd).group(1))
-    if step_size is None:
-        step_size = float(re.search(r'<oms:FixedStepMaster[^>]*stepSize="([^"]+)"', ssd).group(1))
-    return simulate_ssp(str(ssp_path), stop_time=stop_time, step_size=step_size,
-                        parameter_set=read_bound_parameter_set(ssp_path))
 
 
 def main(argv=None):

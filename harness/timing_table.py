@@ -9,10 +9,11 @@ latest ``loop_delay_time`` of the six runs) and the e_rms of each scenario over 
     python -m harness.timing_table                  # the table, in Markdown
     python -m harness.timing_table --seeds 1 2 3 4  # the family: e_rms and choice times over seeds
 
-The masters (their schedules: docs/cosimulation.md, section 2): our Gauss-Seidel in both
-doStep orders and our Jacobi (:mod:`harness.cosim`), fmpy's SSP player and
-fmu-manipulation-toolbox's container in parallel mode and in sequential mode with each of
-the 6 orders of its FMU list (:mod:`harness.importers`).
+The masters (their schedules: docs/cosimulation.md, section 2), each asked of the registry
+:mod:`harness.masters`: our Gauss-Seidel in both doStep orders and our Jacobi (``fmpy``),
+fmpy's SSP player (``ssp-player``) and fmu-manipulation-toolbox's container
+(``container``) in parallel mode and in sequential mode with each of the 6 orders of its FMU
+list.
 """
 
 from __future__ import annotations
@@ -22,9 +23,13 @@ import itertools
 import os
 import statistics
 import sys
-import tempfile
 from dataclasses import dataclass, field
-from pathlib import Path
+
+from . import masters
+from .loop import EXCHANGE_LOOP_DELAY
+from .masters.container import CONTAINER_ORDER
+from .metrics import compute_metrics
+from .scenarios import MISMATCH_SCENARIOS, get_scenario, reference_label
 
 __all__ = ["MASTERS", "MasterRun", "run_master", "measure", "markdown_table", "family_summary", "main"]
 
@@ -33,7 +38,7 @@ _ABBREV = {"ReferenceSignal.fmu": "reference", "AdaptiveCompoundController.fmu":
 
 
 def _orders():
-    from .importers import CONTAINER_ORDER
+    """The orders of the container's FMU list."""
     return list(itertools.permutations(CONTAINER_ORDER))
 
 
@@ -85,11 +90,6 @@ def run_master(master, scenario, tf_delay=0, seed=None, workdir=None):
     -------
     MasterRun
     """
-    from . import importers
-    from .cosim import simulate_closed_loop
-    from .metrics import compute_metrics
-    from .scenarios import get_scenario
-
     if master not in MASTERS:
         raise ValueError(f"unknown master {master!r}; masters: {', '.join(MASTERS)}")
     sc = get_scenario(scenario)
@@ -100,22 +100,19 @@ def run_master(master, scenario, tf_delay=0, seed=None, workdir=None):
         timing = {}
         kwargs = {"master": "jacobi"} if "Jacobi" in master else \
             {"step_order": "controller-first" if "controller first" in master else "plant-first"}
-        run = simulate_closed_loop(sc.name, plant_params=plant, timing=timing, **kwargs)
+        run = masters.closed_loop("fmpy")(sc.name, plant_params=plant, timing=timing, **kwargs)
     else:
         if master == "fmpy SSP player":
-            run = importers.simulate_ssp_scenario(sc.name, plant_params=plant)
+            run = masters.closed_loop("ssp-player")(sc.name, plant_params=plant)
         else:
             sequential = "sequential" in master
-            order = importers.CONTAINER_ORDER
+            order = CONTAINER_ORDER
             if sequential:
                 names = master.split(": ")[1].split(", ")
                 inverse = {v: k for k, v in _ABBREV.items()}
                 order = tuple(inverse[n] for n in names)
-            with tempfile.TemporaryDirectory(dir=workdir) as tmp:
-                path = importers.build_closed_loop_container(sc.name, Path(tmp) / "loop.fmu",
-                                                             sequential=sequential, order=order,
-                                                             plant_params=plant)
-                run = importers.simulate_container(path, sc.duration, sc.step_size, sequential=sequential)
+            run = masters.closed_loop("container")(sc.name, sequential=sequential, order=order,
+                                                   plant_params=plant, workdir=workdir)
         timing = {f: run[f][-1] for f in ("loop_delay", "loop_delay_time", "preview_lead", "meas_offset")}
     e = compute_metrics(run["time"], run["y_d"], run["y"], sc.metric_window, sc.step_size).e_rms
     return MasterRun(master, sc.name, int(tf_delay), seed, float(e), int(timing["loop_delay"]),
@@ -125,8 +122,6 @@ def run_master(master, scenario, tf_delay=0, seed=None, workdir=None):
 
 def measure(masters=MASTERS, scenarios=None, tf_delays=(0, 1), seeds=(None,), progress=None):
     """Every master x tf.delay x seed x scenario, as a list of :class:`MasterRun`."""
-    from .scenarios import MISMATCH_SCENARIOS
-
     scenarios = list(scenarios or MISMATCH_SCENARIOS)
     runs = []
     for master, tf_delay, seed in itertools.product(masters, tf_delays, seeds):
@@ -137,16 +132,11 @@ def measure(masters=MASTERS, scenarios=None, tf_delays=(0, 1), seeds=(None,), pr
     return runs
 
 
-def _label(name):
-    from .scenarios import get_scenario
-    return "/".join(f"{f:g}" for f in get_scenario(name).signal.frequencies) + " Hz"
-
-
 def markdown_table(runs):
     """The table of docs/cosimulation.md: one row per master and tf.delay."""
     scenarios = list(dict.fromkeys(r.scenario for r in runs))
     head = (["master", "tf.delay", "d chosen", "at [ms]", "preview lead", "meas offset"]
-            + [f"{_label(s)} [nm]" for s in scenarios])
+            + [f"{reference_label(get_scenario(s))} [nm]" for s in scenarios])
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     keys = list(dict.fromkeys((r.master, r.tf_delay) for r in runs))
     for master, tf_delay in keys:
@@ -175,7 +165,7 @@ def family_summary(runs):
         group = [r for r in runs if r.scenario == s]
         e = [r.e_rms * 1e3 for r in group]
         t = [r.loop_delay_time * 1e3 for r in group]
-        lines.append(f"| {_label(s)} | {len(group)} | {statistics.median(e):.2f} | {max(e):.2f} | "
+        lines.append(f"| {reference_label(get_scenario(s))} | {len(group)} | {statistics.median(e):.2f} | {max(e):.2f} | "
                      f"{statistics.median(t):.1f} | {max(t):.1f} |")
     return "\n".join(lines)
 
@@ -217,7 +207,8 @@ def main(argv=None):
 
 def _expected_delay(run):
     """The loop delay of a master's schedule (docs/cosimulation.md, section 2)."""
-    return (1 if "sequential" in run.master else 2) + run.tf_delay
+    # a post-step link (the container's sequential mode) makes the loop one sample shorter
+    return EXCHANGE_LOOP_DELAY - (1 if "sequential" in run.master else 0) + run.tf_delay
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ import xml.etree.ElementTree as ET
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from harness import core  # noqa: E402
+from harness import core, paths  # noqa: E402
 import numpy_reference as ref  # noqa: E402
 
 
@@ -94,7 +94,7 @@ def test_missing_library_message(tmp_path):
     naming the exact cmake command (checked in a fresh interpreter)."""
     code = ("import sys; sys.path.insert(0, %r)\n"
             "from harness import core\n"
-            "try:\n    core.lib()\nexcept FileNotFoundError as e:\n    print('FNF', e)\n") % str(core.REPO_ROOT)
+            "try:\n    core.lib()\nexcept FileNotFoundError as e:\n    print('FNF', e)\n") % str(paths.REPO_ROOT)
     env = dict(os.environ, PIEZO_CORE_LIB=str(tmp_path / "nope.so"))
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
     assert out.startswith("FNF") and "cmake -S . -B build && cmake --build build" in out
@@ -130,7 +130,7 @@ def test_defaults_match_design():
 def _fmu_parameters(model):
     """{name: start value as typed} of the causality="parameter" variables in
     modelDescription/<model>.xml (the FMU interface of docs/fmus.md)."""
-    root = ET.parse(core.REPO_ROOT / "modelDescription" / f"{model}.xml").getroot()
+    root = ET.parse(paths.REPO_ROOT / "modelDescription" / f"{model}.xml").getroot()
     out = {}
     for var in root.iter("ScalarVariable"):
         if var.get("causality") == "parameter":
@@ -190,7 +190,7 @@ def test_parameter_round_trip_through_struct():
     for i, n in enumerate(names):
         kind = core._PLANT_TABLE[n][1]
         vals[n] = (i % 2 == 0) if kind == "bool" else (i + 1 if kind == "int" else 0.001 * (i + 1))
-    s = core._plant_params_struct(vals)
+    s = core.plant_params_struct(vals)
     back = core._to_dict(core._PLANT_TABLE, s)
     assert back == vals
     names = list(core.CONTROLLER_PARAMETER_NAMES)
@@ -198,5 +198,5 @@ def test_parameter_round_trip_through_struct():
     for i, n in enumerate(names):
         kind = core._CONTROLLER_TABLE[n][1]
         vals[n] = (i % 2 == 0) if kind == "bool" else (i + 1 if kind == "int" else 0.001 * (i + 1))
-    s = core._controller_params_struct(vals)
+    s = core.controller_params_struct(vals)
     assert core._to_dict(core._CONTROLLER_TABLE, s) == vals

@@ -42,7 +42,7 @@ from fmpy.validation import validate_fmu
 from conftest import FMU_NAMES, fmu_platforms
 from fmu_experiments import LS_REF, load_experiment, start_values
 
-from harness.cosim import simulate_closed_loop, simulate_open_loop
+from harness.masters.fmpy import simulate_closed_loop, simulate_open_loop
 from harness.metrics import compute_metrics
 from harness.scenarios import get_scenario
 
@@ -172,7 +172,7 @@ def test_closed_loop_equals_fmi2_under_other_masters_and_parameters(options):
 
 
 def test_unknown_array_element_is_refused_by_name():
-    from harness.cosim import UnknownParameterError
+    from harness.fmu import UnknownParameterError
     with pytest.raises(UnknownParameterError, match=r"'pi\.w\[17\]' is not a parameter"):
         simulate_closed_loop("track_1hz", duration=0.01, fmi_version=3,
                              plant_params={"pi.w[17]": 0.1})

@@ -17,9 +17,11 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-from harness import bench, core, native  # noqa: E402
-from harness._common import prepare_closed_loop  # noqa: E402
-from harness.core_loop import simulate_closed_loop_core  # noqa: E402
+from harness import bench, core  # noqa: E402
+from harness.bench.measure import timing_library  # noqa: E402
+from harness.loop import prepare_closed_loop  # noqa: E402
+from harness.masters import native  # noqa: E402
+from harness.masters.core import simulate_closed_loop_core  # noqa: E402
 
 
 def test_bench_command_reports_every_loop(tmp_path):
@@ -61,16 +63,16 @@ def test_bench_command_reports_every_loop(tmp_path):
 
 
 def test_bench_loops_run_the_closed_loop_trajectory():
-    """Reference: harness.core_loop.simulate_closed_loop_core (the core binding's loop with
+    """Reference: harness.masters.core.simulate_closed_loop_core (the core binding's loop with
     the FMUs' timing). piezo_bench_closed_loop records y_meas(k) and the applied v(k): both
     equal the reference's bit for bit; the plant timed alone on that v and the controller
     timed alone on those inputs run every sample (status PIEZO_OK)."""
-    ffi, lib = bench._bench_lib()
+    ffi, lib = timing_library()
     n = 3000
     setup = prepare_closed_loop("mismatch_1_5_10hz", duration=n * 0.0005)
     want = simulate_closed_loop_core("mismatch_1_5_10hz", duration=n * 0.0005)
-    pp = core._plant_params_struct(setup.plant_params)
-    cp = core._controller_params_struct(setup.controller_params)
+    pp = core.plant_params_struct(setup.plant_params)
+    cp = core.controller_params_struct(setup.controller_params)
     y_ref = np.ascontiguousarray(setup.y_ref)
     y_meas, v, block_ns = np.zeros(n), np.zeros(n), np.zeros(n // 500)
     status = ffi.new("int *")

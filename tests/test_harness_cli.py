@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from harness import cosim
+from harness.masters import fmpy as fmpy_master
 from harness.metrics import compute_metrics
 from harness.scenarios import load_scenarios
 
@@ -53,7 +53,7 @@ def test_run_short_user_scenario_end_to_end(tmp_path):
     assert e_rms == pytest.approx(m.e_rms, rel=1e-12)
     assert e_r == pytest.approx(m.e_r, rel=1e-12)
     sc = load_scenarios([scen])["short_mismatch"]
-    direct = cosim.simulate_closed_loop(sc)
+    direct = fmpy_master.simulate_closed_loop(sc)
     m2 = compute_metrics(direct["time"], direct["y_d"], direct["y"], sc.metric_window, sc.step_size)
     assert e_rms == pytest.approx(m2.e_rms, rel=1e-12)
     # a user scenario is not the paper's experiment: no paper value, though it extends one
@@ -140,11 +140,11 @@ def test_missing_fmu_in_a_chosen_folder_says_what_the_folder_lacks(tmp_path):
 def test_missing_fmu_in_the_default_folder_says_how_to_build_it(tmp_path, monkeypatch, capsys):
     """The default folder (a checkout's build/fmus, here one that was never built) is filled by
     the build: the message gives its command."""
-    from harness import _paths
+    from harness import paths
     from harness.cli import main
 
     monkeypatch.delenv("PIEZO_FMU_DIR", raising=False)
-    monkeypatch.setattr(_paths, "fmu_dir", lambda: tmp_path / "build" / "fmus")
+    monkeypatch.setattr(paths, "fmu_dir", lambda: tmp_path / "build" / "fmus")
     assert main(["run", "track_1hz", "--no-plots", "--out", str(tmp_path / "o")]) == 2
     msg = capsys.readouterr().err
     assert f"FMU not found: {tmp_path / 'build' / 'fmus' / 'PiezoStage.fmu'}" in msg
@@ -154,9 +154,9 @@ def test_missing_fmu_in_the_default_folder_says_how_to_build_it(tmp_path, monkey
 @pytest.mark.parametrize("sub", ["all", "run", "export", "bench"])
 def test_fmu_dir_help_names_the_real_default(sub, monkeypatch, capsys):
     """--fmu-dir's help names the folder the FMUs are really taken from (reference:
-    harness._paths.fmu_dir(), which the runs use): here the checkout's build/fmus, and
+    harness.paths.fmu_dir(), which the runs use): here the checkout's build/fmus, and
     $PIEZO_FMU_DIR when it is set. (tests/test_install.py checks the installed package's.)"""
-    from harness import _paths
+    from harness import paths
     from harness.cli import main
 
     def says(text):
@@ -165,7 +165,7 @@ def test_fmu_dir_help_names_the_real_default(sub, monkeypatch, capsys):
         return "".join(text.split()) in "".join(capsys.readouterr().out.split())
 
     monkeypatch.delenv("PIEZO_FMU_DIR", raising=False)
-    assert _paths.fmu_dir() == REPO / "build" / "fmus"
+    assert paths.fmu_dir() == REPO / "build" / "fmus"
     assert says(f"(default: {REPO / 'build' / 'fmus'}, the checkout's build; $PIEZO_FMU_DIR "
                 f"overrides)")
     monkeypatch.setenv("PIEZO_FMU_DIR", "/srv/my_fmus")
@@ -271,7 +271,7 @@ def test_fmus_without_windows_binaries_are_announced(fmu_paths, fmu3_paths, tmp_
     """pip hides CMake's output, so a build without MinGW-w64 is announced when the FMUs are
     used: one warning line before the run, saying how to get Windows binaries where a rebuild
     or a reinstall makes them (the default folder). Reference: the zip's binaries/ folders."""
-    from harness import _paths
+    from harness import paths
     from harness.cli import main
 
     linux = _linux_only_copies(fmu_paths, fmu3_paths, tmp_path / "fmus")
@@ -281,8 +281,8 @@ def test_fmus_without_windows_binaries_are_announced(fmu_paths, fmu3_paths, tmp_
     if where == "--fmu-dir":
         args += ["--fmu-dir", str(linux)]
     else:
-        monkeypatch.setattr(_paths, "fmu_dir", lambda: linux)
-        monkeypatch.setattr(_paths, "IN_CHECKOUT", where == "checkout")
+        monkeypatch.setattr(paths, "fmu_dir", lambda: linux)
+        monkeypatch.setattr(paths, "IN_CHECKOUT", where == "checkout")
     assert main(args, prog="python -m harness") == 0
     err = capsys.readouterr().err.splitlines()
     folder, windows = (linux, "win64") if fmi == "2" else (linux / "fmi3", "x86_64-windows")

@@ -1,4 +1,4 @@
-"""harness.cosim (fmpy master) against the C core loop and the docs/model.md, scenarios bounds.
+"""harness.masters.fmpy (the fmpy master) against the C core loop and the docs/model.md, scenarios bounds.
 
 Needs build/fmus/*.fmu and build/libpiezo_core.so (cmake -S . -B build && cmake --build build).
 """
@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from harness import core as core_binding
-from harness import cosim
-from harness.core_loop import simulate_closed_loop_core, simulate_open_loop_core
+from harness import fmu
+from harness.masters import fmpy as fmpy_master
+from harness.masters.core import simulate_closed_loop_core, simulate_open_loop_core
 from harness.metrics import compute_metrics
 from harness.scenarios import MISMATCH_SCENARIOS, TRACKING_SCENARIOS, Signal, get_scenario
 
@@ -27,7 +28,7 @@ def _run(name, **kw):
     """fmpy run, cached across tests of this module (each run is deterministic)."""
     key = (name, tuple(sorted(kw.items())))
     if key not in _CACHE:
-        _CACHE[key] = cosim.simulate_closed_loop(name, **kw)
+        _CACHE[key] = fmpy_master.simulate_closed_loop(name, **kw)
     return _CACHE[key]
 
 
@@ -38,7 +39,7 @@ def _metrics(name, data):
 
 @pytest.mark.parametrize("name", ["track_1hz", "track_1_10_20hz", "mismatch_1hz", "mismatch_1_5_10hz"])
 def test_fmpy_loop_equals_core_loop(name):
-    # Reference: the same closed loop on the C core through cffi (harness.core_loop);
+    # Reference: the same closed loop on the C core through cffi (harness.masters.core);
     # the FMI layer must not change a single sample (bound 1e-9 um, every field).
     fmu = _run(name)
     core = simulate_closed_loop_core(name)
@@ -61,7 +62,7 @@ def test_nominal_model_with_preview_tracks_exactly(name):
     assert m.n_samples == 4000
     assert m.e_rms <= 1e-6, f"{name}: e_rms = {m.e_rms:.3g} um"
     timing = {}
-    late = cosim.simulate_closed_loop(name, plant_params={"tf.delay": 1}, timing=timing)
+    late = fmpy_master.simulate_closed_loop(name, plant_params={"tf.delay": 1}, timing=timing)
     assert timing["loop_delay"] == 3
     assert _metrics(name, late).e_rms <= 1e-6
 
@@ -90,7 +91,7 @@ def test_preview_off_gives_the_expected_lag_error(d):
     # e_rms = 2 * 10 * sin(pi * f * d h) / sqrt(2) = 44.43 nm for the default d = 2 and
     # 22.21 nm for d = 1 (mv.feedthrough with mv.delay = 0).
     params = {} if d == 2 else {"mv.delay": 0, "mv.feedthrough": True}
-    data = cosim.simulate_closed_loop("track_1hz", preview=False, controller_params=params)
+    data = fmpy_master.simulate_closed_loop("track_1hz", preview=False, controller_params=params)
     m = _metrics("track_1hz", data)
     expected = 2 * 10 * math.sin(math.pi * 1.0 * d * 0.0005) / math.sqrt(2)
     assert m.e_rms == pytest.approx(expected, rel=1e-6)
@@ -117,7 +118,7 @@ def test_every_master_runs_the_published_at_end_loop(master, order):
     delay explicit: at sample k the plant applies the v the controller computed at k-1
     (0 at k = 0) from y_d(k-1+2) and y_meas(k-1); y_d = 10 sin(2 pi 10 t) computed here.
     The fmpy run of mismatch_10hz (3 s) under each master and doStep order must equal it
-    exactly (tolerance 0) in y_d, y, y_meas and v, and equal harness.core_loop's run exactly
+    exactly (tolerance 0) in y_d, y, y_meas and v, and equal harness.masters.core's run exactly
     in every field. Direct check of the delay: replaying the recorded v (the applied
     voltage) through an open-loop core plant reproduces y and y_meas exactly, while v
     shifted one sample earlier does not (differs by > 1 nm). Stability: e_rms <= 3 nm."""
@@ -162,7 +163,7 @@ def test_open_loop_fmu_equals_core_and_u_is_row_aligned():
     t = np.arange(2000) * 0.0005
     v = 10 * np.sin(2 * np.pi * 10 * t) + 10
     params = {"creep.k_c": 1.0497, "creep.alpha": -0.0085}
-    fmu = cosim.simulate_open_loop(params, v)
+    fmu = fmpy_master.simulate_open_loop(params, v)
     core = simulate_open_loop_core(params, v)
     assert fmu.dtype.names == ("time", "v", "u", "x", "y", "y_meas")
     for field in fmu.dtype.names:
@@ -177,7 +178,7 @@ def test_missing_fmu_says_what_the_given_folder_lacks(tmp_path):
     """A folder given by the caller is not filled by a build: the message says what it lacks
     (tests/test_harness_cli.py checks the default folder's build advice)."""
     with pytest.raises(FileNotFoundError) as info:
-        cosim.simulate_closed_loop("track_1hz", fmu_dir=tmp_path)
+        fmpy_master.simulate_closed_loop("track_1hz", fmu_dir=tmp_path)
     assert str(info.value) == (f"FMU not found: {tmp_path / 'PiezoStage.fmu'}; the folder "
                                f"{tmp_path} has no PiezoStage.fmu, it holds no .fmu file at all "
                                f"(the harness runs PiezoStage.fmu and "
@@ -185,38 +186,38 @@ def test_missing_fmu_says_what_the_given_folder_lacks(tmp_path):
 
 
 def test_parameter_errors_are_reported_by_name():
-    with pytest.raises(cosim.UnknownParameterError, match="did you mean rls.forgetting"):
-        cosim.simulate_closed_loop("track_1hz", controller_params={"rls.forgeting": 0.9}, duration=0.01)
-    with pytest.raises(cosim.FMUInitializationError, match=r"creep.alpha = 5 is out of range"):
-        cosim.simulate_closed_loop("track_1hz", plant_params={"creep.alpha": 5.0}, duration=0.01)
+    with pytest.raises(fmu.UnknownParameterError, match="did you mean rls.forgetting"):
+        fmpy_master.simulate_closed_loop("track_1hz", controller_params={"rls.forgeting": 0.9}, duration=0.01)
+    with pytest.raises(fmu.FMUInitializationError, match=r"creep.alpha = 5 is out of range"):
+        fmpy_master.simulate_closed_loop("track_1hz", plant_params={"creep.alpha": 5.0}, duration=0.01)
 
 
 def test_failed_run_releases_both_instances(monkeypatch):
     # A NaN in the reference makes the controller refuse its stamped preview mid-run; both
     # instances must still be terminated and freed (and a following run must work).
     closed = []
-    original = cosim._Instance.close
+    original = fmpy_master._Instance.close
 
     def spy(self):
         closed.append((self.info.model, self.initialized))
         original(self)
 
-    monkeypatch.setattr(cosim._Instance, "close", spy)
+    monkeypatch.setattr(fmpy_master._Instance, "close", spy)
     sc = get_scenario("track_1hz")
     t = np.arange(0, 3.01, 0.0005)
     y = 10 * np.sin(2 * np.pi * t)
     y[201] = np.nan
     bad = sc.with_overrides(signal=Signal("table", table_time=tuple(t), table_value=tuple(y)))
-    with pytest.raises(cosim.FMUError, match=r"sample 197.*y_preview = nan"):   # y_preview(197) = y_d(201)
-        cosim.simulate_closed_loop(bad)
+    with pytest.raises(fmu.FMUError, match=r"sample 197.*y_preview = nan"):   # y_preview(197) = y_d(201)
+        fmpy_master.simulate_closed_loop(bad)
     assert sorted(closed) == [("AdaptiveCompoundController", True), ("PiezoStage", True)]
-    assert cosim._LOGS == {}
-    ok = cosim.simulate_closed_loop("track_1hz", duration=0.05)
+    assert fmpy_master._LOGS == {}
+    ok = fmpy_master.simulate_closed_loop("track_1hz", duration=0.05)
     assert ok.shape == (100,)
 
 
 def test_extraction_is_cached_per_process():
-    cosim.simulate_closed_loop("track_5hz", duration=0.01)
-    n = len(cosim._EXTRACTED)
-    cosim.simulate_closed_loop("track_5hz", duration=0.01)
-    assert len(cosim._EXTRACTED) == n
+    fmpy_master.simulate_closed_loop("track_5hz", duration=0.01)
+    n = len(fmu._EXTRACTED)
+    fmpy_master.simulate_closed_loop("track_5hz", duration=0.01)
+    assert len(fmu._EXTRACTED) == n

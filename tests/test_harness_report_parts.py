@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from harness.core_loop import simulate_closed_loop_core, simulate_open_loop_core
-from harness.cosim import simulate_closed_loop, simulate_open_loop
+from harness.masters.core import simulate_closed_loop_core, simulate_open_loop_core
+from harness.masters.fmpy import simulate_closed_loop, simulate_open_loop
 from harness.report import conditions, document, figures, run_scenario
-from harness.report.progress import Progress
+from harness.progress import Progress
 from harness.scenarios import get_scenario, load_scenarios
 
 SHORT = """

@@ -1,7 +1,7 @@
 """Monte Carlo sweeps (harness.sweep, ``python -m harness sweep``).
 
 References: NumPy's own generator and np.roots for the draws and the pole/zero moves;
-harness.native runs (the native master, itself checked bit for bit against fmpy) for the
+harness.masters.native runs (the native master, itself checked bit for bit against fmpy) for the
 sweep's errors and for the worst parameter file; a real ``dask scheduler`` and ``dask
 worker`` on 127.0.0.1 for ``--scheduler``.
 """
@@ -20,8 +20,10 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-from harness import native, sweep  # noqa: E402
+from harness import sweep  # noqa: E402
+from harness.masters import native  # noqa: E402
 from harness.scenarios import load_scenarios  # noqa: E402
+from harness.sweep.store import RunStore  # noqa: E402
 
 BASE = sweep.plant_start_values()
 REALS = [k for k, v in BASE.items() if isinstance(v, float)]
@@ -109,7 +111,7 @@ def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path):
     once, reports the not-ok ones without stopping, its e_rms equal fresh native runs of the
     same parameters bit for bit, and the worst parameter file, loaded as a scenario file,
     reproduces the worst e_rms exactly."""
-    from harness._common import prepare_closed_loop
+    from harness.loop import prepare_closed_loop
     from harness.metrics import compute_metrics
 
     spreads = ["tf.poles=0.01", "pi.weights=60%", "tf.zero=0.01"]
@@ -285,7 +287,7 @@ def test_store_records_each_run_once_and_drops_a_row_cut_off_by_a_kill(tmp_path)
     """Reference: the journal's own rows. A second row of a recorded run is not written; a
     journal whose last line was cut off mid-write loads the complete rows only, and the
     cut line is removed from the file, so appending continues on a clean line."""
-    store = sweep._Store(tmp_path, ["a"], 5, ["p"])
+    store = RunStore(tmp_path, ["a"], 5, ["p"])
     store.open(fresh=True)
     assert [i for i, _ in store.add("a", [(3, "ok", 1e-3, 1e-4, "", 0.01, [1.5]),
                                           (1, "diverged", math.nan, math.nan, "why, with a comma", 0.02, [2.5])])] == [3, 1]
@@ -293,7 +295,7 @@ def test_store_records_each_run_once_and_drops_a_row_cut_off_by_a_kill(tmp_path)
     store.close()
     text = store.path.read_bytes()
     store.path.write_bytes(text + b"a,4,ok,0.5,0.")              # killed mid-row
-    again = sweep._Store(tmp_path, ["a"], 5, ["p"])
+    again = RunStore(tmp_path, ["a"], 5, ["p"])
     assert again.load() == 2
     assert store.path.read_bytes() == text
     assert list(again.missing("a")) == [0, 2, 4]

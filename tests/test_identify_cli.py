@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from harness.cli import main
-from harness.core_loop import simulate_open_loop_core
+from harness.masters.core import simulate_open_loop_core
 from harness.identify.data import write_record
 from harness.identify.demo import DEMO_PLANT, DEMO_SENSOR
 from harness.identify.params import read_params

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
 
-from harness.cosim import simulate_closed_loop, simulate_open_loop
+from harness.masters.fmpy import simulate_closed_loop, simulate_open_loop
 from harness.identify.export import PROVENANCE_DIR, START_VALUES_PATH, ExportError, export_fmus
 from harness.identify.fit import fit_coupled_model
 from harness.identify.params import ParameterFileError

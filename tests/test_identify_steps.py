@@ -4,7 +4,7 @@ from a noise-free run of the core plant (creep disabled, i.e. the Hammerstein mo
 import numpy as np
 import pytest
 
-from harness.core_loop import simulate_open_loop_core
+from harness.masters.core import simulate_open_loop_core
 from harness.identify import (
     identify_pi,
     identify_transfer_function,
@@ -77,7 +77,7 @@ from harness.identify import (
     identify_creep,
     transfer_function_output,
 )
-from harness.report import generate_identification_records
+from harness.identify import generate_identification_records
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -1,8 +1,8 @@
 """The closed loop under every master that installs here, on the mismatch case of docs/model.md,
 with every FMU at its defaults (issue 21: the loop finds its own timing).
 
-Masters (their real schedules read in their sources, see harness/importers.py):
-  * ours (harness.cosim): Gauss-Seidel in ModelStructure order with either doStep order,
+Masters (their real schedules read in their sources, see harness/masters/ssp.py and container.py):
+  * ours (harness.masters.fmpy): Gauss-Seidel in ModelStructure order with either doStep order,
     and a textbook Jacobi master;
   * fmu-manipulation-toolbox's container FMU, parallel mode (set all, step all, get all);
   * fmpy's SSP player (Jacobi, connectors start at 0 instead of the initial outputs);
@@ -25,9 +25,11 @@ import itertools
 import numpy as np
 import pytest
 
-from harness import core, importers
-from harness._common import REFERENCE_LEAD, REFERENCE_PREVIEW
-from harness.cosim import simulate_closed_loop
+from harness import core
+from harness.loop import REFERENCE_LEAD, REFERENCE_PREVIEW
+from harness.masters import container
+from harness.masters.fmpy import simulate_closed_loop
+from harness.masters.ssp import simulate_ssp_scenario
 from harness.metrics import compute_metrics
 from harness.scenarios import MISMATCH_SCENARIOS, get_scenario
 
@@ -35,7 +37,7 @@ FIELDS = ("y_d", "y", "y_meas", "v")
 TOL = 1e-12          # um (V for v)
 E_RMS_MAX = 3e-3     # um
 D1 = {"mv.delay": 0, "mv.feedthrough": True}
-R, C, P = importers.CONTAINER_ORDER
+R, C, P = container.CONTAINER_ORDER
 ORDERS = list(itertools.permutations((R, C, P)))
 
 
@@ -98,9 +100,9 @@ def test_exchange_at_communication_points_gives_the_same_samples(name, tf_delay,
                                                                   plant_params=plant),
             "jacobi": simulate_closed_loop(name, master="jacobi", plant_params=plant)}
     sc = get_scenario(name)
-    path = importers.build_closed_loop_container(name, workdir / f"{name}_{tf_delay}_par.fmu",
+    path = container.build_closed_loop_container(name, workdir / f"{name}_{tf_delay}_par.fmu",
                                                  plant_params=plant)
-    runs["container parallel"] = importers.simulate_container(path, sc.duration, sc.step_size)
+    runs["container parallel"] = container.simulate_container(path, sc.duration, sc.step_size)
     assert detected(runs["container parallel"]) == {"loop_delay": 2 + tf_delay, "preview_lead": 4,
                                                     "meas_offset": 0}
     for master, run in runs.items():
@@ -115,7 +117,7 @@ def test_fmpy_ssp_player_runs_our_loop_from_its_zero_start(name, tf_delay):
     stays within the bound; the controller detects d = 2 + tf.delay. Its start differs from
     our loop (its first control sees y_ref = 0 instead of y_d(2 h)): measured, the samples
     differ by more than 1 nm."""
-    ssp = importers.simulate_ssp_scenario(name, plant_params={"tf.delay": tf_delay})
+    ssp = simulate_ssp_scenario(name, plant_params={"tf.delay": tf_delay})
     ref = zero_start_jacobi(name, tf_delay)
     assert max_diff(ssp, ref) <= TOL
     assert e_rms(name, ssp) <= E_RMS_MAX
@@ -136,9 +138,9 @@ def test_sequential_container_in_every_order_tracks_with_the_defaults(name, orde
     3 nm; no run is stopped by the monitor (a stopped run raises). The figures are in the
     table of docs/cosimulation.md (python -m harness.timing_table)."""
     sc = get_scenario(name)
-    path = importers.build_closed_loop_container(name, workdir / "seq.fmu", sequential=True, order=order,
+    path = container.build_closed_loop_container(name, workdir / "seq.fmu", sequential=True, order=order,
                                                  plant_params={"tf.delay": tf_delay})
-    seq = importers.simulate_container(path, sc.duration, sc.step_size, sequential=True)
+    seq = container.simulate_container(path, sc.duration, sc.step_size, sequential=True)
     o = 1 if order.index(P) < order.index(C) else 0
     r = 1 if order.index(R) < order.index(C) else 0
     assert detected(seq) == {"loop_delay": 1 + tf_delay, "preview_lead": REFERENCE_PREVIEW + r - o,
@@ -153,10 +155,10 @@ def test_sequential_container_configured_by_hand_still_runs_the_d1_loop(name, wo
     controller gets the reference's post-step output) equals our Gauss-Seidel run of the
     direct-feedthrough loop (mv.feedthrough, mv.delay = 0) within 1e-12 at every sample."""
     sc = get_scenario(name)
-    path = importers.build_closed_loop_container(
+    path = container.build_closed_loop_container(
         name, workdir / f"{name}_seq_set.fmu", sequential=True,
         controller_params={"mv.delay": 0}, reference_params={"lead": 0})
-    seq = importers.simulate_container(path, sc.duration, sc.step_size, sequential=True)
+    seq = container.simulate_container(path, sc.duration, sc.step_size, sequential=True)
     d1 = simulate_closed_loop(name, controller_params=D1)
     assert max_diff(seq, d1) <= TOL
     assert e_rms(name, seq) <= E_RMS_MAX
@@ -168,7 +170,7 @@ def test_a_master_stepping_two_samples_is_refused_at_its_first_step(monkeypatch)
     loop ran and the monitor stopped it at 0.105 s)."""
     import fmpy.ssp.simulation as player
     from harness.ssp import parameter_set_for_scenario, write_closed_loop_ssp
-    from harness.cosim import default_fmu_dir
+    from harness.fmu import default_fmu_dir
 
     calls = []
     original = player.do_step

@@ -1,6 +1,6 @@
-"""The native closed-loop master (fmu_src/runner/, harness.native).
+"""The native closed-loop master (fmu_src/runner/, harness.masters.native).
 
-Reference: the fmpy master (harness.cosim.simulate_closed_loop) on the same FMU files, whose
+Reference: the fmpy master (harness.masters.fmpy.simulate_closed_loop) on the same FMU files, whose
 schedule the runner implements; results must be equal bit for bit, errors must carry the
 same messages. The runner must never end the process on an FMU error.
 """
@@ -14,8 +14,9 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-from harness import cosim, native  # noqa: E402
-from harness._common import prepare_closed_loop  # noqa: E402
+from harness import fmu, masters  # noqa: E402
+from harness.loop import prepare_closed_loop  # noqa: E402
+from harness.masters import fmpy as fmpy_master, native  # noqa: E402
 
 BITS = np.uint64
 
@@ -44,7 +45,7 @@ def test_native_equals_fmpy_bitwise(scenario, kwargs):
     """Reference: the fmpy master, same FMUs and options. Every field of every row equal
     bit for bit (Gauss-Seidel both step orders, Jacobi, direct feedthrough with d = 1,
     clipping with the controller's fmi2Warning, exact creep, adaptation and preview off)."""
-    want = cosim.simulate_closed_loop(scenario, **kwargs)
+    want = fmpy_master.simulate_closed_loop(scenario, **kwargs)
     got = native.simulate_closed_loop_native(scenario, **kwargs)
     assert got.dtype == want.dtype and got.shape == want.shape
     assert np.array_equal(bits(got), bits(want))
@@ -72,9 +73,9 @@ def test_divergence_is_loop_diverged_error_with_the_fmpy_message():
     default d = 2 loop is stopped by its monitor: LoopDivergedError, same message (sample,
     time and the FMU's explanation) as the fmpy master's."""
     kwargs = {"controller_params": {"mv.delay": 0}}
-    with pytest.raises(cosim.LoopDivergedError) as want:
-        cosim.simulate_closed_loop("mismatch_5hz", **kwargs)
-    with pytest.raises(cosim.LoopDivergedError) as got:
+    with pytest.raises(fmu.LoopDivergedError) as want:
+        fmpy_master.simulate_closed_loop("mismatch_5hz", **kwargs)
+    with pytest.raises(fmu.LoopDivergedError) as got:
         native.simulate_closed_loop_native("mismatch_5hz", **kwargs)
     assert str(got.value) == str(want.value)
     assert "unstable" in str(got.value) and "sample" in str(got.value)
@@ -88,13 +89,13 @@ def test_nonfinite_reference_is_an_fmu_error_and_the_loop_recovers():
     bad = setup.__class__(**{**setup.__dict__, "y_ref": setup.y_ref[:150] + [float("nan")]
                              + setup.y_ref[151:]})
     loop = native.NativeLoop()
-    with pytest.raises(cosim.FMUError) as info:
+    with pytest.raises(fmu.FMUError) as info:
         loop.run(bad)
-    assert not isinstance(info.value, cosim.LoopDivergedError)
+    assert not isinstance(info.value, fmu.LoopDivergedError)
     assert "sample 150" in str(info.value) and "fmi2SetReal" in str(info.value)
     assert "y_ref" in str(info.value)
     after = loop.run(prepare_closed_loop("mismatch_5hz", duration=0.5))
-    want = cosim.simulate_closed_loop("mismatch_5hz", duration=0.5)
+    want = fmpy_master.simulate_closed_loop("mismatch_5hz", duration=0.5)
     assert np.array_equal(bits(after), bits(want))
     loop.close()
 
@@ -104,9 +105,9 @@ def test_refused_and_unknown_parameters():
     initialization with the FMU's message naming it (FMUInitializationError); an unknown
     name raises UnknownParameterError with the suggestion; the loop is usable afterwards."""
     loop = native.NativeLoop()
-    with pytest.raises(cosim.FMUInitializationError, match=r"creep.alpha = 5 is out of range"):
+    with pytest.raises(fmu.FMUInitializationError, match=r"creep.alpha = 5 is out of range"):
         loop.run(prepare_closed_loop("track_1hz", plant_params={"creep.alpha": 5.0}, duration=0.01))
-    with pytest.raises(cosim.UnknownParameterError, match="did you mean rls.forgetting"):
+    with pytest.raises(fmu.UnknownParameterError, match="did you mean rls.forgetting"):
         loop.run(prepare_closed_loop("track_1hz", controller_params={"rls.forgeting": 0.9},
                                      duration=0.01))
     ok = loop.run(prepare_closed_loop("track_1hz", duration=0.05))
@@ -140,7 +141,7 @@ def test_runner_refuses_bad_binaries_without_crashing():
     """A library without the fmi2 API, a missing file and a wrong GUID: piezo_runner_new
     returns NULL with the reason (the FMU's own message for the GUID), the process lives."""
     ffi, lib = native._binding()
-    info = cosim._load(cosim.fmu_path(cosim.PLANT_MODEL))
+    info = fmu.load(fmu.fmu_path(fmu.PLANT_MODEL))
     real = str(Path(info.unzipdir, "binaries", "linux64", "PiezoStage.so"))
 
     def new(library, guid):
@@ -167,7 +168,7 @@ def test_missing_runner_library_says_how_to_build(tmp_path):
     """A fresh process with PIEZO_RUNNER_LIB pointing nowhere: FileNotFoundError with the
     build command, and the command line exits 2 with one line."""
     env = {**os.environ, "PIEZO_RUNNER_LIB": str(tmp_path / "nope.so"), "PYTHONPATH": str(REPO)}
-    code = ("import harness.native as n\n"
+    code = ("import harness.masters.native as n\n"
             "try:\n    n.simulate_closed_loop_native('track_1hz', duration=0.01)\n"
             "except FileNotFoundError as e:\n    print('FNF', e)\n")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
@@ -185,16 +186,16 @@ def test_auto_backend_uses_native_for_long_runs(monkeypatch):
     """simulate_closed_loop_auto: runs of LONG_RUN_SAMPLES and more go to the native master,
     shorter ones to fmpy (spies on both); the results equal the fmpy master's either way."""
     calls = []
-    real_native, real_fmpy = native.simulate_closed_loop_native, cosim.simulate_closed_loop
+    real_native, real_fmpy = native.simulate_closed_loop_native, fmpy_master.simulate_closed_loop
     monkeypatch.setattr(native, "simulate_closed_loop_native",
                         lambda *a, **k: calls.append("native") or real_native(*a, **k))
-    monkeypatch.setattr(cosim, "simulate_closed_loop",
+    monkeypatch.setattr(fmpy_master, "simulate_closed_loop",
                         lambda *a, **k: calls.append("fmpy") or real_fmpy(*a, **k))
-    long_s = native.LONG_RUN_SAMPLES * 0.0005
-    long_run = native.simulate_closed_loop_auto("mismatch_5hz", duration=long_s)
-    short_run = native.simulate_closed_loop_auto("mismatch_5hz", duration=1.0)
+    long_s = masters.LONG_RUN_SAMPLES * 0.0005
+    long_run = masters.simulate_closed_loop_auto("mismatch_5hz", duration=long_s)
+    short_run = masters.simulate_closed_loop_auto("mismatch_5hz", duration=1.0)
     assert calls == ["native", "fmpy"]
-    assert long_run.shape == (native.LONG_RUN_SAMPLES,)
+    assert long_run.shape == (masters.LONG_RUN_SAMPLES,)
     assert np.array_equal(bits(long_run[:2000]), bits(short_run[:2000]))
 
 

@@ -9,7 +9,7 @@ import subprocess
 
 import pytest
 
-from harness import _paths, _source
+from harness import _source, paths
 from harness.report import provenance
 
 
@@ -66,12 +66,12 @@ def test_the_record_is_rewritten_only_when_it_changes(repo, tmp_path):
 ])
 def test_an_installed_package_reports_the_commit_it_was_built_from(monkeypatch, record, expected):
     """Outside a checkout (an installed package) the report's commit is the build's record."""
-    monkeypatch.setattr(_paths, "IN_CHECKOUT", False)
+    monkeypatch.setattr(paths, "IN_CHECKOUT", False)
     monkeypatch.setattr(_source, "installed_source", lambda: record)
     assert provenance.commit_id() == expected
 
 
 def test_a_checkout_reports_git_now():
-    head = _git(_paths.REPO_ROOT, "rev-parse", "HEAD")
-    dirty = bool(_git(_paths.REPO_ROOT, "status", "--porcelain", "--untracked-files=no"))
+    head = _git(paths.REPO_ROOT, "rev-parse", "HEAD")
+    dirty = bool(_git(paths.REPO_ROOT, "status", "--porcelain", "--untracked-files=no"))
     assert provenance.commit_id() == head + (" with uncommitted changes" if dirty else "")

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from harness import ssp
+from harness.masters.ssp import simulate_closed_loop_ssp
 from harness.metrics import compute_metrics
 from harness.scenarios import Signal, get_scenario
 from test_masters import FIELDS, zero_start_jacobi
@@ -71,7 +72,7 @@ def test_fmpy_runs_it_and_it_tracks(built):
     """fmpy's SSP player runs the built SSP with its bound parameters: e_rms <= 3 nm over
     [1, 3) s, and every sample equals the zero-start Jacobi loop of tests/test_masters.py
     (the player's schedule) within 1e-12."""
-    res = ssp.simulate_closed_loop_ssp(built)
+    res = simulate_closed_loop_ssp(built)
     n = 6000
     got = {"y_d": res["reference.y_d"][:n], "y": res["plant.y"][:n],
            "y_meas": res["plant.y_meas"][:n], "v": res["controller.v"][:n]}
@@ -92,7 +93,7 @@ def test_the_readmes_pure_fmpy_recipe_tracks(built):
 
     result = simulate_ssp(str(built), stop_time=3.0, step_size=5e-4,
                           parameter_set=read_ssv(str(built), "resources/mismatch_1_5_10hz.ssv"))
-    harness_run = ssp.simulate_closed_loop_ssp(built)
+    harness_run = simulate_closed_loop_ssp(built)
     n = 6000
     for f in ("reference.y_d", "plant.y", "controller.v"):
         assert np.array_equal(result[f][:n], harness_run[f][:n]), f

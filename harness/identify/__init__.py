@@ -14,6 +14,8 @@
 * :mod:`~harness.identify.export`: parameterised FMUs;
 * :mod:`~harness.identify.run`, :mod:`~harness.identify.tables`: files in, reports out;
 * :mod:`~harness.identify.demo`: the virtual experiment;
+* :mod:`~harness.identify.internal`: each step alone on the model's internal outputs
+  (``identify --internal-channels``);
 * :mod:`~harness.identify.cli`: the command-line pieces.
 
 Heavy modules (fmpy, scipy) are imported on first use.
@@ -28,6 +30,14 @@ from .fit import (
 )
 from .model import *  # noqa: F401,F403
 from .model import __all__ as _model_all
+from .internal import (
+    IdentificationRow,
+    IdentificationRun,
+    format_identification_table,
+    generate_identification_records,
+    run_identification,
+    write_identification_csv,
+)
 from .params import ParameterFileError, read_params, write_params
 from .steps import *  # noqa: F401,F403
 from .steps import __all__ as _steps_all
@@ -36,4 +46,6 @@ __all__ = list(_model_all) + list(_steps_all) + [
     "MeasuredRecord", "RecordError", "read_record", "write_record",
     "CoupledModel", "IdentificationFitError", "IdentificationResult", "fit_coupled_model",
     "ParameterFileError", "read_params", "write_params",
+    "IdentificationRow", "IdentificationRun", "format_identification_table",
+    "generate_identification_records", "run_identification", "write_identification_csv",
 ]

@@ -34,6 +34,15 @@ import math
 import sys
 
 from ..checks import RunCheckError
+from . import demo, run
+from .export import export_fmus
+from .family import validate_family
+from .fit import (DEFAULT_HOLDOUT, DEFAULT_MAX_EVALUATIONS, IdentificationFitError,
+                  UndeterminedModelError)
+from .internal import run_identification
+from .params import (CONTROLLER_MODEL, PLANT_MODEL, override_scenarios, parameter_types,
+                     read_params, split_params)
+from .tables import format_report
 
 __all__ = ["add_identify_arguments", "check_identify_arguments", "run_identify",
            "add_export_arguments", "run_export", "add_param_file_arguments",
@@ -201,33 +210,30 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
     harness.checks.RunCheckError
         The fit did not converge, or the virtual experiment failed its checks.
     """
-    from .fit import DEFAULT_HOLDOUT, DEFAULT_MAX_EVALUATIONS, IdentificationFitError
-
     holdout = DEFAULT_HOLDOUT if args.holdout is None else args.holdout
     max_evaluations = getattr(args, "max_evaluations", None) or DEFAULT_MAX_EVALUATIONS
     say = _progress_lines(progress)
     try:
         if args.internal_channels:
-            from .. import report
-
-            report.run_identification(args.out, backend=args.backend,
-                                      noise_rms_um=args.noise_rms or 0.0,
-                                      seed=1 if args.seed is None else args.seed,
-                                      fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
-                                      displacement_only=args.displacement_only)
+            run_identification(args.out, backend=args.backend,
+                               noise_rms_um=args.noise_rms or 0.0,
+                               seed=1 if args.seed is None else args.seed,
+                               fmu_dir=args.fmu_dir, fix_w0=not args.free_w0,
+                               displacement_only=args.displacement_only)
             return 0
         if getattr(args, "family", None) is not None:
             return _identify_family(args, stream, say)
         if args.demo:
-            from .demo import run_demo
-
-            demo = run_demo(args.out, duration=10.0 if args.duration is None else args.duration,
-                            noise=not args.noise_free, seed=1 if args.seed is None else args.seed,
-                            holdout=holdout, fmu_dir=args.fmu_dir, backend=args.backend,
-                            stream=stream, progress=progress, max_evaluations=max_evaluations)
-            if demo.failures:
-                raise RunCheckError(f"the virtual experiment failed {len(demo.failures)} of its "
-                                    f"checks; first: {demo.failures[0]}")
+            result = demo.run_demo(args.out,
+                                   duration=10.0 if args.duration is None else args.duration,
+                                   noise=not args.noise_free,
+                                   seed=1 if args.seed is None else args.seed,
+                                   holdout=holdout, fmu_dir=args.fmu_dir, backend=args.backend,
+                                   stream=stream, progress=progress,
+                                   max_evaluations=max_evaluations)
+            if result.failures:
+                raise RunCheckError(f"the virtual experiment failed {len(result.failures)} of its "
+                                    f"checks; first: {result.failures[0]}")
             return 0
         return _identify_records(args, holdout, max_evaluations, stream, say)
     except IdentificationFitError as exc:
@@ -236,8 +242,6 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
 
 def _identify_family(args, stream, say):
     """``identify --family N``: the distribution of the errors over N drawn stages."""
-    from .family import validate_family
-
     family = validate_family(args.family, seed=2026 if args.seed is None else args.seed,
                              record_set=args.record_set or "standard",
                              duration=10.0 if args.duration is None else args.duration,
@@ -265,20 +269,16 @@ def _progress_lines(stream):
 
 
 def _identify_records(args, holdout, max_evaluations, stream, say):
-    from .fit import UndeterminedModelError
-    from .run import identify_files, write_outputs
-    from .tables import format_report
-
     h = 0.0005 if args.sample_period is None else args.sample_period
     m = 9 if args.operators is None else args.operators
-    result, records = identify_files(args.pi_data, args.tf_data, args.creep_data, h=h, m=m,
+    result, records = run.identify_files(args.pi_data, args.tf_data, args.creep_data, h=h, m=m,
                                      v_max=args.v_max, delay=args.delay or 0, holdout=holdout,
                                      max_evaluations=max_evaluations, progress=say)
     header = [f"Identification from measured records (v and y only): step 1 {args.pi_data}, "
               f"step 2 {args.tf_data}, step 3 {', '.join(args.creep_data)}; h = {h:g} s, "
               f"m = {m}, v_max = {result.model.v_max:g} V; the last {holdout:.0%} of each "
               f"record held out; {result.elapsed_s:.1f} s."]
-    files = write_outputs(result, args.out, records=records, header=header)
+    files = run.write_outputs(result, args.out, records=records, header=header)
     if result.undetermined:
         first = result.undetermined[0]
         more = (f" (and {len(result.undetermined) - 1} more)" if len(result.undetermined) > 1
@@ -296,9 +296,6 @@ def _identify_records(args, holdout, max_evaluations, stream, say):
 
 def run_export(args, stream=sys.stdout):
     """Run ``export``: the parameter file into both FMUs; return the exit code."""
-    from .export import export_fmus
-    from .params import read_params
-
     params = read_params(args.params)
     written = export_fmus(params, args.out, fmu_dir=args.fmu_dir, source=args.params)
     if stream is not None:
@@ -315,9 +312,6 @@ def apply_param_files(args, registry, progress=sys.stderr):
     Each FMU takes the names it has; a name of neither FMU is an error
     (:class:`harness.identify.params.ParameterFileError`).
     """
-    from .params import (CONTROLLER_MODEL, PLANT_MODEL, override_scenarios, parameter_types,
-                         read_params, split_params)
-
     files = [(attr, flag, getattr(args, attr, None)) for attr, flag in _PARAM_FILES]
     if not any(f for _, _, f in files):
         return registry

@@ -30,9 +30,11 @@ import time as _time
 
 import numpy as np
 
-from .data import write_record
-from .fit import CoupledModel
-from .run import identify_files, output_paths, write_outputs
+from .. import masters
+from ..scenarios import get_scenario
+from .data import MIN_RECORD_SAMPLES, count_reversals, write_record
+from .fit import DEFAULT_MAX_EVALUATIONS, CoupledModel
+from .run import PI_MIN_REVERSALS, identify_files, output_paths, write_outputs
 from .tables import format_report
 
 __all__ = ["DEMO_PLANT", "DEMO_SENSOR", "DEMO_INPUTS", "DemoResult", "demo_truth",
@@ -130,14 +132,9 @@ def generate_demo_records(folder, *, duration=10.0, noise=True, seed=1, fmu_dir=
     floors : dict
         Label -> ``rms(y_meas - y)`` over the held-out samples [um].
     """
-    from ..scenarios import get_scenario
-
-    if backend == "fmpy":
-        from ..cosim import simulate_open_loop
-    elif backend == "core":
-        from ..core_loop import simulate_open_loop_core as simulate_open_loop
-    else:
+    if backend not in masters.OPEN_LOOP_BACKENDS:
         raise ValueError(f"backend must be 'fmpy' or 'core', got {backend!r}")
+    simulate_open_loop = masters.open_loop(backend)
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     paths, floors = {}, {}
@@ -205,10 +202,6 @@ def check_demo_duration(duration, h=0.0005):
     ValueError
         One line naming the shortest length that works.
     """
-    from ..scenarios import get_scenario
-    from .data import MIN_RECORD_SAMPLES, count_reversals
-    from .run import PI_MIN_REVERSALS
-
     def enough(d):
         n = int(round(d / h))
         if n < MIN_RECORD_SAMPLES:
@@ -257,10 +250,6 @@ def run_demo(out="out", *, duration=10.0, noise=True, seed=1, holdout=0.25, fmu_
     -------
     DemoResult
     """
-    from ..scenarios import get_scenario
-
-    from .fit import DEFAULT_MAX_EVALUATIONS
-
     check_demo_duration(duration)
     duration = float(duration)
     params_path, _, _ = output_paths(out)

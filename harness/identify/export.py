@@ -37,14 +37,22 @@ from __future__ import annotations
 
 import json
 import math
+import html
 import os
 from pathlib import Path
 import re
 import tempfile
 import zipfile
 
+import fmpy
+from fmpy.validation import validate_fmu
+
+from .. import core, fmu_documentation, fmu_references
+from ..fmu import fmu_path, parameter_types
+from ..fmu_archive import write_fmu_zip
 from .data import sha256_of
 from .params import CONTROLLER_MODEL, PLANT_MODEL, split_params
+from .run import output_paths
 
 __all__ = ["ExportError", "START_VALUES_PATH", "PROVENANCE_DIR", "export_fmus",
            "format_start_value"]
@@ -96,8 +104,6 @@ def _check_range(name, value, var, model, source):
 
 def _check_in_core(model, params, source):
     """Initialise the complete parameter set in the C core (the FMUs' own checks)."""
-    from .. import core
-
     try:
         if model == PLANT_MODEL:
             core.Plant(params)
@@ -142,8 +148,6 @@ def _prepare(src, given, source):
 
     Returns (model description, parameter types, complete parameter set).
     """
-    import fmpy
-
     md = fmpy.read_model_description(str(src))
     model = md.coSimulation.modelIdentifier
     variables = _parameters(md)
@@ -158,8 +162,6 @@ def _prepare(src, given, source):
 
 def _identification_files(source):
     """The identification reports beside a parameter file (``<stem>.report.json``, ``.md``)."""
-    from .run import output_paths
-
     if source is None or not Path(source).is_file():
         return {}
     _, md, js = output_paths(source)
@@ -188,8 +190,6 @@ def _provenance(model, src, version, given, originals, source, reports):
 
 def _documentation_section(model, given, originals, provenance, reports):
     """The HTML section of an exported FMU's documentation: its start values' origin."""
-    import html
-
     doc = json.loads(provenance)
     e = lambda t: html.escape(str(t), quote=True)      # noqa: E731
     rows = "".join(f"<tr><td><code>{e(n)}</code></td><td class=\"num\">{e(c['built'])}</td>"
@@ -223,9 +223,6 @@ regression experiment was recomputed from these values. Where they came from (al
 def _write(src, dst, md, kinds, given, complete, source, plant_complete, reports):
     """Write ``dst``: ``src`` with ``given`` as start values, its references and documentation
     regenerated and its provenance added (through a temporary file)."""
-    from .. import fmu_documentation, fmu_references
-    from ..fmu_archive import write_fmu_zip
-
     model = md.coSimulation.modelIdentifier
     with zipfile.ZipFile(src) as zin:
         files = {i.filename: zin.read(i.filename) for i in zin.infolist()
@@ -267,9 +264,6 @@ def _write(src, dst, md, kinds, given, complete, source, plant_complete, reports
 
 def _verify(path, original, complete, kinds):
     """The written FMU: valid, same GUID, every parameter's start value as intended."""
-    import fmpy
-    from fmpy.validation import validate_fmu
-
     problems = validate_fmu(str(path))
     if problems:
         raise ExportError(f"the written FMU does not validate: {'; '.join(problems)}")
@@ -316,13 +310,8 @@ def export_fmus(params, out_dir, *, fmu_dir=None, source="parameters"):
         A value is out of range (declared in the model description, or
         refused by the model), or the written FMU fails its checks.
     """
-    import fmpy
-
-    from ..cosim import fmu_path
-
     sources = {m: fmu_path(m, fmu_dir) for m in (PLANT_MODEL, CONTROLLER_MODEL)}
-    kinds = {m: {v.name: v.type for v in fmpy.read_model_description(str(p)).modelVariables
-                 if v.causality == "parameter"} for m, p in sources.items()}
+    kinds = {m: parameter_types(m, fmu_dir) for m in sources}
     plant, controller = split_params(params, kinds[PLANT_MODEL], kinds[CONTROLLER_MODEL],
                                      source=source)
     out = Path(out_dir)

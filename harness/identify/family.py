@@ -41,6 +41,10 @@ import time as _time
 
 import numpy as np
 
+from .. import masters
+from .fit import fit_coupled_model
+from .steps import IdentificationRecord
+
 __all__ = ["FAMILY_RANGES", "RECORD_SETS", "HELD_OUT_INPUT", "SENSOR", "StageResult",
            "FamilyResult", "draw_stage", "record_inputs", "simulate_records", "validate_stage",
            "validate_family"]
@@ -124,20 +128,16 @@ def record_inputs(record_set="standard"):
 
 
 def _run(params, v, noise, seed):
-    from ..core_loop import simulate_open_loop_core
-
     p = dict(params)
     if noise:
         p.update(SENSOR)
         p["sensor.seed"] = int(seed)
-    run = simulate_open_loop_core(p, v, step_size=H)
+    run = masters.open_loop("core")(p, v, step_size=H)
     return np.asarray(run["y_meas"], dtype=float), np.asarray(run["y"], dtype=float)
 
 
 def simulate_records(params, record_set="standard", *, duration=10.0, noise=False, seed=1):
     """Records of a stage on the C core: ``{label: IdentificationRecord}`` (``y`` = ``y_meas``)."""
-    from .steps import IdentificationRecord
-
     n = int(round(duration / H))
     t = np.arange(n) * H
     out = {}
@@ -184,8 +184,6 @@ class StageResult:
 def validate_stage(params, *, record_set="standard", duration=10.0, noise=False, seed=1,
                    index=0, hammerstein=False):
     """Identify one stage from its records and measure the errors (a :class:`StageResult`)."""
-    from .fit import fit_coupled_model
-
     pi, tf, creep = RECORD_SETS[record_set]
     records = simulate_records(params, record_set, duration=duration, noise=noise, seed=seed)
     t0 = _time.perf_counter()

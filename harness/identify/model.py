@@ -21,6 +21,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+# scipy is imported inside the functions that use it: the build imports this package with
+# its build requirements only (fmpy, cffi, numpy), and scipy costs 0.3-0.7 s at import.
+
+from .. import core
 
 __all__ = [
     "IdentificationInputError",
@@ -178,16 +182,18 @@ def creep_output(x, k_c, alpha, h, exact=False):
     ValueError
         ``k_c``, ``alpha`` or ``h`` out of range.
     """
-    x = _signal("x", x)
-    h = _sample_period(h)
+    x = checked_signal("x", x)
+    h = checked_sample_period(h)
     k_c = float(k_c)
     if not (math.isfinite(k_c) and k_c > 0):
         raise ValueError(f"k_c must be a finite number > 0, got {k_c!r}")
-    alpha = _order(alpha)
-    return _gl_run(x, alpha, k_c * h ** -alpha, exact)
+    alpha = checked_order(alpha)
+    return gl_run(x, alpha, k_c * h ** -alpha, exact)
 
 
-def _signal(name, a):
+def checked_signal(name, a):
+    """``a`` as a 1-D float array; :class:`IdentificationInputError` naming ``name`` when it
+    is empty, not 1-D or not finite."""
     a = np.asarray(a, dtype=float)
     if a.ndim != 1 or a.size == 0:
         raise IdentificationInputError(
@@ -199,24 +205,24 @@ def _signal(name, a):
     return a
 
 
-def _sample_period(h):
+def checked_sample_period(h):
+    """``h`` as a float; :class:`ValueError` unless finite and > 0."""
     h = float(h)
     if not (math.isfinite(h) and h > 0):
         raise ValueError(f"h must be a finite number > 0, got {h!r}")
     return h
 
 
-def _order(alpha):
+def checked_order(alpha):
+    """The creep order ``alpha`` as a float; :class:`ValueError` outside [-1, 1]."""
     alpha = float(alpha)
     if not -1.0 <= alpha <= 1.0:
         raise ValueError(f"alpha must be in [-1, 1], got {alpha!r}")
     return alpha
 
 
-def _gl_run(x, alpha, gain, exact):
+def gl_run(x, alpha, gain, exact):
     """``gain * sum_j w_j(alpha) x(k-j)`` by the C core (the plant's own operator)."""
-    from .. import core
-
     return core.gl_operator(alpha, gain, exact).run(x)
 
 

@@ -23,6 +23,9 @@ import json
 import math
 from pathlib import Path
 
+from .. import core
+from ..fmu import parameter_types as fmu_parameter_types
+
 __all__ = [
     "PLANT_MODEL",
     "CONTROLLER_MODEL",
@@ -156,18 +159,11 @@ def parameter_types(model, *, fmu_dir=None, backend="fmpy"):
         Name -> ``"Real"``, ``"Integer"`` or ``"Boolean"``.
     """
     if backend == "core":
-        from .. import core
-
         defaults = (core.default_plant_params() if model == PLANT_MODEL
                     else core.default_controller_params())
         return {n: ("Boolean" if isinstance(v, bool) else "Integer" if isinstance(v, int)
                     else "Real") for n, v in defaults.items()}
-    import fmpy
-
-    from ..cosim import fmu_path
-
-    md = fmpy.read_model_description(str(fmu_path(model, fmu_dir)))
-    return {v.name: v.type for v in md.modelVariables if v.causality == "parameter"}
+    return fmu_parameter_types(model, fmu_dir)
 
 
 def _check_type(name, value, kind, model, source):

@@ -33,13 +33,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+# scipy is imported inside the functions that use it: the build imports this package with
+# its build requirements only (fmpy, cffi, numpy), and scipy costs 0.3-0.7 s at import.
 
 from .model import (
     IdentificationInputError,
-    _gl_run,
-    _order,
-    _sample_period,
-    _signal,
+    gl_run,
+    checked_order,
+    checked_sample_period,
+    checked_signal,
     creep_output,
     pi_output,
     pi_thresholds,
@@ -296,8 +298,8 @@ def identify_creep(x, y, h, *, alpha0=0.0, exact=False, tol=1e-12, max_nfev=200)
     """
     from scipy.optimize import least_squares
 
-    x = _signal("x", x)
-    y = _signal("y", y)
+    x = checked_signal("x", x)
+    y = checked_signal("y", y)
     if x.shape != y.shape:
         raise IdentificationInputError(
             f"x and y must have the same length, got {x.size} and {y.size}")
@@ -306,8 +308,8 @@ def identify_creep(x, y, h, *, alpha0=0.0, exact=False, tol=1e-12, max_nfev=200)
             f"need at least {MIN_CREEP_SAMPLES} samples, got {x.size}")
     if not np.any(x):
         raise IdentificationInputError("x is identically zero: k_c and alpha are not identifiable")
-    h = _sample_period(h)
-    alpha0 = _order(alpha0)
+    h = checked_sample_period(h)
+    alpha0 = checked_order(alpha0)
     if not 0 < tol < 1:
         raise ValueError(f"tol must be in (0, 1), got {tol!r}")
     if int(max_nfev) < 1:
@@ -321,7 +323,7 @@ def identify_creep(x, y, h, *, alpha0=0.0, exact=False, tol=1e-12, max_nfev=200)
         if s is None:
             if len(cache) >= 8:
                 cache.clear()
-            s = cache[alpha] = _gl_run(x, alpha, h ** -alpha, exact)
+            s = cache[alpha] = gl_run(x, alpha, h ** -alpha, exact)
         return s
 
     def residual(p):
@@ -534,16 +536,16 @@ def identify_coupled_model(pi_record, tf_record, creep_records, h, *, m=9, v_max
     dup = sorted({lab for lab in labels if labels.count(lab) > 1})
     if dup:
         raise IdentificationInputError(f"record labels must be unique, repeated: {', '.join(dup)}")
-    h = _sample_period(h)
+    h = checked_sample_period(h)
 
     # step 1: PI weights (eq 18)
-    v1 = _signal(f"{pi_record.label}: v", pi_record.v)
+    v1 = checked_signal(f"{pi_record.label}: v", pi_record.v)
     target1 = pi_record.y if pi_record.u is None else pi_record.u
     weights = identify_pi(v1, target1, m=m, v_max=v_max, w0=w0)
     pi_rms = _rms(pi_output(v1, weights, v_max) - np.asarray(target1, dtype=float))
 
     # step 2: G on u = P[v] of the identified PI model (eq 21)
-    u2 = pi_output(_signal(f"{tf_record.label}: v", tf_record.v), weights, v_max)
+    u2 = pi_output(checked_signal(f"{tf_record.label}: v", tf_record.v), weights, v_max)
     target2 = tf_record.y if tf_record.x is None else tf_record.x
     a1, a2, b1, b2 = identify_transfer_function(u2, target2, delay=delay)
     tf_rms = _rms(transfer_function_output(u2, a1, a2, b1, b2, delay)
@@ -552,7 +554,7 @@ def identify_coupled_model(pi_record, tf_record, creep_records, h, *, m=9, v_max
     # step 3: creep per record; input x = G[P[v]] of the identified Hammerstein model (eq 17)
     creep = []
     for r in records:
-        u = pi_output(_signal(f"{r.label}: v", r.v), weights, v_max)
+        u = pi_output(checked_signal(f"{r.label}: v", r.v), weights, v_max)
         x = transfer_function_output(u, a1, a2, b1, b2, delay)
         k_c, alpha = identify_creep(x, r.y, h, exact=exact)
         fit = creep_output(x, k_c, alpha, h, exact=exact)

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+from ..text_tables import titled_table
+
 __all__ = [
     "NORMALISATION_NOTE",
     "format_steps",
@@ -24,22 +26,6 @@ NORMALISATION_NOTE = (
     "Normalisation: only the product of the PI, G and creep gains is identifiable, and only "
     "w0 + w1 (r_1 = 0), so parameters are reported with G(1) = 1, k_c = 1 and w1 = 0: the PI "
     "weights carry the static gain [um/V] and w0 is the static gain (w0 + w1) G(1) k_c.")
-
-
-def _table(head, rows, markdown):
-    if markdown:
-        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-        lines += ["| " + " | ".join(r) + " |" for r in rows]
-        return "\n".join(lines)
-    widths = [max(len(str(c)) for c in col) for col in zip(head, *rows)]
-    fmt = "  ".join(f"{{:<{w}}}" if i == 0 else f"{{:>{w}}}" for i, w in enumerate(widths))
-    lines = [fmt.format(*head), "  ".join("-" * w for w in widths)]
-    lines += [fmt.format(*r) for r in rows]
-    return "\n".join(lines)
-
-
-def _titled(title, table, markdown):
-    return (f"### {title}\n\n" if markdown else f"{title}\n") + table
 
 
 def _g(x, digits=6):
@@ -71,8 +57,7 @@ def format_steps(result, markdown=False):
         if s.note:
             notes.append(f"step {s.step} ({recs}): {s.note}")
     head = ["step", "records", "e_rms [nm]", "e_r [%]", "samples"]
-    text = _titled("Fits (on the fit windows, against the measured y)",
-                   _table(head, rows, markdown), markdown)
+    text = titled_table(head, rows, "Fits (on the fit windows, against the measured y)", markdown)
     if notes:
         text += "\n\n" + "\n".join(("- " if markdown else "  ") + n for n in notes)
     return text
@@ -93,7 +78,7 @@ def format_search(result, markdown=False):
             "rms [nm]", "evaluations", "converged", "time [s]"]
     title = (f"Search by variable projection ({len(search.fits)} starts, {search.agreed} at the "
              f"lowest minimum, {search.elapsed_s:.1f} s)")
-    return _titled(title, _table(head, rows, markdown), markdown)
+    return titled_table(head, rows, title, markdown)
 
 
 def format_undetermined(result, markdown=False):
@@ -134,7 +119,7 @@ def format_parameters(result, truth=None, markdown=False):
     title = "Parameters under the normalisation G(1) = 1, k_c = 1, w1 = 0"
     if truth is not None:
         title += " (true: the virtual stage, normalised the same way)"
-    return _titled(title, _table(head, rows, markdown), markdown)
+    return titled_table(head, rows, title, markdown)
 
 
 def format_creep_rows(result, truth=None, markdown=False):
@@ -148,7 +133,7 @@ def format_creep_rows(result, truth=None, markdown=False):
     title = "Table 1: creep row of each record (joint PI and G fixed; k_c relative to the stage's)"
     if truth is not None:
         title += f"; true k_c = 1, alpha = {truth.alpha:g}"
-    return _titled(title, _table(head, rows, markdown), markdown)
+    return titled_table(head, rows, title, markdown)
 
 
 def format_held_out(result, floors=None, markdown=False):
@@ -166,7 +151,7 @@ def format_held_out(result, floors=None, markdown=False):
         rows.append(row)
     title = (f"Tables 2-3: held-out samples (the last {result.holdout:.0%} of each record), "
              f"against the measured y")
-    return _titled(title, _table(head, rows, markdown), markdown)
+    return titled_table(head, rows, title, markdown)
 
 
 def format_report(result, *, truth=None, floors=None, header=(), markdown=False):

@@ -48,6 +48,11 @@ import math
 import time as _time
 
 import numpy as np
+# scipy is imported inside the functions that use it: the build imports this package with
+# its build requirements only (fmpy, cffi, numpy), and scipy costs 0.3-0.7 s at import.
+from numpy.linalg import LinAlgError
+
+from .model import gl_weights
 
 __all__ = ["FTOL", "DEFAULT_STARTS", "MIN_STARTS", "AGREE", "Theta", "LocalFit", "MultiStartFit", "ReducedProblem",
            "fit_multistart", "theta_from_g"]
@@ -197,8 +202,6 @@ class ReducedProblem:
     # -- the operators ------------------------------------------------------
     def _kernels(self, alpha, rec):
         from scipy import fft
-
-        from .model import gl_weights
 
         h, n = self.h, rec.n
         lo, hi = max(alpha - _ALPHA_STEP, -1.0), min(alpha + _ALPHA_STEP, 1.0)
@@ -353,7 +356,6 @@ def _gram_factor(a):
     nearly collinear that the Gram matrix is not positive definite (operators the
     records move only together) fall back to a Householder QR.
     """
-    from numpy.linalg import LinAlgError
     from scipy.linalg import cholesky
 
     try:
@@ -375,10 +377,7 @@ def _gram_cholesky(a, cholesky):
 
 def _triangular(a, y):
     """``(R, Q^T y)`` of the least-squares problem ``min ||a w - y||`` (``a = Q R``)."""
-    from scipy.linalg import solve_triangular
-
-    from numpy.linalg import LinAlgError
-    from scipy.linalg import cholesky
+    from scipy.linalg import cholesky, solve_triangular
 
     try:
         r = _gram_cholesky(a, cholesky)
@@ -390,7 +389,6 @@ def _triangular(a, y):
 
 def _lstsq_normal(a, b):
     """``argmin_X ||a X - b||`` column by column (minimum norm where ``a`` is rank deficient)."""
-    from numpy.linalg import LinAlgError
     from scipy.linalg import cho_solve, cholesky
 
     try:

@@ -10,21 +10,14 @@ One module per job:
 * :mod:`.figures`: the figures, one per question, PNG and SVG;
 * :mod:`.document`: report.md and report.html from one list of blocks;
 * :mod:`.provenance`: commit, FMU GUIDs and versions, package versions, date, machine;
-* :mod:`.progress`: progress lines;
-* :mod:`.jobs`: the command line's jobs, :func:`run_all` and :func:`run_scenario`;
-* :mod:`.identification`: the identification driver (paper section 3).
+* :mod:`.jobs`: the command line's jobs, :func:`run_all` and :func:`run_scenario`.
+
+Progress lines (:mod:`harness.progress`) and plain tables (:mod:`harness.text_tables`)
+are shared with the other jobs; the identification is :mod:`harness.identify`.
 """
 
 from .conditions import Condition, default_conditions, describe_condition
 from .figures import FigureFile
-from .identification import (
-    IdentificationRow,
-    IdentificationRun,
-    format_identification_table,
-    generate_identification_records,
-    run_identification,
-    write_identification_csv,
-)
 from .jobs import VALIDATION_NOTES, check_out_dir, prepare_out_dir, run_all, run_scenario
 from .provenance import Provenance, collect_provenance
 from .run import TrackingResult, ValidationResult, evaluate_tracking, evaluate_validation
@@ -62,11 +55,5 @@ __all__ = [
     "prepare_out_dir",
     "run_all",
     "run_scenario",
-    "IdentificationRow",
-    "IdentificationRun",
-    "generate_identification_records",
-    "format_identification_table",
-    "write_identification_csv",
-    "run_identification",
     "VALIDATION_NOTES",
 ]

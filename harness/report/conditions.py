@@ -11,8 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
-from .._common import loop_delay as _loop_delay
-from ..scenarios import MISMATCH_SCENARIOS, TRACKING_SCENARIOS, get_scenario
+from ..loop import loop_delay
+from ..scenarios import MISMATCH_SCENARIOS, TRACKING_SCENARIOS, get_scenario, reference_label
 
 __all__ = [
     "Condition",
@@ -20,7 +20,6 @@ __all__ = [
     "default_conditions",
     "user_condition",
     "describe_condition",
-    "loop_delay",
     "lag_error_rms",
     "reference_label",
     "MISMATCH_PLANT_TEXT",
@@ -139,12 +138,6 @@ def user_condition(names, adaptation=None, preview=True, master="gauss-seidel"):
                      tuple(names), adaptation, preview, master, "user", "user")
 
 
-def loop_delay(scenario):
-    """The loop delay d of a tracking scenario's loop under the harness's masters (see
-    :func:`harness._common.loop_delay`)."""
-    return _loop_delay(scenario.controller, scenario.plant)
-
-
 def lag_error_rms(scenario):
     """Expected rms error [um] of a stage that follows a sine reference d samples late.
 
@@ -156,17 +149,9 @@ def lag_error_rms(scenario):
     sig = scenario.signal
     if sig.kind != "sines":
         return math.nan
-    dh = loop_delay(scenario) * scenario.step_size
+    dh = loop_delay(scenario.controller, scenario.plant) * scenario.step_size
     return math.sqrt(sum(2.0 * (a * math.sin(math.pi * f * dh)) ** 2
                          for a, f in zip(sig.amplitudes, sig.frequencies)))
-
-
-def reference_label(scenario):
-    """'1 Hz', '1/5/10 Hz' for a sine reference; the scenario name otherwise."""
-    sig = scenario.signal
-    if sig.kind == "sines" and sig.frequencies:
-        return "/".join(f"{f:g}" for f in sig.frequencies) + " Hz"
-    return scenario.name
 
 
 def describe_condition(cond, registry=None):
@@ -183,7 +168,7 @@ def describe_condition(cond, registry=None):
     list of str
     """
     scenarios = [get_scenario(n, registry) for n in cond.scenarios]
-    d_values = sorted({loop_delay(s) for s in scenarios})
+    d_values = sorted({loop_delay(s.controller, s.plant) for s in scenarios})
     d_text = "/".join(str(d) for d in d_values)
     h_ms = "/".join(f"{v * 1e3:g}" for v in sorted({s.step_size for s in scenarios}))
     out = []

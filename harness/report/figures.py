@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..metrics import window_mask
-from .conditions import reference_label
+from ..scenarios import reference_label
 
 __all__ = [
     "DPI",
@@ -79,6 +79,8 @@ class FigureFile:
 # ---------------------------------------------------------------------------
 
 def _pyplot():
+    """pyplot on the Agg backend. matplotlib is imported here, when a figure is drawn: the
+    build imports this package without it, and it costs about 1 s at import."""
     import matplotlib
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
@@ -172,7 +174,7 @@ def _symlog(ax, linthresh, values):
     decades above it, labelled as plain numbers, so the ticks near zero do not pile up
     as they do with matplotlib's default locator.
     """
-    import matplotlib.ticker as mticker
+    import matplotlib.ticker as mticker        # matplotlib: only once a figure is drawn
 
     lin = _decade_up(linthresh)
     ax.set_yscale("symlog", linthresh=lin, linscale=1.0)

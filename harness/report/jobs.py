@@ -19,6 +19,9 @@ from pathlib import Path
 import sys
 import textwrap
 
+from .. import masters
+from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, WINDOWS_PLATFORM
+from ..progress import Progress
 from ..scenarios import VALIDATION_SCENARIOS, get_scenario, load_scenarios
 from . import document as doc_
 from . import tables
@@ -28,10 +31,9 @@ from .conditions import (
     describe_condition,
     user_condition,
 )
-from .progress import Progress
-from .provenance import WINDOWS_PLATFORM
-from .run import (evaluate_tracking, evaluate_validation, parameter_defaults, simulators,
-                  validation_series)
+from .figures import draw_main_figures, draw_scenario_figure
+from .provenance import collect_provenance
+from .run import evaluate_tracking, evaluate_validation, parameter_defaults, validation_series
 
 __all__ = ["run_all", "run_scenario", "check_out_dir", "prepare_out_dir", "VALIDATION_NOTES",
            "REPORT_WIDTH"]
@@ -189,9 +191,6 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
         "conditions": [Condition], "provenance": Provenance, "figures": [FigureFile],
         "files": [Path]}``
     """
-    from ..cosim import CONTROLLER_MODEL, PLANT_MODEL
-    from .provenance import collect_provenance
-
     out = prepare_out_dir(out_dir)
     registry = load_scenarios() if registry is None else registry
     conditions = default_conditions(adaptation, preview, master)
@@ -201,8 +200,11 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
                                                      if s.kind == "validation"]
     if extra_track:
         conditions.append(user_condition(extra_track, adaptation, preview, master))
+    # every scenario looked up once, here; the Scenario objects go down
+    scenarios = {n: get_scenario(n, registry)
+                 for n in [*(n for c in conditions for n in c.scenarios), *validation_names]}
     # provenance first: a missing FMU fails here, before minutes of runs
-    simulators(backend, fmi_version)        # an impossible backend/version pair fails now
+    masters.simulators(backend, fmi_version)    # an impossible backend/version pair fails now
     prov = collect_provenance(backend, fmu_dir, command=command, fmi_version=fmi_version)
     plant_def = parameter_defaults(PLANT_MODEL, backend, fmu_dir, fmi_version)
     ctrl_def = parameter_defaults(CONTROLLER_MODEL, backend, fmu_dir, fmi_version)
@@ -214,10 +216,10 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
         res = []
         for name in cond.scenarios:
             what = f"{cond.key} / {name}"
-            sc = get_scenario(name, registry)
+            sc = scenarios[name]
             r = evaluate_tracking(sc, condition=cond.key, adaptation=cond.adaptation,
                                   preview=cond.preview, master=cond.master, fmu_dir=fmu_dir,
-                                  registry=registry, backend=backend, fmi_version=fmi_version,
+                                  backend=backend, fmi_version=fmi_version,
                                   keep_data=plots and cond.role != "check",
                                   progress=prog.within(what, sc.step_size))
             prog.done(f"{what}: e_rms {r.e_rms_um * 1e3:.4g} nm", r.elapsed_s)
@@ -225,8 +227,8 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
         tracking[cond.key] = res
     validation = []
     for name in validation_names:
-        sc = get_scenario(name, registry)
-        r = evaluate_validation(sc, fmu_dir=fmu_dir, registry=registry, backend=backend,
+        sc = scenarios[name]
+        r = evaluate_validation(sc, fmu_dir=fmu_dir, backend=backend,
                                 fmi_version=fmi_version, keep_data=plots,
                                 progress=prog.within(f"validation / {name}", sc.step_size))
         prog.done(f"validation / {name}: C − H e_rms {r.diff_e_rms_um:.4f} µm", r.elapsed_s)
@@ -239,8 +241,6 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
 
     figures = []
     if plots:
-        from .figures import draw_main_figures
-
         first = all_tracking[0].spec
         nominal_g = _effective(ctrl_def, first.controller)
         plants = {r.scenario: _effective(plant_def, r.spec.plant) for r in all_tracking}
@@ -428,9 +428,6 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
     ValueError
         Closed-loop options given for a validation scenario, or an unknown format.
     """
-    from ..cosim import CONTROLLER_MODEL, PLANT_MODEL
-    from .figures import draw_scenario_figure
-
     sc = get_scenario(name, registry)
     if timeseries not in (None, *tables.TIMESERIES_FORMATS):
         raise ValueError(f"timeseries must be one of {', '.join(tables.TIMESERIES_FORMATS)} "
@@ -439,14 +436,14 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
                                     or master != "gauss-seidel"):
         raise ValueError(f"scenario '{sc.name}' is a validation scenario (the plant runs alone): "
                          f"adaptation, preview and master do not apply")
-    simulators(backend, fmi_version)        # an impossible backend/version pair fails now
+    masters.simulators(backend, fmi_version)    # an impossible backend/version pair fails now
     out = prepare_out_dir(out_dir)
     prog = Progress(1, progress, progress_interval)
     keep = plots or timeseries is not None
     if sc.kind == "tracking":
         label = condition_label("run", adaptation, preview, master)
         r = evaluate_tracking(sc, condition="run", adaptation=adaptation, preview=preview,
-                              master=master, fmu_dir=fmu_dir, registry=registry, backend=backend,
+                              master=master, fmu_dir=fmu_dir, backend=backend,
                               fmi_version=fmi_version, keep_data=keep,
                               progress=prog.within(sc.name, sc.step_size))
         prog.done(f"{sc.name}: e_rms {r.e_rms_um * 1e3:.4g} nm", r.elapsed_s)
@@ -454,7 +451,7 @@ def run_scenario(name, out_dir="out", *, adaptation=None, preview=True, master="
         series = r.data
         table = tables.format_tracking_table([r], f"Tracking: {sc.name} ({label})")
     else:
-        r = evaluate_validation(sc, fmu_dir=fmu_dir, registry=registry, backend=backend,
+        r = evaluate_validation(sc, fmu_dir=fmu_dir, backend=backend,
                                 fmi_version=fmi_version, keep_data=keep,
                                 progress=prog.within(sc.name, sc.step_size))
         prog.done(f"{sc.name}: C − H e_rms {r.diff_e_rms_um:.4f} µm", r.elapsed_s)

@@ -2,8 +2,8 @@
 
 :func:`collect_provenance` gathers everything a reader needs to reproduce a
 report: the commit of the harness (and whether the tree had uncommitted
-changes; for an installed package, the commit it was built from), each FMU's GUID, version and checksum from its modelDescription, the
-versions of Python, fmpy and numpy, the date and the machine.
+changes; for an installed package, the commit it was built from), each FMU's GUID,
+version and checksum from its modelDescription, the versions of Python, fmpy and numpy, the date and the machine.
 """
 
 from __future__ import annotations
@@ -16,26 +16,11 @@ import os
 from pathlib import Path
 import platform
 import sys
-import zipfile
 
-from .._common import REPO_ROOT
+from .. import _source, core, paths
+from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, fmu_path, fmu_platforms, model_description
 
-__all__ = ["FMUInfo", "Provenance", "collect_provenance", "model_description", "fmu_info",
-           "fmu_platforms", "missing_windows_binaries"]
-
-_MD_CACHE = {}
-
-
-def model_description(path):
-    """fmpy's model description of an FMU file (cached by path, mtime and size)."""
-    import fmpy
-
-    path = Path(path)
-    st = path.stat()
-    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
-    if key not in _MD_CACHE:
-        _MD_CACHE[key] = fmpy.read_model_description(str(path))
-    return _MD_CACHE[key]
+__all__ = ["FMUInfo", "Provenance", "collect_provenance", "fmu_info", "commit_id"]
 
 
 def _sha256(path):
@@ -61,18 +46,6 @@ class FMUInfo:
     platforms: tuple = ()
 
 
-#: the folder of the Windows binary in each FMI version's binaries/
-WINDOWS_PLATFORM = {2: "win64", 3: "x86_64-windows"}
-
-
-def fmu_platforms(path):
-    """The platform folders of an FMU's ``binaries/`` (``linux64``, ``win64``, ...), sorted."""
-    with zipfile.ZipFile(path) as zf:
-        return tuple(sorted({n.split("/")[1] for n in zf.namelist()
-                             if n.startswith("binaries/") and n.count("/") >= 2
-                             and not n.endswith("/")}))
-
-
 def fmu_info(path):
     """Read an FMU's identity from its modelDescription."""
     md = model_description(path)
@@ -82,35 +55,6 @@ def fmu_info(path):
                    generation_tool=md.generationTool or "",
                    generated=md.generationDateAndTime or "",
                    sha256=_sha256(path), platforms=fmu_platforms(path))
-
-
-def missing_windows_binaries(fmu_dir=None, fmi_version=2):
-    """A one-line note when the FMUs of `fmu_dir` have no Windows binary, else None.
-
-    The build cross-compiles ``binaries/win64`` (FMI 3.0: ``x86_64-windows``) only when
-    MinGW-w64 is installed; ``pip install .`` hides CMake's output, so the user learns it
-    here. Only the plant FMU is looked at: one build makes all of them.
-    """
-    from .. import _paths
-    from ..cosim import PLANT_MODEL, fmu_path
-
-    try:
-        path = fmu_path(PLANT_MODEL, fmu_dir, fmi_version)
-        platforms = fmu_platforms(path)
-    except (OSError, zipfile.BadZipFile):
-        return None                         # the run itself says what is wrong
-    windows = WINDOWS_PLATFORM[int(fmi_version)]
-    if set(platforms) & set(WINDOWS_PLATFORM.values()):
-        return None                         # (the other edition's: the run refuses it)
-    folder = path.parent
-    if fmu_dir is None and not os.environ.get("PIEZO_FMU_DIR"):
-        fix = (f"then rebuild ({_paths.BUILD_COMMAND})" if _paths.IN_CHECKOUT
-               else f"then reinstall the package from its source folder ({_paths.INSTALL_COMMAND})")
-        fix = f"; for FMUs that also run on Windows install MinGW-w64 (Debian: gcc-mingw-w64-x86-64), {fix}"
-    else:
-        fix = ""
-    return (f"the FMUs in {folder} have no Windows binaries (binaries/{windows}): MinGW-w64 was "
-            f"not found when they were built, so they run on Linux only{fix}")
 
 
 @dataclass
@@ -159,10 +103,8 @@ def commit_id():
     differ from it. An installed package: the commit recorded when it was built, with
     `` (recorded at build time, installed package)``. Otherwise ``unknown`` and why.
     """
-    from .. import _paths, _source
-
-    if _paths.IN_CHECKOUT:
-        here = _source.git_source(REPO_ROOT)
+    if paths.IN_CHECKOUT:
+        here = _source.git_source(paths.REPO_ROOT)
         if here["commit"]:
             return _source.describe(here)
     built = _source.installed_source()
@@ -214,15 +156,12 @@ def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None, 
     -------
     Provenance
     """
-    from ..cosim import CONTROLLER_MODEL, PLANT_MODEL, fmu_path
-
     models = (PLANT_MODEL, CONTROLLER_MODEL) if models is None else tuple(models)
     prov = Provenance(commit=commit_id(), backend=backend,
                       fmi_version=None if backend == "core" else int(fmi_version))
     if backend != "core":
         prov.fmus = [fmu_info(fmu_path(m, fmu_dir, fmi_version)) for m in models]
     else:
-        from .. import core
         lib = core.library_path()
         prov.core_library = {"path": str(lib), "sha256": _sha256(lib) if lib.is_file() else ""}
     prov.versions = {"python": platform.python_version(), "fmpy": _version("fmpy"),

@@ -13,22 +13,20 @@ import time as _time
 
 import numpy as np
 
+from .. import core, masters
+from ..checks import RunDivergedError, check_tracking_run
+from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, LoopDivergedError, parameter_starts
 from ..metrics import compute_metrics, window_mask
 from ..scenarios import get_scenario
 
 __all__ = [
-    "BACKENDS",
     "TrackingResult",
     "ValidationResult",
     "evaluate_tracking",
     "evaluate_validation",
-    "simulators",
     "parameter_defaults",
     "validation_series",
 ]
-
-BACKENDS = ("auto", "fmpy", "native", "core")
-
 
 def _ratio(a, b):
     if b is None or not math.isfinite(b) or b == 0:
@@ -42,7 +40,7 @@ class TrackingResult:
 
     ``paper_*`` are ``nan`` for a scenario that is not one of the paper's.
     ``data`` is the run's structured array (fields of
-    :func:`harness.cosim.simulate_closed_loop`) when kept.
+    :func:`harness.masters.fmpy.simulate_closed_loop`) when kept.
     """
 
     condition: str
@@ -104,47 +102,6 @@ class ValidationResult:
         return math.isfinite(self.paper_coupled_e_rms_um)
 
 
-def simulators(backend, fmi_version=2):
-    """The (closed-loop, open-loop) simulation functions of a backend.
-
-    ``fmi_version=3`` runs the FMI 3.0 editions of the FMUs (fmpy; ``auto`` then runs every
-    loop with fmpy); the core and native backends have no FMI 3.0 path and raise ValueError.
-    """
-    if fmi_version != 2:
-        return _fmi3_simulators(backend, fmi_version)
-    if backend == "fmpy":
-        from ..cosim import simulate_closed_loop, simulate_open_loop
-        return simulate_closed_loop, simulate_open_loop
-    if backend == "core":
-        from ..core_loop import simulate_closed_loop_core, simulate_open_loop_core
-        return simulate_closed_loop_core, simulate_open_loop_core
-    if backend in ("native", "auto"):   # closed loops only; the plant alone runs in fmpy
-        from ..cosim import simulate_open_loop
-        from ..native import simulate_closed_loop_auto, simulate_closed_loop_native
-        return (simulate_closed_loop_native if backend == "native" else simulate_closed_loop_auto,
-                simulate_open_loop)
-    raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-
-
-def _fmi3_simulators(backend, fmi_version):
-    import functools
-
-    from ..cosim import FMI_VERSIONS, simulate_closed_loop, simulate_open_loop
-    from ..native import FMI3_REFUSAL
-
-    if fmi_version not in FMI_VERSIONS:
-        raise ValueError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
-    if backend == "core":
-        raise ValueError("the core backend runs the C core without FMI: an FMI version does "
-                         "not apply to it")
-    if backend == "native":
-        raise ValueError(FMI3_REFUSAL)
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-    return (functools.partial(simulate_closed_loop, fmi_version=fmi_version),
-            functools.partial(simulate_open_loop, fmi_version=fmi_version))
-
-
 def parameter_defaults(model, backend="fmpy", fmu_dir=None, fmi_version=2):
     """A model's default parameters (its start values) on a backend, by FMU variable name.
 
@@ -153,8 +110,8 @@ def parameter_defaults(model, backend="fmpy", fmu_dir=None, fmi_version=2):
     model : {"PiezoStage", "AdaptiveCompoundController"}
     backend : {"auto", "fmpy", "native", "core"}
         The FMU backends: the ``start`` of every Real/Integer/Boolean parameter in the FMU's
-        modelDescription; core: :func:`harness.core.default_plant_params` or
-        :func:`harness.core.default_controller_params`.
+        modelDescription (:func:`harness.fmu.parameter_starts`); core:
+        :func:`harness.core.default_plant_params` or :func:`harness.core.default_controller_params`.
     fmu_dir : str or Path, optional
     fmi_version : {2, 3}
         The edition whose modelDescription is read; the elements of an FMI 3.0 array variable
@@ -165,37 +122,12 @@ def parameter_defaults(model, backend="fmpy", fmu_dir=None, fmi_version=2):
     -------
     dict
     """
-    from ..cosim import CONTROLLER_MODEL, PLANT_MODEL, fmu_path
-
     if model not in (PLANT_MODEL, CONTROLLER_MODEL):
         raise ValueError(f"model must be {PLANT_MODEL} or {CONTROLLER_MODEL}, got {model!r}")
     if backend == "core":
-        from .. import core
         return dict(core.default_plant_params() if model == PLANT_MODEL
                     else core.default_controller_params())
-    from .provenance import model_description
-
-    md = model_description(fmu_path(model, fmu_dir, fmi_version))
-    out = {}
-    for v in md.modelVariables:
-        if v.causality != "parameter" or v.start is None:
-            continue
-        if v.type in ("Real", "Float64"):
-            convert = float
-        elif v.type in ("Integer", "Int32"):
-            convert = int
-        elif v.type == "Boolean":
-            def convert(text):
-                return text.lower() in ("true", "1")
-        else:
-            continue
-        starts = str(v.start).split()
-        if getattr(v, "dimensions", None):          # an FMI 3.0 array: one start per element
-            for i, text in enumerate(starts):
-                out[f"{v.name}[{i + 1}]"] = convert(text)
-        else:
-            out[v.name] = convert(str(v.start))
-    return out
+    return parameter_starts(model, fmu_dir, fmi_version)
 
 
 def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=True,
@@ -209,11 +141,11 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
     condition : str
         Label stored in the result.
     adaptation, preview, master, fmu_dir, registry
-        See :func:`harness.cosim.simulate_closed_loop`.
+        See :func:`harness.masters.fmpy.simulate_closed_loop`.
     backend : {"auto", "fmpy", "native", "core"}
         Run the FMUs (default) or the C core directly.
     fmi_version : {2, 3}
-        The FMUs' FMI 2.0 (default) or FMI 3.0 editions (see :func:`simulators`).
+        The FMUs' FMI 2.0 (default) or FMI 3.0 editions (see :func:`harness.masters.closed_loop`).
     keep_data : bool
         Keep the time series in ``result.data``.
     progress : callable, optional
@@ -229,18 +161,14 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
         The run diverged (the controller stopped it, or its error exceeds the reference) or
         saturated persistently (:func:`harness.checks.check_tracking_run`).
     """
-    from ..checks import RunDivergedError, check_tracking_run
-    from ..core import CoreDivergedError
-    from ..cosim import LoopDivergedError
-
     sc = get_scenario(scenario, registry)
-    closed, _ = simulators(backend, fmi_version)
+    closed = masters.closed_loop(backend, fmi_version)
     label = f"{condition} / {sc.name}"
     t0 = _time.perf_counter()
     try:
         data = closed(sc, adaptation=adaptation, preview=preview, master=master, fmu_dir=fmu_dir,
                       progress=progress)
-    except (LoopDivergedError, CoreDivergedError) as exc:
+    except (LoopDivergedError, core.CoreDivergedError) as exc:
         raise RunDivergedError(f"{label}: {exc}") from None
     elapsed = _time.perf_counter() - t0
     check_tracking_run(data, sc, label)
@@ -278,7 +206,7 @@ def evaluate_validation(scenario, *, fmu_dir=None, registry=None, backend="fmpy"
     sc = get_scenario(scenario, registry)
     if sc.kind != "validation":
         raise ValueError(f"scenario '{sc.name}' is a {sc.kind} scenario, not a validation input")
-    _, open_loop = simulators(backend, fmi_version)
+    open_loop = masters.open_loop(backend, fmi_version)
     t0 = _time.perf_counter()
     v = sc.signal.evaluate(sc.time_grid())
     params = dict(sc.plant)

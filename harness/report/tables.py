@@ -12,16 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .conditions import reference_label
+from ..scenarios import reference_label
+from ..text_tables import fmt, num, titled_table
 
 __all__ = [
     "TIMESERIES_FORMATS",
     "format_tracking_table",
     "format_conditions_table",
     "format_validation_table",
-    "text_table",
-    "markdown_table",
-    "titled_table",
     "tracking_table_rows",
     "conditions_table_rows",
     "validation_table_rows",
@@ -33,34 +31,6 @@ __all__ = [
 ]
 
 TIMESERIES_FORMATS = ("csv", "npz")
-
-
-def fmt(x, spec):
-    """A number for a table cell; 'n/a' when missing or not finite."""
-    return "n/a" if x is None or not math.isfinite(x) else format(x, spec)
-
-
-def text_table(head, rows):
-    """Aligned text: first column left, the others right."""
-    widths = [max(len(str(c)) for c in col) for col in zip(head, *rows)]
-    lines = ["  ".join(str(c).rjust(w) if i else str(c).ljust(w)
-                       for i, (c, w) in enumerate(zip(row, widths))).rstrip()
-             for row in [head] + rows]
-    lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines)
-
-
-def markdown_table(head, rows):
-    out = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-    out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return "\n".join(out)
-
-
-def titled_table(head, rows, title=None, markdown=False):
-    table = markdown_table(head, rows) if markdown else text_table(head, rows)
-    if title:
-        table = (f"### {title}\n\n" if markdown else f"{title}\n") + table
-    return table
 
 
 # ---------------------------------------------------------------------------
@@ -195,11 +165,6 @@ _TRACK_CSV = ["condition", "scenario", "adaptation", "preview", "master", "e_rms
 _VALID_CSV = ["scenario", "k_c", "alpha", "diff_e_rms_um", "diff_e_r", "y_min_um", "y_max_um",
               "paper_hammerstein_e_rms_um", "paper_coupled_e_rms_um", "paper_hammerstein_e_r",
               "paper_coupled_e_r", "elapsed_s"]
-
-
-def num(x):
-    """Full precision for a CSV cell; empty when missing or not finite."""
-    return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else repr(float(x))
 
 
 def write_tracking_csv(results, path):

@@ -1,21 +1,23 @@
-"""Pieces shared by the fmpy master (:mod:`harness.cosim`) and the core loop
-(:mod:`harness.core_loop`), so that both run exactly the same experiment."""
+"""The experiment every master runs, whichever runs it (:mod:`harness.masters`).
+
+A scenario and the options of a closed-loop run become a :class:`ClosedLoopSetup`: the
+samples, the reference the controller receives, the parameters of both FMUs, the loop
+delay d the controller runs and the lead of its reference. Here too: the fields of the
+results, and the loop delay and the reference's lead, each computed in one place.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 import itertools
 import math
-from pathlib import Path
 
 import numpy as np
 
 from .scenarios import Scenario, get_scenario
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-BUILD_COMMAND = "cmake -S . -B build && cmake --build build"
-
-MASTERS = ("gauss-seidel", "jacobi")
+#: the schedules of our own masters (``master=`` of :func:`prepare_closed_loop`)
+SCHEDULES = ("gauss-seidel", "jacobi")
 #: doStep orders of the Gauss-Seidel master (the exchange happens before both steps)
 STEP_ORDERS = ("plant-first", "controller-first")
 
@@ -54,11 +56,26 @@ def loop_delay(controller_params, plant_params=None):
     d = EXCHANGE_LOOP_DELAY - (1 if c.get("mv.feedthrough", False) else 0)
     return d + int((plant_params or {}).get("tf.delay", 0))
 
+
+def reference_lead(controller_params):
+    """ReferenceSignal's ``lead`` that goes with the controller: ``1 + mv.delay`` when
+    ``mv.delay`` is set (0 .. 8), else None: the FMU's own default (``REFERENCE_LEAD``), whose
+    preview the detecting controller aligns by its time stamps."""
+    mv_delay = int((controller_params or {}).get("mv.delay", DEFAULT_MV_DELAY))
+    return 1 + mv_delay if mv_delay >= 0 else None
+
+
+#: the fields of a closed-loop result (every master's but other tools'), and of an open loop's
 CLOSED_LOOP_FIELDS = ("time", "y_d", "y", "y_meas", "v", "q", "a1", "a2", "b1", "b2", "pred_error",
                       "saturated")
 CLOSED_LOOP_DTYPE = np.dtype([(f, "f8") for f in CLOSED_LOOP_FIELDS])
 OPEN_LOOP_FIELDS = ("time", "v", "u", "x", "y", "y_meas")
 OPEN_LOOP_DTYPE = np.dtype([(f, "f8") for f in OPEN_LOOP_FIELDS])
+#: the result of other tools' masters (:mod:`harness.masters.ssp`, :mod:`harness.masters.container`):
+#: the closed loop's first fields and the controller's timing outputs
+IMPORTER_FIELDS = ("time", "y_d", "y", "y_meas", "v", "loop_delay", "loop_delay_time", "preview_lead",
+                   "meas_offset")
+IMPORTER_DTYPE = np.dtype([(f, "f8") for f in IMPORTER_FIELDS])
 
 
 def as_structured(rows, dtype):
@@ -74,7 +91,7 @@ def normalize_master(master):
         return "gauss-seidel"
     if key == "jacobi":
         return "jacobi"
-    raise ValueError(f"master must be one of {MASTERS}, got {master!r}")
+    raise ValueError(f"master must be one of {SCHEDULES}, got {master!r}")
 
 
 def normalize_step_order(order):
@@ -169,8 +186,7 @@ def prepare_closed_loop(scenario, *, adaptation=None, preview=True, master="gaus
     # ReferenceSignal, the setup gives y_ref = y_d(k + lead) and the stamped
     # preview y_d(k + REFERENCE_PREVIEW) at (k + REFERENCE_PREVIEW) h.
     d = loop_delay(c, p)
-    mv_delay = int(c.get("mv.delay", DEFAULT_MV_DELAY))
-    lead = 1 + mv_delay if mv_delay >= 0 else REFERENCE_LEAD
+    lead = reference_lead(c) or REFERENCE_LEAD
     feedthrough = bool(c.get("mv.feedthrough", False))
 
     time = np.arange(n, dtype=float) * h

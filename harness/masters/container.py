@@ -1,54 +1,39 @@
-"""The closed loop in other people's masters: fmpy's SSP player and FMU containers.
+"""The closed loop in an FMU container of fmu-manipulation-toolbox (an optional package:
+``pip install fmu-manipulation-toolbox``, in the ``test`` extra).
 
-Our own masters (:mod:`harness.cosim`) exchange values at communication points.
-Other importers schedule differently, and that decides which loop they run
-(read in their sources, measured in ``tests/test_masters.py``):
+* In **parallel** mode the container sets all inputs, steps all FMUs, gets all outputs (it
+  reads the outputs after initialization first): our loop, sample for sample.
+* In **sequential** mode it sets one FMU's inputs, steps it and gets its outputs before the
+  next FMU: each FMU receives the post-step outputs of the FMUs before it (true
+  Gauss-Seidel). Whatever the order, one link of the loop is post-step, so the loop has one
+  sample less delay: d = 1, which the controller detects; configured for it (``mv.delay =
+  0``; ``lead = 0`` with the reference before the controller), it runs the d = 1 loop of a
+  ModelStructure-ordered Gauss-Seidel master with ``mv.feedthrough``, sample for sample.
 
-* ``fmpy.ssp.simulation.simulate_ssp`` steps every component, then copies
-  outputs to inputs: a Jacobi master.  It starts every connector at 0 instead
-  of reading the outputs after initialization, so the controller's first
-  sample sees ``y_ref = 0`` (not ``y_d(2h)``) and ``y_meas = 0``; from there on it
-  runs our loop.
-* fmu-manipulation-toolbox's container FMU in **parallel** mode sets all
-  inputs, steps all FMUs, gets all outputs (it reads the outputs after
-  initialization first): our loop, sample for sample.
-* The same container in **sequential** mode sets one FMU's inputs, steps it
-  and gets its outputs before the next FMU: each FMU receives the post-step
-  outputs of the FMUs before it (true Gauss-Seidel).  Whatever the order, one
-  link of the loop is post-step, so the loop has one sample less delay:
-  d = 1.  With the default controller (d = 2) that loop is unstable, and the
-  controller's monitor stops it within 0.1 s.  Configured for it
-  (``mv.delay = 0``; ``lead = 0`` with the reference before the controller),
-  it runs the d = 1 loop of a ModelStructure-ordered Gauss-Seidel master with
-  ``mv.feedthrough``, sample for sample.
-
-Every function returns a structured array like
-:func:`harness.cosim.simulate_closed_loop`'s first fields, ``time, y_d, y,
-y_meas, v``, one row per sample time ``t_k`` for which the importer reports
-values (``v`` is the voltage the plant applies over ``[t_k, t_(k+1))``).
+The functions return a structured array of :data:`harness.loop.IMPORTER_FIELDS`, one row per
+sample time ``t_k`` for which the container reports values (``v`` is the voltage the plant
+applies over ``[t_k, t_(k+1))``).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from pathlib import Path
 import shutil
 import tempfile
 
+from fmpy import simulate_fmu
 import numpy as np
 
-__all__ = [
-    "IMPORTER_FIELDS",
-    "CONTAINER_ORDER",
-    "simulate_ssp_scenario",
-    "build_closed_loop_container",
-    "simulate_container",
-    "MissingImporterError",
-]
+from ..fmu import TIMING_OUTPUTS, default_fmu_dir
+from ..loop import IMPORTER_DTYPE, IMPORTER_FIELDS
+from ..scenarios import get_scenario
+from ..ssp import SSP_CONNECTIONS, parameter_set_for_scenario
 
-IMPORTER_FIELDS = ("time", "y_d", "y", "y_meas", "v", "loop_delay", "loop_delay_time", "preview_lead",
-                   "meas_offset")
-_DTYPE = np.dtype([(f, "f8") for f in IMPORTER_FIELDS])
+__all__ = ["CONTAINER_ORDER", "MissingImporterError", "build_closed_loop_container",
+           "simulate_container", "simulate_closed_loop_container"]
+
 #: FMU files of the loop, in the topological order of its links (reference -> controller -> plant)
 CONTAINER_ORDER = ("ReferenceSignal.fmu", "AdaptiveCompoundController.fmu", "PiezoStage.fmu")
 _FMU_OF = {"reference": "ReferenceSignal.fmu", "controller": "AdaptiveCompoundController.fmu",
@@ -59,68 +44,9 @@ class MissingImporterError(ImportError):
     """An optional importer package is not installed; the message says how to get it."""
 
 
-def _fmu_dir(fmu_dir):
-    from .cosim import default_fmu_dir
-    return Path(fmu_dir) if fmu_dir is not None else default_fmu_dir()
-
-
-def simulate_ssp_scenario(scenario, *, fmu_dir=None, registry=None, workdir=None, plant_params=None,
-                          controller_params=None, reference_params=None):
-    """Write the closed-loop SSP of a scenario and run it with fmpy's SSP player.
-
-    Parameters
-    ----------
-    scenario : str
-        A tracking scenario with a sines reference (see :mod:`harness.ssp`).
-    fmu_dir : str or Path, optional
-    registry : dict, optional
-    workdir : str or Path, optional
-        Where the SSP is written (default: a temporary folder, removed).
-    plant_params, controller_params, reference_params : dict, optional
-        Overrides on top of the scenario's, written into the bound SSV.
-
-    Returns
-    -------
-    ndarray
-        ``time, y_d, y, y_meas, v`` and the controller's timing outputs (``loop_delay``,
-        ``loop_delay_time``, ``preview_lead``, ``meas_offset``) at ``t_1 .. t_n`` (the player
-        reports the values after each step; it has no row for the initial values).
-    """
-    import dataclasses
-
-    from .ssp import parameter_set_for_scenario, simulate_closed_loop_ssp, write_closed_loop_ssp
-
-    pset = parameter_set_for_scenario(scenario, registry)
-    values = dict(pset.values)
-    for comp, over in (("plant", plant_params), ("controller", controller_params),
-                       ("reference", reference_params)):
-        values.update({f"{comp}.{k}": v for k, v in (over or {}).items()})
-    pset = dataclasses.replace(pset, values=values)
-    tmp = None
-    if workdir is None:
-        tmp = workdir = tempfile.mkdtemp(prefix="harness_ssp_")
-    try:
-        path = write_closed_loop_ssp(Path(workdir) / f"{pset.name}.ssp", _fmu_dir(fmu_dir), [pset])
-        res = simulate_closed_loop_ssp(path, stop_time=pset.stop_time, step_size=pset.step_size)
-    finally:
-        if tmp is not None:
-            shutil.rmtree(tmp, ignore_errors=True)
-    h = pset.step_size
-    n = int(round(pset.stop_time / h))
-    res = res[:n]          # the player may step once more when its float time falls short of stop
-    out = np.zeros(n, dtype=_DTYPE)
-    out["time"] = (np.arange(n) + 1) * h
-    out["y_d"] = res["reference.y_d"]
-    out["y"] = res["plant.y"]
-    out["y_meas"] = res["plant.y_meas"]
-    out["v"] = res["controller.v"]       # published at t_(k+1): applied over [t_(k+1), t_(k+2))
-    for name in IMPORTER_FIELDS[5:]:
-        out[name] = res[f"controller.{name}"]
-    return out
-
-
 def _container_class():
-    try:
+    """fmu-manipulation-toolbox's FMUContainer (MissingImporterError when not installed)."""
+    try:     # optional: fmu-manipulation-toolbox is in the test extra only
         from fmu_manipulation_toolbox.container import FMUContainer
     except ImportError as exc:    # pragma: no cover - the test extra installs it
         raise MissingImporterError(
@@ -130,6 +56,7 @@ def _container_class():
 
 
 def _start_text(value):
+    """A start value as the container's text (``true``, ``3``, ``0.25``)."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -162,11 +89,6 @@ def build_closed_loop_container(scenario, path, *, sequential=False, order=CONTA
     -------
     Path
     """
-    import logging
-
-    from .cosim import TIMING_OUTPUTS
-    from .ssp import SSP_CONNECTIONS, parameter_set_for_scenario
-
     FMUContainer = _container_class()
     pset = parameter_set_for_scenario(scenario, registry)
     starts = {comp: {} for comp in _FMU_OF}
@@ -182,7 +104,7 @@ def build_closed_loop_container(scenario, path, *, sequential=False, order=CONTA
     level = quiet.level
     quiet.setLevel(logging.ERROR)      # its notes on unconnected ports and the loop are expected
     try:
-        src = _fmu_dir(fmu_dir)
+        src = Path(fmu_dir) if fmu_dir is not None else default_fmu_dir()
         for fmu in CONTAINER_ORDER:
             shutil.copy(src / fmu, work / fmu)
         c = FMUContainer(path.stem, work, fmi_version=2)
@@ -223,15 +145,13 @@ def simulate_container(container_path, stop_time, step_size, *, sequential=False
         ``time, y_d, y, y_meas, v`` and the controller's timing outputs (with ``v``'s
         timing) at ``t_0 .. t_(n-1)``.
     """
-    from fmpy import simulate_fmu
-
     n = int(round(stop_time / step_size))
     res = simulate_fmu(str(container_path), stop_time=stop_time, step_size=step_size,
                        output_interval=step_size, output=list(IMPORTER_FIELDS[1:]))
     if res.shape[0] < n + 1 or not math.isclose(res["time"][n], stop_time, rel_tol=1e-9):
         raise RuntimeError(f"{container_path}: expected {n + 1} rows up to t = {stop_time}, "
                            f"got {res.shape[0]}")
-    out = np.zeros(n, dtype=_DTYPE)
+    out = np.zeros(n, dtype=IMPORTER_DTYPE)
     out["time"] = np.arange(n) * step_size
     for f in ("y_d", "y", "y_meas"):
         out[f] = res[f][:n]
@@ -239,3 +159,35 @@ def simulate_container(container_path, stop_time, step_size, *, sequential=False
     for name in IMPORTER_FIELDS[5:]:
         out[name] = res[name][1:n + 1] if sequential else res[name][:n]
     return out
+
+
+def simulate_closed_loop_container(scenario, *, sequential=False, order=CONTAINER_ORDER,
+                                   plant_params=None, controller_params=None,
+                                   reference_params=None, fmu_dir=None, registry=None,
+                                   workdir=None):
+    """The closed loop of a scenario in a container built for the run and removed after it:
+    :func:`build_closed_loop_container`, then :func:`simulate_container` over the scenario's
+    duration.
+
+    Parameters
+    ----------
+    scenario : str
+        A tracking scenario with a sines reference.
+    sequential, order, plant_params, controller_params, reference_params, fmu_dir, registry
+        As :func:`build_closed_loop_container`.
+    workdir : str or Path, optional
+        Where the container is built (default: the system's temporary folder).
+
+    Returns
+    -------
+    ndarray
+        As :func:`simulate_container`.
+    """
+    sc = get_scenario(scenario, registry)
+    with tempfile.TemporaryDirectory(dir=workdir) as tmp:
+        path = build_closed_loop_container(sc.name, Path(tmp) / "loop.fmu", sequential=sequential,
+                                           order=order, plant_params=plant_params,
+                                           controller_params=controller_params,
+                                           reference_params=reference_params, fmu_dir=fmu_dir,
+                                           registry=registry)
+        return simulate_container(path, sc.duration, sc.step_size, sequential=sequential)

@@ -1,24 +1,24 @@
 """The native closed-loop master (``fmu_src/runner/``, ``build/libpiezo_runner.so``) through cffi.
 
 A small C co-simulation master loads the binaries of both FMUs through the FMI 2.0
-API and runs the loop of :func:`harness.cosim.simulate_closed_loop` at native speed:
+API and runs the loop of :func:`harness.masters.fmpy.simulate_closed_loop` at native speed:
 the same schedule (Gauss-Seidel in ModelStructure order, either doStep order, or
 textbook Jacobi), the same ``y_ref`` and stamped preview (computed here), the same time
-stamps (the plant's ``t_meas`` to the controller), the same result, bit for bit. The FMUs are the same files the fmpy master runs (extracted once per
-process by :mod:`harness.cosim`).
+stamps (the plant's ``t_meas`` to the controller), the same result, bit for bit. The FMUs
+are the same files the fmpy master runs (extracted once per process by
+:func:`harness.fmu.load`).
 
 FMU errors never end the process: a failing call stops the run and comes back with
 the FMU's log messages as the exceptions of the fmpy master
-(:class:`harness.cosim.LoopDivergedError` when the controller's monitor stopped the
-loop or a value diverged, :class:`harness.cosim.FMUError` otherwise,
-:class:`harness.cosim.FMUInitializationError` for refused parameters). A completed
+(:class:`harness.fmu.LoopDivergedError` when the controller's monitor stopped the
+loop or a value diverged, :class:`harness.fmu.FMUError` otherwise,
+:class:`harness.fmu.FMUInitializationError` for refused parameters). A completed
 step with ``fmi2Warning`` (the controller's first clipped voltage) goes on.
 
 :class:`NativeLoop` holds one plant and one controller instance and reuses them for
 run after run through ``fmi2Reset`` (a sweep's worker keeps one per process);
-:func:`simulate_closed_loop_native` is the drop-in function.
-:func:`simulate_closed_loop_auto` picks the native master for long runs
-(``LONG_RUN_SAMPLES``) when the runner is built, else fmpy.
+:func:`simulate_closed_loop_native` is the drop-in function (``auto`` in
+:mod:`harness.masters` picks it for long runs when the runner is built).
 """
 
 from __future__ import annotations
@@ -27,29 +27,23 @@ import os
 from pathlib import Path
 import threading
 
+from cffi import FFI
+from fmpy import platform, sharedLibraryExtension
 import numpy as np
 
-from ._common import (
-    BUILD_COMMAND,
-    CLOSED_LOOP_DTYPE,
-    CLOSED_LOOP_FIELDS,
-    REPO_ROOT,
-    as_structured,
-    prepare_closed_loop,
-)
+from ..core import header_cdef
+from ..fmu import (CONTROLLER_MODEL, PLANT_MODEL, FMUError, FMUInitializationError,
+                   LoopDivergedError, fmu_path, load, typed_parameters)
+from ..loop import CLOSED_LOOP_DTYPE, CLOSED_LOOP_FIELDS, as_structured, prepare_closed_loop
+from ..paths import BUILD_COMMAND, REPO_ROOT, runner_include_dir, runner_library
 
 __all__ = [
-    "LONG_RUN_SAMPLES",
     "NativeLoop",
     "native_available",
     "native_loop",
     "runner_library_path",
-    "simulate_closed_loop_auto",
     "simulate_closed_loop_native",
 ]
-
-#: Runs of at least this many samples (10 s at 2 kHz) use the native master by default.
-LONG_RUN_SAMPLES = 20000
 
 PLANT, CONTROLLER = 0, 1
 _HEADER_NAME = "piezo_runner.h"
@@ -66,8 +60,7 @@ _LOCK = threading.Lock()
 
 def runner_library_path():
     """Path of the runner library: ``$PIEZO_RUNNER_LIB``, the installed package's, or
-    ``<repo>/build/libpiezo_runner.so`` (see :mod:`harness._paths`)."""
-    from ._paths import runner_library
+    ``<repo>/build/libpiezo_runner.so`` (see :mod:`harness.paths`)."""
     return runner_library()
 
 
@@ -82,17 +75,12 @@ def _binding():
     if _LIB is None:
         with _LOCK:
             if _LIB is None:
-                from cffi import FFI
-
-                from .core import header_cdef
-
                 path = runner_library_path()
                 if not path.is_file():
                     raise FileNotFoundError(
                         f"native runner library not found: {path}; build it with `{BUILD_COMMAND}` "
                         f"in {REPO_ROOT} (or set PIEZO_RUNNER_LIB), or use the fmpy backend")
                 ffi = FFI()
-                from ._paths import runner_include_dir
                 ffi.cdef(header_cdef(runner_include_dir(), (_HEADER_NAME,)))
                 _LIB = ffi.dlopen(str(path))
                 _FFI = ffi
@@ -105,13 +93,13 @@ class NativeLoop:
     Parameters
     ----------
     fmu_dir : str or Path, optional
-        Folder of the FMUs (default :func:`harness.cosim.default_fmu_dir`).
+        Folder of the FMUs (default :func:`harness.fmu.default_fmu_dir`).
 
     Raises
     ------
     FileNotFoundError
         An FMU or the runner library is missing (the message says how to build it).
-    harness.cosim.FMUInitializationError
+    harness.fmu.FMUInitializationError
         A binary could not be loaded or instantiated (with the FMU's messages).
 
     Notes
@@ -124,14 +112,10 @@ class NativeLoop:
     _count = 0
 
     def __init__(self, fmu_dir=None):
-        from fmpy import platform, sharedLibraryExtension
-
-        from .cosim import CONTROLLER_MODEL, PLANT_MODEL, FMUInitializationError, _load, fmu_path
-
         ffi, lib = _binding()
         self._ffi, self._lib = ffi, lib
-        self.plant_info = _load(fmu_path(PLANT_MODEL, fmu_dir))
-        self.controller_info = _load(fmu_path(CONTROLLER_MODEL, fmu_dir))
+        self.plant_info = load(fmu_path(PLANT_MODEL, fmu_dir))
+        self.controller_info = load(fmu_path(CONTROLLER_MODEL, fmu_dir))
         NativeLoop._count += 1
         keep = []
 
@@ -195,10 +179,8 @@ class NativeLoop:
 
     # -- one run ----------------------------------------------------------------------
     def _set(self, role, info, params):
-        from .cosim import FMUInitializationError, _typed_parameters
-
         ffi, lib, r = self._ffi, self._lib, self._runner
-        reals, ints, bools = _typed_parameters(info, params)
+        reals, ints, bools = typed_parameters(info, params)
         for (vrs, values), fn, ctype in ((reals, lib.piezo_runner_set_real, "double[]"),
                                          (ints, lib.piezo_runner_set_integer, "int[]"),
                                          (bools, lib.piezo_runner_set_boolean, "int[]")):
@@ -211,8 +193,6 @@ class NativeLoop:
                 raise FMUInitializationError(self._message(role, "setting parameters", st))
 
     def _start(self, setup):
-        from .cosim import FMUInitializationError
-
         lib, r = self._lib, self._runner
         if not self._fresh:
             lib.piezo_runner_reset(r)
@@ -226,8 +206,6 @@ class NativeLoop:
                 self._message(res.failed_role, _CALLS.get(res.failed_call, "initialization"), res.status))
 
     def _run(self, setup, rows_ptr, stride, block):
-        from .cosim import FMUError, LoopDivergedError
-
         ffi, lib, r, res = self._ffi, self._lib, self._runner, self._result
         n, h = setup.n, setup.h
         y_ref = np.ascontiguousarray(setup.y_ref, dtype=np.float64)
@@ -257,8 +235,8 @@ class NativeLoop:
 
         Parameters
         ----------
-        setup : harness._common.ClosedLoopSetup
-            From :func:`harness._common.prepare_closed_loop`.
+        setup : harness.loop.ClosedLoopSetup
+            From :func:`harness.loop.prepare_closed_loop`.
         block : int
             When > 0, the thread CPU time of every complete block of ``block`` samples
             is kept in :attr:`last_block_ns` (for the benchmark).
@@ -266,7 +244,7 @@ class NativeLoop:
         Returns
         -------
         ndarray
-            The structured result of :func:`harness.cosim.simulate_closed_loop`.
+            The structured result of :func:`harness.masters.fmpy.simulate_closed_loop`.
         """
         n = setup.n
         rows = np.zeros((n, len(CLOSED_LOOP_FIELDS)))
@@ -302,8 +280,6 @@ _PER_THREAD = threading.local()
 def native_loop(fmu_dir=None):
     """This thread's :class:`NativeLoop` for the FMUs in ``fmu_dir``, created on first use and
     kept (the binaries are loaded and instantiated once per thread and FMU set)."""
-    from .cosim import CONTROLLER_MODEL, PLANT_MODEL, fmu_path
-
     key = []
     for model in (PLANT_MODEL, CONTROLLER_MODEL):
         path = fmu_path(model, fmu_dir)
@@ -334,7 +310,7 @@ def simulate_closed_loop_native(scenario, *, adaptation=None, preview=True, mast
                                 progress=None, fmi_version=2):
     """Run a tracking scenario through both FMUs with the native master.
 
-    Parameters, Returns and Raises are those of :func:`harness.cosim.simulate_closed_loop`
+    Parameters, Returns and Raises are those of :func:`harness.masters.fmpy.simulate_closed_loop`
     (and the result equals it bit for bit); a missing runner library raises
     FileNotFoundError with the build command. The run is one C call (about 1000x real
     time), so ``progress(n, n)`` is called once, at its end. The native master calls the
@@ -349,18 +325,3 @@ def simulate_closed_loop_native(scenario, *, adaptation=None, preview=True, mast
     if progress is not None:
         progress(setup.n, setup.n)
     return data
-
-
-def simulate_closed_loop_auto(scenario, *, registry=None, duration=None, fmi_version=2, **kwargs):
-    """:func:`simulate_closed_loop_native` for runs of at least ``LONG_RUN_SAMPLES`` samples when
-    the runner is built, else :func:`harness.cosim.simulate_closed_loop` (same result either way);
-    the FMI 3.0 editions (``fmi_version=3``) always run with fmpy."""
-    from .cosim import simulate_closed_loop
-    from .scenarios import get_scenario
-
-    sc = get_scenario(scenario, registry)
-    n = sc.n_samples if duration is None else int(round(float(duration) / float(sc.step_size)))
-    if fmi_version == 2 and n >= LONG_RUN_SAMPLES and native_available():
-        return simulate_closed_loop_native(sc, registry=registry, duration=duration, **kwargs)
-    return simulate_closed_loop(sc, registry=registry, duration=duration, fmi_version=fmi_version,
-                                **kwargs)

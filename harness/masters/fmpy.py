@@ -1,4 +1,4 @@
-"""Co-simulation master for the PiezoStage and AdaptiveCompoundController FMUs (fmpy), on their
+"""The fmpy master: the PiezoStage and AdaptiveCompoundController FMUs run through fmpy, on their
 FMI 2.0 editions (default) or their FMI 3.0 editions (``fmi_version=3``: the FMUs in the
 ``fmi3/`` folder beside the FMI 2.0 ones, run through fmpy's FMU3Slave).
 
@@ -38,22 +38,36 @@ are given by the FMI 2.0 names in either case: ``pi.w[3]`` sets element 3 of the
 ``pi.w`` (the array is read in initialization mode, the element replaced, the array set).
 The two editions give the same samples bit for bit.
 
-Each FMU file is extracted once per process (cache keyed by path, mtime and
-size); instances are always terminated and freed, also when a run fails.
+Each FMU file is extracted once per process (:func:`harness.fmu.load`); instances are
+always terminated and freed, also when a run fails.
 """
 
 from __future__ import annotations
 
-import atexit
 import ctypes
-import difflib
-from pathlib import Path
-import shutil
-import tempfile
+import time
 
+from fmpy import calloc, fmi2, free
+from fmpy.fmi1 import printLogMessage
+from fmpy.fmi2 import FMU2Slave, fmi2Boolean, fmi2Real, fmi2ValueReference
+from fmpy.fmi3 import FMU3Slave
 import numpy as np
 
-from ._common import (
+from ..fmu import (
+    CONTROLLER_MODEL,
+    PLANT_MODEL,
+    REAL_TYPES,
+    TIMING_OUTPUTS,
+    FMUError,
+    FMUInitializationError,
+    LoopDivergedError,
+    array_size,
+    check_fmi_version,
+    fmu_path,
+    load,
+    sort_parameters,
+)
+from ..loop import (
     CLOSED_LOOP_DTYPE,
     CLOSED_LOOP_FIELDS,
     OPEN_LOOP_DTYPE,
@@ -63,232 +77,10 @@ from ._common import (
     sample_range,
 )
 
-__all__ = [
-    "PLANT_MODEL",
-    "CONTROLLER_MODEL",
-    "REFERENCE_MODEL",
-    "FMUError",
-    "FMUInitializationError",
-    "FMUFileError",
-    "LoopDivergedError",
-    "UnknownParameterError",
-    "FMI_VERSIONS",
-    "default_fmu_dir",
-    "fmu_path",
-    "simulate_closed_loop",
-    "simulate_open_loop",
-    "TIMING_OUTPUTS",
-]
-
-PLANT_MODEL = "PiezoStage"
-CONTROLLER_MODEL = "AdaptiveCompoundController"
-REFERENCE_MODEL = "ReferenceSignal"
-
-#: the FMI versions the FMUs come in (the FMI 3.0 editions in the ``fmi3/`` subfolder)
-FMI_VERSIONS = (2, 3)
+__all__ = ["simulate_closed_loop", "simulate_open_loop", "simulate_setup"]
 
 _PLANT_OUTPUTS = ("u", "x", "y", "y_meas")
 _CTRL_OUTPUTS = ("v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error")
-
-
-class FMUError(RuntimeError):
-    """An FMI call failed; the message carries the FMU's log messages."""
-
-
-class LoopDivergedError(FMUError):
-    """The closed loop diverged: the controller's monitor found it unstable, or a computed
-    value was not finite; the message carries the FMU's explanation."""
-
-
-class FMUInitializationError(FMUError, ValueError):
-    """The FMU refused its parameters (instantiation or initialization failed)."""
-
-
-class FMUFileError(FMUError, ValueError):
-    """The file is not the FMU expected there: not an FMU at all, the other FMI version, or
-    another model under this model's file name (a user error, like a missing FMU)."""
-
-
-class UnknownParameterError(KeyError):
-    """A parameter name is not a parameter of the FMU; the message lists the valid names."""
-
-    def __str__(self):  # KeyError would quote the message
-        return self.args[0]
-
-
-def default_fmu_dir():
-    """Folder of the FMUs: ``$PIEZO_FMU_DIR``, the copies ``pip install .`` put inside the
-    package, or ``<repo>/build/fmus`` (see :mod:`harness._paths`)."""
-    from . import _paths
-    return _paths.fmu_dir()
-
-
-def _check_fmi_version(fmi_version):
-    if fmi_version not in FMI_VERSIONS:
-        raise ValueError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
-    return fmi_version
-
-
-def fmu_path(model, fmu_dir=None, fmi_version=2):
-    """Path of a model's FMU, checked to exist.
-
-    Parameters
-    ----------
-    model : str
-        ``"PiezoStage"``, ``"AdaptiveCompoundController"`` or ``"ReferenceSignal"``.
-    fmu_dir : str or Path, optional
-        Defaults to :func:`default_fmu_dir`.
-    fmi_version : {2, 3}
-        2: ``<fmu_dir>/<model>.fmu``; 3: the FMI 3.0 edition ``<fmu_dir>/fmi3/<model>.fmu``
-        (or ``<fmu_dir>/<model>.fmu`` when ``fmu_dir`` is itself a folder of FMI 3.0
-        editions without an ``fmi3/`` subfolder).
-
-    Returns
-    -------
-    Path
-
-    Raises
-    ------
-    FileNotFoundError
-        With the command that builds the FMUs.
-    """
-    import os
-
-    _check_fmi_version(fmi_version)
-    chosen = fmu_dir is not None or bool(os.environ.get("PIEZO_FMU_DIR"))
-    folder = Path(fmu_dir if fmu_dir is not None else default_fmu_dir())
-    path = folder / f"{model}.fmu"
-    if fmi_version == 3:
-        nested = folder / "fmi3" / f"{model}.fmu"
-        path = nested if nested.is_file() or not path.is_file() else path
-    if not path.is_file():
-        if chosen:
-            why = _folder_contents(folder, model, fmi_version, from_env=fmu_dir is None)
-            raise FileNotFoundError(f"FMU not found: {path}; {why}")
-        from . import _paths
-        raise FileNotFoundError(f"FMU not found: {path}; {_paths.where_to_get_it()} "
-                                f"(or set PIEZO_FMU_DIR to the folder of the FMUs)")
-    return path
-
-
-def _folder_contents(folder, model, fmi_version, from_env):
-    """What a user-chosen FMU folder lacks and what it holds, for the message of a missing FMU."""
-    need = f"the harness runs {PLANT_MODEL}.fmu and {CONTROLLER_MODEL}.fmu from it"
-    if fmi_version == 3:
-        need += ", or from its fmi3/ subfolder, in their FMI 3.0 editions"
-    name = f"{folder} ($PIEZO_FMU_DIR)" if from_env else str(folder)
-    if not folder.exists():
-        return f"the folder {name} does not exist ({need})"
-    if not folder.is_dir():
-        return f"{name} is a file, not a folder ({need})"
-    present = sorted(p.name for p in folder.glob("*.fmu"))
-    if fmi_version == 3:
-        present += sorted(f"fmi3/{p.name}" for p in (folder / "fmi3").glob("*.fmu"))
-    held = f"it holds {', '.join(present)}" if present else "it holds no .fmu file at all"
-    return f"the folder {name} has no {model}.fmu, {held} ({need})"
-
-
-# ---------------------------------------------------------------------------
-# extraction cache
-# ---------------------------------------------------------------------------
-
-class _FMUInfo:
-    """An extracted FMU: model description, unzip folder, variables by name.
-
-    ``elements`` maps the FMI 2.0 name of every element of an FMI 3.0 array variable
-    (``pi.w[3]``) to ``(array variable, index from 0)``.
-    """
-
-    __slots__ = ("path", "md", "unzipdir", "variables", "model", "fmi_version", "elements")
-
-    def __init__(self, path, md, unzipdir):
-        self.path = path
-        self.md = md
-        self.unzipdir = unzipdir
-        self.variables = {v.name: v for v in md.modelVariables}
-        self.model = md.coSimulation.modelIdentifier
-        self.fmi_version = 3 if md.fmiVersion.startswith("3") else 2
-        self.elements = {}
-        for v in md.modelVariables:
-            for i in range(_array_size(v) or 0):
-                self.elements[f"{v.name}[{i + 1}]"] = (v, i)
-
-    def vr(self, name):
-        try:
-            return self.variables[name].valueReference
-        except KeyError:
-            other = (f": it is not this project's {self.path.stem} (its model is {self.model})"
-                     if self.model != self.path.stem else "")
-            raise FMUFileError(f"{self.path} has no variable '{name}'{other}") from None
-
-    def parameter_names(self):
-        """The parameters by their FMI 2.0 names (array elements one by one)."""
-        names = []
-        for name, v in self.variables.items():
-            if v.causality != "parameter":
-                continue
-            size = _array_size(v)
-            names += [name] if size is None else [f"{name}[{i + 1}]" for i in range(size)]
-        return names
-
-
-def _array_size(var):
-    """The number of elements of an FMI 3.0 array variable, None for a scalar."""
-    dims = getattr(var, "dimensions", None) or []
-    if not dims:
-        return None
-    size = 1
-    for d in dims:
-        size *= int(d.start)
-    return size
-
-
-_EXTRACTED = {}
-_TEMP_DIRS = []
-
-
-def _cleanup():
-    for d in _TEMP_DIRS:
-        shutil.rmtree(d, ignore_errors=True)
-
-
-atexit.register(_cleanup)
-
-
-def _load(path, fmi_version=2):
-    import fmpy
-
-    st = path.stat()
-    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
-    info = _EXTRACTED.get(key)
-    if info is None:
-        try:
-            md = fmpy.read_model_description(str(path))
-        except Exception as exc:    # fmpy raises BadZipFile, KeyError, lxml errors, ...
-            raise FMUFileError(f"{path} is not an FMU (its model description cannot be read: "
-                               f"{type(exc).__name__}: {exc})") from None
-        if md.fmiVersion != f"{fmi_version}.0" or md.coSimulation is None:
-            raise _wrong_edition(path, md.fmiVersion, fmi_version)
-        unzipdir = tempfile.mkdtemp(prefix=f"harness_{path.stem}_")
-        _TEMP_DIRS.append(unzipdir)
-        fmpy.extract(str(path), unzipdir=unzipdir)
-        info = _FMUInfo(path, md, unzipdir)
-        _EXTRACTED[key] = info
-    if info.fmi_version != fmi_version:
-        raise _wrong_edition(path, info.md.fmiVersion, fmi_version)
-    return info
-
-
-def _wrong_edition(path, found, fmi_version):
-    """The error for an FMU of the other FMI version (or without Co-Simulation)."""
-    if fmi_version == 3:
-        hint = " (the FMI 3.0 editions are in the fmi3/ folder beside the FMI 2.0 FMUs)"
-    elif str(found).startswith("3"):
-        hint = " (an FMI 3.0 edition: run it with --fmi 3)"
-    else:
-        hint = ""
-    return FMUFileError(f"{path} is not an FMI {fmi_version}.0 Co-Simulation FMU (it is FMI "
-                        f"{found}){hint}")
 
 
 # ---------------------------------------------------------------------------
@@ -310,7 +102,6 @@ def _log_message(component, instance_name, status, category, message):
         if len(sink) < 200:
             sink.append(f"[{label}] {text}")
     else:  # somebody else's FMU in this process: behave like fmpy's default
-        from fmpy.fmi1 import printLogMessage
         printLogMessage(component, instance_name, status, category, message)
 
 
@@ -323,9 +114,6 @@ def _callbacks():
     log to us even if other code in the process installed its own logger.
     """
     global _LOGGER
-    from fmpy import calloc, free
-    from fmpy import fmi2
-
     if _LOGGER is None:
         _LOGGER = fmi2.fmi2CallbackLoggerTYPE(_log_message)
     cb = fmi2.fmi2CallbackFunctions()
@@ -333,7 +121,7 @@ def _callbacks():
     cb.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(calloc)
     cb.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(free)
     try:
-        from fmpy.logging import addLoggerProxy
+        from fmpy.logging import addLoggerProxy     # optional: not in every fmpy version
         addLoggerProxy(ctypes.byref(cb))
     except Exception:  # pragma: no cover - the raw format string is logged then
         pass
@@ -343,64 +131,6 @@ def _callbacks():
 # ---------------------------------------------------------------------------
 # one FMU instance
 # ---------------------------------------------------------------------------
-
-_REAL_TYPES = ("Real", "Float64", "Float32")
-_INTEGER_TYPES = ("Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")
-
-
-def _sorted_parameters(info, params):
-    """Parameters by FMI 2.0 variable name as ``(reals, ints, bools, arrays)``: each of the first
-    three ``([vr], [value])``, ``arrays`` ``{array variable: {index from 0: value}}`` for the
-    elements of FMI 3.0 array variables.
-
-    Raises
-    ------
-    UnknownParameterError
-        A name is not a parameter of the FMU (the message lists the close ones and all).
-    TypeError
-        A value does not fit the variable's type.
-    """
-    reals, ints, bools, arrays = ([], []), ([], []), ([], []), {}
-    for name, value in params.items():
-        var, index = info.variables.get(name), None
-        if var is None and name in info.elements:
-            var, index = info.elements[name]
-        if var is None or var.causality != "parameter" or (index is None and _array_size(var)):
-            valid = info.parameter_names()
-            close = difflib.get_close_matches(name, valid, n=3)
-            hint = f" (did you mean {', '.join(close)}?)" if close else ""
-            raise UnknownParameterError(
-                f"'{name}' is not a parameter of {info.model}{hint}; "
-                f"parameters: {', '.join(valid)}")
-        if var.type in _REAL_TYPES:
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)):
-                raise TypeError(f"{info.model} parameter {name} is Real, got {value!r}")
-            typed, target = float(value), reals
-        elif var.type in _INTEGER_TYPES:
-            if isinstance(value, (bool, np.bool_)) or not float(value).is_integer():
-                raise TypeError(f"{info.model} parameter {name} is Integer, got {value!r}")
-            typed, target = int(value), ints
-        elif var.type == "Boolean":
-            if not (isinstance(value, (bool, np.bool_)) or value in (0, 1)):
-                raise TypeError(f"{info.model} parameter {name} is Boolean, got {value!r}")
-            typed, target = bool(value), bools
-        else:
-            raise TypeError(f"{info.model} parameter {name} has unsupported type {var.type}")
-        if index is not None:
-            arrays.setdefault(var, {})[index] = typed
-        else:
-            target[0].append(var.valueReference)
-            target[1].append(typed)
-    return reals, ints, bools, arrays
-
-
-def _typed_parameters(info, params):
-    """Parameters of an FMI 2.0 FMU by variable name as ``(reals, ints, bools)``, each
-    ``([vr], [value])`` (see :func:`_sorted_parameters`)."""
-    reals, ints, bools, arrays = _sorted_parameters(info, params)
-    if arrays:
-        raise TypeError(f"{info.model}: array elements need the FMI 3.0 path")
-    return reals, ints, bools
 
 
 def _fmi3_logger(sink):
@@ -428,11 +158,9 @@ class _Instance:
         self.instantiated = False
         self.initialized = False
         if self.fmi3:
-            from fmpy.fmi3 import FMU3Slave
             self.fmu = FMU3Slave(guid=info.md.guid, unzipDirectory=info.unzipdir,
                                  modelIdentifier=info.model, instanceName=self.name)
         else:
-            from fmpy.fmi2 import FMU2Slave
             self.fmu = FMU2Slave(guid=info.md.guid, unzipDirectory=info.unzipdir,
                                  modelIdentifier=info.model, instanceName=self.name)
         try:
@@ -454,14 +182,14 @@ class _Instance:
     def set_parameters(self, params):
         """Set parameters by name, typed from the model description (FMI 3.0: array elements
         by their FMI 2.0 names, in initialization mode, where the array can be read)."""
-        reals, ints, bools, arrays = _sorted_parameters(self.info, params)
+        reals, ints, bools, arrays = sort_parameters(self.info, params)
         f = self.fmu
         try:
             if self.fmi3:
                 for var, elements in arrays.items():
-                    size = _array_size(var)
-                    get = f.getFloat64 if var.type in _REAL_TYPES else f.getInt32
-                    put = f.setFloat64 if var.type in _REAL_TYPES else f.setInt32
+                    size = array_size(var)
+                    get = f.getFloat64 if var.type in REAL_TYPES else f.getInt32
+                    put = f.setFloat64 if var.type in REAL_TYPES else f.setInt32
                     values = list(get([var.valueReference], nValues=size))
                     for index, value in elements.items():
                         values[index] = value
@@ -534,8 +262,7 @@ class _Instance:
 
 
 def _vr_array(values):
-    from fmpy.fmi2 import fmi2ValueReference
-
+    """A ctypes array of value references."""
     return (fmi2ValueReference * len(values))(*values)
 
 
@@ -615,12 +342,8 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
     setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
                                 plant_params=plant_params, controller_params=controller_params,
                                 duration=duration, registry=registry, step_order=step_order)
-    return _simulate(setup, fmu_dir, progress=progress, fmi_version=_check_fmi_version(fmi_version),
+    return simulate_setup(setup, fmu_dir, progress=progress, fmi_version=check_fmi_version(fmi_version),
                      timing=timing)
-
-
-#: the controller's outputs that say what it detected (Integer, except loop_delay_time)
-TIMING_OUTPUTS = ("loop_delay", "loop_delay_time", "preview_lead", "meas_offset")
 
 
 def _read_timing(inst):
@@ -634,11 +357,14 @@ def _read_timing(inst):
     return {n: out[n] for n in TIMING_OUTPUTS}
 
 
-def _simulate(setup, fmu_dir=None, block=0, block_ns=None, progress=None, fmi_version=2, timing=None):
-    """Run a prepared closed loop (see :func:`_run_closed_loop` for the timing and progress
-    arguments)."""
-    p_info = _load(fmu_path(PLANT_MODEL, fmu_dir, fmi_version), fmi_version)
-    c_info = _load(fmu_path(CONTROLLER_MODEL, fmu_dir, fmi_version), fmi_version)
+def simulate_setup(setup, fmu_dir=None, block=0, block_ns=None, progress=None, fmi_version=2,
+                   timing=None):
+    """Run a prepared closed loop (:func:`harness.loop.prepare_closed_loop`); the result of
+    :func:`simulate_closed_loop`. ``block``, ``block_ns`` and ``progress`` are those of
+    :func:`_run_closed_loop` (the benchmark's timings), ``timing`` that of
+    :func:`simulate_closed_loop`."""
+    p_info = load(fmu_path(PLANT_MODEL, fmu_dir, fmi_version), fmi_version)
+    c_info = load(fmu_path(CONTROLLER_MODEL, fmu_dir, fmi_version), fmi_version)
     n, h = setup.n, setup.h
     rows = np.zeros((n, len(CLOSED_LOOP_FIELDS)))
     rows[:, 0] = setup.time
@@ -717,10 +443,6 @@ def _run_closed_loop(plant, ctrl, setup, rows, block=0, block_ns=None, progress=
     ``progress(done, n)`` is called after every simulated second (blocks of one
     second then, unless timed).
     """
-    import time
-
-    from fmpy.fmi2 import fmi2Boolean
-
     fp, fc = _ScalarFunctions(plant), _ScalarFunctions(ctrl)
     GET, SET, GET_BOOL, DO_STEP = fp.names
     pc, cc = fp.c, fc.c
@@ -877,12 +599,10 @@ def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None
     FileNotFoundError, UnknownParameterError, FMUInitializationError, FMUError
         As :func:`simulate_closed_loop`.
     """
-    from fmpy.fmi2 import fmi2Real
-
     v, time = open_loop_grid(v_signal, step_size)
     params = dict(plant_params or {})
     params.setdefault("h", float(step_size))
-    info = _load(fmu_path(PLANT_MODEL, fmu_dir, fmi_version), _check_fmi_version(fmi_version))
+    info = load(fmu_path(PLANT_MODEL, fmu_dir, fmi_version), check_fmi_version(fmi_version))
     n, h = v.size, float(step_size)
     rows = np.zeros((n, len(OPEN_LOOP_DTYPE.names)))
     rows[:, 0] = time
@@ -928,3 +648,4 @@ def simulate_open_loop(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None
         if plant is not None:
             plant.close()
     return as_structured(rows, OPEN_LOOP_DTYPE)
+

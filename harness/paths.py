@@ -1,6 +1,7 @@
-"""Where the built artefacts are: the FMUs, the core library and the core headers.
+"""Where things are: the repository (``REPO_ROOT``), the command that builds it
+(``BUILD_COMMAND``), and the built artefacts: the FMUs, the libraries and their headers.
 
-In order:
+The artefacts are looked for in order:
 
 1. an environment variable (``PIEZO_FMU_DIR``, ``PIEZO_CORE_LIB``, ``PIEZO_CORE_INCLUDE``);
 2. the package's own ``_data/`` folder, which ``pip install .`` fills (``fmus/``,
@@ -18,6 +19,7 @@ was expected.
 
 from __future__ import annotations
 
+from importlib.metadata import PackageNotFoundError, distribution
 import os
 from pathlib import Path
 
@@ -37,9 +39,8 @@ CORE_LIBRARY_NAME = "libpiezo_core.so"
 def _installed_data_dir():
     """``_data/`` of an installed ``harness`` distribution, or None."""
     try:
-        from importlib.metadata import PackageNotFoundError, distribution
         dist = distribution("harness")
-    except (ImportError, PackageNotFoundError):
+    except PackageNotFoundError:
         return None
     data = Path(dist.locate_file("harness/_data"))
     return data if data.is_dir() else None

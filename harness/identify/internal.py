@@ -1,15 +1,16 @@
-"""The identification driver (paper section 3): records of the PiezoStage model, the three
-steps, and every parameter next to the value the plant ran.
+"""``identify --internal-channels``: the paper's three steps (section 3), each alone, on
+records of the PiezoStage model that include its internal outputs, and every parameter
+next to the value the plant ran.
 
-:func:`run_identification` writes ``identification.csv`` and ``identification.md``.
-(This driver is on its way to :mod:`harness.identify`; it lives in its own module so
-that move changes no code.)
+:func:`generate_identification_records` runs the model on the six inputs of Table 1;
+:func:`run_identification` identifies them and writes ``identification.csv`` and
+``identification.md``.
 """
 
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 from pathlib import Path
 import sys
@@ -17,10 +18,11 @@ import time as _time
 
 import numpy as np
 
-from ..scenarios import VALIDATION_SCENARIOS, get_scenario
-from .progress import Progress
-from .run import simulators
-from .tables import markdown_table, num, text_table
+from .. import core, masters
+from ..progress import Progress
+from ..scenarios import VALIDATION_SCENARIOS, get_scenario, reference_label
+from ..text_tables import markdown_table, num, text_table
+from .steps import IdentificationRecord, identify_coupled_model
 
 __all__ = [
     "IDENTIFICATION_PI_SCENARIO",
@@ -66,7 +68,7 @@ class IdentificationRun:
 
     Attributes
     ----------
-    estimate : harness.identification.CoupledModelEstimate
+    estimate : harness.identify.CoupledModelEstimate
     rows : list of IdentificationRow
         Every parameter: PI weights, ``w0 + w1``, ``G``, then ``k_c`` and
         ``alpha`` of each Table 1 row.
@@ -87,16 +89,8 @@ class IdentificationRun:
     elapsed_s: float
 
 
-def _record_label(sc):
-    if sc.signal.kind == "sines" and sc.signal.frequencies:
-        return "/".join(f"{f:g}" for f in sc.signal.frequencies) + " Hz"
-    return sc.name
-
-
 def _true_params(sc):
     """The plant parameters that define a record: core defaults, then the scenario's overrides."""
-    from .. import core
-
     d = core.default_plant_params()
     names = ["pi.w0"] + [f"pi.w[{j}]" for j in range(1, d["pi.m"] + 1)]
     names += ["tf.a1", "tf.a2", "tf.b1", "tf.b2", "creep.k_c", "creep.alpha"]
@@ -132,13 +126,11 @@ def generate_identification_records(*, backend="fmpy", noise_rms_um=0.0, seed=1,
 
     Returns
     -------
-    records : list of harness.identification.IdentificationRecord
+    records : list of harness.identify.IdentificationRecord
         In the order of ``IDENTIFICATION_CREEP_SCENARIOS``.
     truth : dict
         ``{label: plant parameters}``.
     """
-    from ..identification import IdentificationRecord
-
     noise = float(noise_rms_um)
     if not (math.isfinite(noise) and noise >= 0):
         raise ValueError(f"noise rms must be a finite number >= 0 um, got {noise_rms_um!r}")
@@ -146,13 +138,13 @@ def generate_identification_records(*, backend="fmpy", noise_rms_um=0.0, seed=1,
     top = 2 ** 31 - len(IDENTIFICATION_CREEP_SCENARIOS)     # sensor.seed is an FMI Integer
     if not 0 <= seed < top:
         raise ValueError(f"seed must be in [0, {top}), got {seed}")
-    _, open_loop = simulators(backend)
+    open_loop = masters.open_loop(backend)
     prog = Progress(len(IDENTIFICATION_CREEP_SCENARIOS), progress)
     records, truth = [], {}
     for i, name in enumerate(IDENTIFICATION_CREEP_SCENARIOS):
         t0 = _time.perf_counter()
         sc = get_scenario(name)
-        label = _record_label(sc)
+        label = reference_label(sc)
         params = _true_params(sc)
         v = sc.signal.evaluate(sc.time_grid())
         run = open_loop({**{k: p for k, p in params.items() if isinstance(p, float)},
@@ -251,7 +243,7 @@ def run_identification(out_dir="out", *, backend="fmpy", noise_rms_um=0.0, seed=
     """Identify the coupled model from records of the PiezoStage model; print and write the table.
 
     Generates the records (:func:`generate_identification_records`), runs
-    :func:`harness.identification.identify_coupled_model` and compares every
+    :func:`harness.identify.identify_coupled_model` and compares every
     parameter with the value the plant ran.  Files: ``identification.csv``
     and ``identification.md`` under ``out_dir``.
 
@@ -273,20 +265,16 @@ def run_identification(out_dir="out", *, backend="fmpy", noise_rms_um=0.0, seed=
     -------
     IdentificationRun
     """
-    from dataclasses import replace as _replace
-
-    from ..identification import identify_coupled_model
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t0 = _time.perf_counter()
     records, truth = generate_identification_records(
         backend=backend, noise_rms_um=noise_rms_um, seed=seed, fmu_dir=fmu_dir, progress=progress)
     if displacement_only:
-        records = [_replace(r, u=None, x=None) for r in records]
+        records = [replace(r, u=None, x=None) for r in records]
     by_label = {r.label: r for r in records}
-    pi_label = _record_label(get_scenario(IDENTIFICATION_PI_SCENARIO))
-    tf_label = _record_label(get_scenario(IDENTIFICATION_TF_SCENARIO))
+    pi_label = reference_label(get_scenario(IDENTIFICATION_PI_SCENARIO))
+    tf_label = reference_label(get_scenario(IDENTIFICATION_TF_SCENARIO))
     t_pi = truth[pi_label]
     est = identify_coupled_model(by_label[pi_label], by_label[tf_label], records, t_pi["h"],
                                  m=t_pi["pi.m"], v_max=t_pi["pi.v_max"],

@@ -1,4 +1,5 @@
-"""The closed loop of :func:`harness.cosim.simulate_closed_loop`, run directly on the C core.
+"""The core master: the closed loop of :func:`harness.masters.fmpy.simulate_closed_loop`, run
+directly on the C core.
 
 Same experiment, same result fields, no FMI layer: the plant and controller are
 the cffi binding's :class:`harness.core.Plant` and :class:`harness.core.Controller`.
@@ -9,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import (
+from .. import core
+from ..loop import (
     CLOSED_LOOP_DTYPE,
     CLOSED_LOOP_FIELDS,
     OPEN_LOOP_DTYPE,
@@ -32,7 +34,7 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
     Parameters
     ----------
     scenario, adaptation, preview, master, plant_params, controller_params, duration, registry, step_order, progress
-        As :func:`harness.cosim.simulate_closed_loop` (the FMUs' semantics, emulated sample
+        As :func:`harness.masters.fmpy.simulate_closed_loop` (the FMUs' semantics, emulated sample
         by sample; ``step_order`` changes nothing here, as it changes nothing there).
     fmu_dir : ignored
         Accepted so that both functions share one signature.
@@ -40,7 +42,7 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
     Returns
     -------
     ndarray
-        Structured array with the fields of :func:`harness.cosim.simulate_closed_loop`.
+        Structured array with the fields of :func:`harness.masters.fmpy.simulate_closed_loop`.
 
     Raises
     ------
@@ -51,8 +53,6 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
     harness.core.CoreParameterError
         A parameter value is out of range.
     """
-    from . import core
-
     setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
                                 plant_params=plant_params, controller_params=controller_params,
                                 duration=duration, registry=registry, step_order=step_order)
@@ -111,7 +111,7 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
 
 def simulate_open_loop_core(plant_params, v_signal, *, step_size=0.0005, fmu_dir=None,
                             progress=None):
-    """Drive the core plant alone; same result as :func:`harness.cosim.simulate_open_loop`.
+    """Drive the core plant alone; same result as :func:`harness.masters.fmpy.simulate_open_loop`.
 
     Parameters
     ----------
@@ -123,15 +123,13 @@ def simulate_open_loop_core(plant_params, v_signal, *, step_size=0.0005, fmu_dir
         Sample period h [s].
     fmu_dir : ignored
     progress : callable, optional
-        As :func:`harness.cosim.simulate_open_loop`.
+        As :func:`harness.masters.fmpy.simulate_open_loop`.
 
     Returns
     -------
     ndarray
         Fields ``time, v, u, x, y, y_meas``; ``u[k] = P[v](k)``.
     """
-    from . import core
-
     v, time = open_loop_grid(v_signal, step_size)
     params = dict(plant_params or {})
     params.setdefault("h", float(step_size))

@@ -1,0 +1,295 @@
+"""Running a sweep: the runs handed out to Dask (or run here), collected as they complete."""
+
+from __future__ import annotations
+
+from collections import deque
+import hashlib
+import logging
+import math
+import os
+from pathlib import Path
+import tempfile
+import time
+
+from .. import masters
+from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, fmu_path, load, starts_of
+from ..loop import normalize_master
+from ..scenarios import get_scenario
+from .manifest import prepare_folder, sweep_identity, write_manifest
+from .spreads import Spread, parse_spread, varied_keys, varies_something
+from .store import ParameterSets, RunRows, RunStore, SweepResult
+from .worker import first_line, peak_rss, remove_at_exit, run_chunk, scenario_fields
+
+__all__ = ["run_sweep", "SweepIncompleteError", "plant_start_values"]
+
+
+class SweepIncompleteError(RuntimeError):
+    """Runs are missing after the sweep (their tasks failed on every attempt)."""
+
+
+def plant_start_values(fmu_dir=None):
+    """The PiezoStage parameters' start values from its model description (name -> value),
+    the FMU checked to be an FMI 2.0 Co-Simulation FMU."""
+    return starts_of(load(fmu_path(PLANT_MODEL, fmu_dir)).md)
+
+
+def _chunks_of(indices, size):
+    """The indices in lists of at most ``size``."""
+    for i in range(0, len(indices), size):
+        yield [int(j) for j in indices[i:i + size]]
+
+
+def _fmu_package(fmu_dir):
+    """Content digest and ``{file name: bytes}`` of both FMUs, shipped to every worker."""
+    files = {}
+    digest = hashlib.sha256()
+    for model in (PLANT_MODEL, CONTROLLER_MODEL):
+        path = fmu_path(model, fmu_dir)
+        data = path.read_bytes()
+        files[path.name] = data
+        digest.update(data)
+    return digest.hexdigest(), files
+
+
+class _Progress:
+    """Progress of the runs on stderr, with the rate and the time left: a rewritten line on
+    a terminal, else a line per 10 % of the runs (and at least every 30 s)."""
+
+    def __init__(self, total, done, stream):
+        self.total, self.stream = total, stream
+        self.done = self.start = done
+        self.bad = 0
+        self.t0 = self.last = time.perf_counter()
+        self.tty = bool(getattr(stream, "isatty", lambda: False)())
+        self.next_mark = (math.floor(10 * done / total) + 1) / 10 if total else 1.0
+
+    def update(self, new):
+        self.done += len(new)
+        self.bad += sum(1 for _, status in new if status != "ok")
+        now = time.perf_counter()
+        frac = self.done / self.total
+        elapsed = now - self.t0
+        rate = (self.done - self.start) / elapsed if elapsed > 0 else 0.0
+        eta = f", ETA {(self.total - self.done) / rate:.0f} s" if rate > 0 and self.done < self.total else ""
+        text = (f"sweep: {self.done}/{self.total} runs ({frac:.0%}), {self.bad} not ok, "
+                f"{elapsed:.1f} s, {rate:.0f} runs/s{eta}")
+        if self.tty:
+            self.stream.write("\r" + text + ("\n" if self.done == self.total else ""))
+            self.stream.flush()
+        elif frac >= self.next_mark or self.done == self.total or now - self.last >= 30.0:
+            self.stream.write(text + "\n")
+            self.stream.flush()
+            self.last = now
+            while self.next_mark <= frac:
+                self.next_mark += 0.1
+
+    def say(self, text):
+        self.stream.write(("\n" if self.tty and self.done < self.total else "") + text + "\n")
+        self.stream.flush()
+
+
+def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=None, chunk=None,
+              backend="native", adaptation=None, preview=True, master="gauss-seidel",
+              fmu_dir=None, registry=None, progress=None, out=None, resume=False):
+    """Run a Monte Carlo sweep, streaming every run to disk as its task completes.
+
+    Parameters
+    ----------
+    scenarios : sequence of str
+        Tracking scenarios.
+    spreads : sequence of Spread or str
+        The distributions (``KEY=SPEC`` strings are parsed); at least one must move a
+        parameter.
+    n_runs : int
+        Runs per scenario.
+    seed : int
+        Seed of the draws.
+    scheduler : str, optional
+        Address of an existing Dask scheduler (e.g. ``tcp://10.0.0.5:8786``); else a local
+        cluster of ``workers`` processes is started (and stopped) for the sweep.
+    workers : int, optional
+        Local worker processes (default: the number of cores); 0 runs everything in this
+        process without Dask.
+    chunk : int, optional
+        Runs per task (default: about four tasks per worker and scenario, at most 50).
+    backend : {"native", "fmpy"}
+    adaptation, preview, master
+        As :func:`harness.masters.fmpy.simulate_closed_loop`.
+    fmu_dir, registry
+        FMU folder and scenario registry.
+    progress : file, optional
+        Where the progress goes (e.g. ``sys.stderr``).
+    out : path, optional
+        Folder of the journal (``sweep_runs.journal.csv``, one row per run as it completes)
+        and the manifest (``sweep_manifest.json``); default: a temporary folder.
+    resume : bool
+        Continue the unfinished sweep in ``out`` (the same scenarios, runs, seed, spreads,
+        options and FMUs): only its missing runs are computed.
+
+    Returns
+    -------
+    SweepResult
+
+    Raises
+    ------
+    ValueError
+        Bad arguments, nothing varied, or ``out`` holding another (or an unfinished) sweep.
+    SweepIncompleteError
+        Runs whose task failed on every attempt (the others are in the journal: resume).
+    """
+    t_start = time.perf_counter()
+    if n_runs < 1:
+        raise ValueError(f"the number of runs must be at least 1, got {n_runs}")
+    masters.check_sweep_backend(backend)
+    master = normalize_master(master)
+    base_all = plant_start_values(fmu_dir)
+    reals = [k for k, v in base_all.items() if isinstance(v, float)]
+    spreads = [s if isinstance(s, Spread) else parse_spread(s, reals) for s in spreads]
+    keys = [s.key for s in spreads]
+    if len(set(keys)) != len(keys):
+        raise ValueError(f"a key is varied twice: {', '.join(keys)}")
+    scs = [get_scenario(name, registry) for name in scenarios]
+    for sc in scs:
+        if sc.kind != "tracking":
+            raise ValueError(f"scenario '{sc.name}' is a {sc.kind} scenario; a sweep needs tracking "
+                             f"scenarios")
+    if not varies_something(spreads):
+        what = "no spread is given" if not spreads else "every spread has width 0"
+        raise ValueError(f"nothing varies ({what}): all {n_runs} runs would be the same run; add "
+                         f"--vary KEY=SPEC, e.g. --vary pi.weights=10% --vary sensor.seed")
+    bases = {}
+    for sc in scs:
+        base = {**base_all, **dict(sc.plant)}
+        base.setdefault("h", sc.step_size)
+        bases[sc.name] = base
+    varied = sorted(set().union(*(varied_keys(spreads, b) for b in bases.values())))
+    options = {"backend": backend, "adaptation": adaptation, "preview": bool(preview),
+               "master": master}
+    package = _fmu_package(fmu_dir)
+    identity = sweep_identity(scs, spreads, n_runs, seed, options, package[0], bases)
+    names = [sc.name for sc in scs]
+    total = n_runs * len(scs)
+
+    if out is None:
+        folder = Path(tempfile.mkdtemp(prefix="harness_sweep_runs_"))
+        remove_at_exit(folder)
+    else:
+        folder = Path(out)
+        folder.mkdir(parents=True, exist_ok=True)
+    fresh = prepare_folder(folder, identity, resume, progress)
+    store = RunStore(folder, names, n_runs, varied)
+    if not fresh:
+        store.load()
+    write_manifest(folder, identity, complete=False)
+    store.open(fresh)
+    done_before = store.done()
+    if progress is not None and done_before:
+        progress.write(f"sweep: resuming {folder}: {done_before} of {total} runs done, "
+                       f"{total - done_before} to compute\n")
+    prog = _Progress(total, done_before, progress) if progress is not None else None
+    fields_ = {sc.name: scenario_fields(sc) for sc in scs}
+    worker_rss = []
+    failures = []
+
+    def collect(name, result):
+        rows, rss = result
+        if rss is not None:
+            worker_rss.append(rss)
+        new = store.add(name, rows)
+        if prog:
+            prog.update(new)
+
+    n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
+    size = chunk or max(1, min(50, math.ceil(n_runs / (4 * max(n_workers, 1)))))
+    try:
+        if scheduler is None and n_workers == 0:
+            where = "this process (no Dask)"
+            for sc in scs:
+                for part in _chunks_of(store.missing(sc.name), size):
+                    rows, _ = run_chunk(package, fields_[sc.name], bases[sc.name], spreads, seed, part,
+                                        varied, options)
+                    collect(sc.name, (rows, None))
+        else:
+            where = _run_on_dask(scheduler, n_workers, package, scs, store, size, collect, failures,
+                                 (fields_, bases, spreads, seed, varied, options), prog)
+    except KeyboardInterrupt:
+        store.close()
+        if progress is not None:
+            progress.write(f"\nsweep: interrupted: {store.done()} of {total} runs are in {store.path}; "
+                           f"the same command with --resume computes the rest\n")
+            progress.flush()
+        raise
+    store.close()
+    missing = total - store.done()
+    if missing:
+        why = f" (last error: {failures[-1]})" if failures else ""
+        raise SweepIncompleteError(f"{missing} of {total} runs are missing: their tasks failed on every "
+                                   f"attempt{why}; the others are in {store.path}: rerun with --resume")
+    peak = {"client": peak_rss(), "worker": max(worker_rss) if worker_rss else None}
+    return SweepResult(names, spreads,
+                       {sc.name: ParameterSets(bases[sc.name], spreads, seed, n_runs) for sc in scs},
+                       {name: RunRows(store, name) for name in names},
+                       time.perf_counter() - t_start, where, options, computed=total - done_before,
+                       peak_rss=peak, store=store)
+
+
+_ATTEMPTS = 4          # a task whose worker is lost is run again; after this many failures its runs are missing
+
+
+def _run_on_dask(scheduler, n_workers, package, scs, store, size, collect, failures, task, prog):
+    """Run the missing runs on Dask; return where. At most a few tasks per worker are
+    queued at a time (memory does not grow with the number of runs). A task lost with its
+    worker is rescheduled by Dask; a task that fails anyway is submitted again."""
+    from dask.distributed import Client, LocalCluster, as_completed     # heavy: only here
+
+    fields_, bases, spreads, seed, varied, options = task
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=logging.ERROR)
+        client = Client(cluster)
+        where = f"a local Dask cluster of {n_workers} worker process{'es' if n_workers > 1 else ''}"
+    else:
+        client = Client(scheduler, timeout=30)
+        info = client.scheduler_info()
+        nw = len(info.get("workers", {}))
+        where = f"the Dask cluster at {scheduler} ({nw} worker{'s' if nw != 1 else ''})"
+        n_workers = max(nw, 1)
+    try:
+        shipped = client.scatter(package, broadcast=True)
+        pending = deque((sc.name, part, 1) for sc in scs for part in _chunks_of(store.missing(sc.name), size))
+        inflight = {}
+        queue = as_completed()
+        limit = max(8, 4 * n_workers)
+
+        def submit():
+            name, part, attempt = pending.popleft()
+            fut = client.submit(run_chunk, shipped, fields_[name], bases[name], spreads, seed, part,
+                                varied, options, pure=False)
+            inflight[fut] = (name, part, attempt)
+            queue.add(fut)
+
+        while pending and len(inflight) < limit:
+            submit()
+        for fut in queue:
+            name, part, attempt = inflight.pop(fut)
+            try:
+                result = fut.result()
+            except Exception as exc:                # noqa: BLE001 - any failure of a task is retried
+                failures.append(first_line(exc) or type(exc).__name__)
+                if attempt < _ATTEMPTS:
+                    pending.appendleft((name, part, attempt + 1))
+                    if prog is not None:
+                        prog.say(f"sweep: a task of {len(part)} runs failed ({failures[-1]}); "
+                                 f"running it again (attempt {attempt + 1} of {_ATTEMPTS})")
+            else:
+                collect(name, result)
+            fut.release()
+            while pending and len(inflight) < limit:
+                submit()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return where
+
