@@ -463,6 +463,56 @@ def test_plant_noise_is_added_before_quantization():
     assert np.mean(sim["y_meas"] != res * np.round(sim["y"] / res)) > 0.2
 
 
+def _quantize_cases():
+    """(reading, resolution) pairs at the edges of the core's fast quantiser: readings on and
+    within a few ulps of the half steps (n + 1/2) res, at the fast path's margin (n + 1/2 +- 2^-8,
+    2^-9) res, at its magnitude limit 2^36 res and up to 2^53 res, signed zeros, subnormal and
+    huge readings, resolutions from 1e-300 to 2^1023 (whose reciprocal is subnormal), and
+    random readings."""
+    rng = np.random.default_rng(5)
+    resolutions = [0.002, 0.001, 1e-3 / 3, 0.1, 1.0, 3.0, 1e-300, 1e300, 2.0 ** 1023, 0.0017]
+    cases = []
+    for res in resolutions:
+        steps = [0, 1, 2, 3, 7, 1000, 123456, 2 ** 20 + 1, 2 ** 35 - 1, 2 ** 36 - 1, 2 ** 36,
+                 2 ** 36 + 3, 2 ** 40, 2 ** 51 - 1, 2 ** 52, 2 ** 53]
+        for n in steps:
+            for sign in (1.0, -1.0):
+                for off in (0.5, 0.5 + 2.0 ** -8, 0.5 - 2.0 ** -8, 0.5 + 2.0 ** -9, 0.5 - 2.0 ** -9,
+                            0.0, 0.25, 1.0 - 2.0 ** -8):
+                    a = sign * (n + off) * res
+                    cases.append((a, res))
+                    up = down = a
+                    for _ in range(6):
+                        up, down = math.nextafter(up, math.inf), math.nextafter(down, -math.inf)
+                        cases += [(up, res), (down, res)]
+        cases += [(float(a), res) for a in rng.normal(0.0, 50.0, 2000) * res]
+        cases += [(float(a), res) for a in rng.uniform(-1e4, 1e4, 2000)]
+        cases += [(0.0, res), (-0.0, res), (5e-324, res), (-5e-324, res), (2.2e-308, res),
+                  (1e308, res), (-1e308, res), (1.7976931348623157e308, res)]
+    return cases
+
+
+def test_quantizer_equals_the_division_bitwise_at_its_edges():
+    """Reference: res * floor(a / res + 0.5) in NumPy doubles (IEEE division, exact floor),
+    the formula of docs/model.md, which the core computed with a division until it took the
+    reciprocal fast path (piezo_plant.c, quantize, with its proof). Over 73000 readings
+    at the edges listed in _quantize_cases the core's piezo_quantize gives the same bits,
+    infinities included; a quantiser that rounded a * (1/res) to the nearest integer without
+    the margin fails at the half steps (checked on the same cases)."""
+    L = core.lib()
+    cases = _quantize_cases()
+    a = np.array([c[0] for c in cases])
+    res = np.array([c[1] for c in cases])
+    with np.errstate(over="ignore", invalid="ignore"):
+        want = res * np.floor(a / res + 0.5)
+        naive = res * np.round(a * (1.0 / res))
+    got = np.array([L.piezo_quantize(x, r) for x, r in cases])
+    bad = np.flatnonzero(got.view(np.uint64) != want.view(np.uint64))
+    assert bad.size == 0, [(cases[i], got[i], want[i]) for i in bad[:5]]
+    assert np.count_nonzero(naive.view(np.uint64) != want.view(np.uint64)) > 100
+    assert np.isinf(want).sum() > 10 and len(cases) > 70000
+
+
 def test_overflow_is_reported_as_divergence_not_as_bad_input():
     """Reference: IEEE overflow. With pi.w0 = 4, v = 1e308 is a finite input but
     u = 4 v + ... overflows to inf: the core refuses the step as diverged

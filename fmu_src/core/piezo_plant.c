@@ -1,5 +1,6 @@
 /* piezo_plant.c - coupled hysteresis-dynamics-creep plant with sensor.
  * See piezo_plant.h. */
+#include <float.h>
 #include <math.h>
 #include <string.h>
 #include "piezo_plant.h"
@@ -167,6 +168,7 @@ piezo_status piezo_plant_init(piezo_plant *plant, const piezo_plant_params *p, p
     if (st != PIEZO_OK) return st;
     plant->creep_enabled = p->creep_enabled ? 1 : 0;
     plant->sensor_resolution = p->sensor_resolution;
+    plant->sensor_inv_resolution = p->sensor_resolution > 0.0 ? 1.0 / p->sensor_resolution : 0.0;
     plant->sensor_noise_rms = p->sensor_noise_rms;
     plant->sensor_seed = p->sensor_seed;
     piezo_plant_reset(plant);
@@ -185,14 +187,50 @@ static double sensor_noise(const piezo_plant *plant, piezo_rng *rng)
     return plant->sensor_noise_rms > 0.0 ? plant->sensor_noise_rms * rng_normal(rng) : 0.0;
 }
 
-/* y_meas = quantize(y + noise), quantize(a) = res * round(a / res); noise from
- * sensor_noise (not added when the noise is off) */
+/*
+ * quantize(a) = res * floor(a / res + 0.5), the same bits, mostly without the
+ * division (inv = 1/res, rounded, kept by the caller). With p = a * inv rounded:
+ *   p = (a/res)(1 + e1)(1 + e2) (+ at most 2^-1075 if the product underflows), where
+ *   |e2| <= 2^-53 and |e1| <= 2^-51 (2^-53 when inv is normal, i.e. res < 2^1022),
+ *   so p and Q = a / res rounded differ by less than 2^-50 |p| + 2^-1074.
+ * n = (p + M) - M with M = 1.5 * 2^52 is the integer nearest p for |p| < 2^51 (p + M
+ * lies in (2^52, 2^53), where doubles are the integers; subtracting M is exact), and
+ * p - n is exact (Sterbenz, or n = 0). The fast path takes |p| < 2^36 and
+ * |p - n| <= 0.5 - 2^-8: then |p - Q| < 2^-14, so Q + 0.5 lies in
+ * (n + 2^-8 - 2^-14, n + 1 - 2^-8 + 2^-14), rounding it moves it by at most 2^-17
+ * (it is below 2^37), and floor(Q + 0.5) = n: res * n is the division's result.
+ * Zero is +0 either way (M - M and floor of a value in (0, 1)). Anything else
+ * (near a half step, huge, Inf or NaN) takes the division. It needs doubles
+ * evaluated as doubles (FLT_EVAL_METHOD 0: SSE2 on x86-64, not x87), and always
+ * divides otherwise.
+ */
+static double quantize(double a, double res, double inv)
+{
+#if defined(FLT_EVAL_METHOD) && FLT_EVAL_METHOD == 0
+    const double round_shift = 6755399441055744.0;     /* 1.5 * 2^52 */
+    double p = a * inv;
+    double n = (p + round_shift) - round_shift;
+    if (fabs(p) < 68719476736.0 && fabs(p - n) <= 0.5 - 1.0 / 256)     /* 2^36, 2^-8 */
+        return res * n;
+#else
+    (void)inv;
+#endif
+    return res * floor(a / res + 0.5);
+}
+
+double piezo_quantize(double reading, double resolution)
+{
+    return quantize(reading, resolution, 1.0 / resolution);
+}
+
+/* y_meas = quantize(y + noise), quantize(a) = res * floor(a / res + 0.5); noise
+ * from sensor_noise (not added when the noise is off) */
 static double sense(const piezo_plant *plant, double y, double noise)
 {
     double reading = y;
     if (plant->sensor_noise_rms > 0.0) reading += noise;
     if (plant->sensor_resolution > 0.0)
-        reading = plant->sensor_resolution * floor(reading / plant->sensor_resolution + 0.5);
+        reading = quantize(reading, plant->sensor_resolution, plant->sensor_inv_resolution);
     return reading;
 }
 
@@ -284,6 +322,8 @@ const char *piezo_plant_check(const piezo_plant *plant)
     if (!(isfinite(plant->sensor_resolution)
           && (plant->sensor_resolution == 0.0 || plant->sensor_resolution >= SENSOR_RESOLUTION_MIN)))
         return "sensor.resolution out of range";
+    if (plant->sensor_inv_resolution != (plant->sensor_resolution > 0.0 ? 1.0 / plant->sensor_resolution : 0.0))
+        return "the reciprocal of sensor.resolution kept from init does not match sensor.resolution";
     if (!(isfinite(plant->sensor_noise_rms) && plant->sensor_noise_rms >= 0.0
           && plant->sensor_noise_rms <= SENSOR_NOISE_MAX))
         return "sensor.noise_rms out of range";

@@ -8,7 +8,8 @@
  * and advances to k+1: u(k) = P[v](k), x(k+1) = G..., y(k+1) = creep(x)(k+1).
  * Outputs live in the struct (`out`), so the FMU reads them without work.
  *
- * Sensor: quantize(a) = resolution * round(a / resolution) (off when 0);
+ * Sensor: quantize(a) = resolution * floor(a / resolution + 0.5) (off when 0),
+ * computed exactly but mostly without the division (piezo_quantize);
  * noise ~ N(0, noise_rms^2) from the core's own xoshiro256** generator seeded
  * by splitmix64(seed): reproducible, independent of the C library.
  * A step whose reading overflows (e.g. y near 1e308) is refused as divergence
@@ -54,6 +55,7 @@ typedef struct {
     piezo_gl creep;
     int creep_enabled;
     double sensor_resolution;
+    double sensor_inv_resolution;   /* 1 / sensor_resolution (0 when off), set at init */
     double sensor_noise_rms;
     int sensor_seed;
     piezo_rng rng;
@@ -85,6 +87,9 @@ size_t piezo_plant_history_needed(const piezo_plant *plant);
  */
 const char *piezo_plant_check(const piezo_plant *plant);
 
+/* The sensor's quantiser, resolution * floor(reading / resolution + 0.5) for a
+ * resolution > 0, bit for bit (exposed for tests; the plant keeps 1/resolution). */
+double piezo_quantize(double reading, double resolution);
 /* The sensor's generator, exposed for tests. */
 void piezo_rng_seed(piezo_rng *rng, uint64_t seed);
 double piezo_rng_uniform(piezo_rng *rng);   /* (0, 1) */
