@@ -9,9 +9,9 @@
  * registers; a CPU with AVX holds them in one 256-bit register, so a block of
  * four terms is one instruction per operation instead of two. Each sum has
  * both versions, and which one runs is chosen per call by
- * piezo_cpu_has_avx() (a flag of libgcc's, read once when the binary is
- * loaded; no state of ours, so nothing in a serialized FMU state depends on
- * it). The binaries stay baseline x86-64: only those functions are compiled
+ * piezo_cpu_has_avx() (a flag the compiler's runtime, libgcc, sets once
+ * when the binary is loaded; no state of ours, so nothing in a serialized FMU
+ * state depends on it). The binaries stay baseline x86-64: only those functions are compiled
  * for "avx", and run only where the CPU and the OS have it.
  *
  * Same bits on every machine: the AVX versions do the same operations on the
@@ -26,7 +26,8 @@
 #define PIEZO_SIMD_H
 
 /* gcc and clang (also MinGW-w64) on x86-64 compile one function for AVX in a
- * baseline binary; elsewhere only the portable versions exist. */
+ * baseline binary; elsewhere, or with -DPIEZO_NO_AVX_PATH, only the portable
+ * versions exist. */
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__)) && !defined(PIEZO_NO_AVX_PATH)
 #define PIEZO_HAVE_AVX_PATH 1
 #include <immintrin.h>
@@ -39,8 +40,8 @@ static inline int piezo_cpu_has_avx(void)
 
 /* The lanes a_0..a_3 of acc as scalars, for the last n mod 4 terms and the
  * combination (a_0 + a_1) + (a_2 + a_3), both done as in the SSE2 versions.
- * (A masked block for those terms would cost more than it saves: AMD's
- * vmaskmovpd is slow, and the combination by haddpd has a longer latency.) */
+ * (Those terms as a masked block, vmaskmovpd, with a haddpd combination were
+ * slower on the AMD EPYC of docs/speed.md.) */
 __attribute__((target("avx")))
 static inline void piezo_avx_lanes(__m256d acc, double *a0, double *a1, double *a2, double *a3)
 {
