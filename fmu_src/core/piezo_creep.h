@@ -30,6 +30,17 @@
  *     y(k) = gain * (x(k) + ((a_0 + a_1) + (a_2 + a_3))),
  * so that the CPU overlaps the additions and the compiler can keep the lanes
  * in vector registers (SSE2 on any x86-64).
+ *
+ * Two versions of that sum, one result (piezo_simd.h): the portable one
+ * (two lanes per 128-bit SSE2 register on baseline x86-64) and, on x86-64
+ * with gcc or clang, one with the four lanes in a 256-bit AVX register. Each
+ * step takes the AVX one when the CPU and the OS support AVX
+ * (__builtin_cpu_supports, evaluated by libgcc when the binary is loaded; no
+ * field of piezo_gl, so a serialized state does not depend on it). Both do
+ * the same multiplications and additions on the same lanes in the same order,
+ * without fused multiply-adds, so they give the same bits (tests/c/
+ * simd_paths.c compares them on every term count); the binaries stay baseline
+ * x86-64.
  */
 #ifndef PIEZO_CREEP_H
 #define PIEZO_CREEP_H

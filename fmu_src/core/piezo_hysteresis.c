@@ -2,6 +2,7 @@
 #include <math.h>
 #include <string.h>
 #include "piezo_hysteresis.h"
+#include "piezo_simd.h"
 
 /* eq 3: z_r(k) = max(v(k) - r, min(v(k) + r, z_r(k-1))). Static, so the
  * model loops inline it (an exported function is called through the PLT). */
@@ -108,12 +109,52 @@ static double pi_sum(int m, double w0, const double *w, const double *r, const d
     return w0 * v + ((a0 + a1) + (a2 + a3));
 }
 
+#if PIEZO_HAVE_AVX_PATH
+/* pi_sum with the four lanes in one 256-bit register (piezo_simd.h): lane l is
+ * a_l, and a block of four operators is one vaddpd/vsubpd/vminpd/vmaxpd/vmulpd
+ * per operation (eq 3 as play() writes it: min(z, v + r), then max(., v - r));
+ * the last m mod 4 operators and the combination as in pi_sum. Same bits. */
+__attribute__((target("avx")))
+static double pi_sum_avx(int m, double w0, const double *w, const double *r, const double *z,
+                         double *z_next, double v)
+{
+    const __m256d v4 = _mm256_set1_pd(v);
+    __m256d acc = _mm256_setzero_pd();
+    double a0, a1, a2, a3;
+    int j;
+    for (j = 0; j + 4 <= m; j += 4) {
+        __m256d r4 = _mm256_loadu_pd(r + j);
+        __m256d z4 = _mm256_min_pd(_mm256_loadu_pd(z + j), _mm256_add_pd(v4, r4));
+        z4 = _mm256_max_pd(z4, _mm256_sub_pd(v4, r4));
+        acc = _mm256_add_pd(acc, _mm256_mul_pd(_mm256_loadu_pd(w + j), z4));
+        _mm256_storeu_pd(z_next + j, z4);
+    }
+    piezo_avx_lanes(acc, &a0, &a1, &a2, &a3);
+    if (j < m) a0 += pi_term(w, r, z, z_next, j, v);
+    if (j + 1 < m) a1 += pi_term(w, r, z, z_next, j + 1, v);
+    if (j + 2 < m) a2 += pi_term(w, r, z, z_next, j + 2, v);
+    return w0 * v + ((a0 + a1) + (a2 + a3));
+}
+#endif
+
+/* pi_sum_avx where the CPU has AVX, else pi_sum: the same bits. Not inlined,
+ * so that piezo_pi_eval stays small enough to be inlined into its callers. */
+__attribute__((noinline))
+static double pi_sum_any(int m, double w0, const double *w, const double *r, const double *z,
+                         double *z_next, double v)
+{
+#if PIEZO_HAVE_AVX_PATH
+    if (piezo_cpu_has_avx()) return pi_sum_avx(m, w0, w, r, z, z_next, v);
+#endif
+    return pi_sum(m, w0, w, r, z, z_next, v);
+}
+
 /* eq 18: u(k) = w0 v(k) + sum_j w_j z_{r_j}(k) (pi_sum). z_next may be pi->z (in place). */
 piezo_status piezo_pi_eval(const piezo_pi *pi, double v, double *z_next, double *u)
 {
     if (!pi || !z_next || !u) return PIEZO_ERR_NULL;
     if (!isfinite(v)) return PIEZO_ERR_NONFINITE;
-    *u = pi_sum(pi->m, pi->w0, pi->w, pi->r, pi->z, z_next, v);
+    *u = pi_sum_any(pi->m, pi->w0, pi->w, pi->r, pi->z, z_next, v);
     return PIEZO_OK;
 }
 
@@ -158,7 +199,7 @@ piezo_status piezo_pi_inverse_eval(const piezo_pi_inverse *inv, double u, double
 {
     if (!inv || !z_next || !v) return PIEZO_ERR_NULL;
     if (!isfinite(u)) return PIEZO_ERR_NONFINITE;
-    *v = pi_sum(inv->m, inv->w0, inv->w, inv->r, inv->z, z_next, u);
+    *v = pi_sum_any(inv->m, inv->w0, inv->w, inv->r, inv->z, z_next, u);
     return PIEZO_OK;
 }
 

@@ -15,6 +15,8 @@
  * definition, the same on every machine): four partial sums over the operators
  * j = 1..m, lane l = 0..3 taking j - 1 = l mod 4 in increasing j,
  *     a_l = sum w_j z_{r_j}(k),   u(k) = w0 v(k) + ((a_0 + a_1) + (a_2 + a_3)).
+ * Where the CPU has AVX, the four lanes are one 256-bit register (the same
+ * operations in the same order, the same bits: piezo_simd.h, piezo_creep.h).
  */
 #ifndef PIEZO_HYSTERESIS_H
 #define PIEZO_HYSTERESIS_H
