@@ -1,5 +1,6 @@
 """Where things are: the repository (``REPO_ROOT``), the command that builds it
-(``BUILD_COMMAND``), and the built artefacts: the FMUs, the libraries and their headers.
+(``BUILD_COMMAND``), and the built artefacts: the FMUs, the libraries and their headers;
+and how a report names a file it used (``sha256_of``).
 
 The artefacts are looked for in order:
 
@@ -20,12 +21,14 @@ was expected.
 from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, distribution
+import hashlib
 import os
 from pathlib import Path
 
 __all__ = ["PACKAGE_DIR", "REPO_ROOT", "IN_CHECKOUT", "BUILD_COMMAND", "INSTALL_COMMAND",
            "fmu_dir", "core_library", "core_include_dir", "runner_library", "runner_include_dir",
-           "bench_library", "bench_include_dir", "where_to_get_it", "describe_fmu_dir"]
+           "bench_library", "bench_include_dir", "where_to_get_it", "describe_fmu_dir",
+           "sha256_of"]
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_ROOT = PACKAGE_DIR.parent
@@ -117,3 +120,13 @@ def describe_fmu_dir() -> str:
     if path.parent.name == "_data":
         return f"{path}, the FMUs installed with the package; $PIEZO_FMU_DIR overrides"
     return f"{path}, the checkout's build; $PIEZO_FMU_DIR overrides"
+
+
+def sha256_of(path):
+    """The SHA-256 of a file's bytes, as hex (how a report, a provenance record and an
+    exported FMU name a record, an FMU or a library)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

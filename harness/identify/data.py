@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import csv
 from dataclasses import dataclass
-import hashlib
 import difflib
 import math
 from pathlib import Path
@@ -56,7 +55,6 @@ __all__ = [
     "count_reversals",
     "read_record",
     "write_record",
-    "sha256_of",
 ]
 
 #: Columns a record file must have, with their units.
@@ -369,10 +367,3 @@ def write_record(path, time, v, y, extra=None):
     return path
 
 
-def sha256_of(path):
-    """The SHA-256 of a file's bytes, as hex (how a report and an FMU name a record)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()

@@ -50,7 +50,7 @@ from fmpy.validation import validate_fmu
 from .. import core, fmu_documentation, fmu_references
 from ..fmu import fmu_path, parameter_types
 from ..fmu_archive import write_fmu_zip
-from .data import sha256_of
+from ..paths import sha256_of
 from .params import CONTROLLER_MODEL, PLANT_MODEL, split_params
 from .run import output_paths
 

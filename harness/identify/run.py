@@ -19,7 +19,8 @@ import json
 import math
 from pathlib import Path
 
-from .data import read_record, sha256_of
+from ..paths import sha256_of
+from .data import read_record
 from .fit import DEFAULT_HOLDOUT, DEFAULT_MAX_EVALUATIONS, fit_coupled_model
 from .params import write_params
 from .tables import NORMALISATION_NOTE, format_report

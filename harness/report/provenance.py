@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 import datetime as _dt
-import hashlib
 from importlib import metadata
 import os
 from pathlib import Path
@@ -21,14 +20,6 @@ from .. import _source, core, paths
 from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, fmu_path, fmu_platforms, model_description
 
 __all__ = ["FMUInfo", "Provenance", "collect_provenance", "fmu_info", "commit_id"]
-
-
-def _sha256(path):
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -54,7 +45,7 @@ def fmu_info(path):
                    fmi_version=md.fmiVersion or "",
                    generation_tool=md.generationTool or "",
                    generated=md.generationDateAndTime or "",
-                   sha256=_sha256(path), platforms=fmu_platforms(path))
+                   sha256=paths.sha256_of(path), platforms=fmu_platforms(path))
 
 
 @dataclass
@@ -163,7 +154,7 @@ def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None, 
         prov.fmus = [fmu_info(fmu_path(m, fmu_dir, fmi_version)) for m in models]
     else:
         lib = core.library_path()
-        prov.core_library = {"path": str(lib), "sha256": _sha256(lib) if lib.is_file() else ""}
+        prov.core_library = {"path": str(lib), "sha256": paths.sha256_of(lib) if lib.is_file() else ""}
     prov.versions = {"python": platform.python_version(), "fmpy": _version("fmpy"),
                      "numpy": _version("numpy"), "scipy": _version("scipy"),
                      "matplotlib": _version("matplotlib"), "cffi": _version("cffi")}
