@@ -195,8 +195,7 @@ def check_sweep_backend(backend):
     if backend not in SWEEP_BACKENDS:
         raise ValueError(f"backend must be 'native' or 'fmpy', got {backend!r}")
     if backend == "native" and not native.native_available():
-        raise FileNotFoundError(f"native runner library not found: {native.runner_library_path()}; "
-                                f"build it (cmake --build build) or use --backend fmpy")
+        raise FileNotFoundError(native.missing_runner_message())
 
 
 def prepared_loop(backend, fmu_dir=None):

@@ -35,10 +35,11 @@ from ..core import header_cdef
 from ..fmu import (CONTROLLER_MODEL, PLANT_MODEL, FMUError, FMUInitializationError,
                    LoopDivergedError, fmu_path, load, typed_parameters)
 from ..loop import CLOSED_LOOP_DTYPE, CLOSED_LOOP_FIELDS, as_structured, prepare_closed_loop
-from ..paths import BUILD_COMMAND, REPO_ROOT, runner_include_dir, runner_library
+from ..paths import runner_include_dir, runner_library, where_to_get_it
 
 __all__ = [
     "NativeLoop",
+    "missing_runner_message",
     "native_available",
     "native_loop",
     "runner_library_path",
@@ -69,6 +70,13 @@ def native_available():
     return runner_library_path().is_file()
 
 
+def missing_runner_message():
+    """What to say when the runner library is not built: where it was looked for, how to
+    build it (a checkout) or reinstall it (an installed package), and the way around it."""
+    return (f"native runner library not found: {runner_library_path()}; {where_to_get_it()} "
+            f"(or set PIEZO_RUNNER_LIB), or use the fmpy backend")
+
+
 def _binding():
     """(ffi, lib) of the runner, loaded once per process."""
     global _FFI, _LIB
@@ -77,9 +85,7 @@ def _binding():
             if _LIB is None:
                 path = runner_library_path()
                 if not path.is_file():
-                    raise FileNotFoundError(
-                        f"native runner library not found: {path}; build it with `{BUILD_COMMAND}` "
-                        f"in {REPO_ROOT} (or set PIEZO_RUNNER_LIB), or use the fmpy backend")
+                    raise FileNotFoundError(missing_runner_message())
                 ffi = FFI()
                 ffi.cdef(header_cdef(runner_include_dir(), (_HEADER_NAME,)))
                 _LIB = ffi.dlopen(str(path))
