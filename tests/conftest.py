@@ -303,6 +303,15 @@ WIN64_HINT = ("install MinGW-w64 and wine64 (Debian: gcc-mingw-w64-x86-64 wine64
 WINE64_DIRS = ("/usr/lib/wine",)
 
 
+def error_lines(stderr):
+    """The lines of a command's stderr without the platform note that every run of FMUs built
+    without MinGW-w64 prints first ("warning: the FMUs in ... have no Windows binaries",
+    harness.fmu.missing_windows_binaries): a test of a message sees the same lines on a
+    machine with or without MinGW-w64."""
+    return [line for line in stderr.strip().splitlines()
+            if not (": warning: the FMUs in " in line and " have no Windows binaries " in line)]
+
+
 def need_win64(reason):
     """Skip the calling test because `reason` (what is missing); with PIEZO_REQUIRE_WIN64=1
     fail it instead, with the same reason."""

@@ -10,6 +10,7 @@ import sys
 import pytest
 
 from harness.cli import main
+from conftest import error_lines
 
 REPO = Path(__file__).resolve().parents[1]
 PROG = "python -m harness"
@@ -228,7 +229,7 @@ def test_each_user_mistake_is_one_line_and_exit_2(files, capsys, args, code, mes
     got = main(argv, prog=PROG)
     out, err = capsys.readouterr()
     assert got == code, err
-    lines = err.strip().splitlines()
+    lines = error_lines(err)
     assert len(lines) == 1, err
     assert lines[0].startswith(f"{PROG}: error: "), lines[0]
     assert message.replace("{d}", d) in lines[0], lines[0]

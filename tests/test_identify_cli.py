@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from harness.cli import main
+from conftest import error_lines
 from harness.masters.core import simulate_open_loop_core
 from harness.identify.data import write_record
 from harness.identify.demo import DEMO_PLANT, DEMO_SENSOR
@@ -103,7 +104,7 @@ def test_identify_demo_end_to_end(tmp_path):
 
 def _fails(capsys, argv, message, code=2):
     assert main(argv) == code
-    err = capsys.readouterr().err.strip().splitlines()
+    err = error_lines(capsys.readouterr().err)
     assert len(err) == 1 and err[0] == f"python -m harness: error: {message}", err
 
 

@@ -15,6 +15,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from harness import fmu, masters  # noqa: E402
+from conftest import error_lines  # noqa: E402
 from harness.loop import prepare_closed_loop  # noqa: E402
 from harness.masters import fmpy as fmpy_master, native  # noqa: E402
 
@@ -179,7 +180,8 @@ def test_missing_runner_library_says_how_to_build(tmp_path):
                           "--no-plots", "--out", str(tmp_path / "o")], env=env, capture_output=True,
                          text=True, cwd=tmp_path, timeout=120)
     assert cli.returncode == 2
-    assert cli.stderr.count("\n") == 1 and "native runner library not found" in cli.stderr
+    lines = error_lines(cli.stderr)
+    assert len(lines) == 1 and "native runner library not found" in lines[0], cli.stderr
 
 
 def test_auto_backend_uses_native_for_long_runs(monkeypatch):
@@ -209,4 +211,5 @@ def test_cli_native_backend_failing_run_exits_3(tmp_path):
                            "--backend", "native", "--no-plots", "--out", str(tmp_path / "o")],
                           capture_output=True, text=True, cwd=REPO, timeout=300)
     assert proc.returncode == 3, proc.stderr
-    assert proc.stderr.count("\n") == 1 and "the closed loop is unstable" in proc.stderr
+    lines = error_lines(proc.stderr)
+    assert len(lines) == 1 and "the closed loop is unstable" in lines[0], proc.stderr
