@@ -310,27 +310,25 @@ static void project(const piezo_controller *c, double *th)
 static double rls_step(const piezo_controller *c, const double *theta_in, const double *P, int d, double y,
                        int update, double *theta, double *P_new)
 {
-    double phi[4], Pphi[4] = {0.0, 0.0, 0.0, 0.0}, denom, inv_denom, e, trace;
+    /* phi as four scalars, not an array: built from separate loads, an array
+     * went through the stack and was read back as pairs, a store-to-load
+     * forwarding stall on the loop's path from y(k) to the law */
+    const double phi0 = -c->y_prev[0], phi1 = -c->y_prev[1];
+    const double phi2 = q_past(c, d), phi3 = q_past(c, d + 1);
+    double Pphi[4], denom, inv_denom, e, trace;
     const double inv_lambda = c->inv_forgetting;
-    int i, j;
-    phi[0] = -c->y_prev[0];
-    phi[1] = -c->y_prev[1];
-    phi[2] = q_past(c, d);
-    phi[3] = q_past(c, d + 1);
+    int i;
     e = y;
-    for (i = 0; i < 4; ++i) e -= phi[i] * theta_in[i];
+    e -= phi0 * theta_in[0];
+    e -= phi1 * theta_in[1];
+    e -= phi2 * theta_in[2];
+    e -= phi3 * theta_in[3];
     if (!update) return e;
 
-    /* (P phi)_i = sum_j P_ij phi_j in increasing j, P_ij read as P_ji (symmetric) */
-    for (j = 0; j < 4; ++j) {
-        const double *row = P + 4 * j;
-        Pphi[0] += row[0] * phi[j];
-        Pphi[1] += row[1] * phi[j];
-        Pphi[2] += row[2] * phi[j];
-        Pphi[3] += row[3] * phi[j];
-    }
-    denom = c->forgetting;
-    for (i = 0; i < 4; ++i) denom += phi[i] * Pphi[i];
+    /* (P phi)_i = sum_j P_ij phi_j in increasing j (from 0.0), P_ij read as P_ji (symmetric) */
+    for (i = 0; i < 4; ++i)
+        Pphi[i] = (((0.0 + P[i] * phi0) + P[4 + i] * phi1) + P[8 + i] * phi2) + P[12 + i] * phi3;
+    denom = (((c->forgetting + phi0 * Pphi[0]) + phi1 * Pphi[1]) + phi2 * Pphi[2]) + phi3 * Pphi[3];
     inv_denom = 1.0 / denom;
     for (i = 0; i < 4; ++i) theta[i] = theta_in[i] + Pphi[i] * inv_denom * e;
     for (i = 0; i < 4; ++i) {
@@ -528,7 +526,7 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
     s->out.preview = stamped;
 
     /* feedforward: inverse creep, then inverse PI */
-    st = piezo_gl_eval(&c->inv_creep, q, history, capacity, s->creep_next, &r);
+    st = piezo_gl_eval(&c->inv_creep, q, history, capacity, &r);
     if (st != PIEZO_OK) return st == PIEZO_ERR_NONFINITE ? PIEZO_ERR_DIVERGED : st;
     st = piezo_pi_inverse_eval(&c->inv_pi, r, s->inv_z, &v);
     if (st != PIEZO_OK) return st == PIEZO_ERR_NONFINITE ? PIEZO_ERR_DIVERGED : st;
@@ -544,9 +542,9 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
         piezo_pi_eval(&c->fwd_pi, v, s->fwd_z, &r_eff);
         st = piezo_pi_inverse_eval(&c->inv_pi, r_eff, s->inv_z, &v_resync);  /* re-sync the inverse states */
         if (st != PIEZO_OK) return PIEZO_ERR_DIVERGED;
-        piezo_gl_eval(&c->inv_creep, 0.0, history, capacity, s->creep_next, &memory);
+        piezo_gl_eval(&c->inv_creep, 0.0, history, capacity, &memory);
         q = (r_eff - memory) / c->inv_creep.gain;
-        st = piezo_gl_eval(&c->inv_creep, q, history, capacity, s->creep_next, &r);
+        st = piezo_gl_eval(&c->inv_creep, q, history, capacity, &r);
         if (st != PIEZO_OK) return PIEZO_ERR_DIVERGED;
         operators_finite = isfinite(r_eff) && isfinite(v_resync) && isfinite(r);
         /* no adaptation until the clipped sample leaves the regressor (while
@@ -617,7 +615,7 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
         memcpy(c->theta, s->theta, sizeof c->theta);
         memcpy(c->P, s->P, sizeof c->P);
     }
-    piezo_gl_commit(&c->inv_creep, q, s->creep_next);
+    piezo_gl_commit(&c->inv_creep, q);
     memcpy(c->inv_pi.z, s->inv_z, (size_t)c->inv_pi.m * sizeof *s->inv_z);
     memcpy(c->fwd_pi.z, s->fwd_z, (size_t)c->fwd_pi.m * sizeof *s->fwd_z);
     c->sat_hold = s->sat_hold;

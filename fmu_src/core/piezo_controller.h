@@ -162,7 +162,6 @@ typedef struct {
     piezo_controller_output out; /* its outputs */
     double theta[4], P[16];      /* RLS result (valid when rls_updated) */
     int rls_updated;
-    double creep_next[PIEZO_GL_MAX_TERMS];   /* inverse creep SOE states of k+1 */
     double inv_z[PIEZO_PI_MAX_OPERATORS];    /* inverse PI play states of k+1 */
     double fwd_z[PIEZO_PI_MAX_OPERATORS];    /* forward PI play states of k+1 */
     int sat_hold;

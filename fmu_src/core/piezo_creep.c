@@ -134,6 +134,7 @@ static int all_finite(const double *x, size_t n)
 
 const char *piezo_gl_check(const piezo_gl *gl)
 {
+    int i;
     if (!gl) return "creep operator missing";
     if (gl->exact != 0 && gl->exact != 1) return "creep.exact is not 0 or 1";
     if (!(isfinite(gl->alpha) && gl->alpha >= -1.0 && gl->alpha <= 1.0)) return "creep.alpha outside [-1, 1]";
@@ -146,8 +147,12 @@ const char *piezo_gl_check(const piezo_gl *gl)
     if (memcmp(gl->x_ring, gl->x_ring + PIEZO_GL_HEAD_LEN, sizeof gl->x_ring / 2) != 0)
         return "creep input ring differs from its mirror";
     if (!all_finite(gl->soe_c, PIEZO_GL_MAX_TERMS) || !all_finite(gl->soe_decay, PIEZO_GL_MAX_TERMS)
-        || !all_finite(gl->soe_inject, PIEZO_GL_MAX_TERMS) || !all_finite(gl->soe_state, PIEZO_GL_MAX_TERMS))
+        || !all_finite(gl->soe_inject, PIEZO_GL_MAX_TERMS))
         return "creep SOE values not finite";
+    /* the states may have overflowed to +-Inf in an advance (piezo_creep.h), never NaN:
+     * finite decay * (finite or +-Inf) + finite inject * finite input */
+    for (i = 0; i < PIEZO_GL_MAX_TERMS; ++i)
+        if (isnan(gl->soe_state[i])) return "creep SOE state is NaN";
     return NULL;
 }
 
@@ -187,31 +192,20 @@ static double gl_exact_sum(const double *history, size_t k)
 /* The head window is summed in blocks of four lanes (piezo_creep.h). */
 typedef char gl_head_is_a_multiple_of_4[PIEZO_GL_HEAD % 4 == 0 ? 1 : -1];
 
-/* One SOE term: T_i(k) = e^{-s_i} T_i(k-1) + c_i e^{-s_i (L0+1)} x(k-L0-1) into
- * next[i] (after soe_state[i] is read) and returned. */
-static double soe_term(const piezo_gl *gl, int i, double x_leaving, double *next)
-{
-    double t = gl->soe_decay[i] * gl->soe_state[i] + gl->soe_inject[i] * x_leaving;
-    next[i] = t;
-    return t;
-}
-
-/* SOE: y(k) = gain * (x(k) + sum_{j=1..L0} w_j x(k-j) + sum_i T_i(k)),
- * T_i(k) = c_i S_i(k) = e^{-s_i} T_i(k-1) + c_i e^{-s_i (L0+1)} x(k-L0-1),
- * in the four lanes of piezo_creep.h:
+/* SOE: y(k) = gain * (x(k) + sum_{j=1..L0} w_j x(k-j) + sum_i T_i(k)), where
+ * soe_state holds T_i(k) already (advanced by the commit of sample k-1,
+ * gl_soe_advance), in the four lanes of piezo_creep.h:
  *     a_l = sum_{j-1 = l mod 4} w_j x(k-j) + sum_{i = l mod 4} T_i(k),
  *     sum = x(k) + ((a_0 + a_1) + (a_2 + a_3)).
- * x(k-j) is x_ring[head + j - 1] (the mirror keeps the window contiguous) and
- * x(k-L0-1), the one leaving the window now, is x_ring[head + L0]. Every term is
- * independent of the others: the lanes are four chains of additions instead of
- * one, and the blocks of four are two SSE2 vectors each. In each block the
- * states and constants are read before next[] is written, so next may be
- * gl->soe_state (in place). */
-static double gl_soe_sum(const piezo_gl *gl, double x, double *next)
+ * x(k-j) is x_ring[head + j - 1] (the mirror keeps the window contiguous).
+ * Every term is independent of the others: the lanes are four chains of
+ * additions instead of one, and the blocks of four are two SSE2 vectors each.
+ * Nothing is written: the sample can still be refused. */
+static double gl_soe_sum(const piezo_gl *gl, double x)
 {
     const double *xw = gl->x_ring + gl->head;    /* xw[j-1] = x(k-j) */
     const double *w = gl->w_head + 1;            /* w[j-1] = w_j */
-    const double x_leaving = xw[PIEZO_GL_HEAD];  /* x(k-L0-1) */
+    const double *state = gl->soe_state;         /* T_i(k) */
     double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
     int i, n = gl->n_terms;
     for (i = 0; i < PIEZO_GL_HEAD; i += 4) {
@@ -221,26 +215,39 @@ static double gl_soe_sum(const piezo_gl *gl, double x, double *next)
         a3 += w[i + 3] * xw[i + 3];
     }
     for (i = 0; i + 4 <= n; i += 4) {
-        const double *decay = gl->soe_decay + i, *inject = gl->soe_inject + i;
-        const double *state = gl->soe_state + i;
-        double t0 = decay[0] * state[0] + inject[0] * x_leaving;
-        double t1 = decay[1] * state[1] + inject[1] * x_leaving;
-        double t2 = decay[2] * state[2] + inject[2] * x_leaving;
-        double t3 = decay[3] * state[3] + inject[3] * x_leaving;
-        a0 += t0;
-        a1 += t1;
-        a2 += t2;
-        a3 += t3;
-        next[i] = t0;
-        next[i + 1] = t1;
-        next[i + 2] = t2;
-        next[i + 3] = t3;
+        a0 += state[i];
+        a1 += state[i + 1];
+        a2 += state[i + 2];
+        a3 += state[i + 3];
     }
     /* the last n mod 4 terms continue lanes 0, 1, 2 */
-    if (i < n) a0 += soe_term(gl, i, x_leaving, next);
-    if (i + 1 < n) a1 += soe_term(gl, i + 1, x_leaving, next);
-    if (i + 2 < n) a2 += soe_term(gl, i + 2, x_leaving, next);
+    if (i < n) a0 += state[i];
+    if (i + 1 < n) a1 += state[i + 1];
+    if (i + 2 < n) a2 += state[i + 2];
     return x + ((a0 + a1) + (a2 + a3));
+}
+
+/* The SOE states of the next sample, in place, once sample k is committed:
+ *     T_i(k+1) = e^{-s_i} T_i(k) + c_i e^{-s_i (L0+1)} x(k-L0)
+ * (x(k-L0) = x_leaving: the input that leaves the head window at sample k+1).
+ * Each term is its own recursion: no sum, so any grouping of the terms gives
+ * the same bits; blocks of four as in the sum. */
+static void gl_soe_advance(piezo_gl *gl, double x_leaving)
+{
+    const double *decay = gl->soe_decay, *inject = gl->soe_inject;
+    double *state = gl->soe_state;
+    int i, n = gl->n_terms;
+    for (i = 0; i + 4 <= n; i += 4) {
+        double t0 = decay[i] * state[i] + inject[i] * x_leaving;
+        double t1 = decay[i + 1] * state[i + 1] + inject[i + 1] * x_leaving;
+        double t2 = decay[i + 2] * state[i + 2] + inject[i + 2] * x_leaving;
+        double t3 = decay[i + 3] * state[i + 3] + inject[i + 3] * x_leaving;
+        state[i] = t0;
+        state[i + 1] = t1;
+        state[i + 2] = t2;
+        state[i + 3] = t3;
+    }
+    for (; i < n; ++i) state[i] = decay[i] * state[i] + inject[i] * x_leaving;
 }
 
 #if PIEZO_HAVE_AVX_PATH
@@ -248,43 +255,62 @@ static double gl_soe_sum(const piezo_gl *gl, double x, double *next)
  * is a_l, and a block of four terms is one vmulpd/vaddpd per operation; the
  * last n mod 4 terms and the combination as in gl_soe_sum. Same bits. */
 __attribute__((target("avx")))
-static double gl_soe_sum_avx(const piezo_gl *gl, double x, double *next)
+static double gl_soe_sum_avx(const piezo_gl *gl, double x)
 {
     const double *xw = gl->x_ring + gl->head;    /* xw[j-1] = x(k-j) */
     const double *w = gl->w_head + 1;            /* w[j-1] = w_j */
-    const double x_leaving = xw[PIEZO_GL_HEAD];  /* x(k-L0-1) */
-    const __m256d x_leaving4 = _mm256_set1_pd(x_leaving);
+    const double *state = gl->soe_state;         /* T_i(k) */
     __m256d acc = _mm256_setzero_pd();
     double a0, a1, a2, a3;
     int i, n = gl->n_terms;
     for (i = 0; i < PIEZO_GL_HEAD; i += 4)
         acc = _mm256_add_pd(acc, _mm256_mul_pd(_mm256_loadu_pd(w + i), _mm256_loadu_pd(xw + i)));
-    for (i = 0; i + 4 <= n; i += 4) {
-        __m256d t = _mm256_add_pd(_mm256_mul_pd(_mm256_loadu_pd(gl->soe_decay + i),
-                                                _mm256_loadu_pd(gl->soe_state + i)),
-                                  _mm256_mul_pd(_mm256_loadu_pd(gl->soe_inject + i), x_leaving4));
-        acc = _mm256_add_pd(acc, t);
-        _mm256_storeu_pd(next + i, t);
-    }
+    for (i = 0; i + 4 <= n; i += 4)
+        acc = _mm256_add_pd(acc, _mm256_loadu_pd(state + i));
     piezo_avx_lanes(acc, &a0, &a1, &a2, &a3);
-    if (i < n) a0 += soe_term(gl, i, x_leaving, next);
-    if (i + 1 < n) a1 += soe_term(gl, i + 1, x_leaving, next);
-    if (i + 2 < n) a2 += soe_term(gl, i + 2, x_leaving, next);
+    if (i < n) a0 += state[i];
+    if (i + 1 < n) a1 += state[i + 1];
+    if (i + 2 < n) a2 += state[i + 2];
     return x + ((a0 + a1) + (a2 + a3));
+}
+
+/* gl_soe_advance, four terms per 256-bit operation; the last n mod 4 as there. */
+__attribute__((target("avx")))
+static void gl_soe_advance_avx(piezo_gl *gl, double x_leaving)
+{
+    const __m256d x_leaving4 = _mm256_set1_pd(x_leaving);
+    const double *decay = gl->soe_decay, *inject = gl->soe_inject;
+    double *state = gl->soe_state;
+    int i, n = gl->n_terms;
+    for (i = 0; i + 4 <= n; i += 4)
+        _mm256_storeu_pd(state + i, _mm256_add_pd(_mm256_mul_pd(_mm256_loadu_pd(decay + i),
+                                                                _mm256_loadu_pd(state + i)),
+                                                  _mm256_mul_pd(_mm256_loadu_pd(inject + i), x_leaving4)));
+    for (; i < n; ++i) state[i] = decay[i] * state[i] + inject[i] * x_leaving;
 }
 #endif
 
 /* gl_soe_sum_avx where the CPU has AVX, else gl_soe_sum: the same bits. */
-static double gl_soe_sum_any(const piezo_gl *gl, double x, double *next)
+static double gl_soe_sum_any(const piezo_gl *gl, double x)
 {
 #if PIEZO_HAVE_AVX_PATH
-    if (piezo_cpu_has_avx()) return gl_soe_sum_avx(gl, x, next);
+    if (piezo_cpu_has_avx()) return gl_soe_sum_avx(gl, x);
 #endif
-    return gl_soe_sum(gl, x, next);
+    return gl_soe_sum(gl, x);
 }
 
-piezo_status piezo_gl_eval(const piezo_gl *gl, double x, double *history, size_t history_capacity,
-                           double *next_state, double *y)
+static void gl_soe_advance_any(piezo_gl *gl, double x_leaving)
+{
+#if PIEZO_HAVE_AVX_PATH
+    if (piezo_cpu_has_avx()) {
+        gl_soe_advance_avx(gl, x_leaving);
+        return;
+    }
+#endif
+    gl_soe_advance(gl, x_leaving);
+}
+
+piezo_status piezo_gl_eval(const piezo_gl *gl, double x, double *history, size_t history_capacity, double *y)
 {
     double sum;
     if (!gl || !y) return PIEZO_ERR_NULL;
@@ -298,22 +324,21 @@ piezo_status piezo_gl_eval(const piezo_gl *gl, double x, double *history, size_t
         history[2 * k + 1] = k == 0 ? 1.0 : gl_weight_ratio(gl->alpha, k) * history[2 * k - 1];
         sum = gl_exact_sum(history, k);
     } else {
-        if (!next_state) return PIEZO_ERR_NULL;
-        sum = gl_soe_sum_any(gl, x, next_state);
+        sum = gl_soe_sum_any(gl, x);
     }
     *y = gl->gain * sum;
     return PIEZO_OK;
 }
 
-void piezo_gl_commit(piezo_gl *gl, double x, const double *next_state)
+void piezo_gl_commit(piezo_gl *gl, double x)
 {
     if (!gl->exact) {
-        /* the slot of x(k-L0-1) becomes the newest, in the ring and its mirror */
+        /* the slot of x(k-L0-1) becomes the newest, in the ring and its mirror;
+         * x(k-L0), which leaves the window at sample k+1, is then at head + L0 */
         gl->head = gl->head == 0 ? PIEZO_GL_HEAD : gl->head - 1;
         gl->x_ring[gl->head] = x;
         gl->x_ring[gl->head + PIEZO_GL_HEAD_LEN] = x;
-        if (next_state != gl->soe_state)
-            memcpy(gl->soe_state, next_state, (size_t)gl->n_terms * sizeof *next_state);
+        gl_soe_advance_any(gl, gl->x_ring[gl->head + PIEZO_GL_HEAD]);
     }
     gl->k += 1;
 }
@@ -322,7 +347,7 @@ piezo_status piezo_gl_step(piezo_gl *gl, double x, double *history, size_t histo
 {
     piezo_status st;
     if (!gl) return PIEZO_ERR_NULL;
-    st = piezo_gl_eval(gl, x, history, history_capacity, gl->soe_state, y);
-    if (st == PIEZO_OK) piezo_gl_commit(gl, x, gl->soe_state);
+    st = piezo_gl_eval(gl, x, history, history_capacity, y);
+    if (st == PIEZO_OK) piezo_gl_commit(gl, x);
     return st;
 }

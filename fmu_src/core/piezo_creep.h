@@ -20,7 +20,12 @@
  *    and each term is a first-order recursion on x(k-L0-1), kept scaled by c_i:
  *        T_i(k) = c_i sum_{j>L0} e^{-s_i j} x(k-j)
  *               = e^{-s_i} T_i(k-1) + c_i e^{-s_i (L0+1)} x(k-L0-1).
- *    O(1) per step.
+ *    O(1) per step. T_i(k) depends only on inputs before x(k-L0), so the
+ *    commit of sample k-1 already computes it: soe_state holds the states of
+ *    the next sample, the evaluation of a sample only sums them (it writes
+ *    nothing, so a refused sample needs no copy of them), and the commit
+ *    advances them in place. The arithmetic, and so every result, is the
+ *    same as advancing them in the evaluation.
  *
  * Summation order (it fixes the rounding, so it is part of the definition; the
  * same on every machine, since it is written out in the source): four partial
@@ -68,7 +73,11 @@ typedef struct {
     double soe_c[PIEZO_GL_MAX_TERMS];      /* c_i */
     double soe_decay[PIEZO_GL_MAX_TERMS];  /* e^{-s_i} */
     double soe_inject[PIEZO_GL_MAX_TERMS]; /* c_i e^{-s_i (L0+1)} */
-    double soe_state[PIEZO_GL_MAX_TERMS];  /* T_i(k) = c_i sum_{j>L0} e^{-s_i j} x(k-j) */
+    /* T_i(k) = c_i sum_{j>L0} e^{-s_i j} x(k-j) for the next sample k (advanced
+     * by the commit of sample k-1; all 0 after a reset). Finite, or +-Inf once
+     * an advance overflowed: then every later sample's sum is Inf or NaN and
+     * is refused, as the sample that would have advanced them was before. */
+    double soe_state[PIEZO_GL_MAX_TERMS];
 } piezo_gl;
 
 /* Closed-form-free weights by the recursion of eq 14: w[0..n-1]. */
@@ -86,14 +95,13 @@ void piezo_gl_reset(piezo_gl *gl);
 piezo_status piezo_gl_step(piezo_gl *gl, double x, double *history, size_t history_capacity, double *y);
 /*
  * The same sample without committing it, for callers that can still refuse
- * the sample afterwards: y(k) and, in SOE mode, the SOE states of k+1 in
- * next_state[0..n_terms-1] (may be gl->soe_state itself). Exact mode writes
- * history[2k], history[2k+1] as the step does. piezo_gl_commit(gl, x,
- * next_state) then makes it the step (next_state unused in exact mode).
+ * the sample afterwards: y(k), the operator unchanged (exact mode writes
+ * history[2k], history[2k+1] as the step does). piezo_gl_commit(gl, x) then
+ * makes it the step: the input ring, in SOE mode the states of k+1 (in
+ * place), the sample counter.
  */
-piezo_status piezo_gl_eval(const piezo_gl *gl, double x, double *history, size_t history_capacity,
-                           double *next_state, double *y);
-void piezo_gl_commit(piezo_gl *gl, double x, const double *next_state);
+piezo_status piezo_gl_eval(const piezo_gl *gl, double x, double *history, size_t history_capacity, double *y);
+void piezo_gl_commit(piezo_gl *gl, double x);
 /* Doubles of history the next exact-mode step needs, 2(k+1); 0 in SOE mode.
  * SIZE_MAX when 2(k+1) does not fit a size_t (no buffer can be that large). */
 size_t piezo_gl_history_needed(const piezo_gl *gl);

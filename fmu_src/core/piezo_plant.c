@@ -265,7 +265,7 @@ size_t piezo_plant_history_needed(const piezo_plant *plant)
 piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_history,
                               size_t history_capacity, piezo_plant_output *out)
 {
-    double z_next[PIEZO_PI_MAX_OPERATORS], soe_next[PIEZO_GL_MAX_TERMS];
+    double z_next[PIEZO_PI_MAX_OPERATORS];
     double u, x, y, y_meas, noise;
     piezo_rng rng;
     if (!plant) return PIEZO_ERR_NULL;
@@ -286,7 +286,7 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
     if (!isfinite(x)) return PIEZO_ERR_DIVERGED;
     if (plant->creep_enabled) {
         piezo_status st = piezo_gl_eval(&plant->creep, x, creep_history, history_capacity,
-                                        soe_next, &y);                /* y(k+1)         */
+                                        &y);                          /* y(k+1)         */
         if (st != PIEZO_OK) return st;
         if (!isfinite(y)) return PIEZO_ERR_DIVERGED;
     } else {
@@ -298,7 +298,7 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
     /* commit */
     memcpy(plant->pi.z, z_next, (size_t)plant->pi.m * sizeof *z_next);
     piezo_tf_commit(&plant->tf, u, x);
-    if (plant->creep_enabled) piezo_gl_commit(&plant->creep, x, soe_next);
+    if (plant->creep_enabled) piezo_gl_commit(&plant->creep, x);
     plant->rng = rng;
     plant->k += 1;
     plant->out.u = u;

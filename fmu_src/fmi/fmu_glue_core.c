@@ -1180,14 +1180,17 @@ glue_status glue_free_state(void *c, const char *fname, void **state)
 }
 
 /*
- * Serialized FMU state (format version 1), the same in both FMI versions.
+ * Serialized FMU state (format version 2), the same in both FMI versions.
+ * Version 2: the creep's SOE states are kept advanced to the next sample
+ * (piezo_creep.h); a version 1 image holds them one sample behind, so it is
+ * refused rather than restored one sample off.
  * Header integers and doubles are little-endian whatever the host; the
  * ModelData image is the host's native layout, guarded by its size and a
  * byte-order marker.
  *
  *   offset  size  field
  *        0     8  magic "PZFMUST1"
- *        8     4  format version (1)
+ *        8     4  format version (2)
  *       12     4  header size (128)
  *       16     8  total size of the blob, checksum included
  *       24    48  model GUID (the FMI 3.0 instantiationToken is the same string), NUL padded
@@ -1218,7 +1221,7 @@ glue_status glue_free_state(void *c, const char *fname, void **state)
  * history). Anything else is refused and nothing is changed.
  */
 #define BLOB_MAGIC "PZFMUST1"
-#define BLOB_VERSION 1u
+#define BLOB_VERSION 2u
 #define BLOB_HEADER 128u
 #define BLOB_GUID_LEN 48u
 #define BLOB_BOM 0x01020304u
