@@ -227,3 +227,46 @@ def test_nonfinite_input_refused_state_unchanged(exact):
         out_a.append(a.step(xi))
         out_b.append(b.step(xi))
     assert out_a == out_b
+
+
+def test_soe_states_are_advanced_by_the_commit():
+    """piezo_creep.h: after the step of sample k the operator holds T_i(k+1) =
+    e^{-s_i} T_i(k) + c_i e^{-s_i (L0+1)} x(k-L0), already advanced for the next sample.
+    Reference: that recursion in plain Python floats (two products and a sum, no fused
+    multiply-add) from T_i(0) = 0, bit for bit, on 300 samples of a signal with an offset."""
+    gl = core.gl_operator(-0.3, 1.2, False)
+    raw = gl.raw
+    n = raw.n_terms
+    decay, inject = list(raw.soe_decay)[:n], list(raw.soe_inject)[:n]
+    x = list(3.0 + np.sin(np.arange(300) * 0.07) * 2.5)
+    state = [0.0] * n
+    assert list(raw.soe_state)[:n] == state
+    for k, xk in enumerate(x):
+        gl.step(xk)
+        leaving = x[k - 16] if k >= 16 else 0.0         # x(k - L0), L0 = 16
+        state = [decay[i] * state[i] + inject[i] * leaving for i in range(n)]
+        assert list(raw.soe_state)[:n] == state, k
+    assert all(v == 0.0 for v in list(raw.soe_state)[n:])     # unused slots untouched
+
+
+def test_soe_state_overflowed_to_inf_refuses_every_later_sample():
+    """An advance that overflows leaves +-Inf in the states (piezo_creep.h): the operator's
+    check accepts it (a live operator can hold it), its output is not finite from then on, so
+    the plant refuses every later sample as diverged and changes nothing, as it did when the
+    advance ran in the evaluation. NaN never arises from an advance and the check refuses it."""
+    L = core.lib()
+    plant = core.Plant({"sensor.noise_rms": 0.0})
+    for v in (1.0, 2.0, 3.0):
+        plant.step(v)
+    creep = plant.raw.creep
+    assert L.piezo_gl_check(core.ffi.addressof(creep)) == core.ffi.NULL
+    creep.soe_state[5] = float("inf")
+    assert L.piezo_gl_check(core.ffi.addressof(creep)) == core.ffi.NULL
+    assert L.piezo_plant_check(plant.raw) == core.ffi.NULL
+    before = bytes(core.ffi.buffer(plant.raw))
+    for v in (1.0, 0.0, -4.0):
+        with pytest.raises(core.CoreDivergedError):
+            plant.step(v)
+        assert bytes(core.ffi.buffer(plant.raw)) == before
+    creep.soe_state[5] = float("nan")
+    assert core.ffi.string(L.piezo_gl_check(core.ffi.addressof(creep))) == b"creep SOE state is NaN"
