@@ -197,16 +197,23 @@ static void log_core_failure(const glue_instance *inst, const char *fname, piezo
 /* ------------------------------------------------------------------------ */
 /* Helpers                                                                   */
 
+/* The refusal of a call outside its modes, apart from glue_instance_of so
+ * that the check itself stays small enough to be inlined into every call. */
+static GLUE_NOINLINE void log_illegal_sequence(const glue_instance *inst, const char *fname, int mask)
+{
+    char allowed[128];
+    mask_names(inst, mask, allowed, sizeof allowed);
+    glue_log_error(inst, "%s: illegal call sequence: the FMU is in state %s (allowed in: %s)",
+                   fname, mode_name(inst, inst->mode), allowed);
+}
+
 glue_instance *glue_instance_of(void *c, const char *fname, int mask)
 {
     glue_instance *inst = (glue_instance *)c;
-    char allowed[128];
     if (inst == NULL || inst->magic != INSTANCE_MAGIC || inst->model != model_guid)
         return NULL;
     if (!(inst->mode & mask)) {
-        mask_names(inst, mask, allowed, sizeof allowed);
-        glue_log_error(inst, "%s: illegal call sequence: the FMU is in state %s (allowed in: %s)",
-                       fname, mode_name(inst, inst->mode), allowed);
+        log_illegal_sequence(inst, fname, mask);
         return NULL;
     }
     return inst;

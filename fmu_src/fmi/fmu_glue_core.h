@@ -124,8 +124,11 @@ typedef struct {
 
 #if defined(__GNUC__)
 #define GLUE_PRINTF(f, a) __attribute__((format(printf, f, a)))
+/* a slow path, kept out of the hot function it is called from */
+#define GLUE_NOINLINE __attribute__((noinline))
 #else
 #define GLUE_PRINTF(f, a)
+#define GLUE_NOINLINE
 #endif
 
 /* Before an instance exists: one message through the host (category from status). */
