@@ -385,14 +385,28 @@ static int scalars_of_type(const glue_instance *inst, const uint32_t vr[], size_
                            int *any_output)
 {
     size_t i;
-    int outputs = 0;
+    unsigned seen = 0;
     for (i = 0; i < nvr; i++) {
         uint32_t r = vr[i];
-        if (r >= (uint32_t)MODEL_N_VARIABLES || inst->n_values[r] != 1 || model_variables[r].type != type)
+        if (r >= (uint32_t)MODEL_N_VARIABLES || !(inst->scalar[r] & GLUE_SCALAR_OF(type)))
             return 0;
-        outputs |= model_variables[r].causality == MODEL_OUTPUT;
+        seen |= inst->scalar[r];
     }
-    *any_output = outputs;
+    *any_output = (seen & GLUE_SCALAR_OUTPUT) != 0;
+    return 1;
+}
+
+/* The hot path of a master's set: 1 when every vr[i] is a scalar Real input
+ * and every v[i] finite, which the checks of glue_set's full path accept. */
+static int finite_real_inputs(const glue_instance *inst, const uint32_t vr[], size_t nvr, const double v[])
+{
+    const unsigned want = GLUE_SCALAR_OF(MODEL_REAL) | GLUE_SCALAR_INPUT;
+    size_t i;
+    for (i = 0; i < nvr; i++) {
+        uint32_t r = vr[i];
+        if (r >= (uint32_t)MODEL_N_VARIABLES || (inst->scalar[r] & want) != want || !isfinite(v[i]))
+            return 0;
+    }
     return 1;
 }
 
@@ -422,12 +436,16 @@ static int check_references(const glue_instance *inst, const char *fname, const 
 /* Instantiation, logging control                                            */
 
 /* Which value references a version has (see glue_instance.n_values). */
+static void map_scalars(glue_instance *inst);
+
 static void map_variables(glue_instance *inst)
 {
     size_t i, j;
     memset(inst->n_values, 1, sizeof inst->n_values);
-    if (!inst->version->arrays)
+    if (!inst->version->arrays) {
+        map_scalars(inst);
         return;
+    }
     /* a run name[1], name[2], ..., name[n] of one type and causality is one array */
     for (i = 0; i < (size_t)MODEL_N_VARIABLES; i++) {
         const char *first = model_variables[i].name, *bracket = strchr(first, '[');
@@ -449,6 +467,22 @@ static void map_variables(glue_instance *inst)
             memset(inst->n_values + i + 1, 0, j - i - 1);
             i = j - 1;
         }
+    }
+    map_scalars(inst);
+}
+
+/* glue_instance.scalar from n_values and the model's table. */
+static void map_scalars(glue_instance *inst)
+{
+    size_t i;
+    for (i = 0; i < (size_t)MODEL_N_VARIABLES; i++) {
+        const model_variable *var = &model_variables[i];
+        inst->scalar[i] = 0;
+        if (inst->n_values[i] != 1)
+            continue;
+        inst->scalar[i] = (unsigned char)(GLUE_SCALAR_OF(var->type)
+                                          | (var->causality == MODEL_INPUT ? GLUE_SCALAR_INPUT : 0u)
+                                          | (var->causality == MODEL_OUTPUT ? GLUE_SCALAR_OUTPUT : 0u));
     }
 }
 
@@ -718,19 +752,14 @@ glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr
     /* The master's exchange: finite values for scalar Real inputs, with no
      * feedthrough warning due. Every check below passes and the values are
      * stored as below; anything else takes the full path. */
-    if (kind == GLUE_VALUES_DOUBLE && nvr == n_values && scalars_of_type(inst, vr, nvr, MODEL_REAL, &any_output)
+    if (kind == GLUE_VALUES_DOUBLE && nvr == n_values
         && !(inst->outputs_read && inst->mode == GLUE_MODE_STEP && !inst->warned_read_before_set
-             && model_direct_feedthrough(&inst->data))) {
-        const double *v = (const double *)values;
+             && model_direct_feedthrough(&inst->data))
+        && finite_real_inputs(inst, vr, nvr, (const double *)values)) {
         for (i = 0; i < nvr; i++)
-            if (model_variables[vr[i]].causality != MODEL_INPUT || !isfinite(v[i]))
-                break;
-        if (i == nvr) {
-            for (i = 0; i < nvr; i++)
-                *(double *)value_ptr(inst, vr[i]) = v[i];
-            inst->outputs_valid = 0;
-            return GLUE_OK;
-        }
+            *(double *)value_ptr(inst, vr[i]) = ((const double *)values)[i];
+        inst->outputs_valid = 0;
+        return GLUE_OK;
     }
     /* Check everything first: a refused call changes nothing. */
     for (i = 0, j = 0; i < nvr; i++) {

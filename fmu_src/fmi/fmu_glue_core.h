@@ -86,6 +86,11 @@ typedef struct {
     int time_variable;              /* GLUE_VR_TIME is the independent variable time (read only) */
 } glue_version;
 
+/* The bits of glue_instance.scalar. */
+#define GLUE_SCALAR_OF(type) (1u << (type))    /* a scalar variable of that model_type */
+#define GLUE_SCALAR_INPUT 8u
+#define GLUE_SCALAR_OUTPUT 16u
+
 /* The value reference of the independent variable (FMI 3.0): the first after the model's. */
 #define GLUE_VR_TIME ((uint32_t)MODEL_N_VARIABLES)
 
@@ -115,6 +120,10 @@ typedef struct {
      * of n elements (model variables vr .. vr + n - 1), 0 if vr is not a value
      * reference of this version (an array's other elements) */
     unsigned char n_values[MODEL_N_VARIABLES];
+    /* what a master's exchange needs to know of vr, in one byte (map_variables):
+     * GLUE_SCALAR_OF(type) when vr is a scalar of that type (n_values[vr] = 1),
+     * and whether it is an input or an output */
+    unsigned char scalar[MODEL_N_VARIABLES];
     ModelData data;
     ModelData backup;           /* data at the start of a doStep; scratch for deserialization */
 } glue_instance;
