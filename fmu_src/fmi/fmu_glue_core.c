@@ -158,8 +158,8 @@ static void mask_names(const glue_instance *inst, int mask, char *buf, size_t si
         snprintf(buf, size, "none");
 }
 
-static void log_core_failure(const glue_instance *inst, const char *fname, piezo_status st,
-                             const piezo_diag *diag)
+static GLUE_NOINLINE void log_core_failure(const glue_instance *inst, const char *fname, piezo_status st,
+                                           const piezo_diag *diag)
 {
     char text[512];
     if (st != PIEZO_ERR_PARAM && model_failure_text(&inst->data, st, text, sizeof text)) {
@@ -588,6 +588,8 @@ glue_status glue_set_debug_logging(void *c, const char *fname, int logging_on, s
 /* ------------------------------------------------------------------------ */
 /* Experiment, initialization, termination                                   */
 
+static void set_stop_limit(glue_instance *inst);
+
 glue_status glue_setup(void *c, const char *fname, double start_time, int stop_time_defined,
                        double stop_time, int enter_init)
 {
@@ -606,6 +608,7 @@ glue_status glue_setup(void *c, const char *fname, double start_time, int stop_t
     inst->t0 = start_time;
     inst->stop_time_defined = stop_time_defined ? 1 : 0;
     inst->stop_time = stop_time_defined ? stop_time : 0.0;
+    set_stop_limit(inst);
     if (enter_init) {
         inst->mode = GLUE_MODE_INIT;
         inst->outputs_valid = 0;
@@ -647,6 +650,7 @@ glue_status glue_exit_init(void *c, const char *fname)
     }
     inst->h = h;
     inst->k = 0;
+    set_stop_limit(inst);
     inst->mode = GLUE_MODE_STEP;
     inst->outputs_valid = 0;
     glue_log_event(inst, "%s: initialized, t0 = %.16g, h = %.16g", fname, inst->t0, h);
@@ -683,6 +687,7 @@ glue_status glue_reset(void *c, const char *fname)
     inst->h = 0.0;
     inst->stop_time_defined = 0;
     inst->stop_time = 0.0;
+    set_stop_limit(inst);
     inst->outputs_valid = 0;
     inst->outputs_read = 0;
     glue_log_event(inst, "%s: back to %s with the start values", fname, mode_name(inst, GLUE_MODE_INSTANTIATED));
@@ -859,9 +864,18 @@ glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32
 /* ------------------------------------------------------------------------ */
 /* Stepping                                                                  */
 
+/* (double)n of a sample count n <= 2^53 + MAX_STEP_SAMPLES < 2^63: the signed
+ * conversion gives the same value (the same integer, rounded alike), and
+ * baseline x86-64 converts a signed 64-bit integer in one instruction, an
+ * unsigned one with a branch and several */
+static double samples_real(uint64_t n)
+{
+    return (double)(int64_t)n;
+}
+
 double glue_time(const glue_instance *inst)
 {
-    return inst->t0 + (double)inst->k * inst->h;
+    return inst->t0 + samples_real(inst->k) * inst->h;
 }
 
 /* fmax(a, b) inline (a libm call on baseline x86-64): the larger, or the other
@@ -869,6 +883,18 @@ double glue_time(const glue_instance *inst)
 static double max_of(double a, double b)
 {
     return a > b || b != b ? a : b;
+}
+
+/* A step may end up to tol_end = min(1e-9 max(h, |stopTime|), 1e-3 h) past
+ * stopTime: stop_limit = stopTime + tol_end. It depends on h and stopTime
+ * only, so it is computed where either changes (setup, the end of
+ * initialization, a restored state, reset), not in every doStep. */
+static void set_stop_limit(glue_instance *inst)
+{
+    double tol_end = 1e-9 * max_of(inst->h, fabs(inst->stop_time));
+    if (tol_end > 1e-3 * inst->h)
+        tol_end = 1e-3 * inst->h;
+    inst->stop_limit = inst->stop_time + tol_end;
 }
 
 /* Log what the model asks to say after a step; a warning if anything. */
@@ -911,68 +937,72 @@ static uint64_t longest_creep_step(double a)
 static glue_status do_step(glue_instance *inst, const char *fname, double currentCommunicationPoint,
                            double communicationStepSize)
 {
-    double t, tol, ratio, n_real;
+    double t, tol, ratio, n_real, t_end;
     char t1[GLUE_REAL_TEXT_SIZE], t2[GLUE_REAL_TEXT_SIZE], t3[GLUE_REAL_TEXT_SIZE], t4[GLUE_REAL_TEXT_SIZE];
     uint64_t n, i;
     size_t needed;
 
     t = glue_time(inst);
-    tol = 1e-9 * max_of(inst->h, fabs(t));
-    if (tol > 1e-3 * inst->h)
-        tol = 1e-3 * inst->h;
-    if (!isfinite(currentCommunicationPoint) || fabs(currentCommunicationPoint - t) > tol) {
-        glue_log_error(inst, "%s: currentCommunicationPoint = %s does not match the FMU time "
-                       "t0 + k h = %s (k = %llu, h = %s): step refused, state and time unchanged",
-                       fname, glue_real_text(t1, currentCommunicationPoint), glue_real_text(t2, t),
-                       (unsigned long long)inst->k, glue_real_text(t3, inst->h));
-        return GLUE_ERROR;
+    /* |currentCommunicationPoint - t| <= tol; the usual step starts exactly at
+     * t, a finite time (as every time of the FMU's), which needs no tolerance */
+    if (currentCommunicationPoint != t) {
+        tol = 1e-9 * max_of(inst->h, fabs(t));
+        if (tol > 1e-3 * inst->h)
+            tol = 1e-3 * inst->h;
+        if (!isfinite(currentCommunicationPoint) || fabs(currentCommunicationPoint - t) > tol) {
+            glue_log_error(inst, "%s: currentCommunicationPoint = %s does not match the FMU time "
+                           "t0 + k h = %s (k = %llu, h = %s): step refused, state and time unchanged",
+                           fname, glue_real_text(t1, currentCommunicationPoint), glue_real_text(t2, t),
+                           (unsigned long long)inst->k, glue_real_text(t3, inst->h));
+            return GLUE_ERROR;
+        }
     }
-    if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
-        glue_log_error(inst, "%s: communicationStepSize = %s refused: the step size must be > 0, a whole "
-                       "multiple n >= 1 of h = %s (a positive step below 1e-9 h rounds to no sample and is a "
-                       "no-op); state and time unchanged", fname, glue_real_text(t1, communicationStepSize),
-                       glue_real_text(t2, inst->h));
-        return GLUE_ERROR;
-    }
-    /* one sample, the usual step: H/h = 1 passes the checks below exactly */
-    ratio = communicationStepSize == inst->h ? 1.0 : communicationStepSize / inst->h;
-    n_real = ratio == 1.0 ? 1.0 : floor(ratio + 0.5);
-    if (!(n_real <= (double)MAX_STEP_SAMPLES)) {
-        glue_log_error(inst, "%s: communicationStepSize = %s is %s samples of h = %s: refused, one doStep "
-                       "computes at most %llu samples (about a second of work: a host must not wait longer in one "
-                       "call); step at most %s s at a time; state and time unchanged", fname,
-                       glue_real_text(t1, communicationStepSize), glue_real_text(t2, ratio),
-                       glue_real_text(t3, inst->h), (unsigned long long)MAX_STEP_SAMPLES,
-                       glue_real_text(t4, (double)MAX_STEP_SAMPLES * inst->h));
-        return GLUE_ERROR;
-    }
-    if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * max_of(1.0, n_real) * inst->h) {
-        glue_log_error(inst, "%s: communicationStepSize = %s is not a whole multiple of h = %s "
-                       "(H/h = %s; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
-                       "time unchanged", fname, glue_real_text(t1, communicationStepSize),
-                       glue_real_text(t2, inst->h), glue_real_text(t3, ratio));
-        return GLUE_ERROR;
+    if (communicationStepSize == inst->h) {
+        /* one sample, the usual step: H = 1 h (h > 0 and finite) passes the checks below exactly */
+        n_real = 1.0;
+    } else {
+        if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
+            glue_log_error(inst, "%s: communicationStepSize = %s refused: the step size must be > 0, a whole "
+                           "multiple n >= 1 of h = %s (a positive step below 1e-9 h rounds to no sample and is a "
+                           "no-op); state and time unchanged", fname, glue_real_text(t1, communicationStepSize),
+                           glue_real_text(t2, inst->h));
+            return GLUE_ERROR;
+        }
+        ratio = communicationStepSize / inst->h;
+        n_real = ratio == 1.0 ? 1.0 : floor(ratio + 0.5);
+        if (!(n_real <= (double)MAX_STEP_SAMPLES)) {
+            glue_log_error(inst, "%s: communicationStepSize = %s is %s samples of h = %s: refused, one doStep "
+                           "computes at most %llu samples (about a second of work: a host must not wait longer "
+                           "in one call); step at most %s s at a time; state and time unchanged", fname,
+                           glue_real_text(t1, communicationStepSize), glue_real_text(t2, ratio),
+                           glue_real_text(t3, inst->h), (unsigned long long)MAX_STEP_SAMPLES,
+                           glue_real_text(t4, (double)MAX_STEP_SAMPLES * inst->h));
+            return GLUE_ERROR;
+        }
+        if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * max_of(1.0, n_real) * inst->h) {
+            glue_log_error(inst, "%s: communicationStepSize = %s is not a whole multiple of h = %s "
+                           "(H/h = %s; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
+                           "time unchanged", fname, glue_real_text(t1, communicationStepSize),
+                           glue_real_text(t2, inst->h), glue_real_text(t3, ratio));
+            return GLUE_ERROR;
+        }
     }
     n = (uint64_t)n_real;
-    /* the end of the step must be a time: k + n <= 2^53 and t0 + (k + n) h finite */
-    if (n > MAX_SAMPLES - inst->k || !isfinite(inst->t0 + (double)(inst->k + n) * inst->h)) {
+    /* the end of the step must be a time: k + n <= 2^53 and t0 + (k + n) h finite
+     * (k + n does not wrap: k <= 2^53, n <= MAX_STEP_SAMPLES) */
+    t_end = inst->t0 + samples_real(inst->k + n) * inst->h;
+    if (n > MAX_SAMPLES - inst->k || !isfinite(t_end)) {
         glue_log_error(inst, "%s: the step from t = %s over %s samples of h = %s ends beyond the FMU's time "
                        "range (at most 2^53 samples, finite t0 + k h): step refused, state and time unchanged",
                        fname, glue_real_text(t1, t), glue_real_text(t2, n_real), glue_real_text(t3, inst->h));
         return GLUE_ERROR;
     }
-    if (inst->stop_time_defined) {
-        double t_end = inst->t0 + (double)(inst->k + n) * inst->h;
-        double tol_end = 1e-9 * max_of(inst->h, fabs(inst->stop_time));
-        if (tol_end > 1e-3 * inst->h)
-            tol_end = 1e-3 * inst->h;
-        if (t_end > inst->stop_time + tol_end) {
-            glue_log_error(inst, "%s: the step from t = %s to t = %s passes stopTime = %s of "
-                           "%s: step refused, state and time unchanged", fname,
-                           glue_real_text(t1, t), glue_real_text(t2, t_end), glue_real_text(t3, inst->stop_time),
-                           inst->version->stop_time_source);
-            return GLUE_ERROR;
-        }
+    if (inst->stop_time_defined && t_end > inst->stop_limit) {
+        glue_log_error(inst, "%s: the step from t = %s to t = %s passes stopTime = %s of "
+                       "%s: step refused, state and time unchanged", fname,
+                       glue_real_text(t1, t), glue_real_text(t2, t_end), glue_real_text(t3, inst->stop_time),
+                       inst->version->stop_time_source);
+        return GLUE_ERROR;
     }
     if (n > 0) {
         char why[512];
@@ -992,8 +1022,8 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
     }
     /* exact creep: the sample at k sums its k + 1 past values (the history holds
      * two doubles a sample), so the work grows with the time since t0 */
-    needed = model_history_needed(&inst->data);
-    if (n > 1 && needed > 0 && creep_terms((double)n, (double)(needed / 2)) > (double)MAX_STEP_CREEP_TERMS) {
+    needed = n > 1 ? model_history_needed(&inst->data) : 0;
+    if (needed > 0 && creep_terms((double)n, (double)(needed / 2)) > (double)MAX_STEP_CREEP_TERMS) {
         uint64_t longest = longest_creep_step((double)(needed / 2));
         glue_log_error(inst, "%s: the step from t = %s over %llu samples would sum %s terms of the exact creep "
                        "(creep.exact = true: the sample at k sums its k + 1 past values), but one doStep sums at "
@@ -1189,6 +1219,7 @@ glue_status glue_set_state(void *c, const char *fname, void *state)
     inst->t0 = st->t0;
     inst->k = st->k;
     inst->h = st->h;
+    set_stop_limit(inst);
     inst->outputs_valid = 0;
     glue_log_event(inst, "%s: restored a state in %s at t = %.16g", fname, mode_name(inst, inst->mode),
                    glue_time(inst));
