@@ -697,75 +697,86 @@ glue_status glue_reset(void *c, const char *fname)
 /* ------------------------------------------------------------------------ */
 /* Getting and setting variables                                             */
 
-glue_status glue_get(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
-                     void *values, size_t n_values)
+/* One value of a get, in the layout of kind, from the variable at p. */
+static void get_value(glue_values kind, void *values, size_t j, const void *p)
 {
-    glue_instance *inst = glue_instance_of(c, fname, GLUE_MASK_GET);
+    switch (kind) {
+    case GLUE_VALUES_DOUBLE: ((double *)values)[j] = *(const double *)p; break;
+    case GLUE_VALUES_INT: ((int *)values)[j] = *(const int *)p; break;
+    case GLUE_VALUES_INT32: ((int32_t *)values)[j] = (int32_t)*(const int *)p; break;
+    case GLUE_VALUES_BOOL_INT: ((int *)values)[j] = *(const int *)p; break;     /* 0 or 1 */
+    case GLUE_VALUES_BOOL_BYTE: ((unsigned char *)values)[j] = *(const int *)p != 0; break;
+    }
+}
+
+/* glue_get after the instance check, for everything but scalars of the
+ * getter's type: the checks with their messages, arrays, time. */
+static GLUE_NOINLINE glue_status get_checked(glue_instance *inst, const char *fname, const uint32_t vr[],
+                                             size_t nvr, glue_values kind, void *values, size_t n_values)
+{
     size_t i, j, e;
-    int need_outputs, scalars;
-    if (inst == NULL)
-        return GLUE_ERROR;
+    int need_outputs;
     if (nvr == 0)
         return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
-    /* scalars of the right type (a master's exchange) pass check_references: skip its bookkeeping */
-    scalars = nvr == n_values && scalars_of_type(inst, vr, nvr, kind_type(kind), &need_outputs);
-    if (!scalars && !check_references(inst, fname, vr, nvr, kind_type(kind), n_values, &need_outputs))
+    if (!check_references(inst, fname, vr, nvr, kind_type(kind), n_values, &need_outputs))
         return GLUE_ERROR;
     if (need_outputs && !refresh_outputs(inst, fname))
         return GLUE_ERROR;
     if (need_outputs)
         inst->outputs_read = 1;
-    if (scalars && kind == GLUE_VALUES_DOUBLE) {
-        /* one double each: the copy of the loop below */
-        for (i = 0; i < nvr; i++)
-            ((double *)values)[i] = *(const double *)value_ptr(inst, vr[i]);
-        return GLUE_OK;
-    }
     for (i = 0, j = 0; i < nvr; i++) {
         if (is_time(inst, vr[i])) {
             ((double *)values)[j++] = glue_time(inst);
             continue;
         }
-        for (e = 0; e < inst->n_values[vr[i]]; e++, j++) {
-            const void *p = value_ptr(inst, vr[i] + (uint32_t)e);
-            switch (kind) {
-            case GLUE_VALUES_DOUBLE: ((double *)values)[j] = *(const double *)p; break;
-            case GLUE_VALUES_INT: ((int *)values)[j] = *(const int *)p; break;
-            case GLUE_VALUES_INT32: ((int32_t *)values)[j] = (int32_t)*(const int *)p; break;
-            case GLUE_VALUES_BOOL_INT: ((int *)values)[j] = *(const int *)p; break;     /* 0 or 1 */
-            case GLUE_VALUES_BOOL_BYTE: ((unsigned char *)values)[j] = *(const int *)p != 0; break;
-            }
-        }
+        for (e = 0; e < inst->n_values[vr[i]]; e++, j++)
+            get_value(kind, values, j, value_ptr(inst, vr[i] + (uint32_t)e));
     }
     return GLUE_OK;
 }
 
-glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
-                     const void *values, size_t n_values)
+/* The master's exchange: scalar variables of the getter's type (vr non-empty,
+ * nValues = nvr), which check_references accepts without a message; the rest
+ * of get_checked, without its bookkeeping. Anything else takes get_checked. */
+glue_status glue_get(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
+                     void *values, size_t n_values)
 {
-    glue_instance *inst = glue_instance_of(c, fname, GLUE_MASK_SET);
-    size_t i, j, e;
-    int any_output;
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MASK_GET);
+    size_t i;
+    int need_outputs;
     if (inst == NULL)
         return GLUE_ERROR;
+    if (nvr == 0 || nvr != n_values || vr == NULL || values == NULL
+        || !scalars_of_type(inst, vr, nvr, kind_type(kind), &need_outputs))
+        return get_checked(inst, fname, vr, nvr, kind, values, n_values);
+    if (need_outputs) {
+        if (!refresh_outputs(inst, fname))
+            return GLUE_ERROR;
+        inst->outputs_read = 1;
+    }
+    if (kind == GLUE_VALUES_DOUBLE) {
+        /* one double each: get_value's copy without its switch */
+        for (i = 0; i < nvr; i++)
+            ((double *)values)[i] = *(const double *)value_ptr(inst, vr[i]);
+        return GLUE_OK;
+    }
+    for (i = 0; i < nvr; i++)
+        get_value(kind, values, i, value_ptr(inst, vr[i]));
+    return GLUE_OK;
+}
+
+/* glue_set after the instance check: every case with its checks and messages. */
+static GLUE_NOINLINE glue_status set_checked(glue_instance *inst, const char *fname, const uint32_t vr[],
+                                             size_t nvr, glue_values kind, const void *values, size_t n_values)
+{
+    size_t i, j, e;
+    int any_output;
     if (nvr == 0)
         return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
-    /* The master's exchange: finite values for scalar Real inputs, with no
-     * feedthrough warning due. Every check below passes and the values are
-     * stored as below; anything else takes the full path. */
-    if (kind == GLUE_VALUES_DOUBLE && nvr == n_values
-        && !(inst->outputs_read && inst->mode == GLUE_MODE_STEP && !inst->warned_read_before_set
-             && model_direct_feedthrough(&inst->data))
-        && finite_real_inputs(inst, vr, nvr, (const double *)values)) {
-        for (i = 0; i < nvr; i++)
-            *(double *)value_ptr(inst, vr[i]) = ((const double *)values)[i];
-        inst->outputs_valid = 0;
-        return GLUE_OK;
-    }
     /* Check everything first: a refused call changes nothing. */
     for (i = 0, j = 0; i < nvr; i++) {
         const model_variable *var;
@@ -832,6 +843,27 @@ glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr
             }
         }
     }
+    inst->outputs_valid = 0;
+    return GLUE_OK;
+}
+
+/* The master's exchange: finite values for scalar Real inputs (vr non-empty,
+ * nValues = nvr), with no feedthrough warning due. Every check of set_checked
+ * passes and the values are stored as there; anything else takes set_checked. */
+glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
+                     const void *values, size_t n_values)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MASK_SET);
+    size_t i;
+    if (inst == NULL)
+        return GLUE_ERROR;
+    if (kind != GLUE_VALUES_DOUBLE || nvr == 0 || nvr != n_values || vr == NULL || values == NULL
+        || (inst->outputs_read && inst->mode == GLUE_MODE_STEP && !inst->warned_read_before_set
+            && model_direct_feedthrough(&inst->data))
+        || !finite_real_inputs(inst, vr, nvr, (const double *)values))
+        return set_checked(inst, fname, vr, nvr, kind, values, n_values);
+    for (i = 0; i < nvr; i++)
+        *(double *)value_ptr(inst, vr[i]) = ((const double *)values)[i];
     inst->outputs_valid = 0;
     return GLUE_OK;
 }
