@@ -136,9 +136,15 @@ typedef struct {
 #define GLUE_PRINTF(f, a) __attribute__((format(printf, f, a)))
 /* a slow path, kept out of the hot function it is called from */
 #define GLUE_NOINLINE __attribute__((noinline))
+/* A function of a master's exchange, called every sample (the getter and
+ * setter of Reals and Booleans, doStep): everything it calls is inlined into
+ * it, the glue, the model and the core's step, which saves the calls and the
+ * spills between them; the slow paths (GLUE_NOINLINE) and the logging stay out. */
+#define GLUE_HOT_PATH __attribute__((flatten))
 #else
 #define GLUE_PRINTF(f, a)
 #define GLUE_NOINLINE
+#define GLUE_HOT_PATH
 #endif
 
 /* Before an instance exists: one message through the host (category from status). */
