@@ -196,6 +196,7 @@ fmi2Status fmi2Reset(fmi2Component c)
 /* ------------------------------------------------------------------------ */
 /* Getting and setting variables                                             */
 
+GLUE_HOT_PATH
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
     return (fmi2Status)glue_get(c, "fmi2GetReal", vr, nvr, GLUE_VALUES_DOUBLE, value, nvr);
@@ -206,6 +207,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     return (fmi2Status)glue_get(c, "fmi2GetInteger", vr, nvr, GLUE_VALUES_INT, value, nvr);
 }
 
+GLUE_HOT_PATH
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Boolean value[])
 {
     return (fmi2Status)glue_get(c, "fmi2GetBoolean", vr, nvr, GLUE_VALUES_BOOL_INT, value, nvr);
@@ -226,6 +228,7 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     return fmi2Error;
 }
 
+GLUE_HOT_PATH
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
 {
     return (fmi2Status)glue_set(c, "fmi2SetReal", vr, nvr, GLUE_VALUES_DOUBLE, value, nvr);
@@ -259,6 +262,7 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 /* ------------------------------------------------------------------------ */
 /* Stepping                                                                  */
 
+GLUE_HOT_PATH
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {

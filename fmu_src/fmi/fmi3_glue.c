@@ -226,6 +226,7 @@ fmi3Status fmi3Reset(fmi3Instance instance)
 /* ------------------------------------------------------------------------ */
 /* Getting and setting variables                                             */
 
+GLUE_HOT_PATH
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, fmi3Float64 values[], size_t nValues)
 {
@@ -240,6 +241,7 @@ fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
                                 values, nValues);
 }
 
+GLUE_HOT_PATH
 fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, fmi3Boolean values[], size_t nValues)
 {
@@ -247,6 +249,7 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
                                 GLUE_VALUES_BOOL_BYTE, values, nValues);
 }
 
+GLUE_HOT_PATH
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
                           size_t nValueReferences, const fmi3Float64 values[], size_t nValues)
 {
@@ -545,6 +548,7 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueRefere
     return (fmi3Status)glue_unsupported(instance, "fmi3GetOutputDerivatives", "maxOutputDerivativeOrder = 0");
 }
 
+GLUE_HOT_PATH
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
                       fmi3Float64 communicationStepSize, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                       fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn,

@@ -158,8 +158,8 @@ static void mask_names(const glue_instance *inst, int mask, char *buf, size_t si
         snprintf(buf, size, "none");
 }
 
-static void log_core_failure(const glue_instance *inst, const char *fname, piezo_status st,
-                             const piezo_diag *diag)
+static GLUE_NOINLINE void log_core_failure(const glue_instance *inst, const char *fname, piezo_status st,
+                                           const piezo_diag *diag)
 {
     char text[512];
     if (st != PIEZO_ERR_PARAM && model_failure_text(&inst->data, st, text, sizeof text)) {
@@ -197,16 +197,23 @@ static void log_core_failure(const glue_instance *inst, const char *fname, piezo
 /* ------------------------------------------------------------------------ */
 /* Helpers                                                                   */
 
+/* The refusal of a call outside its modes, apart from glue_instance_of so
+ * that the check itself stays small enough to be inlined into every call. */
+static GLUE_NOINLINE void log_illegal_sequence(const glue_instance *inst, const char *fname, int mask)
+{
+    char allowed[128];
+    mask_names(inst, mask, allowed, sizeof allowed);
+    glue_log_error(inst, "%s: illegal call sequence: the FMU is in state %s (allowed in: %s)",
+                   fname, mode_name(inst, inst->mode), allowed);
+}
+
 glue_instance *glue_instance_of(void *c, const char *fname, int mask)
 {
     glue_instance *inst = (glue_instance *)c;
-    char allowed[128];
     if (inst == NULL || inst->magic != INSTANCE_MAGIC || inst->model != model_guid)
         return NULL;
     if (!(inst->mode & mask)) {
-        mask_names(inst, mask, allowed, sizeof allowed);
-        glue_log_error(inst, "%s: illegal call sequence: the FMU is in state %s (allowed in: %s)",
-                       fname, mode_name(inst, inst->mode), allowed);
+        log_illegal_sequence(inst, fname, mask);
         return NULL;
     }
     return inst;
@@ -378,14 +385,28 @@ static int scalars_of_type(const glue_instance *inst, const uint32_t vr[], size_
                            int *any_output)
 {
     size_t i;
-    int outputs = 0;
+    unsigned seen = 0;
     for (i = 0; i < nvr; i++) {
         uint32_t r = vr[i];
-        if (r >= (uint32_t)MODEL_N_VARIABLES || inst->n_values[r] != 1 || model_variables[r].type != type)
+        if (r >= (uint32_t)MODEL_N_VARIABLES || !(inst->scalar[r] & GLUE_SCALAR_OF(type)))
             return 0;
-        outputs |= model_variables[r].causality == MODEL_OUTPUT;
+        seen |= inst->scalar[r];
     }
-    *any_output = outputs;
+    *any_output = (seen & GLUE_SCALAR_OUTPUT) != 0;
+    return 1;
+}
+
+/* The hot path of a master's set: 1 when every vr[i] is a scalar Real input
+ * and every v[i] finite, which the checks of glue_set's full path accept. */
+static int finite_real_inputs(const glue_instance *inst, const uint32_t vr[], size_t nvr, const double v[])
+{
+    const unsigned want = GLUE_SCALAR_OF(MODEL_REAL) | GLUE_SCALAR_INPUT;
+    size_t i;
+    for (i = 0; i < nvr; i++) {
+        uint32_t r = vr[i];
+        if (r >= (uint32_t)MODEL_N_VARIABLES || (inst->scalar[r] & want) != want || !isfinite(v[i]))
+            return 0;
+    }
     return 1;
 }
 
@@ -415,12 +436,16 @@ static int check_references(const glue_instance *inst, const char *fname, const 
 /* Instantiation, logging control                                            */
 
 /* Which value references a version has (see glue_instance.n_values). */
+static void map_scalars(glue_instance *inst);
+
 static void map_variables(glue_instance *inst)
 {
     size_t i, j;
     memset(inst->n_values, 1, sizeof inst->n_values);
-    if (!inst->version->arrays)
+    if (!inst->version->arrays) {
+        map_scalars(inst);
         return;
+    }
     /* a run name[1], name[2], ..., name[n] of one type and causality is one array */
     for (i = 0; i < (size_t)MODEL_N_VARIABLES; i++) {
         const char *first = model_variables[i].name, *bracket = strchr(first, '[');
@@ -442,6 +467,22 @@ static void map_variables(glue_instance *inst)
             memset(inst->n_values + i + 1, 0, j - i - 1);
             i = j - 1;
         }
+    }
+    map_scalars(inst);
+}
+
+/* glue_instance.scalar from n_values and the model's table. */
+static void map_scalars(glue_instance *inst)
+{
+    size_t i;
+    for (i = 0; i < (size_t)MODEL_N_VARIABLES; i++) {
+        const model_variable *var = &model_variables[i];
+        inst->scalar[i] = 0;
+        if (inst->n_values[i] != 1)
+            continue;
+        inst->scalar[i] = (unsigned char)(GLUE_SCALAR_OF(var->type)
+                                          | (var->causality == MODEL_INPUT ? GLUE_SCALAR_INPUT : 0u)
+                                          | (var->causality == MODEL_OUTPUT ? GLUE_SCALAR_OUTPUT : 0u));
     }
 }
 
@@ -547,6 +588,8 @@ glue_status glue_set_debug_logging(void *c, const char *fname, int logging_on, s
 /* ------------------------------------------------------------------------ */
 /* Experiment, initialization, termination                                   */
 
+static void set_stop_limit(glue_instance *inst);
+
 glue_status glue_setup(void *c, const char *fname, double start_time, int stop_time_defined,
                        double stop_time, int enter_init)
 {
@@ -565,6 +608,7 @@ glue_status glue_setup(void *c, const char *fname, double start_time, int stop_t
     inst->t0 = start_time;
     inst->stop_time_defined = stop_time_defined ? 1 : 0;
     inst->stop_time = stop_time_defined ? stop_time : 0.0;
+    set_stop_limit(inst);
     if (enter_init) {
         inst->mode = GLUE_MODE_INIT;
         inst->outputs_valid = 0;
@@ -606,6 +650,7 @@ glue_status glue_exit_init(void *c, const char *fname)
     }
     inst->h = h;
     inst->k = 0;
+    set_stop_limit(inst);
     inst->mode = GLUE_MODE_STEP;
     inst->outputs_valid = 0;
     glue_log_event(inst, "%s: initialized, t0 = %.16g, h = %.16g", fname, inst->t0, h);
@@ -642,6 +687,7 @@ glue_status glue_reset(void *c, const char *fname)
     inst->h = 0.0;
     inst->stop_time_defined = 0;
     inst->stop_time = 0.0;
+    set_stop_limit(inst);
     inst->outputs_valid = 0;
     inst->outputs_read = 0;
     glue_log_event(inst, "%s: back to %s with the start values", fname, mode_name(inst, GLUE_MODE_INSTANTIATED));
@@ -651,80 +697,86 @@ glue_status glue_reset(void *c, const char *fname)
 /* ------------------------------------------------------------------------ */
 /* Getting and setting variables                                             */
 
-glue_status glue_get(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
-                     void *values, size_t n_values)
+/* One value of a get, in the layout of kind, from the variable at p. */
+static void get_value(glue_values kind, void *values, size_t j, const void *p)
 {
-    glue_instance *inst = glue_instance_of(c, fname, GLUE_MASK_GET);
+    switch (kind) {
+    case GLUE_VALUES_DOUBLE: ((double *)values)[j] = *(const double *)p; break;
+    case GLUE_VALUES_INT: ((int *)values)[j] = *(const int *)p; break;
+    case GLUE_VALUES_INT32: ((int32_t *)values)[j] = (int32_t)*(const int *)p; break;
+    case GLUE_VALUES_BOOL_INT: ((int *)values)[j] = *(const int *)p; break;     /* 0 or 1 */
+    case GLUE_VALUES_BOOL_BYTE: ((unsigned char *)values)[j] = *(const int *)p != 0; break;
+    }
+}
+
+/* glue_get after the instance check, for everything but scalars of the
+ * getter's type: the checks with their messages, arrays, time. */
+static GLUE_NOINLINE glue_status get_checked(glue_instance *inst, const char *fname, const uint32_t vr[],
+                                             size_t nvr, glue_values kind, void *values, size_t n_values)
+{
     size_t i, j, e;
-    int need_outputs, scalars;
-    if (inst == NULL)
-        return GLUE_ERROR;
+    int need_outputs;
     if (nvr == 0)
         return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
-    /* scalars of the right type (a master's exchange) pass check_references: skip its bookkeeping */
-    scalars = nvr == n_values && scalars_of_type(inst, vr, nvr, kind_type(kind), &need_outputs);
-    if (!scalars && !check_references(inst, fname, vr, nvr, kind_type(kind), n_values, &need_outputs))
+    if (!check_references(inst, fname, vr, nvr, kind_type(kind), n_values, &need_outputs))
         return GLUE_ERROR;
     if (need_outputs && !refresh_outputs(inst, fname))
         return GLUE_ERROR;
     if (need_outputs)
         inst->outputs_read = 1;
-    if (scalars && kind == GLUE_VALUES_DOUBLE) {
-        /* one double each: the copy of the loop below */
-        for (i = 0; i < nvr; i++)
-            ((double *)values)[i] = *(const double *)value_ptr(inst, vr[i]);
-        return GLUE_OK;
-    }
     for (i = 0, j = 0; i < nvr; i++) {
         if (is_time(inst, vr[i])) {
             ((double *)values)[j++] = glue_time(inst);
             continue;
         }
-        for (e = 0; e < inst->n_values[vr[i]]; e++, j++) {
-            const void *p = value_ptr(inst, vr[i] + (uint32_t)e);
-            switch (kind) {
-            case GLUE_VALUES_DOUBLE: ((double *)values)[j] = *(const double *)p; break;
-            case GLUE_VALUES_INT: ((int *)values)[j] = *(const int *)p; break;
-            case GLUE_VALUES_INT32: ((int32_t *)values)[j] = (int32_t)*(const int *)p; break;
-            case GLUE_VALUES_BOOL_INT: ((int *)values)[j] = *(const int *)p; break;     /* 0 or 1 */
-            case GLUE_VALUES_BOOL_BYTE: ((unsigned char *)values)[j] = *(const int *)p != 0; break;
-            }
-        }
+        for (e = 0; e < inst->n_values[vr[i]]; e++, j++)
+            get_value(kind, values, j, value_ptr(inst, vr[i] + (uint32_t)e));
     }
     return GLUE_OK;
 }
 
-glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
-                     const void *values, size_t n_values)
+/* The master's exchange: scalar variables of the getter's type (vr non-empty,
+ * nValues = nvr), which check_references accepts without a message; the rest
+ * of get_checked, without its bookkeeping. Anything else takes get_checked. */
+glue_status glue_get(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
+                     void *values, size_t n_values)
 {
-    glue_instance *inst = glue_instance_of(c, fname, GLUE_MASK_SET);
-    size_t i, j, e;
-    int any_output;
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MASK_GET);
+    size_t i;
+    int need_outputs;
     if (inst == NULL)
         return GLUE_ERROR;
+    if (nvr == 0 || nvr != n_values || vr == NULL || values == NULL
+        || !scalars_of_type(inst, vr, nvr, kind_type(kind), &need_outputs))
+        return get_checked(inst, fname, vr, nvr, kind, values, n_values);
+    if (need_outputs) {
+        if (!refresh_outputs(inst, fname))
+            return GLUE_ERROR;
+        inst->outputs_read = 1;
+    }
+    if (kind == GLUE_VALUES_DOUBLE) {
+        /* one double each: get_value's copy without its switch */
+        for (i = 0; i < nvr; i++)
+            ((double *)values)[i] = *(const double *)value_ptr(inst, vr[i]);
+        return GLUE_OK;
+    }
+    for (i = 0; i < nvr; i++)
+        get_value(kind, values, i, value_ptr(inst, vr[i]));
+    return GLUE_OK;
+}
+
+/* glue_set after the instance check: every case with its checks and messages. */
+static GLUE_NOINLINE glue_status set_checked(glue_instance *inst, const char *fname, const uint32_t vr[],
+                                             size_t nvr, glue_values kind, const void *values, size_t n_values)
+{
+    size_t i, j, e;
+    int any_output;
     if (nvr == 0)
         return no_references_no_values(inst, fname, n_values) ? GLUE_OK : GLUE_ERROR;
     if (glue_null_arg(inst, fname, "vr", vr) || glue_null_arg(inst, fname, "value", values))
         return GLUE_ERROR;
-    /* The master's exchange: finite values for scalar Real inputs, with no
-     * feedthrough warning due. Every check below passes and the values are
-     * stored as below; anything else takes the full path. */
-    if (kind == GLUE_VALUES_DOUBLE && nvr == n_values && scalars_of_type(inst, vr, nvr, MODEL_REAL, &any_output)
-        && !(inst->outputs_read && inst->mode == GLUE_MODE_STEP && !inst->warned_read_before_set
-             && model_direct_feedthrough(&inst->data))) {
-        const double *v = (const double *)values;
-        for (i = 0; i < nvr; i++)
-            if (model_variables[vr[i]].causality != MODEL_INPUT || !isfinite(v[i]))
-                break;
-        if (i == nvr) {
-            for (i = 0; i < nvr; i++)
-                *(double *)value_ptr(inst, vr[i]) = v[i];
-            inst->outputs_valid = 0;
-            return GLUE_OK;
-        }
-    }
     /* Check everything first: a refused call changes nothing. */
     for (i = 0, j = 0; i < nvr; i++) {
         const model_variable *var;
@@ -795,6 +847,27 @@ glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr
     return GLUE_OK;
 }
 
+/* The master's exchange: finite values for scalar Real inputs (vr non-empty,
+ * nValues = nvr), with no feedthrough warning due. Every check of set_checked
+ * passes and the values are stored as there; anything else takes set_checked. */
+glue_status glue_set(void *c, const char *fname, const uint32_t vr[], size_t nvr, glue_values kind,
+                     const void *values, size_t n_values)
+{
+    glue_instance *inst = glue_instance_of(c, fname, GLUE_MASK_SET);
+    size_t i;
+    if (inst == NULL)
+        return GLUE_ERROR;
+    if (kind != GLUE_VALUES_DOUBLE || nvr == 0 || nvr != n_values || vr == NULL || values == NULL
+        || (inst->outputs_read && inst->mode == GLUE_MODE_STEP && !inst->warned_read_before_set
+            && model_direct_feedthrough(&inst->data))
+        || !finite_real_inputs(inst, vr, nvr, (const double *)values))
+        return set_checked(inst, fname, vr, nvr, kind, values, n_values);
+    for (i = 0; i < nvr; i++)
+        *(double *)value_ptr(inst, vr[i]) = ((const double *)values)[i];
+    inst->outputs_valid = 0;
+    return GLUE_OK;
+}
+
 glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32_t vr[], size_t nvr,
                               const void *values, size_t n_values, const char *type_name)
 {
@@ -823,9 +896,18 @@ glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32
 /* ------------------------------------------------------------------------ */
 /* Stepping                                                                  */
 
+/* (double)n of a sample count n <= 2^53 + MAX_STEP_SAMPLES < 2^63: the signed
+ * conversion gives the same value (the same integer, rounded alike), and
+ * baseline x86-64 converts a signed 64-bit integer in one instruction, an
+ * unsigned one with a branch and several */
+static double samples_real(uint64_t n)
+{
+    return (double)(int64_t)n;
+}
+
 double glue_time(const glue_instance *inst)
 {
-    return inst->t0 + (double)inst->k * inst->h;
+    return inst->t0 + samples_real(inst->k) * inst->h;
 }
 
 /* fmax(a, b) inline (a libm call on baseline x86-64): the larger, or the other
@@ -833,6 +915,18 @@ double glue_time(const glue_instance *inst)
 static double max_of(double a, double b)
 {
     return a > b || b != b ? a : b;
+}
+
+/* A step may end up to tol_end = min(1e-9 max(h, |stopTime|), 1e-3 h) past
+ * stopTime: stop_limit = stopTime + tol_end. It depends on h and stopTime
+ * only, so it is computed where either changes (setup, the end of
+ * initialization, a restored state, reset), not in every doStep. */
+static void set_stop_limit(glue_instance *inst)
+{
+    double tol_end = 1e-9 * max_of(inst->h, fabs(inst->stop_time));
+    if (tol_end > 1e-3 * inst->h)
+        tol_end = 1e-3 * inst->h;
+    inst->stop_limit = inst->stop_time + tol_end;
 }
 
 /* Log what the model asks to say after a step; a warning if anything. */
@@ -875,68 +969,72 @@ static uint64_t longest_creep_step(double a)
 static glue_status do_step(glue_instance *inst, const char *fname, double currentCommunicationPoint,
                            double communicationStepSize)
 {
-    double t, tol, ratio, n_real;
+    double t, tol, ratio, n_real, t_end;
     char t1[GLUE_REAL_TEXT_SIZE], t2[GLUE_REAL_TEXT_SIZE], t3[GLUE_REAL_TEXT_SIZE], t4[GLUE_REAL_TEXT_SIZE];
     uint64_t n, i;
     size_t needed;
 
     t = glue_time(inst);
-    tol = 1e-9 * max_of(inst->h, fabs(t));
-    if (tol > 1e-3 * inst->h)
-        tol = 1e-3 * inst->h;
-    if (!isfinite(currentCommunicationPoint) || fabs(currentCommunicationPoint - t) > tol) {
-        glue_log_error(inst, "%s: currentCommunicationPoint = %s does not match the FMU time "
-                       "t0 + k h = %s (k = %llu, h = %s): step refused, state and time unchanged",
-                       fname, glue_real_text(t1, currentCommunicationPoint), glue_real_text(t2, t),
-                       (unsigned long long)inst->k, glue_real_text(t3, inst->h));
-        return GLUE_ERROR;
+    /* |currentCommunicationPoint - t| <= tol; the usual step starts exactly at
+     * t, a finite time (as every time of the FMU's), which needs no tolerance */
+    if (currentCommunicationPoint != t) {
+        tol = 1e-9 * max_of(inst->h, fabs(t));
+        if (tol > 1e-3 * inst->h)
+            tol = 1e-3 * inst->h;
+        if (!isfinite(currentCommunicationPoint) || fabs(currentCommunicationPoint - t) > tol) {
+            glue_log_error(inst, "%s: currentCommunicationPoint = %s does not match the FMU time "
+                           "t0 + k h = %s (k = %llu, h = %s): step refused, state and time unchanged",
+                           fname, glue_real_text(t1, currentCommunicationPoint), glue_real_text(t2, t),
+                           (unsigned long long)inst->k, glue_real_text(t3, inst->h));
+            return GLUE_ERROR;
+        }
     }
-    if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
-        glue_log_error(inst, "%s: communicationStepSize = %s refused: the step size must be > 0, a whole "
-                       "multiple n >= 1 of h = %s (a positive step below 1e-9 h rounds to no sample and is a "
-                       "no-op); state and time unchanged", fname, glue_real_text(t1, communicationStepSize),
-                       glue_real_text(t2, inst->h));
-        return GLUE_ERROR;
-    }
-    /* one sample, the usual step: H/h = 1 passes the checks below exactly */
-    ratio = communicationStepSize == inst->h ? 1.0 : communicationStepSize / inst->h;
-    n_real = ratio == 1.0 ? 1.0 : floor(ratio + 0.5);
-    if (!(n_real <= (double)MAX_STEP_SAMPLES)) {
-        glue_log_error(inst, "%s: communicationStepSize = %s is %s samples of h = %s: refused, one doStep "
-                       "computes at most %llu samples (about a second of work: a host must not wait longer in one "
-                       "call); step at most %s s at a time; state and time unchanged", fname,
-                       glue_real_text(t1, communicationStepSize), glue_real_text(t2, ratio),
-                       glue_real_text(t3, inst->h), (unsigned long long)MAX_STEP_SAMPLES,
-                       glue_real_text(t4, (double)MAX_STEP_SAMPLES * inst->h));
-        return GLUE_ERROR;
-    }
-    if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * max_of(1.0, n_real) * inst->h) {
-        glue_log_error(inst, "%s: communicationStepSize = %s is not a whole multiple of h = %s "
-                       "(H/h = %s; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
-                       "time unchanged", fname, glue_real_text(t1, communicationStepSize),
-                       glue_real_text(t2, inst->h), glue_real_text(t3, ratio));
-        return GLUE_ERROR;
+    if (communicationStepSize == inst->h) {
+        /* one sample, the usual step: H = 1 h (h > 0 and finite) passes the checks below exactly */
+        n_real = 1.0;
+    } else {
+        if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
+            glue_log_error(inst, "%s: communicationStepSize = %s refused: the step size must be > 0, a whole "
+                           "multiple n >= 1 of h = %s (a positive step below 1e-9 h rounds to no sample and is a "
+                           "no-op); state and time unchanged", fname, glue_real_text(t1, communicationStepSize),
+                           glue_real_text(t2, inst->h));
+            return GLUE_ERROR;
+        }
+        ratio = communicationStepSize / inst->h;
+        n_real = ratio == 1.0 ? 1.0 : floor(ratio + 0.5);
+        if (!(n_real <= (double)MAX_STEP_SAMPLES)) {
+            glue_log_error(inst, "%s: communicationStepSize = %s is %s samples of h = %s: refused, one doStep "
+                           "computes at most %llu samples (about a second of work: a host must not wait longer "
+                           "in one call); step at most %s s at a time; state and time unchanged", fname,
+                           glue_real_text(t1, communicationStepSize), glue_real_text(t2, ratio),
+                           glue_real_text(t3, inst->h), (unsigned long long)MAX_STEP_SAMPLES,
+                           glue_real_text(t4, (double)MAX_STEP_SAMPLES * inst->h));
+            return GLUE_ERROR;
+        }
+        if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * max_of(1.0, n_real) * inst->h) {
+            glue_log_error(inst, "%s: communicationStepSize = %s is not a whole multiple of h = %s "
+                           "(H/h = %s; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
+                           "time unchanged", fname, glue_real_text(t1, communicationStepSize),
+                           glue_real_text(t2, inst->h), glue_real_text(t3, ratio));
+            return GLUE_ERROR;
+        }
     }
     n = (uint64_t)n_real;
-    /* the end of the step must be a time: k + n <= 2^53 and t0 + (k + n) h finite */
-    if (n > MAX_SAMPLES - inst->k || !isfinite(inst->t0 + (double)(inst->k + n) * inst->h)) {
+    /* the end of the step must be a time: k + n <= 2^53 and t0 + (k + n) h finite
+     * (k + n does not wrap: k <= 2^53, n <= MAX_STEP_SAMPLES) */
+    t_end = inst->t0 + samples_real(inst->k + n) * inst->h;
+    if (n > MAX_SAMPLES - inst->k || !isfinite(t_end)) {
         glue_log_error(inst, "%s: the step from t = %s over %s samples of h = %s ends beyond the FMU's time "
                        "range (at most 2^53 samples, finite t0 + k h): step refused, state and time unchanged",
                        fname, glue_real_text(t1, t), glue_real_text(t2, n_real), glue_real_text(t3, inst->h));
         return GLUE_ERROR;
     }
-    if (inst->stop_time_defined) {
-        double t_end = inst->t0 + (double)(inst->k + n) * inst->h;
-        double tol_end = 1e-9 * max_of(inst->h, fabs(inst->stop_time));
-        if (tol_end > 1e-3 * inst->h)
-            tol_end = 1e-3 * inst->h;
-        if (t_end > inst->stop_time + tol_end) {
-            glue_log_error(inst, "%s: the step from t = %s to t = %s passes stopTime = %s of "
-                           "%s: step refused, state and time unchanged", fname,
-                           glue_real_text(t1, t), glue_real_text(t2, t_end), glue_real_text(t3, inst->stop_time),
-                           inst->version->stop_time_source);
-            return GLUE_ERROR;
-        }
+    if (inst->stop_time_defined && t_end > inst->stop_limit) {
+        glue_log_error(inst, "%s: the step from t = %s to t = %s passes stopTime = %s of "
+                       "%s: step refused, state and time unchanged", fname,
+                       glue_real_text(t1, t), glue_real_text(t2, t_end), glue_real_text(t3, inst->stop_time),
+                       inst->version->stop_time_source);
+        return GLUE_ERROR;
     }
     if (n > 0) {
         char why[512];
@@ -956,8 +1054,8 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
     }
     /* exact creep: the sample at k sums its k + 1 past values (the history holds
      * two doubles a sample), so the work grows with the time since t0 */
-    needed = model_history_needed(&inst->data);
-    if (n > 1 && needed > 0 && creep_terms((double)n, (double)(needed / 2)) > (double)MAX_STEP_CREEP_TERMS) {
+    needed = n > 1 ? model_history_needed(&inst->data) : 0;
+    if (needed > 0 && creep_terms((double)n, (double)(needed / 2)) > (double)MAX_STEP_CREEP_TERMS) {
         uint64_t longest = longest_creep_step((double)(needed / 2));
         glue_log_error(inst, "%s: the step from t = %s over %llu samples would sum %s terms of the exact creep "
                        "(creep.exact = true: the sample at k sums its k + 1 past values), but one doStep sums at "
@@ -1153,6 +1251,7 @@ glue_status glue_set_state(void *c, const char *fname, void *state)
     inst->t0 = st->t0;
     inst->k = st->k;
     inst->h = st->h;
+    set_stop_limit(inst);
     inst->outputs_valid = 0;
     glue_log_event(inst, "%s: restored a state in %s at t = %.16g", fname, mode_name(inst, inst->mode),
                    glue_time(inst));

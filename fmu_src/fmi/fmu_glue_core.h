@@ -86,6 +86,11 @@ typedef struct {
     int time_variable;              /* GLUE_VR_TIME is the independent variable time (read only) */
 } glue_version;
 
+/* The bits of glue_instance.scalar. */
+#define GLUE_SCALAR_OF(type) (1u << (type))    /* a scalar variable of that model_type */
+#define GLUE_SCALAR_INPUT 8u
+#define GLUE_SCALAR_OUTPUT 16u
+
 /* The value reference of the independent variable (FMI 3.0): the first after the model's. */
 #define GLUE_VR_TIME ((uint32_t)MODEL_N_VARIABLES)
 
@@ -104,6 +109,7 @@ typedef struct {
     double h;                   /* sample period, fixed at the end of initialization */
     int stop_time_defined;      /* a stopTime applies */
     double stop_time;
+    double stop_limit;          /* the last end of a step stopTime allows, for this h (set_stop_limit) */
     int outputs_valid;          /* the output values match data (no set/step since) */
     int outputs_read;           /* outputs were read since the last doStep */
     int warned_read_before_set; /* that warning is given once per instance */
@@ -115,6 +121,10 @@ typedef struct {
      * of n elements (model variables vr .. vr + n - 1), 0 if vr is not a value
      * reference of this version (an array's other elements) */
     unsigned char n_values[MODEL_N_VARIABLES];
+    /* what a master's exchange needs to know of vr, in one byte (map_variables):
+     * GLUE_SCALAR_OF(type) when vr is a scalar of that type (n_values[vr] = 1),
+     * and whether it is an input or an output */
+    unsigned char scalar[MODEL_N_VARIABLES];
     ModelData data;
     ModelData backup;           /* data at the start of a doStep; scratch for deserialization */
 } glue_instance;
@@ -124,8 +134,17 @@ typedef struct {
 
 #if defined(__GNUC__)
 #define GLUE_PRINTF(f, a) __attribute__((format(printf, f, a)))
+/* a slow path, kept out of the hot function it is called from */
+#define GLUE_NOINLINE __attribute__((noinline))
+/* A function of a master's exchange, called every sample (the getter and
+ * setter of Reals and Booleans, doStep): everything it calls is inlined into
+ * it, the glue, the model and the core's step, which saves the calls and the
+ * spills between them; the slow paths (GLUE_NOINLINE) and the logging stay out. */
+#define GLUE_HOT_PATH __attribute__((flatten))
 #else
 #define GLUE_PRINTF(f, a)
+#define GLUE_NOINLINE
+#define GLUE_HOT_PATH
 #endif
 
 /* Before an instance exists: one message through the host (category from status). */

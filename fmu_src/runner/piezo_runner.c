@@ -342,8 +342,9 @@ static double thread_ns(void)
     return (double)ts.tv_sec * 1e9 + (double)ts.tv_nsec;
 }
 
+/* fmi2OK, the usual status, changes nothing in res: only another is recorded */
 #define CALL(expr, role, call) \
-    do { if (failed(res, (expr), (role), (call))) goto stop; } while (0)
+    do { int st_ = (expr); if (st_ != fmi2OK && failed(res, st_, (role), (call))) goto stop; } while (0)
 
 int piezo_runner_run(piezo_runner *r, size_t n, double h, int master, int step_order,
                      const double *y_ref, const double *y_preview, const double *t_preview,
@@ -356,7 +357,7 @@ int piezo_runner_run(piezo_runner *r, size_t n, double h, int master, int step_o
     const int plant = PIEZO_RUNNER_PLANT, ctrl = PIEZO_RUNNER_CONTROLLER;
     double c_in[5], p_out[3], minimal[2], t_block = 0.0;
     fmi2Boolean sat;
-    size_t k;
+    size_t k, k0, block_left = timing_block;    /* samples until the current timing block is complete */
     int jacobi = master == PIEZO_RUNNER_JACOBI, ctrl_first = step_order == PIEZO_RUNNER_CONTROLLER_FIRST;
     int timing = block_ns != NULL && timing_block > 0;
     if (res == NULL) res = &local;
@@ -370,10 +371,12 @@ int piezo_runner_run(piezo_runner *r, size_t n, double h, int master, int step_o
     cc = r->fmu[ctrl].component;
     pa = &r->fmu[plant].api;
     ca = &r->fmu[ctrl].api;
+    k0 = r->k;
     if (timing) t_block = thread_ns();
     for (k = 0; k < n; ++k) {
-        /* time on the integer grid, as the harness computes it: start + k h */
-        double t = r->start_time + (double)(r->k + k) * h;
+        /* time on the integer grid, as the harness computes it: start + k h (k < 2^63, so
+         * the signed conversion gives (double)k in one instruction, the unsigned one takes several) */
+        double t = r->start_time + (double)(int64_t)(k0 + k) * h;
         if (rows != NULL) {
             double *row = rows + k * row_stride;
             CALL(pa->get_real(pc, r->p_out, 3, p_out), plant, PIEZO_RUNNER_CALL_GET_REAL);  /* y, y_meas, t_meas */
@@ -419,10 +422,13 @@ int piezo_runner_run(piezo_runner *r, size_t n, double h, int master, int step_o
             CALL(ca->do_step(cc, t, h, fmi2True), ctrl, PIEZO_RUNNER_CALL_DO_STEP);
         }
         res->samples = k + 1;
-        if (timing && (k + 1) % timing_block == 0) {
+        /* block (k + 1) / timing_block - 1 ends with sample k when timing_block divides k + 1
+         * (counted down: no division per sample) */
+        if (timing && --block_left == 0) {
             double now = thread_ns();
             block_ns[(k + 1) / timing_block - 1] = now - t_block;
             t_block = now;
+            block_left = timing_block;
         }
     }
 stop:

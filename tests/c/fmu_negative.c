@@ -35,6 +35,9 @@
  *              refused step leaves the outputs as they were
  *   free       FreeInstance in every state, with and without FMU states still
  *              allocated: everything the FMU allocated is freed
+ *   fast paths a master's exchange (Real inputs set, scalars read, a doStep
+ *              from exactly t over exactly h) leaves the same state and returns
+ *              the same values as the same exchange through the full checks
  *   edges      the standard at its edges (issue 23): a step size of 0 or below
  *              refused, a positive one that rounds to no sample a no-op; a huge
  *              step refused at once, naming the bound of one doStep's work
@@ -2108,6 +2111,96 @@ static void edges(const host_fmu *f)
     group_end("edges", f->id);
 }
 
+/* ------------------------------------------------------------------------ */
+/* fast paths                                                                */
+
+/*
+ * A master's exchange skips the checks it passes (fmu_glue_core.c): a set of
+ * finite Real inputs, a get of scalars of the getter's type, a doStep from
+ * exactly the FMU's time over exactly h. Each case runs the same exchange in
+ * two instances, once through the fast path and once through the full one,
+ * and compares what they hold afterwards byte for byte (the serialized
+ * state) and what they return: a fast path that diverged would differ here.
+ */
+static void fast_paths(const host_fmu *f)
+{
+    host_inst a, b;
+    unsigned char *blob_a = NULL, *blob_b = NULL;
+    size_t size_a = 0, size_b = 0;
+    const host_var *param = host_find(f, VAR_PARAMETER, VAR_REAL);
+    int v, k, same;
+    group_start();
+    /* sets: each Real input alone (the fast path) in a, with a Real parameter at
+     * its start value (a parameter: the full path) in b, before initialization */
+    if (case_check(instantiate(&a, f, "fast") != NULL && instantiate(&b, f, "full") != NULL && param != NULL,
+                   "%s: two instances and a Real parameter", f->id)) {
+        int ok = 1;
+        for (v = 0; v < f->n_vars; v++) {
+            const host_var *in = &f->vars[v];
+            host_vr both[2];
+            double value = 0.375 + v, values[2];
+            if (in->causality != VAR_INPUT || in->type != VAR_REAL)
+                continue;
+            both[0] = in->vr;
+            both[1] = param->vr;
+            values[0] = value;
+            values[1] = param->start[0];
+            ok = ok && host_set_reals(f, a.c, &in->vr, 1, &value, 1) == HOST_OK
+                 && host_set_reals(f, a.c, &param->vr, 1, &param->start[0], 1) == HOST_OK
+                 && host_set_reals(f, b.c, both, 2, values, 2) == HOST_OK;
+        }
+        blob_a = host_snapshot(f, a.c, &size_a);
+        blob_b = host_snapshot(f, b.c, &size_b);
+        same = blob_a != NULL && blob_b != NULL && size_a == size_b && memcmp(blob_a, blob_b, size_a) == 0;
+        case_check(ok && same, "%s: Real inputs set alone (fast path) and beside a parameter (full path): "
+                   "the same state", f->id);
+        free(blob_a);
+        free(blob_b);
+        /* doSteps: from t = k h over h (the fast path) in a; from the next double
+         * after t over the next double after h (within the tolerances: the full
+         * path) in b; the same statuses and states, every sample */
+        ok = host_enter_init(f, a.c, 0.0, 0, 0.0) == HOST_OK && host_enter_init(f, b.c, 0.0, 0, 0.0) == HOST_OK
+             && f->api.ExitInitializationMode(a.c) == HOST_OK && f->api.ExitInitializationMode(b.c) == HOST_OK;
+        for (k = 0; ok && k < 6; k++) {
+            double t = k * f->h;
+            host_status sa = host_step(f, a.c, t, f->h);
+            host_status sb = host_step(f, b.c, nextafter(t, 1.0), nextafter(f->h, 1.0));
+            blob_a = host_snapshot(f, a.c, &size_a);
+            blob_b = host_snapshot(f, b.c, &size_b);
+            ok = sa <= HOST_WARNING && sa == sb && blob_a != NULL && blob_b != NULL && size_a == size_b
+                 && memcmp(blob_a, blob_b, size_a) == 0;
+            free(blob_a);
+            free(blob_b);
+        }
+        case_check(ok, "%s: " FMI_NAME("DoStep") " from t = k h over h (fast path) and from t + 1 ulp over "
+                   "h + 1 ulp (full path): the same statuses and states over 6 samples (k = %d)", f->id, k);
+#if FMI_VERSION == 3
+        /* gets: every scalar Real alone (the fast path) and beside time (the full path) */
+        {
+            const host_var *time = host_find(f, VAR_INDEPENDENT, VAR_REAL);
+            ok = time != NULL;
+            for (v = 0; ok && v < f->n_vars; v++) {
+                const host_var *x = &f->vars[v];
+                host_vr both[2];
+                double alone, pair[2];
+                if (x->type != VAR_REAL || x->n != 1 || x->causality == VAR_INDEPENDENT)
+                    continue;
+                both[0] = x->vr;
+                both[1] = time->vr;
+                ok = host_get_reals(f, a.c, &x->vr, 1, &alone, 1) == HOST_OK
+                     && host_get_reals(f, b.c, both, 2, pair, 2) == HOST_OK
+                     && memcmp(&alone, &pair[0], sizeof alone) == 0 && pair[1] == 6 * f->h;
+            }
+            case_check(ok, "%s: every scalar Real read alone (fast path) and beside time (full path): "
+                       "the same bits", f->id);
+        }
+#endif
+    }
+    host_free_instance(&a);
+    host_free_instance(&b);
+    group_end("fast paths", f->id);
+}
+
 /* stdout's buffer: static, so that printing allocates nothing on the heap whose use FMI 3.0 compares */
 static char stdout_buffer[1 << 14];
 
@@ -2141,6 +2234,8 @@ int main(int argc, char **argv)
         for (j = 0; j < n_fmus; j++)
             if (i != j)
                 foreign(&fmus[i], &fmus[j]);
+    for (i = 0; i < n_fmus; i++)
+        fast_paths(&fmus[i]);
     for (i = 0; i < n_fmus; i++)
         edges(&fmus[i]);     /* last: before issue 23 its huge step ran for hours */
     case_check(host_mem_back_to(mem), "every " MEM_UNIT " the FMUs allocated was freed (%s)",
