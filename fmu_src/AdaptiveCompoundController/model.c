@@ -107,12 +107,10 @@ void model_set_start_values(ModelData *data)
     data->t_meas = 0.0;
 }
 
-/* t_k = t0 + k h, the FMU's time (the glue computes it the same way). k <= 2^53
- * (the glue's bound), so (double)(int64_t)k is (double)k, in one instruction
- * on x86-64 instead of the unsigned conversion's branch and several. */
+/* t_k of the model's own t0 and h (fmu_sample_time, as the glue) */
 static double sample_time(const ModelData *data, uint64_t k)
 {
-    return data->t0 + (double)(int64_t)k * data->params.h;
+    return fmu_sample_time(data->t0, k, data->params.h);
 }
 
 piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)

@@ -229,25 +229,15 @@ static double gl_soe_sum(const piezo_gl *gl, double x)
 
 /* The SOE states of the next sample, in place, once sample k is committed:
  *     T_i(k+1) = e^{-s_i} T_i(k) + c_i e^{-s_i (L0+1)} x(k-L0)
- * (x(k-L0) = x_leaving: the input that leaves the head window at sample k+1).
- * Each term is its own recursion: no sum, so any grouping of the terms gives
- * the same bits; blocks of four as in the sum. */
-static void gl_soe_advance(piezo_gl *gl, double x_leaving)
+ * (x(k-L0) = x_leaving: the input that leaves the head window at sample k+1),
+ * for the terms i = from..n-1. Each term is its own recursion: no sum, so any
+ * grouping of the terms (gl_soe_advance_avx's blocks of four) gives the same bits. */
+static void gl_soe_advance(piezo_gl *gl, int from, double x_leaving)
 {
     const double *decay = gl->soe_decay, *inject = gl->soe_inject;
     double *state = gl->soe_state;
-    int i, n = gl->n_terms;
-    for (i = 0; i + 4 <= n; i += 4) {
-        double t0 = decay[i] * state[i] + inject[i] * x_leaving;
-        double t1 = decay[i + 1] * state[i + 1] + inject[i + 1] * x_leaving;
-        double t2 = decay[i + 2] * state[i + 2] + inject[i + 2] * x_leaving;
-        double t3 = decay[i + 3] * state[i + 3] + inject[i + 3] * x_leaving;
-        state[i] = t0;
-        state[i + 1] = t1;
-        state[i + 2] = t2;
-        state[i + 3] = t3;
-    }
-    for (; i < n; ++i) state[i] = decay[i] * state[i] + inject[i] * x_leaving;
+    int i;
+    for (i = from; i < gl->n_terms; ++i) state[i] = decay[i] * state[i] + inject[i] * x_leaving;
 }
 
 #if PIEZO_HAVE_AVX_PATH
@@ -274,7 +264,7 @@ static double gl_soe_sum_avx(const piezo_gl *gl, double x)
     return x + ((a0 + a1) + (a2 + a3));
 }
 
-/* gl_soe_advance, four terms per 256-bit operation; the last n mod 4 as there. */
+/* gl_soe_advance, four terms per 256-bit operation; the last n mod 4 by gl_soe_advance. */
 __attribute__((target("avx")))
 static void gl_soe_advance_avx(piezo_gl *gl, double x_leaving)
 {
@@ -286,7 +276,7 @@ static void gl_soe_advance_avx(piezo_gl *gl, double x_leaving)
         _mm256_storeu_pd(state + i, _mm256_add_pd(_mm256_mul_pd(_mm256_loadu_pd(decay + i),
                                                                 _mm256_loadu_pd(state + i)),
                                                   _mm256_mul_pd(_mm256_loadu_pd(inject + i), x_leaving4)));
-    for (; i < n; ++i) state[i] = decay[i] * state[i] + inject[i] * x_leaving;
+    gl_soe_advance(gl, i, x_leaving);
 }
 #endif
 
@@ -307,7 +297,7 @@ static void gl_soe_advance_any(piezo_gl *gl, double x_leaving)
         return;
     }
 #endif
-    gl_soe_advance(gl, x_leaving);
+    gl_soe_advance(gl, 0, x_leaving);
 }
 
 piezo_status piezo_gl_eval(const piezo_gl *gl, double x, double *history, size_t history_capacity, double *y)

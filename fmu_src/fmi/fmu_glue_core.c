@@ -588,8 +588,6 @@ glue_status glue_set_debug_logging(void *c, const char *fname, int logging_on, s
 /* ------------------------------------------------------------------------ */
 /* Experiment, initialization, termination                                   */
 
-static void set_stop_limit(glue_instance *inst);
-
 glue_status glue_setup(void *c, const char *fname, double start_time, int stop_time_defined,
                        double stop_time, int enter_init)
 {
@@ -608,7 +606,6 @@ glue_status glue_setup(void *c, const char *fname, double start_time, int stop_t
     inst->t0 = start_time;
     inst->stop_time_defined = stop_time_defined ? 1 : 0;
     inst->stop_time = stop_time_defined ? stop_time : 0.0;
-    set_stop_limit(inst);
     if (enter_init) {
         inst->mode = GLUE_MODE_INIT;
         inst->outputs_valid = 0;
@@ -650,7 +647,6 @@ glue_status glue_exit_init(void *c, const char *fname)
     }
     inst->h = h;
     inst->k = 0;
-    set_stop_limit(inst);
     inst->mode = GLUE_MODE_STEP;
     inst->outputs_valid = 0;
     glue_log_event(inst, "%s: initialized, t0 = %.16g, h = %.16g", fname, inst->t0, h);
@@ -687,7 +683,6 @@ glue_status glue_reset(void *c, const char *fname)
     inst->h = 0.0;
     inst->stop_time_defined = 0;
     inst->stop_time = 0.0;
-    set_stop_limit(inst);
     inst->outputs_valid = 0;
     inst->outputs_read = 0;
     glue_log_event(inst, "%s: back to %s with the start values", fname, mode_name(inst, GLUE_MODE_INSTANTIATED));
@@ -896,18 +891,9 @@ glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32
 /* ------------------------------------------------------------------------ */
 /* Stepping                                                                  */
 
-/* (double)n of a sample count n <= 2^53 + MAX_STEP_SAMPLES < 2^63: the signed
- * conversion gives the same value (the same integer, rounded alike), and
- * baseline x86-64 converts a signed 64-bit integer in one instruction, an
- * unsigned one with a branch and several */
-static double samples_real(uint64_t n)
-{
-    return (double)(int64_t)n;
-}
-
 double glue_time(const glue_instance *inst)
 {
-    return inst->t0 + samples_real(inst->k) * inst->h;
+    return fmu_sample_time(inst->t0, inst->k, inst->h);
 }
 
 /* fmax(a, b) inline (a libm call on baseline x86-64): the larger, or the other
@@ -917,16 +903,13 @@ static double max_of(double a, double b)
     return a > b || b != b ? a : b;
 }
 
-/* A step may end up to tol_end = min(1e-9 max(h, |stopTime|), 1e-3 h) past
- * stopTime: stop_limit = stopTime + tol_end. It depends on h and stopTime
- * only, so it is computed where either changes (setup, the end of
- * initialization, a restored state, reset), not in every doStep. */
-static void set_stop_limit(glue_instance *inst)
+/* How far a time x may be from a time of the FMU's grid and still count as
+ * it: min(1e-9 max(h, |x|), 1e-3 h) (a communication point against t, the end
+ * of a step against stopTime). */
+static double time_tolerance(double h, double x)
 {
-    double tol_end = 1e-9 * max_of(inst->h, fabs(inst->stop_time));
-    if (tol_end > 1e-3 * inst->h)
-        tol_end = 1e-3 * inst->h;
-    inst->stop_limit = inst->stop_time + tol_end;
+    double tol = 1e-9 * max_of(h, fabs(x));
+    return tol > 1e-3 * h ? 1e-3 * h : tol;
 }
 
 /* Log what the model asks to say after a step; a warning if anything. */
@@ -969,19 +952,17 @@ static uint64_t longest_creep_step(double a)
 static glue_status do_step(glue_instance *inst, const char *fname, double currentCommunicationPoint,
                            double communicationStepSize)
 {
-    double t, tol, ratio, n_real, t_end;
+    double t, ratio, n_real, t_end;
     char t1[GLUE_REAL_TEXT_SIZE], t2[GLUE_REAL_TEXT_SIZE], t3[GLUE_REAL_TEXT_SIZE], t4[GLUE_REAL_TEXT_SIZE];
     uint64_t n, i;
     size_t needed;
 
     t = glue_time(inst);
-    /* |currentCommunicationPoint - t| <= tol; the usual step starts exactly at
+    /* |currentCommunicationPoint - t| <= time_tolerance; the usual step starts exactly at
      * t, a finite time (as every time of the FMU's), which needs no tolerance */
     if (currentCommunicationPoint != t) {
-        tol = 1e-9 * max_of(inst->h, fabs(t));
-        if (tol > 1e-3 * inst->h)
-            tol = 1e-3 * inst->h;
-        if (!isfinite(currentCommunicationPoint) || fabs(currentCommunicationPoint - t) > tol) {
+        if (!isfinite(currentCommunicationPoint)
+            || fabs(currentCommunicationPoint - t) > time_tolerance(inst->h, t)) {
             glue_log_error(inst, "%s: currentCommunicationPoint = %s does not match the FMU time "
                            "t0 + k h = %s (k = %llu, h = %s): step refused, state and time unchanged",
                            fname, glue_real_text(t1, currentCommunicationPoint), glue_real_text(t2, t),
@@ -1022,14 +1003,14 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
     n = (uint64_t)n_real;
     /* the end of the step must be a time: k + n <= 2^53 and t0 + (k + n) h finite
      * (k + n does not wrap: k <= 2^53, n <= MAX_STEP_SAMPLES) */
-    t_end = inst->t0 + samples_real(inst->k + n) * inst->h;
+    t_end = fmu_sample_time(inst->t0, inst->k + n, inst->h);
     if (n > MAX_SAMPLES - inst->k || !isfinite(t_end)) {
         glue_log_error(inst, "%s: the step from t = %s over %s samples of h = %s ends beyond the FMU's time "
                        "range (at most 2^53 samples, finite t0 + k h): step refused, state and time unchanged",
                        fname, glue_real_text(t1, t), glue_real_text(t2, n_real), glue_real_text(t3, inst->h));
         return GLUE_ERROR;
     }
-    if (inst->stop_time_defined && t_end > inst->stop_limit) {
+    if (inst->stop_time_defined && t_end > inst->stop_time + time_tolerance(inst->h, inst->stop_time)) {
         glue_log_error(inst, "%s: the step from t = %s to t = %s passes stopTime = %s of "
                        "%s: step refused, state and time unchanged", fname,
                        glue_real_text(t1, t), glue_real_text(t2, t_end), glue_real_text(t3, inst->stop_time),
@@ -1251,7 +1232,6 @@ glue_status glue_set_state(void *c, const char *fname, void *state)
     inst->t0 = st->t0;
     inst->k = st->k;
     inst->h = st->h;
-    set_stop_limit(inst);
     inst->outputs_valid = 0;
     glue_log_event(inst, "%s: restored a state in %s at t = %.16g", fname, mode_name(inst, inst->mode),
                    glue_time(inst));

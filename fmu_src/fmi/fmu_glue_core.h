@@ -109,7 +109,6 @@ typedef struct {
     double h;                   /* sample period, fixed at the end of initialization */
     int stop_time_defined;      /* a stopTime applies */
     double stop_time;
-    double stop_limit;          /* the last end of a step stopTime allows, for this h (set_stop_limit) */
     int outputs_valid;          /* the output values match data (no set/step since) */
     int outputs_read;           /* outputs were read since the last doStep */
     int warned_read_before_set; /* that warning is given once per instance */

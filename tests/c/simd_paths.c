@@ -112,7 +112,7 @@ static void check_creep(long trials)
         if (!same_bits(ys, ya)) report("creep SOE sum", gl.n_terms, t, ys, ya);
         if (memcmp(&gl, &gl_avx, sizeof gl) != 0) report("creep SOE sum wrote to the operator", gl.n_terms, t, ys, ya);
         /* the advance of the states, in place */
-        gl_soe_advance(&gl, x_leaving);
+        gl_soe_advance(&gl, 0, x_leaving);
         gl_soe_advance_avx(&gl_avx, x_leaving);
         if (!same_array(gl.soe_state, gl_avx.soe_state, PIEZO_GL_MAX_TERMS))
             report("creep SOE states advanced", gl.n_terms, t, ys, ya);
