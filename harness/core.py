@@ -32,7 +32,8 @@ from cffi import FFI
 from . import paths
 
 __all__ = [
-    "CoreParameterError", "CoreInputError", "CoreDivergedError", "CoreUnstableError", "Plant",
+    "CoreParameterError", "CoreInputError", "CoreDivergedError", "CoreUnstableError",
+    "CoreFaultError", "Plant",
     "Controller",
     "PlantOutput", "ControllerOutput", "PIModel", "PIInverse",
     "TransferFunction", "GLOperator", "pi_model", "transfer_function",
@@ -45,7 +46,8 @@ __all__ = [
 # The headers are read at import (PIEZO_CORE_INCLUDE overrides their directory).
 CORE_DIR = paths.core_include_dir()
 HEADER_ORDER = ("piezo_status.h", "piezo_hysteresis.h", "piezo_tf.h",
-                "piezo_creep.h", "piezo_plant.h", "piezo_controller.h", "piezo_reference.h")
+                "piezo_creep.h", "piezo_plant.h", "piezo_supervisor.h", "piezo_controller.h",
+                "piezo_reference.h")
 
 PIEZO_OK = 0
 PIEZO_ERR_NULL = 1
@@ -54,6 +56,7 @@ PIEZO_ERR_NONFINITE = 3
 PIEZO_ERR_CAPACITY = 4
 PIEZO_ERR_DIVERGED = 5
 PIEZO_ERR_UNSTABLE = 6
+PIEZO_ERR_FAULT = 7
 
 
 # --------------------------------------------------------------------------
@@ -186,6 +189,22 @@ class CoreUnstableError(CoreDivergedError):
     the step was refused and the state is unchanged."""
 
 
+class CoreFaultError(CoreDivergedError):
+    """The controller's supervision found a loop that cannot work (a measurement that does
+    not answer v, answers inverted or far off the model, ...); the step was refused and the
+    loop's state is unchanged. The message is the supervision's (the FMU's own words).
+
+    Attributes
+    ----------
+    fault : str
+        The verdict's short name (``piezo_supervisor_fault_name``), e.g. ``"no response"``.
+    """
+
+    def __init__(self, message: str, fault: str):
+        super().__init__(message)
+        self.fault = fault
+
+
 def _str(p) -> str:
     return "<unknown>" if p == ffi.NULL else ffi.string(p).decode()
 
@@ -274,6 +293,12 @@ _CONTROLLER_TABLE = {
     "sat.v_max": (("sat_v_max",), "float"),
     "monitor.pred_error_max": (("monitor_pred_error_max",), "float"),
     "monitor.divergence_samples": (("monitor_divergence_samples",), "int"),
+    "sup.enabled": (("sup", "enabled"), "bool"),
+    "sup.gain_min": (("sup", "gain_min"), "float"),
+    "sup.gain_max": (("sup", "gain_max"), "float"),
+    "sup.window": (("sup", "window"), "int"),
+    "sup.clip_time": (("sup", "clip_time"), "float"),
+    "sup.detect_time": (("sup", "detect_time"), "float"),
 }
 
 PLANT_PARAMETER_NAMES = tuple(_PLANT_TABLE)
@@ -610,8 +635,23 @@ class Controller:
         y_meas = float(y_meas)
         self._hist.ensure(self._lib.piezo_controller_history_needed(self._c))
         st = fn(self._c, y_ref, y_meas, self._hist.ptr, self._hist.capacity, self._out)
+        self._raise_fault(st, name)
         _raise_step(st, name, {"y_ref": y_ref, "y_meas": y_meas})
         return _ctrl_out(self._out)
+
+    def verdict_text(self) -> str:
+        """The supervision's explanation of the last refused sample (``piezo_supervisor_explain``
+        of ``ctrl.verdict``): the signal at fault, the evidence, what to check."""
+        size = 1024
+        buf = ffi.new("char[]", size)
+        self._lib.piezo_supervisor_explain(ffi.addressof(self._c, "verdict"), self._params.h, buf, size)
+        return ffi.string(buf).decode()
+
+    def _raise_fault(self, status, name):
+        if status == PIEZO_ERR_FAULT:
+            fault = _str(self._lib.piezo_supervisor_fault_name(self._c.verdict.fault))
+            raise CoreFaultError(f"{name}: supervision stopped the loop ({fault}): {self.verdict_text()}",
+                                 fault)
 
     def peek(self, y_ref: float, y_meas: float) -> ControllerOutput:
         """Control of the current sample without committing anything.
@@ -647,6 +687,10 @@ class Controller:
         ------
         CoreInputError
             If an input is NaN or infinite (the state is left unchanged).
+        CoreUnstableError
+            The monitor found the loop unstable (nothing committed).
+        CoreFaultError
+            The supervision found a loop that cannot work (nothing of the loop committed).
         """
         return self._call(self._lib.piezo_controller_step, "piezo_controller_step", y_ref, y_meas)
 
@@ -673,6 +717,7 @@ class Controller:
         self._hist.ensure(self._lib.piezo_controller_history_needed(self._c))
         st = self._lib.piezo_controller_step_input(self._c, inp, self._hist.ptr, self._hist.capacity,
                                                    self._out)
+        self._raise_fault(st, "piezo_controller_step_input")
         _raise_step(st, "piezo_controller_step_input",
                     {"y_ref": inp.y_ref, "y_meas": inp.y_meas, "y_preview": inp.y_preview,
                      "preview_lead": inp.preview_lead})

@@ -78,6 +78,7 @@ void piezo_controller_default_params(piezo_controller_params *p)
     p->sat_v_max = PIEZO_SAT_DEFAULT_V;
     p->monitor_pred_error_max = PIEZO_MONITOR_DEFAULT_ERROR;
     p->monitor_divergence_samples = PIEZO_MONITOR_DEFAULT_SAMPLES;
+    piezo_supervisor_default_params(&p->sup);
 }
 
 piezo_status piezo_diophantine(double a1, double a2, int d, double *e, double *g)
@@ -185,6 +186,9 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->theta_nominal[1] = p->tf_a2;
     c->theta_nominal[2] = p->tf_b1;
     c->theta_nominal[3] = p->tf_b2;
+    /* the supervisor judges the loop by the nominal model */
+    st = piezo_supervisor_init(&c->sup, &p->sup, p->tf_a1, p->tf_a2, p->tf_b1, p->tf_b2, p->h, diag);
+    if (st != PIEZO_OK) return st;
     piezo_controller_reset(c);
     /* The inverse PI must exist in doubles: its thresholds grow like
      * (w0 + sum w_j) v_max, its weights like 1/w0 (and 1/w0^2 inside eq 27). */
@@ -255,6 +259,8 @@ void piezo_controller_reset(piezo_controller *c)
     c->k = 0;
     memset(&c->out, 0, sizeof c->out);
     memcpy(c->out.theta, c->theta, sizeof c->theta);
+    piezo_supervisor_reset(&c->sup);
+    memset(&c->verdict, 0, sizeof c->verdict);
 }
 
 size_t piezo_controller_history_needed(const piezo_controller *c)
@@ -466,7 +472,11 @@ static int all_finite(const double *x, int n)
  * finite states. */
 static int sample_state_finite(const piezo_controller_sample *s)
 {
-    return all_finite(s->out.theta, 4) && (!s->rls_updated || all_finite(s->P, 16))
+    /* the supervisor's next doubles, z .. clip_error_sum, are contiguous */
+    enum { SUP_DOUBLES = (offsetof(piezo_supervisor_next, clip_error_sum) - offsetof(piezo_supervisor_next, z))
+                         / sizeof(double) + 1 };
+    return all_finite(s->out.theta, 4) && all_finite(&s->sup.z, SUP_DOUBLES)
+           && (!s->rls_updated || all_finite(s->P, 16))
            && (!s->detecting || (all_finite(s->det_theta, PIEZO_DETECT_THETA)
                                  && all_finite(s->det_P, PIEZO_DETECT_P) && all_finite(s->det_score, PIEZO_DETECT_N)));
 }
@@ -500,6 +510,23 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
         pred_error = rls_update(c, y_meas, s);
         detect_carry(c, s);
     }
+    /* supervision of sample k: what the measurement did with the past outputs */
+    s->sup_in.y_meas = y_meas;
+    s->sup_in.y_ref = in->y_ref;
+    s->sup_in.q1 = q_past(c, 1);
+    s->sup_in.q2 = q_past(c, 2);
+    s->sup_in.v1 = c->out.v;
+    s->sup_in.pred_error = pred_error;
+    s->sup_in.clipped1 = c->out.saturated;
+    s->sup_in.clip_run = c->run_saturated;
+    s->sup_in.clip_v = c->out.v;
+    s->sup_in.error_bound = c->pred_error_max;
+    s->sup_in.law_delay = s->d;
+    s->sup_in.loop_delay = s->detecting ? 0 : s->d;
+    s->sup_in.auto_delay = c->auto_delay;
+    s->sup_in.detecting_for = s->detecting ? c->k + 1 - c->k_delay : 0;
+    piezo_supervisor_evaluate(&c->sup, &s->sup_in, &s->sup);
+
     /* the law: the start-up law (nominal model, d = 2, t = 0.9) while detecting,
      * else the loop's estimates, d and observer */
     d = s->d;
@@ -556,7 +583,15 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
         s->sat_hold = c->sat_hold > 0 ? c->sat_hold - 1 : c->sat_hold;
     }
 
+    /* While a clipped sample pauses adaptation the estimates are frozen, and an
+     * estimate adapted to a measurement that is no stage's response (one that
+     * alternates, say) can predict it well: the monitor then also judges the
+     * nominal model's prediction error, A y(k) - B q(k-d), which a working loop
+     * keeps small while clipped (at most 0.13 um on the saturation family). */
     s->large_error = fabs(pred_error) > c->pred_error_max;
+    if (c->sat_hold > 0 && !s->large_error)
+        s->large_error = fabs(s->sup.z - (c->theta_nominal[2] * q_past(c, d) + c->theta_nominal[3] * q_past(c, d + 1)))
+                         > c->pred_error_max;
     s->run_large_error = s->large_error ? c->run_large_error + 1 : 0;
     /* a chosen loop whose prediction error stays beyond the bound since the
      * choice goes back to detection (from the next sample) */
@@ -644,6 +679,7 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
     commit_timing(c, s);
     c->k += 1;
     c->out = s->out;
+    piezo_supervisor_commit(&c->sup, &s->sup_in, &s->sup, s->r);
     if (s->restarted) {
         detection_start(c);
         c->k_delay = c->k;
@@ -691,6 +727,10 @@ piezo_status piezo_controller_commit(piezo_controller *c, const piezo_controller
     if (!c || !sample) return PIEZO_ERR_NULL;
     if (sample->k != c->k) return PIEZO_ERR_PARAM;
     if (sample->reaches_window) return PIEZO_ERR_UNSTABLE;
+    if (sample->sup.fault) {
+        piezo_supervisor_verdict(&c->sup, &sample->sup_in, &sample->sup, &c->verdict);
+        return PIEZO_ERR_FAULT;
+    }
     controller_commit(c, sample);
     if (out) *out = c->out;
     return PIEZO_OK;
@@ -707,6 +747,10 @@ piezo_status piezo_controller_step_input(piezo_controller *c, const piezo_contro
     if (st == PIEZO_OK) st = controller_eval(c, in, history, capacity, &s);
     if (st != PIEZO_OK) return st;
     if (s.reaches_window) return PIEZO_ERR_UNSTABLE;
+    if (s.sup.fault) {
+        piezo_supervisor_verdict(&c->sup, &s.sup_in, &s.sup, &c->verdict);
+        return PIEZO_ERR_FAULT;
+    }
     controller_commit(c, &s);
     if (out) *out = c->out;
     return PIEZO_OK;
@@ -799,6 +843,10 @@ const char *piezo_controller_check(const piezo_controller *c)
     /* a run reaching the window would have been refused as unstable */
     if (c->divergence_samples > 0 && c->run_large_error >= c->divergence_samples)
         return "monitor run at or beyond the divergence window";
+    if ((fault = piezo_supervisor_check(&c->sup)) != NULL) return fault;
+    if (c->sup.k != c->k) return "supervisor sample counter differs from the controller's";
+    if (c->verdict.fault < PIEZO_SUP_NONE || c->verdict.fault > PIEZO_SUP_ERRATIC)
+        return "supervision verdict out of range";
     o = &c->out;
     if (!(isfinite(o->v) && isfinite(o->q) && isfinite(o->pred_error) && all_finite(o->theta, 4)))
         return "controller outputs not finite";

@@ -35,6 +35,7 @@
 #include "piezo_hysteresis.h"
 #include "piezo_tf.h"
 #include "piezo_creep.h"
+#include "piezo_supervisor.h"
 
 #define PIEZO_MV_MAX_EXTRA_DELAY 8
 #define PIEZO_MV_MAX_D 9          /* 1 + PIEZO_MV_MAX_EXTRA_DELAY */
@@ -77,6 +78,7 @@ typedef struct {
     double monitor_pred_error_max;   /* [um], > 0: bound on |pred_error| */
     int monitor_divergence_samples;  /* consecutive samples beyond the bound that mean the loop
                                         is unstable (PIEZO_ERR_UNSTABLE); 0 = never */
+    piezo_supervisor_params sup;     /* supervision (piezo_supervisor.h): sup.* */
 } piezo_controller_params;
 
 typedef struct {
@@ -143,6 +145,9 @@ typedef struct {
     double max_abs_pred_error;   /* largest |pred_error| so far [um] */
     uint64_t k;
     piezo_controller_output out; /* result of the last committed sample */
+    piezo_supervisor sup;        /* supervision of the loop (piezo_supervisor.h) */
+    piezo_sup_verdict verdict;   /* why the last sample was refused with PIEZO_ERR_FAULT: the one
+                                    field a refused step writes (fault 0 when none was) */
 } piezo_controller;
 
 /*
@@ -176,6 +181,9 @@ typedef struct {
     double det_score[PIEZO_DETECT_N];
     double det_theta[PIEZO_DETECT_THETA];
     double det_P[PIEZO_DETECT_P];
+    /* supervision: what it was given and what it found */
+    piezo_supervisor_input sup_in;
+    piezo_supervisor_next sup;
 } piezo_controller_sample;
 
 /* Defaults of docs/fmus.md (nominal plant model). */
@@ -188,7 +196,11 @@ void piezo_controller_reset(piezo_controller *ctrl);
  * commit it (RLS update, operator states, monitor, k -> k+1). Returns
  * PIEZO_ERR_UNSTABLE, committing nothing, when this sample would make the
  * run of samples with |pred_error| > monitor_pred_error_max reach
- * monitor_divergence_samples. Exact mode writes
+ * monitor_divergence_samples (while adaptation pauses on a clipped sample,
+ * the larger of |pred_error| and the nominal model's prediction error counts).
+ * Returns PIEZO_ERR_FAULT, committing nothing of the loop, when the supervisor
+ * finds that the loop cannot work; ctrl->verdict then says why
+ * (piezo_supervisor_explain). Exact mode writes
  * history[2k], history[2k+1] (capacity >= piezo_controller_history_needed). Non-finite inputs refused, state unchanged.
  */
 piezo_status piezo_controller_step(piezo_controller *ctrl, double y_ref, double y_meas,
@@ -200,7 +212,8 @@ piezo_status piezo_controller_step_input(piezo_controller *ctrl, const piezo_con
                                          piezo_controller_output *out);
 /* Same result as piezo_controller_step without committing anything
  * (exact mode may write the unused slots history[2k], history[2k+1]); the
- * divergence window is not applied (the step that commits the sample does). */
+ * divergence window and the supervisor's verdict are not applied (the step
+ * that commits the sample does). */
 piezo_status piezo_controller_peek(const piezo_controller *ctrl, double y_ref, double y_meas,
                                    double *history, size_t history_capacity,
                                    piezo_controller_output *out);
@@ -209,7 +222,8 @@ piezo_status piezo_controller_peek(const piezo_controller *ctrl, double y_ref, d
  * (nothing committed; the checks, refusals and history writes of a peek,
  * which it equals), then commit it: PIEZO_ERR_PARAM (nothing done) unless
  * sample->k == ctrl->k, PIEZO_ERR_UNSTABLE (nothing done) when it completes
- * the divergence window. Commit only the latest evaluation of the sample, with
+ * the divergence window, PIEZO_ERR_FAULT (only ctrl->verdict written) when the
+ * supervisor's verdict on it is a fault. Commit only the latest evaluation of the sample, with
  * the state it was evaluated on (exact mode: history[2k..2k+1] are its own).
  */
 piezo_status piezo_controller_evaluate(const piezo_controller *ctrl, const piezo_controller_input *in,

@@ -7,6 +7,7 @@
 #include "piezo_tf.h"
 #include "piezo_creep.h"
 #include "piezo_plant.h"
+#include "piezo_supervisor.h"
 #include "piezo_controller.h"
 #include "piezo_reference.h"
 #endif

@@ -19,8 +19,11 @@ typedef enum {
     PIEZO_ERR_NONFINITE = 3, /* NaN or Inf input refused; state unchanged */
     PIEZO_ERR_CAPACITY = 4,  /* exact-mode history buffer too small; state unchanged */
     PIEZO_ERR_DIVERGED = 5,  /* finite inputs, non-finite result (the loop diverged); state unchanged */
-    PIEZO_ERR_UNSTABLE = 6   /* the controller's monitor found the loop unstable: |pred_error| above
+    PIEZO_ERR_UNSTABLE = 6,  /* the controller's monitor found the loop unstable: |pred_error| above
                                 its bound for the whole divergence window; state unchanged */
+    PIEZO_ERR_FAULT = 7      /* the controller's supervisor found a loop that cannot work (a
+                                measurement that does not answer, answers inverted, ...): the loop's
+                                state unchanged, the verdict recorded (piezo_supervisor.h) */
 } piezo_status;
 
 /* Which parameter an init refused, and why. Strings are static literals. */

@@ -1,0 +1,513 @@
+/* piezo_supervisor.c - supervision of the closed loop. See piezo_supervisor.h. */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+#include "piezo_supervisor.h"
+
+/* Defaults (docs/model.md, supervision; the margins measured on the legitimate
+ * family are in docs/robustness.md): a working loop's response gain stayed in
+ * 0.41 .. 1.55 times the model's under strong evidence; v stayed clipped at most
+ * 0.34 s on a reference twice beyond the limits; a delay was chosen within 34 ms. */
+#define DEFAULT_GAIN_MIN 0.25
+#define DEFAULT_GAIN_MAX 4.0
+#define DEFAULT_CLIP_TIME 0.5
+#define DEFAULT_DETECT_TIME 0.5
+#define WINDOW_MIN 20
+#define WINDOW_MAX 1000000
+
+void piezo_supervisor_default_params(piezo_supervisor_params *p)
+{
+    if (!p) return;
+    p->enabled = 1;
+    p->gain_min = DEFAULT_GAIN_MIN;
+    p->gain_max = DEFAULT_GAIN_MAX;
+    p->window = PIEZO_SUP_DEFAULT_WINDOW;
+    p->clip_time = DEFAULT_CLIP_TIME;
+    p->detect_time = DEFAULT_DETECT_TIME;
+}
+
+/* samples of a duration t at h, at least 1, saturated far below 2^63 */
+static uint64_t samples_of(double t, double h)
+{
+    double n = ceil(t / h - 1e-9);
+    if (!(n >= 1.0)) return 1;
+    if (n > 9.0e15) return (uint64_t)9.0e15;
+    return (uint64_t)n;
+}
+
+piezo_status piezo_supervisor_init(piezo_supervisor *s, const piezo_supervisor_params *p,
+                                   double a1, double a2, double b1, double b2, double h, piezo_diag *diag)
+{
+    if (!s || !p) return PIEZO_ERR_NULL;
+    if (p->enabled != 0 && p->enabled != 1)
+        return piezo_refuse(diag, "sup.enabled", "false or true", (double)p->enabled);
+    if (!(isfinite(p->gain_min) && p->gain_min > 0.0 && p->gain_min < 1.0))
+        return piezo_refuse(diag, "sup.gain_min", "(0, 1) (times the model's response)", p->gain_min);
+    if (!(isfinite(p->gain_max) && p->gain_max > 1.0))
+        return piezo_refuse(diag, "sup.gain_max", "(1, inf) (times the model's response)", p->gain_max);
+    if (p->window < WINDOW_MIN || p->window > WINDOW_MAX)
+        return piezo_refuse(diag, "sup.window", "20..1000000 samples", (double)p->window);
+    if (!(isfinite(p->clip_time) && p->clip_time > 0.0))
+        return piezo_refuse(diag, "sup.clip_time", "(0, inf) s", p->clip_time);
+    if (!(isfinite(p->detect_time) && p->detect_time > 0.0))
+        return piezo_refuse(diag, "sup.detect_time", "(0, inf) s", p->detect_time);
+    memset(s, 0, sizeof *s);
+    s->enabled = p->enabled;
+    s->forgetting = 1.0 - 1.0 / (double)p->window;
+    s->gain_min = p->gain_min;
+    s->gain_max = p->gain_max;
+    s->clip_samples = samples_of(p->clip_time, h);
+    s->detect_samples = samples_of(p->detect_time, h);
+    s->a1 = a1;
+    s->a2 = a2;
+    s->b1 = b1;
+    s->b2 = b2;
+    s->h = h;
+    piezo_supervisor_reset(s);
+    return PIEZO_OK;
+}
+
+void piezo_supervisor_reset(piezo_supervisor *s)
+{
+    if (!s) return;
+    s->k = 0;
+    s->y1 = s->y2 = s->r1 = s->r2 = 0.0;
+    s->z1 = s->zr1 = s->w1 = 0.0;
+    memset(s->dw, 0, sizeof s->dw);
+    memset(s->sww, 0, sizeof s->sww);
+    s->head = 0;
+    s->szz = s->srr = 0.0;
+    memset(s->szw, 0, sizeof s->szw);
+    memset(s->srw, 0, sizeof s->srw);
+    s->yhat1 = s->yhat2 = 0.0;
+    s->candidate = s->candidate_run = 0;
+    s->status = 0;
+    s->gain = 0.0;
+    s->delay = 0;
+    s->k_verified = 0;
+    s->verified_gain = 0.0;
+    s->clip_error_sum = 0.0;
+    s->y_same = 0;
+    memset(s->ref, 0, sizeof s->ref);
+    s->ref_head = 0;
+    s->weight = s->travel_model = s->travel_meas = s->erratic = 0.0;
+}
+
+/* the i-th older entry of an 8-ring (i = 0: the newest) */
+static int ring_at(int head, int i)
+{
+    int at = head + i;
+    return at < PIEZO_SUP_MAX_D ? at : at - PIEZO_SUP_MAX_D;
+}
+
+/* Sww_d(k) = Sww_1(k - d + 1): the new one for d = 1, the ring's for d >= 2 */
+static double sww_of(const piezo_supervisor *s, const piezo_supervisor_next *n, int d)
+{
+    return d == 1 ? n->sww1 : s->sww[ring_at(s->head, d - 2)];
+}
+
+/* E_d = Szz - Szw_d^2 / Sww_d (Szz when Sww_d = 0: nothing expected) */
+static double unexplained(const piezo_supervisor *s, const piezo_supervisor_next *n, int d)
+{
+    double sww = sww_of(s, n, d);
+    return sww > 0.0 ? n->szz - n->szw[d - 1] * (n->szw[d - 1] / sww) : n->szz;
+}
+
+/* the delay with the least unexplained energy (most explained Szw^2 / Sww; ties:
+ * the shorter), by cross-multiplication: no division per candidate */
+static int best_delay(const piezo_supervisor *s, const piezo_supervisor_next *n)
+{
+    int d, best = 0;
+    double num = 0.0, den = 1.0;
+    for (d = 1; d <= PIEZO_SUP_MAX_D; ++d) {
+        double sww = sww_of(s, n, d), szw = n->szw[d - 1];
+        if (sww > 0.0 && (best == 0 || szw * szw * den > num * sww)) {
+            best = d;
+            num = szw * szw;
+            den = sww;
+        }
+    }
+    return best;
+}
+
+/* The response verdict of the evaluated statistics: a fault kind, 0 for a
+ * verified loop, -1 without strong evidence. *gain, *delay: the best fit. */
+static int response_kind(const piezo_supervisor *s, const piezo_supervisor_input *in,
+                         const piezo_supervisor_next *n, double *gain, int *delay)
+{
+    int b = best_delay(s, n), law_ok, d;
+    double sww, g, e_best, explained;
+    if (b == 0 || s->k < PIEZO_SUP_MIN_SAMPLES) return -1;
+    sww = sww_of(s, n, b);
+    g = n->szw[b - 1] / sww;
+    e_best = n->szz - n->szw[b - 1] * g;
+    if (e_best < 0.0) e_best = 0.0;
+    /* the response the fit explains, or the one the model expects when that is larger */
+    explained = sww * (g * g > 1.0 ? g * g : 1.0);
+    if (!(explained >= PIEZO_SUP_EVIDENCE * e_best)) return -1;
+    *gain = g;
+    *delay = b;
+    if (g <= -s->gain_min) return PIEZO_SUP_INVERTED;
+    if (fabs(g) < s->gain_min) return PIEZO_SUP_NO_RESPONSE;
+    if (g > s->gain_max) return PIEZO_SUP_GAIN_HIGH;
+    /* the delays the law runs: 1..3 while it detects them, else its own */
+    law_ok = in->auto_delay ? b <= PIEZO_SUP_DEFAULT_DETECTABLE : b == in->law_delay;
+    if (!law_ok) {
+        double e_law = INFINITY;
+        if (in->auto_delay) {
+            for (d = 1; d <= PIEZO_SUP_DEFAULT_DETECTABLE; ++d) {
+                double e = unexplained(s, n, d);
+                if (e < e_law) e_law = e;
+            }
+        } else if (in->law_delay >= 1 && in->law_delay <= PIEZO_SUP_MAX_D) {
+            e_law = unexplained(s, n, in->law_delay);
+        } else {
+            e_law = 0.0;        /* a delay beyond the tested ones: no verdict on it */
+        }
+        if (e_law * 100.0 >= PIEZO_SUP_DELAY_PERCENT * explained) return PIEZO_SUP_DELAY;
+    }
+    return 0;
+}
+
+void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor_input *in,
+                               piezo_supervisor_next *n)
+{
+    const double lam = s->forgetting;
+    double dz, dzr, kind_gain = 0.0, e;
+    int d, kind, kind_delay = 0;
+
+    /* dz(k) = Delta[A y](k), dw(k) = Delta[B q](k-1) = w(k) - w(k-1) */
+    n->z = in->y_meas + s->a1 * s->y1 + s->a2 * s->y2;
+    n->zr = in->y_ref + s->a1 * s->r1 + s->a2 * s->r2;
+    n->w = s->b1 * in->q1 + s->b2 * in->q2;
+    dz = n->z - s->z1;
+    dzr = n->zr - s->zr1;
+    n->dw = n->w - s->w1;
+    n->szz = lam * s->szz + dz * dz;
+    n->srr = lam * s->srr + dzr * dzr;
+    n->sww1 = lam * s->sww[ring_at(s->head, 0)] + n->dw * n->dw;
+    /* Szw_d uses dw(k - d + 1): the new dw for d = 1, the ring's for d >= 2 */
+    n->szw[0] = lam * s->szw[0] + dz * n->dw;
+    for (d = 2; d <= PIEZO_SUP_MAX_D; ++d)
+        n->szw[d - 1] = lam * s->szw[d - 1] + dz * s->dw[ring_at(s->head, d - 2)];
+    n->srw[0] = lam * s->srw[0] + dzr * n->dw;
+    for (d = 2; d <= PIEZO_SUP_DEFAULT_DETECTABLE; ++d)
+        n->srw[d - 1] = lam * s->srw[d - 1] + dzr * s->dw[ring_at(s->head, d - 2)];
+    /* the model's y_meas(k) from q (delay 1): yhat = -a1 yhat(k-1) - a2 yhat(k-2) + w */
+    n->yhat = n->w - s->a1 * s->yhat1 - s->a2 * s->yhat2;
+    n->y_same = s->k > 0 && in->y_meas == s->y1 ? s->y_same + 1 : 0;
+    /* the evidence: distances travelled, and how often the prediction missed */
+    n->weight = lam * s->weight + 1.0;
+    n->travel_model = lam * s->travel_model + fabs(n->yhat - s->yhat1);
+    n->travel_meas = lam * s->travel_meas + fabs(in->y_meas - s->y1);
+    n->erratic = lam * s->erratic + (fabs(in->pred_error) > in->error_bound ? 1.0 : 0.0);
+
+    /* the response verdict, confirmed over PIEZO_SUP_CONFIRM samples */
+    n->status = s->status;
+    n->gain = s->gain;
+    n->delay = s->delay;
+    n->fault = PIEZO_SUP_NONE;
+    kind = response_kind(s, in, n, &kind_gain, &kind_delay);
+    if (kind >= 0) {
+        n->gain = kind_gain;
+        n->delay = kind_delay;
+    }
+    if (kind > 0) {
+        n->candidate = kind;
+        n->candidate_run = kind == s->candidate ? s->candidate_run + 1 : 1;
+    } else {
+        n->candidate = 0;
+        n->candidate_run = 0;
+        if (kind == 0) n->status = 1;
+    }
+    /* the clipping watchdog: mean |y_d - y_meas| over the clipped run */
+    {
+        int dl = in->law_delay >= 1 && in->law_delay <= PIEZO_SUP_REF_RING ? in->law_delay : 1;
+        int at = s->ref_head + dl - 1;
+        double target = s->k >= (uint64_t)dl ? s->ref[at < PIEZO_SUP_REF_RING ? at : at - PIEZO_SUP_REF_RING]
+                                             : 0.0;
+        e = fabs(target - in->y_meas);
+        n->clip_error_sum = in->clipped1 ? s->clip_error_sum + e : 0.0;
+    }
+    if (!s->enabled) {
+        n->candidate = n->candidate_run = 0;
+        return;
+    }
+    if (n->candidate_run >= PIEZO_SUP_CONFIRM)
+        n->fault = n->candidate;
+    /* a loop the linear evidence does not explain, once a pending response verdict had its chance */
+    else if (n->candidate == 0 && s->k >= PIEZO_SUP_MIN_SAMPLES + PIEZO_SUP_CONFIRM
+             && n->erratic * 100.0 >= PIEZO_SUP_ERRATIC_PERCENT * n->weight)
+        n->fault = PIEZO_SUP_ERRATIC;
+    else if (in->clipped1 && in->clip_run >= s->clip_samples
+             && n->clip_error_sum > in->error_bound * (double)in->clip_run)
+        n->fault = PIEZO_SUP_CLIPPED;
+    else if (in->detecting_for >= s->detect_samples)
+        n->fault = PIEZO_SUP_UNDETECTED;
+}
+
+void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *in,
+                             const piezo_supervisor_next *n, double r)
+{
+    s->y2 = s->y1;
+    s->y1 = in->y_meas;
+    s->r2 = s->r1;
+    s->r1 = in->y_ref;
+    s->z1 = n->z;
+    s->zr1 = n->zr;
+    s->w1 = n->w;
+    s->head = s->head == 0 ? PIEZO_SUP_MAX_D - 1 : s->head - 1;
+    s->dw[s->head] = n->dw;
+    s->sww[s->head] = n->sww1;
+    s->szz = n->szz;
+    s->srr = n->srr;
+    memcpy(s->szw, n->szw, sizeof s->szw);
+    memcpy(s->srw, n->srw, sizeof s->srw);
+    s->yhat2 = s->yhat1;
+    s->yhat1 = n->yhat;
+    s->candidate = n->candidate;
+    s->candidate_run = n->candidate_run;
+    if (n->status && !s->status) {
+        s->k_verified = s->k;
+        s->verified_gain = n->gain;
+    }
+    s->status = n->status;
+    s->gain = n->gain;
+    s->delay = n->delay;
+    s->clip_error_sum = n->clip_error_sum;
+    s->y_same = n->y_same;
+    s->ref_head = s->ref_head == 0 ? PIEZO_SUP_REF_RING - 1 : s->ref_head - 1;
+    s->ref[s->ref_head] = r;
+    s->weight = n->weight;
+    s->travel_model = n->travel_model;
+    s->travel_meas = n->travel_meas;
+    s->erratic = n->erratic;
+    s->k += 1;
+}
+
+void piezo_supervisor_verdict(const piezo_supervisor *s, const piezo_supervisor_input *in,
+                              const piezo_supervisor_next *n, piezo_sup_verdict *v)
+{
+    int d, b;
+    double window = 1.0 / (1.0 - s->forgetting);
+    memset(v, 0, sizeof *v);
+    v->fault = n->fault;
+    v->k = s->k;
+    v->loop_delay = in->loop_delay;
+    v->auto_delay = in->auto_delay;
+    b = best_delay(s, n);
+    if (b > 0) {
+        double sww = sww_of(s, n, b);
+        double g = n->szw[b - 1] / sww;
+        double e = n->szz - n->szw[b - 1] * g;
+        v->gain = g;
+        v->delay = b;
+        v->fit = n->szz > 0.0 ? 1.0 - (e > 0.0 ? e : 0.0) / n->szz : 0.0;
+    }
+    /* y_ref as if it were the measurement, at the loop's delays */
+    for (d = 1; d <= PIEZO_SUP_DEFAULT_DETECTABLE; ++d) {
+        double sww = sww_of(s, n, d), g, e, fit;
+        if (!(sww > 0.0) || !(n->srr > 0.0)) continue;
+        g = n->srw[d - 1] / sww;
+        e = n->srr - n->srw[d - 1] * g;
+        fit = 1.0 - (e > 0.0 ? e : 0.0) / n->srr;
+        if (fit > v->ref_fit) {
+            v->ref_fit = fit;
+            v->ref_gain = g;
+        }
+    }
+    /* the evidence over the window (its weighted sums: about the last sup.window samples) */
+    v->window = (uint64_t)(n->weight < window ? n->weight : window);
+    v->travel_model = n->travel_model;
+    v->travel_meas = n->travel_meas;
+    v->erratic_share = n->erratic / n->weight;
+    v->y_meas = in->y_meas;
+    v->v = in->v1;
+    v->y_same = n->y_same;
+    /* a real sensor repeats a value 16 times in a row only at rest (quantized, noise below its step) */
+    v->y_constant = n->y_same + 1 >= (v->window < 16 ? v->window : 16);
+    v->clip_v = in->clip_v;
+    v->clip_samples = n->fault == PIEZO_SUP_UNDETECTED ? in->detecting_for : in->clip_run;
+    v->error = in->clip_run > 0 ? n->clip_error_sum / (double)in->clip_run : 0.0;
+    v->error_bound = in->error_bound;
+    v->verified_gain = s->status ? s->verified_gain : 0.0;
+}
+
+const char *piezo_supervisor_fault_name(int fault)
+{
+    switch (fault) {
+    case PIEZO_SUP_NONE: return "none";
+    case PIEZO_SUP_NO_RESPONSE: return "no response";
+    case PIEZO_SUP_INVERTED: return "inverted response";
+    case PIEZO_SUP_GAIN_HIGH: return "response far above the model";
+    case PIEZO_SUP_DELAY: return "loop delay beyond the controller's";
+    case PIEZO_SUP_CLIPPED: return "v held at a limit";
+    case PIEZO_SUP_UNDETECTED: return "no loop delay found";
+    case PIEZO_SUP_ERRATIC: return "prediction error large most of the time";
+    default: return "unknown";
+    }
+}
+
+/* appends to text[*used .. size): snprintf that keeps a running length */
+#if defined(__GNUC__)
+__attribute__((format(printf, 4, 5)))
+#endif
+static void add(char *text, size_t size, int *used, const char *fmt, ...)
+{
+    va_list ap;
+    int w;
+    size_t at = *used < 0 ? 0 : (size_t)*used;
+    va_start(ap, fmt);
+    w = vsnprintf(at < size ? text + at : NULL, at < size ? size - at : 0, fmt, ap);
+    va_end(ap);
+    if (w > 0) *used += w;
+}
+
+/* "over the last N samples (t = a .. b s), what v did should have moved y_meas by c um in all
+ * (the sum of its sample-to-sample moves, by the controller's model); it moved e um" */
+static void add_evidence(char *t, size_t size, int *u, const piezo_sup_verdict *v, double h)
+{
+    double from = (double)(v->k + 1 - v->window) * h;
+    add(t, size, u, "over the last %llu samples (t = %.6g to %.6g s), what v did should have moved y_meas "
+        "by %.4g um in all (the sum of its sample-to-sample moves, by the controller's model); it moved "
+        "%.4g um", (unsigned long long)v->window, from, (double)v->k * h, v->travel_model, v->travel_meas);
+}
+
+int piezo_supervisor_explain(const piezo_sup_verdict *v, double h, char *t, size_t size)
+{
+    int u = 0;
+    if (t != NULL && size > 0) t[0] = '\0';
+    if (v == NULL) return 0;
+    switch (v->fault) {
+    case PIEZO_SUP_NO_RESPONSE:
+        add(t, size, &u, "y_meas does not follow v: ");
+        add_evidence(t, size, &u, v, h);
+        if (v->y_constant) {
+            add(t, size, &u, ". y_meas has not changed at all for the last %llu samples (it stays at %.6g um): "
+                "it is not connected or the sensor is stuck, or v does not reach the stage. Check the connections "
+                "PiezoStage.y_meas -> y_meas and AdaptiveCompoundController.v -> PiezoStage.v",
+                (unsigned long long)(v->y_same + 1), v->y_meas);
+        } else if (v->ref_fit >= 0.5 && v->ref_gain >= 0.25 && v->ref_gain <= 4.0) {
+            add(t, size, &u, ", not in answer to v; y_ref moves as y_meas should (%.3g times the model's "
+                "response): y_meas and y_ref are swapped. Connect PiezoStage.y_meas -> y_meas and "
+                "ReferenceSignal.y_ref -> y_ref", v->ref_gain);
+        } else if (v->fit >= 0.5 && fabs(v->gain) >= 3e-4 && fabs(v->gain) <= 3e-3) {
+            add(t, size, &u, ", and its moves are %.3g times the model's: y_meas is in mm instead of um? "
+                "Check the unit of y_meas (um)", v->gain);
+        } else {
+            add(t, size, &u, ", and its moves are %.3g times the model's (explaining %.0f %% of them): "
+                "v does not reach the stage, or y_meas is not the stage's measurement. Check the "
+                "connections AdaptiveCompoundController.v -> PiezoStage.v and PiezoStage.y_meas -> "
+                "y_meas, their units (V, um) and the amplifier", v->gain, 100.0 * v->fit);
+        }
+        break;
+    case PIEZO_SUP_INVERTED:
+        add(t, size, &u, "y_meas moves against v: ");
+        add_evidence(t, size, &u, v, h);
+        add(t, size, &u, ", and its moves are %.3g times the model's (explaining %.0f %% of them): y_meas or "
+            "v is inverted. Check the sign of the sensor, of the amplifier and of the connections y_meas and v",
+            v->gain, 100.0 * v->fit);
+        break;
+    case PIEZO_SUP_GAIN_HIGH:
+        add(t, size, &u, "y_meas moves %.3g times as much as the model expects: ", v->gain);
+        add_evidence(t, size, &u, v, h);
+        if (v->gain >= 300.0 && v->gain <= 3000.0)
+            add(t, size, &u, ". y_meas is in nm instead of um? Check the unit of y_meas (um)");
+        else
+            add(t, size, &u, ". Check the units of y_meas (um) and v (V), the amplifier's gain, and that the "
+                "controller's model (pi.*, tf.*, creep.*) is this stage's");
+        break;
+    case PIEZO_SUP_DELAY:
+        add(t, size, &u, "y_meas answers v %d samples later (%.3g ms, %.0f %% of its changes explained), "
+            "but the controller ", v->delay, 1e3 * h * (double)v->delay, 100.0 * v->fit);
+        if (v->auto_delay)
+            add(t, size, &u, "detects loop delays of 1 to 3 samples (mv.delay = -1): the loop has more delay "
+                "than a master and the stage add (a plant input delay, or an extra one in the master). "
+                "Set mv.delay = %d (d = %d) for this loop, or remove the extra delay", v->delay - 1, v->delay);
+        else
+            add(t, size, &u, "runs d = %d (mv.delay = %d). Set mv.delay = %d (d = %d), or -1 to detect "
+                "delays of 1 to 3 samples", v->loop_delay, v->loop_delay - 1, v->delay - 1, v->delay);
+        break;
+    case PIEZO_SUP_CLIPPED:
+        add(t, size, &u, "v has been held at %.4g V (a limit of sat.v_min .. sat.v_max) for %llu samples "
+            "(%.3g s, sup.clip_time) while |y_d - y_meas| averaged %.4g um (above monitor.pred_error_max = "
+            "%.4g um): the loop cannot reach the reference. ", v->clip_v, (unsigned long long)v->clip_samples,
+            h * (double)v->clip_samples, v->error, v->error_bound);
+        if (v->verified_gain > 0.0)
+            add(t, size, &u, "y_meas answered v as the model expects (%.3g times its response), so the "
+                "reference asks for more than the stage reaches within the limits: reduce the reference "
+                "or widen sat.v_min .. sat.v_max", v->verified_gain);
+        else
+            add(t, size, &u, "y_meas never answered v as the model expects: check y_meas and v (connections, "
+                "units, sign) and the limits sat.v_min .. sat.v_max");
+        break;
+    case PIEZO_SUP_ERRATIC:
+        add(t, size, &u, "the loop does not settle: |pred_error| exceeded monitor.pred_error_max = %.4g um in "
+            "%.0f %% of the last %llu samples; ", v->error_bound, 100.0 * v->erratic_share,
+            (unsigned long long)v->window);
+        add_evidence(t, size, &u, v, h);
+        if (v->travel_model > 0.0 && v->travel_meas > 2.0 * v->travel_model)
+            add(t, size, &u, ", %.3g times as far: the loop's gain is far above the model's. Check the "
+                "amplifier's gain, the units of v (V) and y_meas (um), and that the controller's model "
+                "(pi.*, tf.*, creep.*) is this stage's", v->travel_meas / v->travel_model);
+        else
+            add(t, size, &u, ": y_meas does not answer v as any model the controller can adapt. Check y_meas and "
+                "v (connections, units, sign) and that the controller's model is this stage's");
+        break;
+    case PIEZO_SUP_UNDETECTED:
+        add(t, size, &u, "no loop delay of 1 to 3 samples explains y_meas after %llu samples (%.3g s, "
+            "sup.detect_time): y_meas does not answer v as a closed loop would. Check the connections of "
+            "y_meas and v, or set mv.delay if the loop has a known longer delay",
+            (unsigned long long)v->clip_samples, h * (double)v->clip_samples);
+        break;
+    default:
+        add(t, size, &u, "no fault");
+        break;
+    }
+    return u;
+}
+
+static int finite_all(const double *x, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i)
+        if (!isfinite(x[i])) return 0;
+    return 1;
+}
+
+const char *piezo_supervisor_check(const piezo_supervisor *s)
+{
+    int i;
+    if (!s) return "supervisor missing";
+    if ((s->enabled != 0 && s->enabled != 1) || (s->status != 0 && s->status != 1))
+        return "supervisor flags are not 0 or 1";
+    if (!(s->forgetting >= 1.0 - 1.0 / WINDOW_MIN && s->forgetting < 1.0)
+        || !(s->gain_min > 0.0 && s->gain_min < 1.0 && s->gain_max > 1.0 && isfinite(s->gain_max))
+        || s->clip_samples < 1 || s->detect_samples < 1 || !(isfinite(s->h) && s->h > 0.0))
+        return "supervisor parameters out of range";
+    if (s->head < 0 || s->head >= PIEZO_SUP_MAX_D || s->ref_head < 0 || s->ref_head >= PIEZO_SUP_REF_RING)
+        return "supervisor ring index out of range";
+    if (s->candidate < 0 || s->candidate > PIEZO_SUP_ERRATIC || s->candidate_run < 0
+        || s->candidate_run >= PIEZO_SUP_CONFIRM || (s->candidate == 0 && s->candidate_run != 0)
+        || s->delay < 0 || s->delay > PIEZO_SUP_MAX_D)
+        return "supervisor verdict state out of range";
+    if (s->y_same > s->k || (s->status && s->k_verified >= s->k))
+        return "supervisor counters exceed the sample count";
+    if (!finite_all(s->dw, PIEZO_SUP_MAX_D) || !finite_all(s->sww, PIEZO_SUP_MAX_D)
+        || !finite_all(s->szw, PIEZO_SUP_MAX_D) || !finite_all(s->srw, PIEZO_SUP_DEFAULT_DETECTABLE)
+        || !finite_all(s->ref, PIEZO_SUP_REF_RING))
+        return "supervisor values not finite";
+    {
+        double sc[] = { s->y1, s->y2, s->r1, s->r2, s->z1, s->zr1, s->w1, s->szz, s->srr, s->yhat1, s->yhat2,
+                        s->gain, s->verified_gain, s->clip_error_sum, s->a1, s->a2, s->b1, s->b2,
+                        s->weight, s->travel_model, s->travel_meas, s->erratic };
+        if (!finite_all(sc, (int)(sizeof sc / sizeof sc[0]))) return "supervisor values not finite";
+    }
+    if (s->szz < 0.0 || s->srr < 0.0 || s->clip_error_sum < 0.0 || s->travel_model < 0.0 || s->travel_meas < 0.0
+        || s->erratic < 0.0 || s->erratic > s->weight || s->weight > (double)s->k)
+        return "supervisor sums negative or beyond their weight";
+    for (i = 0; i < PIEZO_SUP_MAX_D; ++i)
+        if (s->sww[i] < 0.0) return "supervisor sums negative";
+    return NULL;
+}

@@ -1,0 +1,213 @@
+/*
+ * piezo_supervisor.h - supervision of the closed loop (docs/model.md, supervision):
+ * does the measurement answer the controller's output as the controller's model
+ * says it should? The controller is the only block that sees both what it
+ * commands (q, v) and what comes back (y_meas), so this block, fed by it once a
+ * sample, tells a loop that cannot work (a measurement that does not answer,
+ * answers with the wrong sign, far off the model's gain or later than the
+ * controller handles; v held at a limit; a loop delay never found) from one
+ * that works, and says why.
+ *
+ * Response test. With the controller's model A(z^-1) y = z^-d B(z^-1) q, the
+ * measurement filtered by A and the output filtered by B, both differenced
+ * (which removes offsets and what a held signal adds),
+ *     dz(k) = Delta[A y_meas](k),   dw(k) = Delta[B q](k - 1),
+ * satisfy dz(k) = g dw(k - d + 1) + noise on a loop with delay d whose stage
+ * has g times the model's gain. For every d = 1..PIEZO_SUP_MAX_D the block
+ * keeps exponentially weighted sums (forgetting lambda = 1 - 1/sup.window):
+ *     Szz = sum lambda^(k-j) dz(j)^2,  Sww_d(k) = Sww_1(k - d + 1),
+ *     Szw_d = sum lambda^(k-j) dz(j) dw(j - d + 1).
+ * The least-squares gain of delay d is g_d = Szw_d / Sww_d, its unexplained
+ * energy E_d = Szz - Szw_d^2 / Sww_d. The best delay b has the least E_d.
+ * Evidence is strong when the response the fit explains (or, for a gain below
+ * 1, the response the model expects) is PIEZO_SUP_EVIDENCE times what it leaves
+ * unexplained: Sww_b max(1, g_b^2) >= PIEZO_SUP_EVIDENCE E_b, and at least
+ * PIEZO_SUP_MIN_SAMPLES samples were seen. With strong evidence:
+ *     g_b <= -gain_min               the measurement answers inverted
+ *     |g_b| < gain_min                it does not answer (or far too little)
+ *     g_b > gain_max                  it answers far more than the model
+ *     b not a delay the law runs (1..3 detected, or 1 + mv.delay), and those
+ *     leave PIEZO_SUP_DELAY_PERCENT % of the response unexplained: the loop
+ *     delay is beyond the controller's
+ * and otherwise the loop is verified (status 1). A fault kind held for
+ * PIEZO_SUP_CONFIRM consecutive samples is the verdict. Measured on 1,800
+ * legitimate runs (docs/robustness.md) and on every fault of the fault table.
+ *
+ * A loop whose response no linear model explains (a far too high gain makes
+ * it oscillate between the limits of the stage's hysteresis) gives no strong
+ * evidence; it shows in the prediction error instead: |pred_error| above
+ * monitor.pred_error_max in PIEZO_SUP_ERRATIC_PERCENT % of the window's
+ * samples is a fault (the divergence monitor counts consecutive samples only).
+ *
+ * Watchdogs: v clipped for sup.clip_time without a pause while the mean
+ * |y_d - y_meas| over that time exceeds the error bound; a loop delay still not
+ * chosen after sup.detect_time.
+ *
+ * The evidence a message gives: over the window, the distance the model
+ * expected y_meas to travel in answer to q (the sum of its sample-to-sample
+ * moves), the distance y_meas travelled, and the gain and fit of the best
+ * delay.
+ *
+ * Evaluate / commit: piezo_supervisor_evaluate computes a sample's statistics and
+ * verdict into a piezo_supervisor_next (nothing changed), piezo_supervisor_commit
+ * makes them the state, as the controller evaluates and commits its samples.
+ */
+#ifndef PIEZO_SUPERVISOR_H
+#define PIEZO_SUPERVISOR_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include "piezo_status.h"
+
+#define PIEZO_SUP_MAX_D 8            /* loop delays tested: 1..8 samples */
+#define PIEZO_SUP_REF_RING 10        /* references kept: r(k-1)..r(k-10) */
+#define PIEZO_SUP_MIN_SAMPLES 20     /* no verdict before this many samples */
+#define PIEZO_SUP_CONFIRM 10         /* consecutive samples of one fault kind make the verdict */
+#define PIEZO_SUP_EVIDENCE 32        /* explained (or expected) / unexplained response energy */
+#define PIEZO_SUP_DELAY_PERCENT 25   /* the law's delays leave this much of the response unexplained */
+#define PIEZO_SUP_ERRATIC_PERCENT 25 /* share of samples with |pred_error| above its bound */
+#define PIEZO_SUP_DEFAULT_WINDOW 200 /* sup.window [samples] */
+#define PIEZO_SUP_DEFAULT_DETECTABLE 3   /* delays the controller detects: 1..3 */
+
+/* What the supervisor found (the verdict of a refused sample). */
+typedef enum {
+    PIEZO_SUP_NONE = 0,          /* nothing wrong */
+    PIEZO_SUP_NO_RESPONSE = 1,   /* y_meas does not answer v (|gain| < sup.gain_min) */
+    PIEZO_SUP_INVERTED = 2,      /* y_meas answers v inverted (gain <= -sup.gain_min) */
+    PIEZO_SUP_GAIN_HIGH = 3,     /* y_meas answers v far more than the model (gain > sup.gain_max) */
+    PIEZO_SUP_DELAY = 4,         /* y_meas answers v later than the law's delays */
+    PIEZO_SUP_CLIPPED = 5,       /* v held at a limit for sup.clip_time, the error not small */
+    PIEZO_SUP_UNDETECTED = 6,    /* no loop delay chosen within sup.detect_time */
+    PIEZO_SUP_ERRATIC = 7        /* |pred_error| above its bound in much of the window */
+} piezo_sup_fault;
+
+typedef struct {
+    int enabled;                 /* 0: no verdicts (open-loop use) */
+    double gain_min;             /* (0, 1): weakest response gain of a working loop */
+    double gain_max;             /* (1, inf): strongest */
+    int window;                  /* [20, 1e6] samples: time constant of the statistics */
+    double clip_time;            /* [s] > 0: v clipped this long (error not small) is a fault */
+    double detect_time;          /* [s] > 0: delay detection running this long is a fault */
+} piezo_supervisor_params;
+
+/* Evidence of the verdict, for its message. */
+typedef struct {
+    int fault;                   /* piezo_sup_fault */
+    uint64_t k;                  /* the sample refused */
+    double gain;                 /* best delay's gain (response / model's) */
+    double fit;                  /* its share of the measured change explained, [0, 1] */
+    int delay;                   /* the best delay, samples */
+    int loop_delay;              /* the law's delay then (0: detecting) */
+    int auto_delay;              /* 1: the controller detects its delay */
+    double ref_gain, ref_fit;    /* the same for y_ref as if it were the measurement (d = 1..3) */
+    uint64_t window;             /* the window's samples: min(k + 1, sup.window) */
+    double travel_model;         /* the distance the model expected y_meas to travel in it [um] */
+    double travel_meas;          /* the distance y_meas travelled [um] */
+    double y_meas;               /* y_meas of the refused sample [um] */
+    double v;                    /* v of the sample before [V] */
+    int y_constant;              /* 1: y_meas did not change at all in the window */
+    double erratic_share;        /* share of the window's samples with |pred_error| above its bound */
+    double clip_v;               /* CLIPPED: the limit v was held at [V] */
+    uint64_t clip_samples;       /* CLIPPED: samples held; UNDETECTED: samples detecting */
+    uint64_t y_same;             /* samples y_meas had not changed */
+    double error;                /* CLIPPED: mean |y_d - y_meas| over them [um] */
+    double error_bound;          /* CLIPPED: the bound it exceeded [um] */
+    double verified_gain;        /* the last verified gain (0: the loop was never verified) */
+} piezo_sup_verdict;
+
+/* The controller's part of one sample, as the supervisor needs it. */
+typedef struct {
+    double y_meas;               /* y_meas(k) [um] */
+    double y_ref;                /* the y_ref input of sample k [um] (the swap check) */
+    double q1, q2;               /* q(k-1), q(k-2) [um] */
+    double v1;                   /* v(k-1) [V] */
+    double pred_error;           /* the controller's a-priori prediction error of y_meas(k) [um] */
+    int clipped1;                /* v(k-1) was clipped */
+    uint64_t clip_run;           /* consecutive clipped samples up to k-1 */
+    double clip_v;               /* the limit v(k-1) was clipped to */
+    double error_bound;          /* monitor.pred_error_max [um] */
+    int law_delay;               /* d of the law (the start-up law's while detecting) */
+    int loop_delay;              /* d of the law, 0 while detecting */
+    int auto_delay;              /* 1: the controller detects d */
+    uint64_t detecting_for;      /* samples of the current detection (0: not detecting) */
+} piezo_supervisor_input;
+
+typedef struct {
+    /* configuration */
+    int enabled;
+    double forgetting;           /* lambda = 1 - 1/window */
+    double gain_min, gain_max;
+    uint64_t clip_samples, detect_samples;
+    double a1, a2, b1, b2;       /* the model the response is judged by */
+    double h;
+    /* statistics */
+    uint64_t k;                  /* samples seen */
+    double y1, y2;               /* y_meas(k-1), y_meas(k-2) */
+    double r1, r2;               /* y_ref(k-1), y_ref(k-2) */
+    double z1, zr1;              /* A y_meas and A y_ref at k-1 */
+    double w1;                   /* B q at k-1: b1 q(k-2) + b2 q(k-3) */
+    double dw[PIEZO_SUP_MAX_D];  /* dw(k-1) .. dw(k-8) at dw[(head + i) % 8], i = 0.. */
+    double sww[PIEZO_SUP_MAX_D]; /* Sww_1(k-1) .. Sww_1(k-8), the same ring */
+    int head;
+    double szz, srr;             /* Szz, and the same for y_ref */
+    double szw[PIEZO_SUP_MAX_D]; /* Szw_d, d = 1..8 */
+    double srw[PIEZO_SUP_DEFAULT_DETECTABLE];    /* y_ref against d = 1..3 */
+    /* the model's prediction of y_meas from q (delay 1), for the messages */
+    double yhat1, yhat2;         /* at k-1 and k-2 */
+    /* verdict */
+    int candidate;               /* fault kind of the last sample (0: none) */
+    int candidate_run;           /* consecutive samples it held */
+    int status;                  /* 0 not verified yet, 1 verified */
+    double gain;                 /* the last strongly evidenced gain (0: none yet) */
+    int delay;                   /* its delay (0: none yet) */
+    uint64_t k_verified;         /* first sample verified (valid when status 1) */
+    double verified_gain;        /* the gain then */
+    double clip_error_sum;       /* sum of |y_d - y_meas| over the current clipping run */
+    uint64_t y_same;             /* consecutive samples y_meas equalled the one before */
+    double ref[PIEZO_SUP_REF_RING];   /* the law's references r(k-1) .. r(k-10), ring at ref_head */
+    int ref_head;
+    /* the evidence's sums, weighted as the statistics */
+    double weight;               /* sum of lambda^(k-j): the window's weight */
+    double travel_model;         /* sum of lambda^(k-j) |yhat(j) - yhat(j-1)| */
+    double travel_meas;          /* sum of lambda^(k-j) |y_meas(j) - y_meas(j-1)| */
+    double erratic;              /* sum of lambda^(k-j) [|pred_error(j)| > bound] */
+} piezo_supervisor;
+
+/* One evaluated sample: the statistics of k+1 and the verdict. */
+typedef struct {
+    double z, zr, w, dw, szz, srr, sww1, yhat;
+    double szw[PIEZO_SUP_MAX_D];
+    double srw[PIEZO_SUP_DEFAULT_DETECTABLE];
+    double weight, travel_model, travel_meas, erratic;
+    double clip_error_sum;
+    uint64_t y_same;
+    int candidate, candidate_run, status, delay;
+    double gain;
+    int fault;                   /* piezo_sup_fault: the verdict of this sample */
+} piezo_supervisor_next;
+
+void piezo_supervisor_default_params(piezo_supervisor_params *params);
+/* Validate (names a bad parameter in diag) and set up with the model's A, B and h. */
+piezo_status piezo_supervisor_init(piezo_supervisor *sup, const piezo_supervisor_params *params,
+                                   double a1, double a2, double b1, double b2, double h,
+                                   piezo_diag *diag);
+void piezo_supervisor_reset(piezo_supervisor *sup);
+/* The statistics and the verdict of sample k (sup->k) into *next; *sup unchanged.
+ * Disabled: next->fault is always 0 (the statistics still run, for the outputs). */
+void piezo_supervisor_evaluate(const piezo_supervisor *sup, const piezo_supervisor_input *in,
+                               piezo_supervisor_next *next);
+/* Make the evaluated sample the state; r: the reference the law used at k. */
+void piezo_supervisor_commit(piezo_supervisor *sup, const piezo_supervisor_input *in,
+                             const piezo_supervisor_next *next, double r);
+/* The evidence of a verdict reached by the evaluation of the sample of in (next->fault != 0). */
+void piezo_supervisor_verdict(const piezo_supervisor *sup, const piezo_supervisor_input *in,
+                              const piezo_supervisor_next *next, piezo_sup_verdict *verdict);
+/* The message of a verdict: the signal at fault, the evidence, what to check.
+ * Writes at most size bytes (NUL-terminated); returns the length it wanted. */
+int piezo_supervisor_explain(const piezo_sup_verdict *verdict, double h, char *text, size_t size);
+/* The verdict's fault as a short name ("no response", "inverted", ...). */
+const char *piezo_supervisor_fault_name(int fault);
+/* Invariants of a restored supervisor: NULL or the first bad field. */
+const char *piezo_supervisor_check(const piezo_supervisor *sup);
+
+#endif
