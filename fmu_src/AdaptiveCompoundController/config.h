@@ -63,6 +63,15 @@ typedef enum {
     vr_meas_offset,         /* output Integer: t_meas - t_k in samples (0 without a t_meas stamp) */
     vr_mv_observer,
     vr_mv_hold_inputs,      /* Boolean */
+    vr_sup_enabled,         /* Boolean: supervision (piezo_supervisor.h) */
+    vr_sup_gain_min,
+    vr_sup_gain_max,
+    vr_sup_window,          /* Integer [samples] */
+    vr_sup_clip_time,       /* [s] */
+    vr_sup_detect_time,     /* [s] */
+    vr_sup_status,          /* output Integer: 0 not verified yet, 1 verified, 2 degraded */
+    vr_sup_gain,            /* output: response gain, times the model's */
+    vr_sup_delay,           /* output Integer: the delay y_meas answers at [samples] */
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -88,6 +97,14 @@ typedef struct {
     int track_offset;
     int said_delay;                 /* track_delay's value last logged as an event */
     int said_redetect;              /* the restarted-detection warning was logged */
+    int meas_stamped;               /* t_meas has advanced by h at some sample (connected) */
+    int preview_stamped;            /* t_preview has */
+    int preview_offset;             /* its last lead over the measurement [samples], clamped to +-99 */
+    int said_stamps;                /* supervision warnings logged: 1 t_meas, 2 t_preview, 4 alignment */
+    int said_verified;              /* the verified loop was logged as an event */
+    int sup_status;                 /* outputs: sup.status, ... */
+    double sup_gain;                /* ... sup.gain, ... */
+    int sup_delay;                  /* ... sup.delay */
 
     piezo_controller ctrl;          /* core state (committed samples only) */
     piezo_controller_output out;    /* outputs: the last committed sample, or with

@@ -35,6 +35,9 @@
 
 /* a stamped measurement more than this many samples off the controller's time is ignored */
 #define MEAS_OFFSET_MAX 8
+/* the time stamps are judged once the loop delay is chosen and this many samples ran (a
+ * stamp counts from the second sample it advanced, a player's first inputs are zeros) */
+#define STAMP_WARN_SAMPLES 10
 
 const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_y_ref] = { "y_ref", MODEL_REAL, MODEL_INPUT, offsetof(ModelData, y_ref) },
@@ -95,6 +98,15 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_meas_offset] = MODEL_OUTPUT_INT("meas_offset", meas_offset),
     [vr_mv_observer] = PARAM_REAL("mv.observer", mv_observer),
     [vr_mv_hold_inputs] = PARAM_BOOL("mv.hold_inputs", mv_hold_inputs),
+    [vr_sup_enabled] = PARAM_BOOL("sup.enabled", sup.enabled),
+    [vr_sup_gain_min] = PARAM_REAL("sup.gain_min", sup.gain_min),
+    [vr_sup_gain_max] = PARAM_REAL("sup.gain_max", sup.gain_max),
+    [vr_sup_window] = PARAM_INT("sup.window", sup.window),
+    [vr_sup_clip_time] = PARAM_REAL("sup.clip_time", sup.clip_time),
+    [vr_sup_detect_time] = PARAM_REAL("sup.detect_time", sup.detect_time),
+    [vr_sup_status] = MODEL_OUTPUT_INT("sup.status", sup_status),
+    [vr_sup_gain] = { "sup.gain", MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, sup_gain) },
+    [vr_sup_delay] = MODEL_OUTPUT_INT("sup.delay", sup_delay),
 };
 
 void model_set_start_values(ModelData *data)
@@ -119,6 +131,12 @@ piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
     data->said_saturated = 0;
     data->said_large_error = 0;
     data->said_redetect = 0;
+    data->meas_stamped = data->preview_stamped = 0;
+    data->preview_offset = 0;
+    data->said_stamps = 0;
+    data->said_verified = 0;
+    data->sup_status = data->sup_delay = 0;
+    data->sup_gain = 0.0;
     /* the controller is time-invariant; t0 places the time stamps on its grid */
     data->t0 = start_time;
     data->last_t_preview = data->last_t_meas = 0.0;
@@ -144,6 +162,13 @@ static int stamp_advanced(const ModelData *data, double t, double last)
     return data->have_last && fabs((t - last) - h) <= 1e-3 * h;
 }
 
+/* What the stamps of a sample said (for the supervision warnings). */
+typedef struct {
+    int meas;                   /* t_meas advanced by h: counted */
+    int preview;                /* t_preview advanced by h */
+    int lead;                   /* t_preview - origin in samples, clamped to +-99 (preview counted) */
+} stamps_seen;
+
 /*
  * The inputs of the current sample k: with a connected t_meas, the
  * measurement is of sample k + offset, offset = (t_meas - t_k) / h; with a
@@ -151,14 +176,16 @@ static int stamp_advanced(const ModelData *data, double t, double last)
  * ahead of the measurement (t_meas replaced by t_k without its stamp). The
  * core uses it when 1 <= lead < PIEZO_PREVIEW_RING.
  */
-static piezo_controller_input sample_input(const ModelData *data, int *meas_offset)
+static piezo_controller_input sample_input(const ModelData *data, int *meas_offset, stamps_seen *seen)
 {
     piezo_controller_input in;
     double h = data->params.h;
     int meas_stamped = 0;       /* origin = t_meas, else t_k */
     *meas_offset = 0;
+    seen->meas = seen->preview = seen->lead = 0;
     if (stamp_advanced(data, data->t_meas, data->last_t_meas)) {
         double o = floor((data->t_meas - sample_time(data, data->ctrl.k)) / h + 0.5);
+        seen->meas = 1;
         if (fabs(o) <= MEAS_OFFSET_MAX) {
             *meas_offset = (int)o;
             meas_stamped = 1;
@@ -172,6 +199,8 @@ static piezo_controller_input sample_input(const ModelData *data, int *meas_offs
         /* t_k only where a stamp needs it (an unstamped loop runs without) */
         double origin = meas_stamped ? data->t_meas : sample_time(data, data->ctrl.k);
         double a = floor((data->t_preview - origin) / h + 0.5);
+        seen->preview = 1;
+        seen->lead = a > 99.0 ? 99 : (a < -99.0 ? -99 : (int)a);
         if (a >= 1.0 && a < (double)PIEZO_PREVIEW_RING)
             in.preview_lead = (int)a;
     }
@@ -180,9 +209,14 @@ static piezo_controller_input sample_input(const ModelData *data, int *meas_offs
 
 /* After sample k was committed with these inputs: the stamps it saw, and the
  * timing outputs of the default (published) timing. */
-static void after_commit(ModelData *data, const piezo_controller_input *in, int meas_offset)
+static void after_commit(ModelData *data, const piezo_controller_input *in, int meas_offset,
+                         const stamps_seen *seen)
 {
     const piezo_controller_output *o = &data->ctrl.out;
+    data->meas_stamped |= seen->meas;
+    data->preview_stamped |= seen->preview;
+    if (seen->preview)
+        data->preview_offset = seen->lead;
     data->last_t_preview = data->t_preview;
     data->last_t_meas = data->t_meas;
     data->have_last = 1;
@@ -208,7 +242,8 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
                         int outputs_current)
 {
     int meas_offset;
-    piezo_controller_input in = sample_input(data, &meas_offset);
+    stamps_seen seen;
+    piezo_controller_input in = sample_input(data, &meas_offset, &seen);
     piezo_status st;
     /* mv.feedthrough: the sample the outputs were read from is committed as is
      * (computed once, from these inputs); the commit refuses it if it is not
@@ -218,15 +253,20 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
     else
         st = piezo_controller_step_input(&data->ctrl, &in, history, history_capacity, NULL);
     if (st == PIEZO_OK)
-        after_commit(data, &in, meas_offset);
+        after_commit(data, &in, meas_offset, &seen);
     return st;
 }
 
 piezo_status model_update_outputs(ModelData *data, double *history, size_t history_capacity)
 {
+    /* the supervision as of the last committed sample; 2 once it warned */
+    data->sup_status = data->said_stamps ? 2 : data->ctrl.sup.status;
+    data->sup_gain = data->ctrl.sup.gain;
+    data->sup_delay = data->ctrl.sup.delay;
     if (data->params.mv_feedthrough) {
         int meas_offset;
-        piezo_controller_input in = sample_input(data, &meas_offset);
+        stamps_seen seen;
+        piezo_controller_input in = sample_input(data, &meas_offset, &seen);
         piezo_status st = piezo_controller_evaluate(&data->ctrl, &in, history, history_capacity,
                                                     &data->pending);
         if (st != PIEZO_OK)
@@ -254,10 +294,51 @@ int model_direct_feedthrough(const ModelData *data)
     return data->params.mv_feedthrough != 0;
 }
 
+/* The supervision's warnings of the time stamps, each once: a loop that works,
+ * degraded, because a stamp it needs is not connected or cannot be aligned
+ * (docs/cosimulation.md, section 3.3). */
+static int stamp_warning(ModelData *data, char *text, size_t size)
+{
+    const piezo_controller *c = &data->ctrl;
+    int d = data->track_delay;
+    if (!data->params.sup.enabled || d == 0 || c->k < STAMP_WARN_SAMPLES)
+        return 0;
+    if (!(data->said_stamps & 1) && !data->meas_stamped && data->preview_stamped && d == 1) {
+        data->said_stamps |= 1;
+        snprintf(text, size, "t_meas is not connected (it has not advanced by h from one sample to the next), "
+                 "but the loop delay d = 1 chosen here shows a master that steps the FMUs one after another: "
+                 "if it steps PiezoStage before this controller, y_meas is one sample newer than the "
+                 "controller's time and the stamped preview is used one sample late (about sqrt(2) pi f A h "
+                 "rms: 22 nm for a 10 um tone at 1 Hz). Connect PiezoStage.t_meas -> t_meas");
+        return 1;
+    }
+    if (!(data->said_stamps & 2) && !data->preview_stamped && c->auto_delay && d != 2) {
+        data->said_stamps |= 2;
+        snprintf(text, size, "t_preview is not connected (with y_preview), so the controller takes y_ref as "
+                 "y_d(k + d): ReferenceSignal's default lead of 2 samples fits the loop delay of a master that "
+                 "exchanges values at communication points, but this loop has d = %d, so the reference may be "
+                 "off by %d sample%s (about sqrt(2) pi f A h rms per sample). Connect ReferenceSignal.y_preview "
+                 "-> y_preview and ReferenceSignal.t_preview -> t_preview", d, abs(d - 2), abs(d - 2) == 1 ? "" : "s");
+        return 1;
+    }
+    if (!(data->said_stamps & 4) && data->preview_stamped
+        && (data->preview_offset < d || data->preview_offset >= PIEZO_PREVIEW_RING)) {
+        data->said_stamps |= 4;
+        snprintf(text, size, "the stamped preview (t_preview) is %d samples ahead of the measurement, but the "
+                 "loop delay d = %d needs it %d to %d samples ahead: it cannot be aligned and y_ref stands in. "
+                 "Set ReferenceSignal's preview (default 4) so that t_preview leads y_meas by %d to %d samples",
+                 data->preview_offset, d, d, PIEZO_PREVIEW_RING - 1, d, PIEZO_PREVIEW_RING - 1);
+        return 1;
+    }
+    return 0;
+}
+
 int model_step_warning(ModelData *data, double start_time, char *text, size_t size)
 {
     const piezo_controller *c = &data->ctrl;
     (void)start_time;   /* data->t0 is the same */
+    if (stamp_warning(data, text, size))
+        return 1;
     if (c->n_detections > 1 && !data->said_redetect) {
         data->said_redetect = 1;
         snprintf(text, size, "the chosen loop delay no longer predicts the measurement (|pred_error| above "
@@ -297,6 +378,13 @@ int model_step_warning(ModelData *data, double start_time, char *text, size_t si
 int model_step_event(ModelData *data, char *text, size_t size)
 {
     const piezo_controller *c = &data->ctrl;
+    if (c->sup.status && !data->said_verified) {
+        data->said_verified = 1;
+        snprintf(text, size, "supervision: y_meas answers v as the model says (%.3g times its response, %d "
+                 "samples after it), verified at t = %.9g s", c->sup.verified_gain, c->sup.delay,
+                 sample_time(data, c->sup.k_verified));
+        return 1;
+    }
     if (data->track_delay == data->said_delay)
         return 0;
     data->said_delay = data->track_delay;
@@ -341,13 +429,23 @@ int model_terminate_warning(const ModelData *data, char *text, size_t size)
 int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size)
 {
     const piezo_controller *c = &data->ctrl;
+    if (st == PIEZO_ERR_FAULT) {
+        /* the words harness/fmu.py LOOP_FAILURES knows this Error by */
+        int used = snprintf(text, size, "supervision stopped the loop (%s): ",
+                            piezo_supervisor_fault_name(c->verdict.fault));
+        if (used > 0 && (size_t)used < size)
+            piezo_supervisor_explain(&c->verdict, data->params.h, text + used, size - (size_t)used);
+        return 1;
+    }
     if (st == PIEZO_ERR_UNSTABLE) {
         snprintf(text, size, "the closed loop is unstable: |pred_error| stayed above "
                  "monitor.pred_error_max = %g um for monitor.divergence_samples = %llu consecutive "
-                 "samples (largest so far %.6g um). Usual causes: the controller's loop delay "
+                 "samples (while v is clipped, the larger of it and the nominal model's prediction error; "
+                 "largest |pred_error| so far %.6g um). Usual causes: the controller's loop delay "
                  "d = %d %s does not match the loop (a master that hands the plant the "
                  "controller's post-step output removes a sample, as does mv.feedthrough; an extra "
-                 "plant or actuation delay adds one), or the plant is far from the nominal model",
+                 "plant or actuation delay adds one), a gain of the sensor or amplifier far from the "
+                 "model's, or a plant far from the nominal model",
                  c->pred_error_max, (unsigned long long)c->divergence_samples,
                  c->max_abs_pred_error, c->d,
                  !c->auto_delay ? "(1 + mv.delay, set)"
@@ -372,8 +470,14 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
     const char *fault;
     if ((data->said_saturated != 0 && data->said_saturated != 1)
         || (data->said_large_error != 0 && data->said_large_error != 1)
-        || (data->said_redetect != 0 && data->said_redetect != 1) || (data->have_last != 0 && data->have_last != 1))
+        || (data->said_redetect != 0 && data->said_redetect != 1) || (data->have_last != 0 && data->have_last != 1)
+        || (data->said_verified != 0 && data->said_verified != 1) || data->said_stamps < 0 || data->said_stamps > 7
+        || (data->meas_stamped != 0 && data->meas_stamped != 1)
+        || (data->preview_stamped != 0 && data->preview_stamped != 1))
         return "warning flags are not 0 or 1";
+    if (abs(data->preview_offset) > 99 || data->sup_status < 0 || data->sup_status > 2
+        || data->sup_delay < 0 || data->sup_delay > PIEZO_SUP_MAX_D || !isfinite(data->sup_gain))
+        return "supervision outputs out of range";
     if (!(isfinite(data->t0) && isfinite(data->last_t_preview) && isfinite(data->last_t_meas)
           && isfinite(data->track_time)))
         return "time stamps not finite";
@@ -403,7 +507,10 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         || c->forgetting != q->rls_forgetting || c->p0 != q->rls_p0 || c->trace_max != q->rls_trace_max
         || c->pred_error_max != q->monitor_pred_error_max
         || c->divergence_samples != (uint64_t)q->monitor_divergence_samples
-        || (c->sat_enabled && (c->sat_v_min != q->sat_v_min || c->sat_v_max != q->sat_v_max)))
+        || (c->sat_enabled && (c->sat_v_min != q->sat_v_min || c->sat_v_max != q->sat_v_max))
+        || c->sup.enabled != q->sup.enabled || c->sup.gain_min != q->sup.gain_min
+        || c->sup.gain_max != q->sup.gain_max || c->sup.forgetting != scratch.sup.forgetting
+        || c->sup.clip_samples != scratch.sup.clip_samples || c->sup.detect_samples != scratch.sup.detect_samples)
         return "controller state does not match its parameters";
     return piezo_gl_check_history(&c->inv_creep, history, n_history);
 }

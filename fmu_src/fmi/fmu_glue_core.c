@@ -161,7 +161,7 @@ static void mask_names(const glue_instance *inst, int mask, char *buf, size_t si
 static GLUE_NOINLINE void log_core_failure(const glue_instance *inst, const char *fname, piezo_status st,
                                            const piezo_diag *diag)
 {
-    char text[512];
+    char text[960];     /* the log line holds 1024 with the function's name */
     if (st != PIEZO_ERR_PARAM && model_failure_text(&inst->data, st, text, sizeof text)) {
         glue_log_error(inst, "%s: %s", fname, text);
         return;
@@ -187,6 +187,9 @@ static GLUE_NOINLINE void log_core_failure(const glue_instance *inst, const char
         break;
     case PIEZO_ERR_UNSTABLE:
         glue_log_error(inst, "%s: the model's monitor found the loop unstable", fname);
+        break;
+    case PIEZO_ERR_FAULT:
+        glue_log_error(inst, "%s: the model's supervision found a loop that cannot work", fname);
         break;
     default:
         glue_log_error(inst, "%s: the model failed with status %d", fname, (int)st);
@@ -1067,9 +1070,10 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
         st = model_step(&inst->data, inst->history, inst->history_capacity,
                         i == 0 && inst->outputs_valid);
         if (st != PIEZO_OK) {
+            /* said before the roll back: the model explains from the refused sample's data */
+            log_core_failure(inst, fname, st, &diag);
             if (i > 0)
                 memcpy(&inst->data, &inst->backup, sizeof inst->data);
-            log_core_failure(inst, fname, st, &diag);
             glue_log_error(inst, "%s: the model refused sample %llu of the step from t = %s; the state "
                            "is restored to that time and the FMU enters state Error (use %s "
                            "or %s)", fname, (unsigned long long)(inst->k + i), glue_real_text(t1, t),
