@@ -31,7 +31,8 @@ from . import paths
 __all__ = [
     "PLANT_MODEL", "CONTROLLER_MODEL", "REFERENCE_MODEL", "FMI_VERSIONS", "TIMING_OUTPUTS",
     "WINDOWS_PLATFORM", "REAL_TYPES", "INTEGER_TYPES",
-    "FMUError", "FMUInitializationError", "FMUFileError", "LoopDivergedError",
+    "FMUError", "FMUInitializationError", "FMUFileError", "LoopDivergedError", "LoopFaultError",
+    "LOOP_FAILURES", "loop_error_class",
     "UnknownParameterError",
     "default_fmu_dir", "check_fmi_version", "fmu_path", "LoadedFMU", "load", "array_size",
     "sort_parameters", "typed_parameters", "model_description", "starts_of", "parameter_starts",
@@ -58,6 +59,30 @@ class FMUError(RuntimeError):
 class LoopDivergedError(FMUError):
     """The closed loop diverged: the controller's monitor found it unstable, or a computed
     value was not finite; the message carries the FMU's explanation."""
+
+
+class LoopFaultError(LoopDivergedError):
+    """The controller's supervision stopped a loop that cannot work (a measurement that does not
+    answer v, answers inverted or far off the model, later than the controller handles; v held
+    at a limit); the message names the signal at fault and the evidence."""
+
+
+#: how the controller's Error messages begin when it stops the loop itself, and the error each means
+#: (fmu_src/AdaptiveCompoundController/model.c, model_failure_text)
+LOOP_FAILURES = (("supervision stopped the loop", LoopFaultError),
+                 ("the closed loop is unstable", LoopDivergedError),
+                 ("diverged", LoopDivergedError))
+
+
+def loop_error_class(log_lines):
+    """The exception a failed run raises, from the FMU's log lines: :class:`LoopFaultError` or
+    :class:`LoopDivergedError` when the controller stopped the loop itself
+    (:data:`LOOP_FAILURES`), :class:`FMUError` otherwise."""
+    errors = [line for line in log_lines if "[Error]" in line]
+    for words, cls in LOOP_FAILURES:
+        if any(words in line for line in errors):
+            return cls
+    return FMUError
 
 
 class FMUInitializationError(FMUError, ValueError):

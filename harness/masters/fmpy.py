@@ -60,8 +60,8 @@ from ..fmu import (
     TIMING_OUTPUTS,
     FMUError,
     FMUInitializationError,
-    LoopDivergedError,
     array_size,
+    loop_error_class,
     check_fmi_version,
     fmu_path,
     load,
@@ -268,9 +268,7 @@ def _vr_array(values):
 
 def _step_error(inst, what, k, h, exc):
     message = inst._message(f"{what} at t = {k * h:.6g} s (sample {k})", exc)
-    diverged = any("[Error]" in line and ("diverged" in line or "unstable" in line)
-                   for line in inst.log)
-    return (LoopDivergedError if diverged else FMUError)(message)
+    return loop_error_class(inst.log)(message)
 
 
 # ---------------------------------------------------------------------------
@@ -335,7 +333,8 @@ def simulate_closed_loop(scenario, *, adaptation=None, preview=True, master="gau
     FMUInitializationError
         The FMU refused a parameter value.
     LoopDivergedError
-        The controller declared the loop unstable, or a value diverged.
+        The controller declared the loop unstable, or a value diverged
+        (:class:`harness.fmu.LoopFaultError`: its supervision stopped a loop that cannot work).
     FMUError
         An FMI call failed during the run.
     """

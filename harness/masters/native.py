@@ -10,8 +10,9 @@ are the same files the fmpy master runs (extracted once per process by
 
 FMU errors never end the process: a failing call stops the run and comes back with
 the FMU's log messages as the exceptions of the fmpy master
-(:class:`harness.fmu.LoopDivergedError` when the controller's monitor stopped the
-loop or a value diverged, :class:`harness.fmu.FMUError` otherwise,
+(:class:`harness.fmu.LoopFaultError` when the controller's supervision stopped the loop,
+:class:`harness.fmu.LoopDivergedError` when its monitor did or a value diverged,
+:class:`harness.fmu.FMUError` otherwise,
 :class:`harness.fmu.FMUInitializationError` for refused parameters). A completed
 step with ``fmi2Warning`` (the controller's first clipped voltage) goes on.
 
@@ -33,7 +34,7 @@ import numpy as np
 
 from ..core import header_cdef
 from ..fmu import (CONTROLLER_MODEL, PLANT_MODEL, FMUError, FMUInitializationError,
-                   LoopDivergedError, fmu_path, load, typed_parameters)
+                   fmu_path, load, loop_error_class, typed_parameters)
 from ..loop import CLOSED_LOOP_DTYPE, CLOSED_LOOP_FIELDS, as_structured, prepare_closed_loop
 from ..paths import runner_include_dir, runner_library, where_to_get_it
 
@@ -231,9 +232,7 @@ class NativeLoop:
             k, role = res.samples, res.failed_role
             what = f"{_CALLS.get(res.failed_call, 'fmi2 call')} at t = {k * h:.6g} s (sample {k})"
             message = self._message(role, what, st)
-            diverged = any("[Error]" in line and ("diverged" in line or "unstable" in line)
-                           for line in self.log(role))
-            raise (LoopDivergedError if diverged else FMUError)(message)
+            raise loop_error_class(self.log(role))(message)
         lib.piezo_runner_terminate(r)
 
     def run(self, setup, *, block=0):
