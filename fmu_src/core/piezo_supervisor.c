@@ -138,7 +138,9 @@ static int response_kind(const piezo_supervisor *s, const piezo_supervisor_input
 {
     int b = best_delay(s, n), law_ok, d;
     double sww, g, e_best, explained;
-    if (b == 0 || s->k < PIEZO_SUP_MIN_SAMPLES) return -1;
+    if (b == 0 || s->k < PIEZO_SUP_MIN_SAMPLES
+        || n->travel_model * 100.0 < PIEZO_SUP_TRAVEL_PERCENT * in->error_bound)
+        return -1;
     sww = sww_of(s, n, b);
     g = n->szw[b - 1] / sww;
     e_best = n->szz - n->szw[b - 1] * g;
@@ -176,6 +178,10 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     const double lam = s->forgetting;
     double dz, dzr, kind_gain = 0.0, e;
     int d, kind, kind_delay = 0;
+    if (!s->enabled) {
+        memset(n, 0, sizeof *n);    /* switched off: no statistics, no verdict */
+        return;
+    }
 
     /* dz(k) = Delta[A y](k), dw(k) = Delta[B q](k-1) = w(k) - w(k-1) */
     n->z = in->y_meas + s->a1 * s->y1 + s->a2 * s->y2;
@@ -230,10 +236,6 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         e = fabs(target - in->y_meas);
         n->clip_error_sum = in->clipped1 ? s->clip_error_sum + e : 0.0;
     }
-    if (!s->enabled) {
-        n->candidate = n->candidate_run = 0;
-        return;
-    }
     if (n->candidate_run >= PIEZO_SUP_CONFIRM)
         n->fault = n->candidate;
     /* a loop the linear evidence does not explain, once a pending response verdict had its chance */
@@ -250,6 +252,10 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
 void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *in,
                              const piezo_supervisor_next *n, double r)
 {
+    if (!s->enabled) {
+        s->k += 1;
+        return;
+    }
     s->y2 = s->y1;
     s->y1 = in->y_meas;
     s->r2 = s->r1;

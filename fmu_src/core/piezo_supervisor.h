@@ -21,8 +21,10 @@
  * energy E_d = Szz - Szw_d^2 / Sww_d. The best delay b has the least E_d.
  * Evidence is strong when the response the fit explains (or, for a gain below
  * 1, the response the model expects) is PIEZO_SUP_EVIDENCE times what it leaves
- * unexplained: Sww_b max(1, g_b^2) >= PIEZO_SUP_EVIDENCE E_b, and at least
- * PIEZO_SUP_MIN_SAMPLES samples were seen. With strong evidence:
+ * unexplained: Sww_b max(1, g_b^2) >= PIEZO_SUP_EVIDENCE E_b, at least
+ * PIEZO_SUP_MIN_SAMPLES samples were seen, and the model expected y_meas to
+ * travel at least PIEZO_SUP_TRAVEL_PERCENT % of monitor.pred_error_max over the
+ * window (the sum of its sample-to-sample moves). With strong evidence:
  *     g_b <= -gain_min               the measurement answers inverted
  *     |g_b| < gain_min                it does not answer (or far too little)
  *     g_b > gain_max                  it answers far more than the model
@@ -66,6 +68,9 @@
 #define PIEZO_SUP_EVIDENCE 32        /* explained (or expected) / unexplained response energy */
 #define PIEZO_SUP_DELAY_PERCENT 25   /* the law's delays leave this much of the response unexplained */
 #define PIEZO_SUP_ERRATIC_PERCENT 25 /* share of samples with |pred_error| above its bound */
+#define PIEZO_SUP_TRAVEL_PERCENT 5   /* evidence needs the model to expect y_meas to travel this share
+                                        of monitor.pred_error_max over the window (a probe below a
+                                        quantised sensor's step proves nothing) */
 #define PIEZO_SUP_DEFAULT_WINDOW 200 /* sup.window [samples] */
 #define PIEZO_SUP_DEFAULT_DETECTABLE 3   /* delays the controller detects: 1..3 */
 
@@ -82,7 +87,7 @@ typedef enum {
 } piezo_sup_fault;
 
 typedef struct {
-    int enabled;                 /* 0: no verdicts (open-loop use) */
+    int enabled;                 /* 0: off (open-loop use): no statistics, no verdicts */
     double gain_min;             /* (0, 1): weakest response gain of a working loop */
     double gain_max;             /* (1, inf): strongest */
     int window;                  /* [20, 1e6] samples: time constant of the statistics */
@@ -193,7 +198,7 @@ piezo_status piezo_supervisor_init(piezo_supervisor *sup, const piezo_supervisor
                                    piezo_diag *diag);
 void piezo_supervisor_reset(piezo_supervisor *sup);
 /* The statistics and the verdict of sample k (sup->k) into *next; *sup unchanged.
- * Disabled: next->fault is always 0 (the statistics still run, for the outputs). */
+ * Disabled (sup.enabled = false): nothing computed, next zeroed, no verdict. */
 void piezo_supervisor_evaluate(const piezo_supervisor *sup, const piezo_supervisor_input *in,
                                piezo_supervisor_next *next);
 /* Make the evaluated sample the state; r: the reference the law used at k. */
