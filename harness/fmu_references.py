@@ -210,8 +210,10 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
     fields = (("v", "v"), ("q", "q"), ("est.a1", "a1"), ("est.a2", "a2"), ("est.b1", "b1"),
               ("est.b2", "b2"), ("pred_error", "pred_error"), ("saturated", "saturated"))
     refs = {"time": time, **{name: [] for name, _ in fields},
-            "loop_delay": [], "loop_delay_time": [], "preview_lead": [], "meas_offset": []}
+            "loop_delay": [], "loop_delay_time": [], "preview_lead": [], "meas_offset": [],
+            "sup.status": [], "sup.gain": [], "sup.delay": []}
     published, out, lead_used = ctrl.output, plant.output, 0
+    sup = ctrl.raw.sup
     for k in range(n + 1):
         stimuli["y_meas"].append(out.y_meas)
         for name, field in fields:
@@ -222,6 +224,10 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
         refs["loop_delay_time"].append(0.0)
         refs["preview_lead"].append(lead_used)
         refs["meas_offset"].append(0)
+        # the supervision as of the last sample (every stamp connected: no warning, status 0 or 1)
+        refs["sup.status"].append(int(sup.status))
+        refs["sup.gain"].append(float(sup.gain))
+        refs["sup.delay"].append(int(sup.delay))
         if k < n:
             lead = preview if k > 0 else 0
             published = ctrl.step_input(y_ref[k], out.y_meas, y_preview[k], lead)  # published at t_(k+1) ...
