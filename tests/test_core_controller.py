@@ -17,11 +17,14 @@ THETA = np.array([D["tf.a1"], D["tf.a2"], D["tf.b1"], D["tf.b2"]])
 
 # The core algorithm as these tests drive it: v applied in the same sample (loop delay
 # d = 1 + mv.delay counted from the plant's one-sample delay alone, set: no detection),
-# the plain MV law (observer pole 0: deadbeat, so exactness is exact), no voltage limits
-# and no divergence monitor unless a test sets them. The FMU defaults (mv.delay = -1:
-# detected, observer 0.4, +-150 V limits, monitor on) are tested where they apply
-# (the observer here and in test_core_delay_detection.py).
-ALGORITHM = {"mv.delay": 0, "mv.observer": 0.0, "sat.enabled": False, "monitor.divergence_samples": 0}
+# the plain MV law (observer pole 0: deadbeat, so exactness is exact), no voltage limits,
+# no divergence monitor and no supervision unless a test sets them (many drive the law with
+# synthetic, open-loop data, which the supervision rightly refuses). The FMU defaults
+# (mv.delay = -1: detected, observer 0.4, +-150 V limits, monitor and supervision on) are
+# tested where they apply (the observer here, test_core_delay_detection.py,
+# test_core_supervision.py).
+ALGORITHM = {"mv.delay": 0, "mv.observer": 0.0, "sat.enabled": False, "monitor.divergence_samples": 0,
+             "sup.enabled": False}
 
 
 def controller(params=None):

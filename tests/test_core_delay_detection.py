@@ -112,7 +112,8 @@ def test_start_up_law_is_stable_for_each_delay_and_the_plain_law_is_not():
     for d in (1, 2, 3):
         assert largest_root(0.9, d) < 0.95, d
     assert largest_root(0.0, 1) > 2.4 and largest_root(0.0, 3) > 1.4
-    start_up = {"mv.delay": 1, "mv.observer": 0.9, "rls.enabled": False}
+    # a law set to the wrong d on purpose: the supervision, which says so at once, is off
+    start_up = {"mv.delay": 1, "mv.observer": 0.9, "rls.enabled": False, "sup.enabled": False}
     for schedule, tf_delay in (("seq R,C,P", 0), ("exchange", 1)):
         y, y_d, _ = closed_loop("mismatch_5hz", schedule, tf_delay, ctrl_params=start_up, n=4000)
         assert np.max(np.abs(y - y_d)) < 2.0, schedule           # bounded (um)
@@ -165,8 +166,9 @@ def test_probes_stop_after_eight():
     at most 8 probes, each at least twice the one before up to the bound of 1 um, the first
     1e-3 um (zero inputs: nothing answers, the errors are the law's own echo), starting the
     trials at samples 20, 40, ..., 160; then its trials go on without probes. Driven open loop with zero inputs,
-    the probe amplitude is 0 from sample 180 on and the controller is still detecting."""
-    ctrl = core.Controller({"monitor.divergence_samples": 0})
+    the probe amplitude is 0 from sample 180 on and the controller is still detecting
+    (supervision off: it would rightly stop a loop whose measurement never answers)."""
+    ctrl = core.Controller({"monitor.divergence_samples": 0, "sup.enabled": False})
     by_trial = {}
     for k in range(400):
         ctrl.step(0.0, 0.0)

@@ -173,30 +173,32 @@ def test_controller_refuses_a_sample_that_overflows_its_covariance_and_keeps_its
     phi = [-1e200, 0, q, 0], so phi^T P phi = 1e400 overflows; P - P phi phi^T P /
     (lambda + phi^T P phi) is Inf / Inf = NaN while theta and every output stay finite (the
     update K e is 1e200 / Inf = 0). That sample is refused as divergence and the controller
-    is the one before it. With the delay detected (the default) the first sample already
+    is the one before it (supervision off: its sums of squared changes overflow at the first
+    sample). With the delay detected (the default) the first sample already
     overflows: its squared a-priori error, 1e400, enters the candidates' sums; it is refused
-    the same way. (Voltage limits off: a clipped first sample would pause the adaptation
-    over the second.)"""
+    the same way, and so is it with the supervision on. (Voltage limits off: a clipped first
+    sample would pause the adaptation over the second.)"""
     assert 1e200 * 1e200 == math.inf
-    ctrl = core.Controller({"sat.enabled": False, "mv.delay": 1})
+    ctrl = core.Controller({"sat.enabled": False, "mv.delay": 1, "sup.enabled": False})
     ctrl.step(0.0, 1e200)
     before = snapshot(ctrl.raw, "piezo_controller")
     with pytest.raises(core.CoreDivergedError):
         ctrl.step(0.0, 1e200)
     assert snapshot(ctrl.raw, "piezo_controller") == before
     assert ctrl.k == 1
-    detecting = core.Controller({"sat.enabled": False})
-    before = snapshot(detecting.raw, "piezo_controller")
-    with pytest.raises(core.CoreDivergedError):
-        detecting.step(0.0, 1e200)
-    assert snapshot(detecting.raw, "piezo_controller") == before and detecting.k == 0
+    for params in ({"sat.enabled": False}, {"sat.enabled": False, "mv.delay": 1}):
+        first = core.Controller(params)
+        before = snapshot(first.raw, "piezo_controller")
+        with pytest.raises(core.CoreDivergedError):
+            first.step(0.0, 1e200)
+        assert snapshot(first.raw, "piezo_controller") == before and first.k == 0, params
 
 
 def test_controller_check_accepts_runs_and_names_tampered_fields():
     lib = core.lib()
     for params in ({}, {"creep.exact": True}, {"rls.enabled": False}, {"mv.feedthrough": True, "mv.delay": 0}):
-        # the inputs are no closed loop: keep the monitor from calling it unstable
-        ctrl = core.Controller({**params, "monitor.divergence_samples": 0})
+        # the inputs are no closed loop: keep the monitor and the supervision from stopping it
+        ctrl = core.Controller({**params, "monitor.divergence_samples": 0, "sup.enabled": False})
         for k in range(300):
             ctrl.step(2.0 * math.sin(0.01 * (k + 2)), 2.0 * math.sin(0.01 * k))
         assert check_text(lib.piezo_controller_check(ctrl.raw)) is None, params
@@ -223,7 +225,7 @@ def test_controller_check_accepts_runs_and_names_tampered_fields():
     raw.P[1] = old
     assert check_text(lib.piezo_controller_check(raw)) is None
     # ... and so is each delay candidate's (the same update), while detecting or after
-    auto = core.Controller({"monitor.divergence_samples": 0})
+    auto = core.Controller({"monitor.divergence_samples": 0, "sup.enabled": False})
     for k in range(5):
         auto.step(2.0 * math.sin(0.01 * (k + 2)), 2.0 * math.sin(0.01 * k))
     det = auto.raw

@@ -22,6 +22,12 @@ INPUTS = ["y_ref", "y_meas", "y_preview", "t_preview", "t_meas"]
 H = 0.0005
 # The direct-feedthrough option (d = 1): v at t_k from the inputs set at t_k.
 FEEDTHROUGH = {"mv.feedthrough": True, "mv.delay": 0}
+# Open loop on synthetic data (y_meas_of does not answer v): the supervision, which would
+# rightly stop such a "loop" within 15 ms, is switched off as docs/model.md says for open-loop use.
+OPEN_LOOP = {"sup.enabled": False}
+SUPERVISION = {"sup.enabled": ("Boolean", True), "sup.gain_min": ("Real", 0.25), "sup.gain_max": ("Real", 4.0),
+               "sup.window": ("Integer", 200), "sup.clip_time": ("Real", 0.5), "sup.detect_time": ("Real", 0.5)}
+SUP_OUTPUTS = ["sup.status", "sup.gain", "sup.delay"]
 
 
 def y_d(k):
@@ -75,7 +81,8 @@ def test_model_description_matches_design(controller, piezo_stage):
     assert (float(de.startTime), float(de.stopTime), float(de.stepSize)) == (0.0, 3.0, 0.0005)
 
     assert [n for n, x in v.items() if x.causality == "input"] == INPUTS
-    assert [n for n, x in v.items() if x.causality == "output"] == OUTPUTS + ["saturated"] + TIMING
+    assert [n for n, x in v.items() if x.causality == "output"] == OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS
+    assert [v[n].type for n in SUP_OUTPUTS] == ["Integer", "Real", "Integer"]
     assert v["saturated"].type == "Boolean"
     assert [v[n].type for n in TIMING] == ["Integer", "Real", "Integer", "Integer"]
     for name in ("y_ref", "y_meas", "y_preview", "q", "pred_error"):
@@ -99,7 +106,8 @@ def test_model_description_matches_design(controller, piezo_stage):
            "mv.lambda_u": ("Real", 0.0), "rls.enabled": ("Boolean", True),
            "rls.forgetting": ("Real", 0.995), "sat.enabled": ("Boolean", True),
            "sat.v_min": ("Real", -150.0), "sat.v_max": ("Real", 150.0),
-           "monitor.pred_error_max": ("Real", 1.0), "monitor.divergence_samples": ("Integer", 200)}
+           "monitor.pred_error_max": ("Real", 1.0), "monitor.divergence_samples": ("Integer", 200),
+           **SUPERVISION}
     for name, (type_, start) in own.items():
         assert v[name].type == type_ and start_value(v[name]) == start, name
     for name in ("rls.p0", "rls.trace_max"):
@@ -109,7 +117,7 @@ def test_model_description_matches_design(controller, piezo_stage):
 
     # honest for the default: no output depends directly on an input
     deps = {u.variable.name: sorted(d.name for d in u.dependencies) for u in md.outputs}
-    assert deps == {name: [] for name in OUTPUTS + ["saturated"] + TIMING}
+    assert deps == {name: [] for name in OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS}
 
 
 def test_start_values_in_the_binary_match_the_xml(controller, make_fmu):
@@ -173,8 +181,8 @@ def test_default_publishes_at_the_end_of_the_step(controller, make_fmu):
     until the next step. Reference: the core controller stepped with the same inputs
     (harness.core.Controller(...).step, cffi), exact equality, over 300 samples."""
     fmu = make_fmu(controller)
-    fmu.initialize()
-    twin = core.Controller()
+    fmu.initialize(OPEN_LOOP)
+    twin = core.Controller(OPEN_LOOP)
     for k in range(300):
         fmu.set({"y_ref": y_d(k + 2), "y_meas": y_meas_of(k)})
         before = fmu.get_reals(OUTPUTS)
@@ -196,8 +204,8 @@ def test_get_twice_gives_the_same_value_and_commits_nothing(controller, make_fmu
     nothing. Reference: a twin instance that is never probed, exact equality."""
     probed = make_fmu(controller)
     twin = make_fmu(controller)
-    # open loop on synthetic data: the divergence monitor has no loop to judge
-    params = {**FEEDTHROUGH, "monitor.divergence_samples": 0}
+    # open loop on synthetic data: the divergence monitor and the supervision have no loop to judge
+    params = {**FEEDTHROUGH, "monitor.divergence_samples": 0, **OPEN_LOOP}
     probed.initialize(params)
     twin.initialize(params)
     for k in range(300):
@@ -222,7 +230,7 @@ def test_model_structure_is_honest(controller, make_fmu):
     """Default: the XML says no output depends directly on an input; changing the inputs
     between steps must then change no output (exact equality)."""
     fmu = make_fmu(controller)
-    fmu.initialize()
+    fmu.initialize(OPEN_LOOP)
     run(fmu, 400)
     base = fmu.get_reals(OUTPUTS)
     for inputs in ({"y_ref": 3.0}, {"y_meas": -2.0}, {"y_ref": -7.0, "y_meas": 4.0}):
@@ -234,7 +242,7 @@ def test_feedthrough_dependencies_are_what_the_option_documents(controller, make
     """mv.feedthrough: v and q depend on y_ref and y_meas, the estimates and pred_error on
     y_meas only (the RLS update uses y_meas; y_ref enters only the MV law)."""
     fmu = make_fmu(controller)
-    fmu.initialize({**FEEDTHROUGH, "sat.enabled": False})     # no clipping to hide a change
+    fmu.initialize({**FEEDTHROUGH, "sat.enabled": False, **OPEN_LOOP})     # no clipping to hide a change
     run(fmu, 400)
     fmu.set({"y_ref": y_d(401), "y_meas": y_meas_of(400)})
     base = dict(zip(OUTPUTS, fmu.get_reals(OUTPUTS)))
@@ -258,7 +266,8 @@ def test_many_samples_per_step_equal_one_sample_per_step(controller, make_fmu, e
     blocks = rng.integers(1, 30, size=50)
     fine = make_fmu(controller)
     coarse = make_fmu(controller)
-    params = {"creep.exact": exact, "creep.alpha": -0.0085, "creep.k_c": 1.0497, "mv.hold_inputs": True}
+    params = {"creep.exact": exact, "creep.alpha": -0.0085, "creep.k_c": 1.0497, "mv.hold_inputs": True,
+              **OPEN_LOOP}
     fine.initialize(params)
     coarse.initialize(params)
     for i, n in enumerate(blocks):
@@ -273,7 +282,7 @@ def test_many_samples_per_step_equal_one_sample_per_step(controller, make_fmu, e
 
 @pytest.mark.parametrize("exact", [False, True])
 def test_state_save_restore_and_serialization_continue_bitwise(controller, make_fmu, exact):
-    params = {"creep.exact": exact, "sat.enabled": True, "sat.v_min": -30.0, "sat.v_max": 30.0}
+    params = {"creep.exact": exact, "sat.enabled": True, "sat.v_min": -30.0, "sat.v_max": 30.0, **OPEN_LOOP}
     fmu = make_fmu(controller)
     fmu.initialize(params)
     run(fmu, 1200)
@@ -297,7 +306,7 @@ def test_state_save_restore_and_serialization_continue_bitwise(controller, make_
 
 def _uninterrupted(controller, make_fmu, n, params=None):
     fmu = make_fmu(controller)
-    fmu.initialize(params)
+    fmu.initialize({**OPEN_LOOP, **(params or {})})
     return run(fmu, n)
 
 
@@ -312,7 +321,8 @@ NON_DEFAULT_PARAMETERS = {
     "mv.hold_inputs": True, "rls.enabled": False,
     "rls.forgetting": 0.99, "rls.p0": 2.0, "rls.trace_max": 50.0, "sat.enabled": False,
     "sat.v_min": -40.0, "sat.v_max": 60.0, "monitor.pred_error_max": 5.0,
-    "monitor.divergence_samples": 0,
+    "monitor.divergence_samples": 0, "sup.enabled": False, "sup.gain_min": 0.1, "sup.gain_max": 8.0,
+    "sup.window": 400, "sup.clip_time": 0.25, "sup.detect_time": 1.0,
 }
 
 
@@ -343,6 +353,8 @@ def test_reset_restores_every_start_value(controller, make_fmu, terminate_first)
         if var.causality in ("parameter", "input"):
             assert fmu.get(name) == start_value(var), name
     assert fmu.get_reals(OUTPUTS) == fresh.get_reals(OUTPUTS)
+    for f in (fmu, fresh):                     # the same open-loop run on both: supervision off
+        f.set(OPEN_LOOP)
     fmu.slave.exitInitializationMode()
     fresh.slave.exitInitializationMode()
     fmu.h, fmu.k, fresh.h, fresh.k = H, 0, H, 0
@@ -355,7 +367,7 @@ def test_deserialize_refuses_garbage(controller, make_fmu):
     the intact blob still restores into that continuation."""
     reference = _uninterrupted(controller, make_fmu, 100)
     fmu = make_fmu(controller)
-    fmu.initialize()
+    fmu.initialize(OPEN_LOOP)
     part = run(fmu, 50)
     state = fmu.slave.getFMUstate()
     blob = fmu.slave.serializeFMUstate(state)
@@ -424,7 +436,7 @@ def test_inconsistent_limits_are_fine_while_saturation_is_off(controller, make_f
     would show."""
     reference = _uninterrupted(controller, make_fmu, 300, {"sat.enabled": False})
     fmu = make_fmu(controller)
-    fmu.initialize({"sat.enabled": False, "sat.v_min": 10.0, "sat.v_max": -10.0})
+    fmu.initialize({"sat.enabled": False, "sat.v_min": 10.0, "sat.v_max": -10.0, **OPEN_LOOP})
     assert (fmu.get("sat.v_min"), fmu.get("sat.v_max")) == (10.0, -10.0)
     out = run(fmu, 300)
     assert np.array_equal(out, reference)
@@ -433,10 +445,10 @@ def test_inconsistent_limits_are_fine_while_saturation_is_off(controller, make_f
 
 def test_non_finite_input_refused_state_unchanged(controller, make_fmu):
     reference = make_fmu(controller)
-    reference.initialize()
+    reference.initialize(OPEN_LOOP)
     expected = run(reference, 60)
     fmu = make_fmu(controller)
-    fmu.initialize()
+    fmu.initialize(OPEN_LOOP)
     part = run(fmu, 30)
     for name in ("y_ref", "y_meas"):
         for bad in (float("nan"), float("inf")):
@@ -449,7 +461,7 @@ def test_step_size_not_a_multiple_of_h_is_refused(controller, make_fmu):
     """Refused steps (not a multiple of h = 1 ms, or from the wrong time) change nothing.
     Reference: an uninterrupted run with h = 1 ms, which the samples before and after the
     refusals must equal bitwise; then a 3-sample step equals three 1-sample steps."""
-    params = {"h": 0.001, "mv.hold_inputs": True}
+    params = {"h": 0.001, "mv.hold_inputs": True, **OPEN_LOOP}
     reference = make_fmu(controller)
     reference.initialize(params)
     expected = run(reference, 40)
@@ -534,7 +546,7 @@ def test_clipping_is_warned_once_and_counted_at_terminate(controller, make_fmu):
     clipped sample; no other step warns about clipping (with loggingOn = false); fmi2Terminate
     returns fmi2Warning with the count, equal to the number of clipped samples."""
     fmu = make_fmu(controller)
-    fmu.initialize({"sat.v_min": -5.0, "sat.v_max": 5.0, "monitor.divergence_samples": 0})
+    fmu.initialize({"sat.v_min": -5.0, "sat.v_max": 5.0, "monitor.divergence_samples": 0, **OPEN_LOOP})
     statuses, clipped = [], []
     for k in range(400):
         fmu.set({"y_ref": y_d(k + 2), "y_meas": y_meas_of(k)})
@@ -558,17 +570,21 @@ def test_clipping_is_warned_once_and_counted_at_terminate(controller, make_fmu):
     assert sum(clipped) > 10
 
 
-def test_unstable_loop_fails_loudly(controller, piezo_stage, make_fmu):
+@pytest.mark.parametrize("supervision", [True, False])
+def test_unstable_loop_fails_loudly(controller, piezo_stage, make_fmu, supervision):
     """The documented diverging configuration: plant with one extra input delay (tf.delay =
     1) and the controller in direct-feedthrough mode with d = 1 (mv.delay = 0), Gauss-Seidel
-    ordered by ModelStructure, 10 Hz reference. Within 0.2 s the controller's doStep returns
-    fmi2Error with a message that says the loop is unstable and names the monitor bound and
-    window; the FMU is then in state Error (getters allowed, doStep refused); |v| never
-    exceeded the +-150 V limits."""
+    ordered by ModelStructure, 10 Hz reference: the loop has d = 2. With the supervision (the
+    default) the controller's doStep returns fmi2Error within 20 ms with a message that says
+    y_meas answers v 2 samples later and how to set mv.delay (reference: the loop's delay by
+    construction, 1 sample of G + 1 of tf.delay); without it (sup.enabled = false) the
+    divergence monitor does within 0.2 s, naming its bound and window. Either way the FMU is
+    then in state Error (getters allowed, doStep refused) and |v| never exceeded the +-150 V
+    limits."""
     plant = make_fmu(piezo_stage)
     ctrl = make_fmu(controller)
     plant.initialize({"tf.delay": 1})
-    ctrl.initialize(FEEDTHROUGH)
+    ctrl.initialize({**FEEDTHROUGH, "sup.enabled": supervision})
     vmax = 0.0
     failed_at = None
     for k in range(400):
@@ -583,10 +599,16 @@ def test_unstable_loop_fails_loudly(controller, piezo_stage, make_fmu):
             assert exc.status == 3                  # fmi2Error
             failed_at = k
             break
-    assert failed_at is not None and failed_at * H < 0.2
     msg = " ".join(ctrl.errors())
-    assert "the closed loop is unstable" in msg and "monitor.pred_error_max = 1 um" in msg
-    assert "monitor.divergence_samples = 200" in msg and "state Error" in msg
+    if supervision:
+        assert failed_at is not None and failed_at * H < 0.02, failed_at
+        assert "supervision stopped the loop (loop delay beyond the controller's)" in msg
+        assert "y_meas answers v 2 samples later" in msg and "Set mv.delay = 1 (d = 2)" in msg
+    else:
+        assert failed_at is not None and failed_at * H < 0.2
+        assert "the closed loop is unstable" in msg and "monitor.pred_error_max = 1 um" in msg
+        assert "monitor.divergence_samples = 200" in msg
+    assert "state Error" in msg
     assert vmax <= 150.0
     ctrl.get("v")                                   # getters stay allowed
     with pytest.raises(FMICallException):

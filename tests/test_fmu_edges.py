@@ -116,8 +116,10 @@ def test_the_longest_step_passes_and_one_sample_more_is_refused(_fmu_packages, m
     nothing (the time stays); so is a step of 1e9 s."""
     samples, _ = _documented_bounds()
     fmu = make_fmu(_fmu_packages[name])
-    # the controller holds its inputs over a step of several samples only when told to
-    fmu.initialize({"monitor.divergence_samples": 0, "mv.hold_inputs": True} if name != "PiezoStage" else None)
+    # the controller holds its inputs over a step of several samples only when told to (open
+    # loop: no monitor, no supervision)
+    fmu.initialize({"monitor.divergence_samples": 0, "mv.hold_inputs": True, "sup.enabled": False}
+                   if name != "PiezoStage" else None)
     for H_step in ((samples + 1) * H, 1e9):
         with pytest.raises(FMICallException):
             fmu.slave.doStep(0.0, H_step)
@@ -136,7 +138,7 @@ def test_with_exact_creep_the_longest_step_it_names_passes(_fmu_packages, make_f
     samples, terms = _documented_bounds()
     params = {"creep.exact": True}
     if name != "PiezoStage":
-        params.update({"monitor.divergence_samples": 0, "mv.hold_inputs": True})
+        params.update({"monitor.divergence_samples": 0, "mv.hold_inputs": True, "sup.enabled": False})
     fmu = make_fmu(_fmu_packages[name])
     fmu.initialize(params)
     fmu.step(10)
@@ -209,7 +211,7 @@ def test_the_monitor_warning_says_what_divergence_samples_means(controller, make
     unstable when monitor.divergence_samples = 0 (no "0 consecutive samples")."""
     fmu = make_fmu(controller)
     fmu.initialize({"monitor.divergence_samples": window, "monitor.pred_error_max": 0.001,
-                    "mv.hold_inputs": True})
+                    "mv.hold_inputs": True, "sup.enabled": False})
     fmu.set({"y_meas": 5.0})
     fmu.step(20)
     warning = next(text for status, _, text in fmu.messages if status == FMI2_WARNING and "pred_error" in text)

@@ -20,8 +20,8 @@ DRIVES = {
     "ReferenceSignal": (None, None, ["y_d", "y_ref"]),
 }
 PARAMS = {"ReferenceSignal": {"amplitude[1]": 10.0, "frequency[1]": 5.0},
-          # open loop on synthetic data: no loop for the monitor to judge
-          "AdaptiveCompoundController": {"monitor.divergence_samples": 0}}
+          # open loop on synthetic data: no loop for the monitor or the supervision to judge
+          "AdaptiveCompoundController": {"monitor.divergence_samples": 0, "sup.enabled": False}}
 
 
 def do_step(fmu, t, step):

@@ -202,25 +202,33 @@ metric_window = [0.25, 0.5]
 controller = { "sat.v_min" = -15.0, "sat.v_max" = 15.0 }
 
 [[scenario]]
+name = "diverging_unsupervised"
+extends = "diverging_d1"
+description = "the same loop with the supervision off: the divergence monitor catches it"
+controller = { "mv.feedthrough" = true, "mv.delay" = 0, "sup.enabled" = false }
+
+[[scenario]]
 name = "diverging_unmonitored"
 extends = "diverging_d1"
-description = "the same loop with the monitor off: the error check of the harness catches it"
-controller = { "mv.feedthrough" = true, "mv.delay" = 0, "monitor.divergence_samples" = 0 }
+description = "the same loop with the supervision and the monitor off: the error check of the harness catches it"
+controller = { "mv.feedthrough" = true, "mv.delay" = 0, "monitor.divergence_samples" = 0, "sup.enabled" = false }
 """
 
 
 @pytest.mark.parametrize("backend", ["fmpy", "core"])
 @pytest.mark.parametrize("name,fragment", [
-    ("diverging_d1", "the closed loop is unstable"),
+    ("diverging_d1", "supervision stopped the loop (loop delay beyond the controller's)"),
     ("clipping", "the controller clipped v in"),
+    ("diverging_unsupervised", "the closed loop is unstable"),
     ("diverging_unmonitored", "the run diverged"),
 ])
 def test_a_failing_run_exits_3_with_one_line(tmp_path, backend, name, fragment):
     """The documented diverging configuration (plant tf.delay = 1, controller in
-    direct-feedthrough mode with d = 1), a reference the +-15 V limits cannot reach, and the
-    diverging loop with the controller's monitor off (the limits then hold v at +-150 V and
-    the harness's own error check finds the error larger than the reference). Each exits
-    with code 3 and a single stderr line naming the scenario and why."""
+    direct-feedthrough mode with d = 1): the supervision says the loop's delay is 2; with it
+    off, the divergence monitor finds the loop unstable; with both off (the limits then hold
+    v at +-150 V) the harness's own error check finds the error larger than the reference.
+    And a reference the +-15 V limits cannot reach. Each exits with code 3 and a single
+    stderr line naming the scenario and why."""
     scen = tmp_path / "failing.toml"
     scen.write_text(FAILING)
     proc = _harness("run", name, "--scenario-file", str(scen), "--out", str(tmp_path / "out"),

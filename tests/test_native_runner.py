@@ -69,17 +69,22 @@ def test_clipping_warning_completes_the_step_and_is_logged():
     loop.close()
 
 
-def test_divergence_is_loop_diverged_error_with_the_fmpy_message():
+@pytest.mark.parametrize("supervision", [True, False])
+def test_divergence_is_loop_diverged_error_with_the_fmpy_message(supervision):
     """Reference: the fmpy master's exception. A controller that assumes d = 1 in the
-    default d = 2 loop is stopped by its monitor: LoopDivergedError, same message (sample,
-    time and the FMU's explanation) as the fmpy master's."""
-    kwargs = {"controller_params": {"mv.delay": 0}}
+    default d = 2 loop is stopped by its supervision (LoopFaultError: the loop delay is 2), or
+    with the supervision off by its monitor (LoopDivergedError): the same class and message
+    (sample, time and the FMU's explanation) as the fmpy master's."""
+    kwargs = {"controller_params": {"mv.delay": 0, "sup.enabled": supervision}}
+    error, fragment = (fmu.LoopFaultError, "Set mv.delay = 1") if supervision else \
+        (fmu.LoopDivergedError, "unstable")
     with pytest.raises(fmu.LoopDivergedError) as want:
         fmpy_master.simulate_closed_loop("mismatch_5hz", **kwargs)
     with pytest.raises(fmu.LoopDivergedError) as got:
         native.simulate_closed_loop_native("mismatch_5hz", **kwargs)
+    assert type(got.value) is type(want.value) is error
     assert str(got.value) == str(want.value)
-    assert "unstable" in str(got.value) and "sample" in str(got.value)
+    assert fragment in str(got.value) and "sample" in str(got.value)
 
 
 def test_nonfinite_reference_is_an_fmu_error_and_the_loop_recovers():
@@ -202,8 +207,8 @@ def test_auto_backend_uses_native_for_long_runs(monkeypatch):
 
 
 def test_cli_native_backend_failing_run_exits_3(tmp_path):
-    """The command line with --backend native: a diverging run exits 3 with one line saying
-    why (the controller's monitor), as with fmpy."""
+    """The command line with --backend native: a run the controller stops exits 3 with one
+    line saying why (the controller's supervision: the loop's delay), as with fmpy."""
     f = tmp_path / "bad.toml"
     f.write_text('[[scenario]]\nname = "bad"\nextends = "mismatch_5hz"\n'
                  'controller = { "mv.delay" = 0 }\n')
@@ -212,4 +217,5 @@ def test_cli_native_backend_failing_run_exits_3(tmp_path):
                           capture_output=True, text=True, cwd=REPO, timeout=300)
     assert proc.returncode == 3, proc.stderr
     lines = error_lines(proc.stderr)
-    assert len(lines) == 1 and "the closed loop is unstable" in lines[0], proc.stderr
+    assert len(lines) == 1 and "supervision stopped the loop" in lines[0], proc.stderr
+    assert "Set mv.delay = 1 (d = 2)" in lines[0], proc.stderr

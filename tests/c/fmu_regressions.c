@@ -87,6 +87,9 @@ static unsigned char *saved_blob(const host_fmu *f, const char *param, double va
     host_enter_init(f, in.c, 0.0, 0, 0.0);
     if (param != NULL)
         host_set_named(f, in.c, param, value);
+    /* constant inputs are no closed loop: the controller's supervision would stop them */
+    if (host_named(f, "sup.enabled", NULL) != NULL)
+        host_set_named(f, in.c, "sup.enabled", 0.0);
     if (f->api.ExitInitializationMode(in.c) == HOST_OK) {
         for (i = 0; i < f->n_vars; i++)
             if (f->vars[i].causality == VAR_INPUT)

@@ -321,7 +321,8 @@ static inline int host_config_setting(int i, int j, const char **name, double *v
         {"amplitude[2]", 0.5},
         {"frequency[2]", 13.0 + i},
         {"offset", 0.25 * i},
-        {"monitor.divergence_samples", 0.0},   /* the drive is no closed loop: never call it unstable */
+        {"monitor.divergence_samples", 0.0},   /* the drive is no closed loop: never call it unstable, */
+        {"sup.enabled", 0.0},                  /* nor stop it as one that cannot work */
     };
     if (j < 0 || j >= (int)(sizeof settings / sizeof settings[0]))
         return 0;

@@ -5,8 +5,10 @@
  * sequences, NaN inputs, bad steps, corrupted blobs). Run by
  * tests/test_fmu_c_master.py, under valgrind when it is installed.
  *
- * usage: fmu_master UNZIPDIR MODEL_ID GUID H N_SAMPLES OUT_VR IN_VR [IN_VR ...]
- * Every input is driven by u(k) = 10 sin(2 pi 5 k h) + 10. Prints one line per
+ * usage: fmu_master [--off VR]... UNZIPDIR MODEL_ID GUID H N_SAMPLES OUT_VR IN_VR [IN_VR ...]
+ * Every input is driven by u(k) = 10 sin(2 pi 5 k h) + 10; --off sets the Boolean
+ * parameter VR to false in every run (before initialization, as an importer's start
+ * value: the controller's sup.enabled, since this drive is no closed loop). Prints one line per
  * check ("ok ..." / "FAIL ..."), the output trajectory's last value and a
  * checksum-free dump of every 100th output (for the comparison with fmpy),
  * then "N passed, M failed". Exit code 1 if any check failed.
@@ -110,12 +112,25 @@ static int run_samples(const run_setup *rs, fmi2Component c, size_t k0, size_t k
     return 0;
 }
 
+/* the Boolean parameters --off sets to false */
+static fmi2ValueReference off_vr[8];
+static size_t n_off;
+
+static int set_off(const fmi2_api *api, fmi2Component c)
+{
+    size_t i;
+    fmi2Boolean no = fmi2False;
+    for (i = 0; i < n_off; ++i)
+        if (api->SetBoolean(c, &off_vr[i], 1, &no) != fmi2OK) return 1;
+    return 0;
+}
+
 static fmi2Component start(const fmi2_api *api, const fmi2CallbackFunctions *cb, const char *id,
                            const char *guid, const char *resources, const char *name)
 {
     fmi2Component c = api->Instantiate(name, fmi2CoSimulation, guid, resources, cb, fmi2False, fmi2False);
     if (c == NULL) return NULL;
-    if (api->SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) != fmi2OK ||
+    if (set_off(api, c) || api->SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) != fmi2OK ||
         api->EnterInitializationMode(c) != fmi2OK || api->ExitInitializationMode(c) != fmi2OK) {
         api->FreeInstance(c);
         return NULL;
@@ -142,8 +157,13 @@ int main(int argc, char **argv)
     run_setup rs;
     int same;
 
+    while (argc >= 3 && strcmp(argv[1], "--off") == 0 && n_off < 8) {
+        off_vr[n_off++] = (fmi2ValueReference)atol(argv[2]);
+        argv += 2;
+        argc -= 2;
+    }
     if (argc < 8) {
-        fprintf(stderr, "usage: %s UNZIPDIR MODEL_ID GUID H N_SAMPLES OUT_VR IN_VR...\n", argv[0]);
+        fprintf(stderr, "usage: %s [--off VR]... UNZIPDIR MODEL_ID GUID H N_SAMPLES OUT_VR IN_VR...\n", argv[0]);
         return 2;
     }
     unzipdir = argv[1];
@@ -183,7 +203,8 @@ int main(int argc, char **argv)
     if (!c) return 1;
     check(api.DoStep(c, 0.0, h, fmi2True) == fmi2Error, "doStep before initialization is refused");
     check(api.ExitInitializationMode(c) == fmi2Error, "exitInitializationMode before enter is refused");
-    check(api.SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) == fmi2OK, "setupExperiment");
+    check(set_off(&api, c) == 0 && api.SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) == fmi2OK,
+          "setupExperiment");
     check(api.EnterInitializationMode(c) == fmi2OK && api.ExitInitializationMode(c) == fmi2OK, "initialize");
     check(api.SetReal(c, in_vr, 1, &nan_value) == fmi2Error, "a NaN input is refused");
     check(api.GetReal(c, &out_vr, 1, NULL) == fmi2Error, "getReal into NULL is refused");
@@ -197,7 +218,7 @@ int main(int argc, char **argv)
     check(api.Terminate(c) == fmi2OK, "terminate");
     check(api.DoStep(c, 0.0, h, fmi2True) == fmi2Error, "doStep after terminate is refused");
     check(api.Reset(c) == fmi2OK, "reset after terminate");
-    check(api.SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) == fmi2OK &&
+    check(set_off(&api, c) == 0 && api.SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) == fmi2OK &&
           api.EnterInitializationMode(c) == fmi2OK && api.ExitInitializationMode(c) == fmi2OK,
           "re-initialize after reset");
     api.FreeInstance(c);
