@@ -4,6 +4,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from scipy.signal import lfilter
 import pytest
 from scipy import signal
 
@@ -798,14 +799,18 @@ def test_monitor_counts_runs_and_refuses_the_window_sample():
 
 
 def test_monitor_run_resets_below_the_bound():
-    """The window counts consecutive samples only. y_meas = 5 um for 10 samples, then 0:
-    the errors fall below the bound for a while, so the run restarts while n_large_error
-    keeps the total. Reference: the |pred_error| sequence of an unmonitored twin (window 0),
-    compared with the 1 um bound by NumPy, and a plain loop counting the trailing run."""
+    """The run counts consecutive samples. y_meas = 5 um for 10 samples, then 0: the errors
+    fall below the bound for a while, so the run restarts while n_large_error keeps the
+    total, and the share of large errors over the window is kept as an exponentially
+    weighted sum. Reference: the |pred_error| sequence of an unmonitored twin (window 0),
+    compared with the 1 um bound by NumPy, a plain loop counting the trailing run, and the
+    weighted sums by scipy.signal.lfilter (lambda = 1 - 1/1000). 32 samples: the share is
+    judged from sample 32 on (the next test)."""
+    n = core.lib().PIEZO_MONITOR_SHARE_MIN_SAMPLES
     twin = _monitored(0)
-    errors = np.array([abs(twin.step(0.0, 5.0 if k < 10 else 0.0).pred_error) for k in range(40)])
+    errors = np.array([abs(twin.step(0.0, 5.0 if k < 10 else 0.0).pred_error) for k in range(n)])
     c = _monitored(1000)
-    for k in range(40):
+    for k in range(n):
         c.step(0.0, 5.0 if k < 10 else 0.0)
     large = errors > 1.0
     assert large[0] and not large.all()                     # a run that ends and restarts
@@ -815,6 +820,27 @@ def test_monitor_run_resets_below_the_bound():
         run = run + 1 if flag else 0
     assert c.raw.run_large_error == run
     assert c.raw.max_abs_pred_error == errors.max()
+    lam = 1.0 - 1.0 / 1000
+    assert c.raw.mon_share == pytest.approx(lfilter([1.0], [1.0, -lam], large.astype(float))[-1], rel=1e-14)
+    assert c.raw.mon_weight == pytest.approx(lfilter([1.0], [1.0, -lam], np.ones(n))[-1], rel=1e-14)
+
+
+def test_monitor_stops_a_loop_beyond_the_bound_in_a_quarter_of_its_window():
+    """The same drive past sample 32: 10 large errors among the first 33 samples are more than
+    PIEZO_MONITOR_SHARE_PERCENT = 25 % of the window's weight, so the step of sample 32 is
+    refused (CoreUnstableError, nothing committed) although no run reached the window of
+    1000; with the window 0 (monitor off) the drive goes on."""
+    n = core.lib().PIEZO_MONITOR_SHARE_MIN_SAMPLES
+    c = _monitored(1000)
+    for k in range(n):
+        c.step(0.0, 5.0 if k < 10 else 0.0)
+    before = bytes(core.ffi.buffer(c.raw))
+    with pytest.raises(core.CoreUnstableError):
+        c.step(0.0, 0.0)
+    assert bytes(core.ffi.buffer(c.raw)) == before
+    off = _monitored(0)
+    for k in range(2 * n):
+        off.step(0.0, 5.0 if k < 10 else 0.0)
 
 
 def test_saturation_counts():

@@ -438,18 +438,33 @@ int model_failure_text(const ModelData *data, piezo_status st, char *text, size_
         return 1;
     }
     if (st == PIEZO_ERR_UNSTABLE) {
-        snprintf(text, size, "the closed loop is unstable: |pred_error| stayed above "
-                 "monitor.pred_error_max = %g um for monitor.divergence_samples = %llu consecutive "
-                 "samples (while v is clipped, the larger of it and the nominal model's prediction error; "
-                 "largest |pred_error| so far %.6g um). Usual causes: the controller's loop delay "
-                 "d = %d %s does not match the loop (a master that hands the plant the "
-                 "controller's post-step output removes a sample, as does mv.feedthrough; an extra "
-                 "plant or actuation delay adds one), a gain of the sensor or amplifier far from the "
-                 "model's, or a plant far from the nominal model",
-                 c->pred_error_max, (unsigned long long)c->divergence_samples,
-                 c->max_abs_pred_error, c->d,
-                 !c->auto_delay ? "(1 + mv.delay, set)"
-                 : c->detecting ? "(the start-up law's, still detecting)" : "(detected)");
+        int used;
+        double share = c->mon_weight > 0.0 ? 100.0 * c->mon_share / c->mon_weight : 0.0;
+        used = snprintf(text, size, "the closed loop is unstable: |pred_error| stayed above monitor.pred_error_max "
+                        "= %g um for %llu consecutive samples and in %.0f %% of the last %llu (the loop is stopped "
+                        "after monitor.divergence_samples = %llu in a row, or at %d %% of them; where v was "
+                        "clipped the nominal model's prediction error counts too; largest |pred_error| so far "
+                        "%.6g um). ", c->pred_error_max, (unsigned long long)(c->run_large_error + 1), share,
+                        (unsigned long long)(c->k < c->divergence_samples ? c->k + 1 : c->divergence_samples),
+                        (unsigned long long)c->divergence_samples, PIEZO_MONITOR_SHARE_PERCENT,
+                        c->max_abs_pred_error);
+        if (used < 0 || (size_t)used >= size)
+            return 1;
+        /* the supervisor's evidence: how far y_meas went against the model's expectation */
+        if (c->sup.enabled && c->sup.travel_model > 0.0 && c->sup.travel_meas > 2.0 * c->sup.travel_model)
+            snprintf(text + used, size - (size_t)used, "y_meas travelled %.3g times as far as the model expects "
+                     "(%.4g um against %.4g um over about the last %llu samples): the loop's gain is far above "
+                     "the model's. Check the amplifier's gain, the units of v (V) and y_meas (um), and that the "
+                     "controller's model (pi.*, tf.*, creep.*) is this stage's",
+                     c->sup.travel_meas / c->sup.travel_model, c->sup.travel_meas, c->sup.travel_model,
+                     (unsigned long long)c->sup.weight);
+        else
+            snprintf(text + used, size - (size_t)used, "Usual causes: the controller's loop delay d = %d %s does "
+                     "not match the loop (a master that hands the plant the controller's post-step output removes "
+                     "a sample, as does mv.feedthrough; an extra plant or actuation delay adds one), a gain of the "
+                     "sensor or amplifier far from the model's, or a plant far from the nominal model", c->d,
+                     !c->auto_delay ? "(1 + mv.delay, set)"
+                     : c->detecting ? "(the start-up law's, still detecting)" : "(detected)");
         return 1;
     }
     if (st == PIEZO_ERR_DIVERGED) {

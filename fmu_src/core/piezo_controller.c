@@ -108,6 +108,12 @@ piezo_status piezo_diophantine_observer(double a1, double a2, double t, int d, d
     return PIEZO_OK;
 }
 
+/* lambda of the monitor's window: 1 - 1/monitor.divergence_samples (0: off) */
+static double monitor_forgetting(int window)
+{
+    return window > 0 ? 1.0 - 1.0 / (double)window : 0.0;
+}
+
 piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_params *p, piezo_diag *diag)
 {
     piezo_pi_params pi_params;
@@ -182,6 +188,7 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->sat_v_max = p->sat_v_max;
     c->pred_error_max = p->monitor_pred_error_max;
     c->divergence_samples = (uint64_t)p->monitor_divergence_samples;
+    c->mon_forgetting = monitor_forgetting(p->monitor_divergence_samples);
     c->theta_nominal[0] = p->tf_a1;
     c->theta_nominal[1] = p->tf_a2;
     c->theta_nominal[2] = p->tf_b1;
@@ -256,6 +263,7 @@ void piezo_controller_reset(piezo_controller *c)
     c->run_saturated = c->run_large_error = 0;
     c->k_first_saturated = c->k_first_large_error = 0;
     c->max_abs_pred_error = 0.0;
+    c->mon_share = c->mon_weight = 0.0;
     c->k = 0;
     memset(&c->out, 0, sizeof c->out);
     memcpy(c->out.theta, c->theta, sizeof c->theta);
@@ -516,7 +524,6 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
     s->sup_in.q1 = q_past(c, 1);
     s->sup_in.q2 = q_past(c, 2);
     s->sup_in.v1 = c->out.v;
-    s->sup_in.pred_error = pred_error;
     s->sup_in.clipped1 = c->out.saturated;
     s->sup_in.clip_run = c->run_saturated;
     s->sup_in.clip_v = c->out.v;
@@ -607,7 +614,14 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
      * stays finite, and the operators' next states are what the next sample starts from */
     if (!(isfinite(v) && isfinite(q) && isfinite(pred_error) && operators_finite) || !sample_state_finite(s))
         return PIEZO_ERR_DIVERGED;
-    s->reaches_window = c->divergence_samples > 0 && s->run_large_error >= c->divergence_samples;
+    /* the monitor: a run of the window, or a quarter of the window's samples (a loop
+     * that restarts its detection between runs, or oscillates between the limits) */
+    s->mon_share = c->mon_forgetting * c->mon_share + (s->large_error ? 1.0 : 0.0);
+    s->mon_weight = c->mon_forgetting * c->mon_weight + 1.0;
+    s->reaches_window = c->divergence_samples > 0
+                        && (s->run_large_error >= c->divergence_samples
+                            || (c->k >= PIEZO_MONITOR_SHARE_MIN_SAMPLES
+                                && s->mon_share * 100.0 >= PIEZO_MONITOR_SHARE_PERCENT * s->mon_weight));
     return PIEZO_OK;
 }
 
@@ -668,6 +682,8 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
         c->n_large_error += 1;
     }
     c->run_large_error = s->run_large_error;
+    c->mon_share = s->mon_share;
+    c->mon_weight = s->mon_weight;
     if (fabs(s->out.pred_error) > c->max_abs_pred_error) c->max_abs_pred_error = fabs(s->out.pred_error);
 
     /* shift the pasts */
@@ -822,6 +838,11 @@ const char *piezo_controller_check(const piezo_controller *c)
         return "sat.v_min or sat.v_max out of range";
     if (!(isfinite(c->pred_error_max) && c->pred_error_max > 0.0)) return "monitor.pred_error_max out of range";
     if (c->divergence_samples > 2147483647u) return "monitor.divergence_samples out of range";
+    if (c->mon_forgetting != monitor_forgetting((int)c->divergence_samples))
+        return "the monitor's window kept from init does not match monitor.divergence_samples";
+    if (!(isfinite(c->mon_share) && isfinite(c->mon_weight) && c->mon_share >= 0.0 && c->mon_share <= c->mon_weight
+          && c->mon_weight <= (double)c->k))
+        return "monitor share out of range";
     if (!(all_finite(c->theta_nominal, 4) && c->theta_nominal[2] > 0.0)) return "nominal model not finite or b1 <= 0";
     if (!all_finite(c->theta, 4) || !all_finite(c->P, 16) || !all_finite(c->y_prev, 2)
         || !all_finite(c->q_ring, PIEZO_MV_Q_RING))
@@ -840,12 +861,15 @@ const char *piezo_controller_check(const piezo_controller *c)
         return "monitor counts exceed the sample count";
     if ((c->n_saturated > 0 && c->k_first_saturated >= c->k) || (c->n_large_error > 0 && c->k_first_large_error >= c->k))
         return "monitor first-sample index beyond the sample count";
-    /* a run reaching the window would have been refused as unstable */
+    /* a run reaching the window, or a share reaching its quarter, would have been refused */
     if (c->divergence_samples > 0 && c->run_large_error >= c->divergence_samples)
         return "monitor run at or beyond the divergence window";
+    if (c->divergence_samples > 0 && c->k > PIEZO_MONITOR_SHARE_MIN_SAMPLES
+        && c->mon_share * 100.0 >= PIEZO_MONITOR_SHARE_PERCENT * c->mon_weight)
+        return "monitor share at or beyond its bound";
     if ((fault = piezo_supervisor_check(&c->sup)) != NULL) return fault;
     if (c->sup.k != c->k) return "supervisor sample counter differs from the controller's";
-    if (c->verdict.fault < PIEZO_SUP_NONE || c->verdict.fault > PIEZO_SUP_ERRATIC)
+    if (c->verdict.fault < PIEZO_SUP_NONE || c->verdict.fault > PIEZO_SUP_UNDETECTED)
         return "supervision verdict out of range";
     o = &c->out;
     if (!(isfinite(o->v) && isfinite(o->q) && isfinite(o->pred_error) && all_finite(o->theta, 4)))

@@ -43,6 +43,8 @@
 #define PIEZO_SAT_DEFAULT_V 150   /* default voltage limits +-150 V */
 #define PIEZO_MONITOR_DEFAULT_ERROR 1   /* default bound on |pred_error| [um] */
 #define PIEZO_MONITOR_DEFAULT_SAMPLES 200   /* default divergence window [samples] */
+#define PIEZO_MONITOR_SHARE_PERCENT 25      /* ... or this share of its samples beyond the bound */
+#define PIEZO_MONITOR_SHARE_MIN_SAMPLES 32  /* (judged from this sample on) */
 #define PIEZO_MV_AUTO_DELAY -1   /* mv_delay: detect the loop delay */
 #define PIEZO_DETECT_N 3         /* candidates d = 1, 2, 3 */
 #define PIEZO_DETECT_THETA 12    /* PIEZO_DETECT_N * 4 */
@@ -77,7 +79,8 @@ typedef struct {
     double sat_v_min, sat_v_max; /* [V], v_min < v_max when enabled */
     double monitor_pred_error_max;   /* [um], > 0: bound on |pred_error| */
     int monitor_divergence_samples;  /* consecutive samples beyond the bound that mean the loop
-                                        is unstable (PIEZO_ERR_UNSTABLE); 0 = never */
+                                        is unstable (PIEZO_ERR_UNSTABLE), or the window over which
+                                        PIEZO_MONITOR_SHARE_PERCENT % beyond it do; 0 = never */
     piezo_supervisor_params sup;     /* supervision (piezo_supervisor.h): sup.* */
 } piezo_controller_params;
 
@@ -143,6 +146,8 @@ typedef struct {
     uint64_t k_first_saturated;  /* first clipped sample (valid when n_saturated > 0) */
     uint64_t k_first_large_error;/* first sample beyond the bound (valid when n_large_error > 0) */
     double max_abs_pred_error;   /* largest |pred_error| so far [um] */
+    double mon_forgetting;       /* 1 - 1/monitor.divergence_samples (0 when the monitor is off) */
+    double mon_share, mon_weight;/* sums of lambda^(k-j) [beyond the bound] and of lambda^(k-j) */
     uint64_t k;
     piezo_controller_output out; /* result of the last committed sample */
     piezo_supervisor sup;        /* supervision of the loop (piezo_supervisor.h) */
@@ -172,6 +177,7 @@ typedef struct {
     int sat_hold;
     int large_error;             /* |pred_error| > monitor_pred_error_max */
     uint64_t run_large_error;
+    double mon_share, mon_weight;/* the monitor's sums of k+1 */
     double r;                    /* the reference the law used */
     /* delay detection: the states of k+1 */
     int d, detecting, det_leader, det_run, restarted, new_trial;
@@ -196,8 +202,10 @@ void piezo_controller_reset(piezo_controller *ctrl);
  * commit it (RLS update, operator states, monitor, k -> k+1). Returns
  * PIEZO_ERR_UNSTABLE, committing nothing, when this sample would make the
  * run of samples with |pred_error| > monitor_pred_error_max reach
- * monitor_divergence_samples (while adaptation pauses on a clipped sample,
- * the larger of |pred_error| and the nominal model's prediction error counts).
+ * monitor_divergence_samples, or their share over an exponential window of that
+ * length reach PIEZO_MONITOR_SHARE_PERCENT % (a loop that keeps restarting its
+ * delay detection, or oscillates); while adaptation pauses on a clipped sample,
+ * the larger of |pred_error| and the nominal model's prediction error counts.
  * Returns PIEZO_ERR_FAULT, committing nothing of the loop, when the supervisor
  * finds that the loop cannot work; ctrl->verdict then says why
  * (piezo_supervisor_explain). Exact mode writes

@@ -91,7 +91,7 @@ void piezo_supervisor_reset(piezo_supervisor *s)
     s->y_same = 0;
     memset(s->ref, 0, sizeof s->ref);
     s->ref_head = 0;
-    s->weight = s->travel_model = s->travel_meas = s->erratic = 0.0;
+    s->weight = s->travel_model = s->travel_meas = 0.0;
 }
 
 /* the i-th older entry of an 8-ring (i = 0: the newest) */
@@ -203,11 +203,10 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     /* the model's y_meas(k) from q (delay 1): yhat = -a1 yhat(k-1) - a2 yhat(k-2) + w */
     n->yhat = n->w - s->a1 * s->yhat1 - s->a2 * s->yhat2;
     n->y_same = s->k > 0 && in->y_meas == s->y1 ? s->y_same + 1 : 0;
-    /* the evidence: distances travelled, and how often the prediction missed */
+    /* the evidence: the distances travelled over the window */
     n->weight = lam * s->weight + 1.0;
     n->travel_model = lam * s->travel_model + fabs(n->yhat - s->yhat1);
     n->travel_meas = lam * s->travel_meas + fabs(in->y_meas - s->y1);
-    n->erratic = lam * s->erratic + (fabs(in->pred_error) > in->error_bound ? 1.0 : 0.0);
 
     /* the response verdict, confirmed over PIEZO_SUP_CONFIRM samples */
     n->status = s->status;
@@ -238,10 +237,6 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     }
     if (n->candidate_run >= PIEZO_SUP_CONFIRM)
         n->fault = n->candidate;
-    /* a loop the linear evidence does not explain, once a pending response verdict had its chance */
-    else if (n->candidate == 0 && s->k >= PIEZO_SUP_MIN_SAMPLES + PIEZO_SUP_CONFIRM
-             && n->erratic * 100.0 >= PIEZO_SUP_ERRATIC_PERCENT * n->weight)
-        n->fault = PIEZO_SUP_ERRATIC;
     else if (in->clipped1 && in->clip_run >= s->clip_samples
              && n->clip_error_sum > in->error_bound * (double)in->clip_run)
         n->fault = PIEZO_SUP_CLIPPED;
@@ -288,7 +283,6 @@ void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *
     s->weight = n->weight;
     s->travel_model = n->travel_model;
     s->travel_meas = n->travel_meas;
-    s->erratic = n->erratic;
     s->k += 1;
 }
 
@@ -327,7 +321,6 @@ void piezo_supervisor_verdict(const piezo_supervisor *s, const piezo_supervisor_
     v->window = (uint64_t)(n->weight < window ? n->weight : window);
     v->travel_model = n->travel_model;
     v->travel_meas = n->travel_meas;
-    v->erratic_share = n->erratic / n->weight;
     v->y_meas = in->y_meas;
     v->v = in->v1;
     v->y_same = n->y_same;
@@ -350,7 +343,6 @@ const char *piezo_supervisor_fault_name(int fault)
     case PIEZO_SUP_DELAY: return "loop delay beyond the controller's";
     case PIEZO_SUP_CLIPPED: return "v held at a limit";
     case PIEZO_SUP_UNDETECTED: return "no loop delay found";
-    case PIEZO_SUP_ERRATIC: return "prediction error large most of the time";
     default: return "unknown";
     }
 }
@@ -448,19 +440,6 @@ int piezo_supervisor_explain(const piezo_sup_verdict *v, double h, char *t, size
             add(t, size, &u, "y_meas never answered v as the model expects: check y_meas and v (connections, "
                 "units, sign) and the limits sat.v_min .. sat.v_max");
         break;
-    case PIEZO_SUP_ERRATIC:
-        add(t, size, &u, "the loop does not settle: |pred_error| exceeded monitor.pred_error_max = %.4g um in "
-            "%.0f %% of the last %llu samples; ", v->error_bound, 100.0 * v->erratic_share,
-            (unsigned long long)v->window);
-        add_evidence(t, size, &u, v, h);
-        if (v->travel_model > 0.0 && v->travel_meas > 2.0 * v->travel_model)
-            add(t, size, &u, ", %.3g times as far: the loop's gain is far above the model's. Check the "
-                "amplifier's gain, the units of v (V) and y_meas (um), and that the controller's model "
-                "(pi.*, tf.*, creep.*) is this stage's", v->travel_meas / v->travel_model);
-        else
-            add(t, size, &u, ": y_meas does not answer v as any model the controller can adapt. Check y_meas and "
-                "v (connections, units, sign) and that the controller's model is this stage's");
-        break;
     case PIEZO_SUP_UNDETECTED:
         add(t, size, &u, "no loop delay of 1 to 3 samples explains y_meas after %llu samples (%.3g s, "
             "sup.detect_time): y_meas does not answer v as a closed loop would. Check the connections of "
@@ -494,7 +473,7 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
         return "supervisor parameters out of range";
     if (s->head < 0 || s->head >= PIEZO_SUP_MAX_D || s->ref_head < 0 || s->ref_head >= PIEZO_SUP_REF_RING)
         return "supervisor ring index out of range";
-    if (s->candidate < 0 || s->candidate > PIEZO_SUP_ERRATIC || s->candidate_run < 0
+    if (s->candidate < 0 || s->candidate > PIEZO_SUP_UNDETECTED || s->candidate_run < 0
         || s->candidate_run >= PIEZO_SUP_CONFIRM || (s->candidate == 0 && s->candidate_run != 0)
         || s->delay < 0 || s->delay > PIEZO_SUP_MAX_D)
         return "supervisor verdict state out of range";
@@ -507,11 +486,11 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
     {
         double sc[] = { s->y1, s->y2, s->r1, s->r2, s->z1, s->zr1, s->w1, s->szz, s->srr, s->yhat1, s->yhat2,
                         s->gain, s->verified_gain, s->clip_error_sum, s->a1, s->a2, s->b1, s->b2,
-                        s->weight, s->travel_model, s->travel_meas, s->erratic };
+                        s->weight, s->travel_model, s->travel_meas };
         if (!finite_all(sc, (int)(sizeof sc / sizeof sc[0]))) return "supervisor values not finite";
     }
     if (s->szz < 0.0 || s->srr < 0.0 || s->clip_error_sum < 0.0 || s->travel_model < 0.0 || s->travel_meas < 0.0
-        || s->erratic < 0.0 || s->erratic > s->weight || s->weight > (double)s->k)
+        || s->weight > (double)s->k)
         return "supervisor sums negative or beyond their weight";
     for (i = 0; i < PIEZO_SUP_MAX_D; ++i)
         if (s->sww[i] < 0.0) return "supervisor sums negative";

@@ -37,9 +37,9 @@
  *
  * A loop whose response no linear model explains (a far too high gain makes
  * it oscillate between the limits of the stage's hysteresis) gives no strong
- * evidence; it shows in the prediction error instead: |pred_error| above
- * monitor.pred_error_max in PIEZO_SUP_ERRATIC_PERCENT % of the window's
- * samples is a fault (the divergence monitor counts consecutive samples only).
+ * evidence; the controller's divergence monitor stops it (a quarter of its
+ * window's prediction errors above their bound), and the supervisor's travel
+ * sums give its message the evidence.
  *
  * Watchdogs: v clipped for sup.clip_time without a pause while the mean
  * |y_d - y_meas| over that time exceeds the error bound; a loop delay still not
@@ -67,7 +67,6 @@
 #define PIEZO_SUP_CONFIRM 10         /* consecutive samples of one fault kind make the verdict */
 #define PIEZO_SUP_EVIDENCE 32        /* explained (or expected) / unexplained response energy */
 #define PIEZO_SUP_DELAY_PERCENT 25   /* the law's delays leave this much of the response unexplained */
-#define PIEZO_SUP_ERRATIC_PERCENT 25 /* share of samples with |pred_error| above its bound */
 #define PIEZO_SUP_TRAVEL_PERCENT 5   /* evidence needs the model to expect y_meas to travel this share
                                         of monitor.pred_error_max over the window (a probe below a
                                         quantised sensor's step proves nothing) */
@@ -82,8 +81,7 @@ typedef enum {
     PIEZO_SUP_GAIN_HIGH = 3,     /* y_meas answers v far more than the model (gain > sup.gain_max) */
     PIEZO_SUP_DELAY = 4,         /* y_meas answers v later than the law's delays */
     PIEZO_SUP_CLIPPED = 5,       /* v held at a limit for sup.clip_time, the error not small */
-    PIEZO_SUP_UNDETECTED = 6,    /* no loop delay chosen within sup.detect_time */
-    PIEZO_SUP_ERRATIC = 7        /* |pred_error| above its bound in much of the window */
+    PIEZO_SUP_UNDETECTED = 6     /* no loop delay chosen within sup.detect_time */
 } piezo_sup_fault;
 
 typedef struct {
@@ -111,7 +109,6 @@ typedef struct {
     double y_meas;               /* y_meas of the refused sample [um] */
     double v;                    /* v of the sample before [V] */
     int y_constant;              /* 1: y_meas did not change at all in the window */
-    double erratic_share;        /* share of the window's samples with |pred_error| above its bound */
     double clip_v;               /* CLIPPED: the limit v was held at [V] */
     uint64_t clip_samples;       /* CLIPPED: samples held; UNDETECTED: samples detecting */
     uint64_t y_same;             /* samples y_meas had not changed */
@@ -126,7 +123,6 @@ typedef struct {
     double y_ref;                /* the y_ref input of sample k [um] (the swap check) */
     double q1, q2;               /* q(k-1), q(k-2) [um] */
     double v1;                   /* v(k-1) [V] */
-    double pred_error;           /* the controller's a-priori prediction error of y_meas(k) [um] */
     int clipped1;                /* v(k-1) was clipped */
     uint64_t clip_run;           /* consecutive clipped samples up to k-1 */
     double clip_v;               /* the limit v(k-1) was clipped to */
@@ -175,7 +171,6 @@ typedef struct {
     double weight;               /* sum of lambda^(k-j): the window's weight */
     double travel_model;         /* sum of lambda^(k-j) |yhat(j) - yhat(j-1)| */
     double travel_meas;          /* sum of lambda^(k-j) |y_meas(j) - y_meas(j-1)| */
-    double erratic;              /* sum of lambda^(k-j) [|pred_error(j)| > bound] */
 } piezo_supervisor;
 
 /* One evaluated sample: the statistics of k+1 and the verdict. */
@@ -183,7 +178,7 @@ typedef struct {
     double z, zr, w, dw, szz, srr, sww1, yhat;
     double szw[PIEZO_SUP_MAX_D];
     double srw[PIEZO_SUP_DEFAULT_DETECTABLE];
-    double weight, travel_model, travel_meas, erratic;
+    double weight, travel_model, travel_meas;
     double clip_error_sum;
     uint64_t y_same;
     int candidate, candidate_run, status, delay;

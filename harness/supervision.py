@@ -1,0 +1,254 @@
+"""The controller's supervision seen from outside: its statistics recomputed from what a run
+recorded, and how close the run came to each of its verdicts.
+
+:func:`statistics` is a NumPy transcription of ``fmu_src/core/piezo_supervisor.c`` (the
+response regression per loop delay, the evidence sums) and of the divergence monitor's share of
+large prediction errors (``piezo_controller.c``),
+computed from a run's samples; ``tests/test_core_supervision.py`` holds it against the C
+core's own sums. :func:`margins` says, for a run that raised no verdict, how near it came to
+each threshold (docs/robustness.md: the margins of the validation family): the weakest and
+the strongest response gain seen with strong evidence against ``sup.gain_min`` and
+``sup.gain_max``, the share of the response the law's delays left unexplained where another
+delay fitted better, the longest run of a fault candidate, the largest share of large
+prediction errors over the divergence monitor's window, the longest clipping and the longest
+delay detection.
+
+The thresholds are the core's: the ``PIEZO_SUP_*`` constants of ``piezo_supervisor.h`` and
+the defaults of the ``sup.*`` parameters (read through :mod:`harness.core`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import lfilter
+
+from . import core
+
+__all__ = ["Thresholds", "thresholds", "statistics", "margins", "Margins", "controller_samples"]
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """The supervision's thresholds (``piezo_supervisor.h`` and the ``sup.*`` defaults)."""
+
+    gain_min: float
+    gain_max: float
+    window: int
+    clip_time: float
+    detect_time: float
+    evidence: float
+    delay_fraction: float
+    monitor_share: float
+    monitor_share_min: int
+    travel_fraction: float
+    confirm: int
+    min_samples: int
+    max_delay: int
+    detectable: int
+
+
+def thresholds(controller_params=None):
+    """The thresholds in force for a controller with these parameter overrides."""
+    p = {**core.default_controller_params(), **(controller_params or {})}
+    lib = core.lib()
+    return Thresholds(
+        gain_min=float(p["sup.gain_min"]), gain_max=float(p["sup.gain_max"]), window=int(p["sup.window"]),
+        clip_time=float(p["sup.clip_time"]), detect_time=float(p["sup.detect_time"]),
+        evidence=float(lib.PIEZO_SUP_EVIDENCE), delay_fraction=lib.PIEZO_SUP_DELAY_PERCENT / 100.0,
+        monitor_share=lib.PIEZO_MONITOR_SHARE_PERCENT / 100.0,
+        monitor_share_min=int(lib.PIEZO_MONITOR_SHARE_MIN_SAMPLES),
+        travel_fraction=lib.PIEZO_SUP_TRAVEL_PERCENT / 100.0, confirm=int(lib.PIEZO_SUP_CONFIRM),
+        min_samples=int(lib.PIEZO_SUP_MIN_SAMPLES), max_delay=int(lib.PIEZO_SUP_MAX_D),
+        detectable=int(lib.PIEZO_SUP_DEFAULT_DETECTABLE))
+
+
+def _ew(x, lam):
+    """sum_j lam^(k-j) x(j), from zero."""
+    return lfilter([1.0], [1.0, -lam], x)
+
+
+def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_window=200):
+    """The supervisor's per-sample sums, as the core computes them (``piezo_supervisor.c``).
+
+    Parameters
+    ----------
+    y_meas : array_like
+        The measurement the controller received at each of its samples k [um].
+    q : array_like
+        Its virtual input q(k) of each sample [um] (the back-calculated one where v was clipped).
+    pred_error : array_like
+        Its a-priori prediction error of each sample [um].
+    nominal : tuple of float
+        The model's ``tf.a1, tf.a2, tf.b1, tf.b2``.
+    window : int
+        ``sup.window`` [samples].
+    error_bound : float
+        ``monitor.pred_error_max`` [um].
+    monitor_window : int
+        ``monitor.divergence_samples`` (the divergence monitor's window, 0: off).
+
+    Returns
+    -------
+    dict of ndarray
+        ``szz``, ``szw`` and ``sww`` (one row per delay 1..8), ``travel_model``,
+        ``travel_meas``, ``weight``: the supervisor's sums after each sample; ``mon_share``,
+        ``mon_weight``: the divergence monitor's (samples with ``|pred_error|`` beyond the
+        bound; where v was clipped the core also counts the nominal model's error, which a
+        working loop keeps far below the bound).
+    """
+    a1, a2, b1, b2 = (float(x) for x in nominal)
+    y = np.asarray(y_meas, dtype=float)
+    q = np.asarray(q, dtype=float)
+    lam = 1.0 - 1.0 / window
+    n = y.size
+    z = lfilter([1.0, a1, a2], [1.0], y)
+    w = lfilter([0.0, b1, b2], [1.0], q)              # w(k) = b1 q(k-1) + b2 q(k-2)
+    dz = np.diff(z, prepend=0.0)
+    dw = np.diff(w, prepend=0.0)
+    sww1 = _ew(dw * dw, lam)
+    dmax = core.lib().PIEZO_SUP_MAX_D
+    szw = np.empty((dmax, n))
+    sww = np.zeros((dmax, n))
+    for d in range(1, dmax + 1):
+        shifted = np.concatenate([np.zeros(d - 1), dw[:n - d + 1]])
+        szw[d - 1] = _ew(dz * shifted, lam)
+        sww[d - 1, d - 1:] = sww1[:n - d + 1]
+    yhat = lfilter([1.0], [1.0, a1, a2], w)
+    lam_m = 1.0 - 1.0 / monitor_window if monitor_window > 0 else 0.0
+    return {
+        "szz": _ew(dz * dz, lam), "szw": szw, "sww": sww,
+        "travel_model": _ew(np.abs(np.diff(yhat, prepend=0.0)), lam),
+        "travel_meas": _ew(np.abs(np.diff(y, prepend=0.0)), lam),
+        "weight": _ew(np.ones(n), lam),
+        "mon_share": _ew((np.abs(np.asarray(pred_error, dtype=float)) > error_bound).astype(float), lam_m),
+        "mon_weight": _ew(np.ones(n), lam_m),
+    }
+
+
+@dataclass
+class Margins:
+    """How close one run came to each verdict (None where it never came into play).
+
+    Attributes
+    ----------
+    gain_low, gain_high : float or None
+        The weakest and the strongest response gain seen with strong evidence (thresholds
+        ``sup.gain_min`` and ``sup.gain_max``).
+    delay_unexplained : float or None
+        Where a delay the law does not run fitted best with strong evidence: the largest share
+        of the response the law's delays left unexplained (threshold ``PIEZO_SUP_DELAY_PERCENT``).
+    candidate_run : int
+        The longest run of samples with one fault candidate (threshold ``PIEZO_SUP_CONFIRM``).
+    monitor_share : float
+        The largest share of samples with ``|pred_error|`` beyond ``monitor.pred_error_max`` over
+        the divergence monitor's window, from its 33rd sample on (threshold
+        ``PIEZO_MONITOR_SHARE_PERCENT``).
+    clip_run : int
+        The longest run of clipped samples (threshold ``sup.clip_time`` / h).
+    detection_run : int
+        The longest run of samples without a chosen loop delay (threshold
+        ``sup.detect_time`` / h).
+    monitor_run : int
+        The longest run of samples with ``|pred_error|`` above ``monitor.pred_error_max``
+        (the divergence window, 200 samples).
+    """
+
+    gain_low: float | None
+    gain_high: float | None
+    delay_unexplained: float | None
+    candidate_run: int
+    monitor_share: float
+    clip_run: int
+    detection_run: int
+    monitor_run: int
+
+
+def _longest_run(mask):
+    best = run = 0
+    for m in np.asarray(mask, dtype=bool):
+        run = run + 1 if m else 0
+        best = max(best, run)
+    return best
+
+
+def margins(samples, nominal, controller_params=None, h=0.0005):
+    """The margins of one run (:class:`Margins`).
+
+    Parameters
+    ----------
+    samples : dict of array_like
+        Per controller sample: ``y_meas``, ``q``, ``pred_error``, ``clipped`` (v was
+        clipped), ``loop_delay`` (the law's d, 0 while detecting) (:func:`controller_samples`).
+    nominal : tuple of float
+        The controller's ``tf.a1, tf.a2, tf.b1, tf.b2``.
+    controller_params : dict, optional
+        The controller's overrides (its ``sup.*``, ``monitor.pred_error_max``, ``mv.delay``).
+    h : float
+        The sample period [s].
+    """
+    p = {**core.default_controller_params(), **(controller_params or {})}
+    th = thresholds(p)
+    bound = float(p["monitor.pred_error_max"])
+    window = int(p["monitor.divergence_samples"])
+    st = statistics(samples["y_meas"], samples["q"], samples["pred_error"], nominal, th.window, bound, window)
+    szz, szw, sww = st["szz"], st["szw"], st["sww"]
+    n = szz.size
+    k = np.arange(n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        explained_d = np.where(sww > 0, szw * szw / sww, -np.inf)
+    best = np.argmax(explained_d, axis=0)              # ties: the shorter delay, as the core
+    idx = np.arange(n)
+    sww_b, szw_b = sww[best, idx], szw[best, idx]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = np.where(sww_b > 0, szw_b / sww_b, np.nan)
+        e_best = np.maximum(szz - szw_b * np.nan_to_num(g), 0.0)
+        explained = sww_b * np.maximum(1.0, np.nan_to_num(g) ** 2)
+    strong = ((sww_b > 0) & (k >= th.min_samples) & (explained >= th.evidence * e_best)
+              & (st["travel_model"] >= th.travel_fraction * bound))
+    loop_delay = np.asarray(samples["loop_delay"], dtype=int)
+    auto = int(p["mv.delay"]) < 0
+    law = th.detectable if auto else 1 + int(p["mv.delay"])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        unexplained = np.where(sww > 0, szz - szw * szw / sww, szz)
+    if auto:
+        e_law = unexplained[:th.detectable].min(axis=0)
+        off_law = best + 1 > th.detectable
+    else:
+        e_law = unexplained[law - 1] if law <= th.max_delay else np.zeros(n)
+        off_law = best + 1 != law
+    kind = np.zeros(n, dtype=int)
+    gs = np.where(strong, g, np.nan)
+    kind[strong & (g <= -th.gain_min)] = 2
+    kind[strong & (np.abs(g) < th.gain_min)] = 1
+    kind[strong & (g > th.gain_max)] = 3
+    in_range = strong & (g >= th.gain_min) & (g <= th.gain_max)
+    delay_share = np.where(in_range & off_law, e_law / np.where(explained > 0, explained, np.inf), np.nan)
+    kind[in_range & off_law & (delay_share >= th.delay_fraction)] = 4
+    cand_run = run = prev = 0
+    for x in kind:
+        run = run + 1 if x and x == prev else (1 if x else 0)
+        prev = x
+        cand_run = max(cand_run, run)
+    share = np.where(k >= th.monitor_share_min, st["mon_share"] / st["mon_weight"], 0.0) if window > 0 \
+        else np.zeros(n)
+    return Margins(
+        gain_low=float(np.nanmin(gs)) if np.isfinite(gs).any() else None,
+        gain_high=float(np.nanmax(gs)) if np.isfinite(gs).any() else None,
+        delay_unexplained=float(np.nanmax(delay_share)) if np.isfinite(delay_share).any() else None,
+        candidate_run=int(cand_run),
+        monitor_share=float(share.max()) if n else 0.0,
+        clip_run=_longest_run(samples["clipped"]),
+        detection_run=_longest_run(loop_delay == 0) if auto else 0,
+        monitor_run=_longest_run(np.abs(np.asarray(samples["pred_error"], dtype=float)) > bound),
+    )
+
+
+def controller_samples(run):
+    """Per controller sample, from a run of :func:`harness.masters.wired.simulate_wired`: what the
+    controller received (``y_meas``) and its outputs of that sample (``q``, ``pred_error``,
+    ``clipped``, ``loop_delay``), published one row later."""
+    s = run.samples if hasattr(run, "samples") else run
+    return {"y_meas": s["y_meas_in"][:-1], "q": s["q"][1:], "pred_error": s["pred_error"][1:],
+            "clipped": s["saturated"][1:] != 0, "loop_delay": s["loop_delay"][1:]}
