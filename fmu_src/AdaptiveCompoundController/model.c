@@ -428,52 +428,8 @@ int model_terminate_warning(const ModelData *data, char *text, size_t size)
 
 int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size)
 {
-    const piezo_controller *c = &data->ctrl;
-    if (st == PIEZO_ERR_FAULT) {
-        /* the words harness/fmu.py LOOP_FAILURES knows this Error by */
-        int used = snprintf(text, size, "supervision stopped the loop (%s): ",
-                            piezo_supervisor_fault_name(c->verdict.fault));
-        if (used > 0 && (size_t)used < size)
-            piezo_supervisor_explain(&c->verdict, data->params.h, text + used, size - (size_t)used);
-        return 1;
-    }
-    if (st == PIEZO_ERR_UNSTABLE) {
-        int used;
-        double share = c->mon_weight > 0.0 ? 100.0 * c->mon_share / c->mon_weight : 0.0;
-        used = snprintf(text, size, "the closed loop is unstable: |pred_error| stayed above monitor.pred_error_max "
-                        "= %g um for %llu consecutive samples and in %.0f %% of the last %llu (the loop is stopped "
-                        "after monitor.divergence_samples = %llu in a row, or at %d %% of them; where v was "
-                        "clipped the nominal model's prediction error counts too; largest |pred_error| so far "
-                        "%.6g um). ", c->pred_error_max, (unsigned long long)(c->run_large_error + 1), share,
-                        (unsigned long long)(c->k < c->divergence_samples ? c->k + 1 : c->divergence_samples),
-                        (unsigned long long)c->divergence_samples, PIEZO_MONITOR_SHARE_PERCENT,
-                        c->max_abs_pred_error);
-        if (used < 0 || (size_t)used >= size)
-            return 1;
-        /* the supervisor's evidence: how far y_meas went against the model's expectation */
-        if (c->sup.enabled && c->sup.travel_model > 0.0 && c->sup.travel_meas > 2.0 * c->sup.travel_model)
-            snprintf(text + used, size - (size_t)used, "y_meas travelled %.3g times as far as the model expects "
-                     "(%.4g um against %.4g um over about the last %llu samples): the loop's gain is far above "
-                     "the model's. Check the amplifier's gain, the units of v (V) and y_meas (um), and that the "
-                     "controller's model (pi.*, tf.*, creep.*) is this stage's",
-                     c->sup.travel_meas / c->sup.travel_model, c->sup.travel_meas, c->sup.travel_model,
-                     (unsigned long long)c->sup.weight);
-        else
-            snprintf(text + used, size - (size_t)used, "Usual causes: the controller's loop delay d = %d %s does "
-                     "not match the loop (a master that hands the plant the controller's post-step output removes "
-                     "a sample, as does mv.feedthrough; an extra plant or actuation delay adds one), a gain of the "
-                     "sensor or amplifier far from the model's, or a plant far from the nominal model", c->d,
-                     !c->auto_delay ? "(1 + mv.delay, set)"
-                     : c->detecting ? "(the start-up law's, still detecting)" : "(detected)");
-        return 1;
-    }
-    if (st == PIEZO_ERR_DIVERGED) {
-        snprintf(text, size, "the closed loop diverged: a value computed by the controller is not "
-                 "finite although its inputs are (loop delay d = %d%s; check it against the master "
-                 "and the plant)", c->d, c->auto_delay ? ", mv.delay = -1: detected" : " = 1 + mv.delay");
-        return 1;
-    }
-    return 0;
+    /* the core's words (one home: the Python binding and any model of the loop use them too) */
+    return piezo_controller_explain(&data->ctrl, st, text, size) > 0;
 }
 
 const char *model_check_data(const ModelData *data, int core_initialized, double t0, uint64_t k,

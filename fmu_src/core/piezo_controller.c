@@ -1,5 +1,6 @@
 /* piezo_controller.c - adaptive compound controller. See piezo_controller.h. */
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 #include "piezo_controller.h"
 #include "piezo_plant.h"
@@ -478,12 +479,12 @@ static int all_finite(const double *x, int n)
  * w0 u + sum w_i z_i), and an Inf or NaN state makes that sum Inf or NaN
  * (0 * Inf is NaN), so a finite output (checked where the operator runs) means
  * finite states. */
-static int sample_state_finite(const piezo_controller_sample *s)
+static int sample_state_finite(const piezo_controller *c, const piezo_controller_sample *s)
 {
-    /* the supervisor's next doubles, z .. clip_error_sum, are contiguous */
+    /* the supervisor's next doubles, z .. clip_error_sum, are contiguous (set when it runs) */
     enum { SUP_DOUBLES = (offsetof(piezo_supervisor_next, clip_error_sum) - offsetof(piezo_supervisor_next, z))
                          / sizeof(double) + 1 };
-    return all_finite(s->out.theta, 4) && all_finite(&s->sup.z, SUP_DOUBLES)
+    return all_finite(s->out.theta, 4) && (!c->sup.enabled || all_finite(&s->sup.z, SUP_DOUBLES))
            && (!s->rls_updated || all_finite(s->P, 16))
            && (!s->detecting || (all_finite(s->det_theta, PIEZO_DETECT_THETA)
                                  && all_finite(s->det_P, PIEZO_DETECT_P) && all_finite(s->det_score, PIEZO_DETECT_N)));
@@ -612,7 +613,7 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
     /* every output (the estimates too) and the state the sample leaves behind are finite,
      * or the sample is refused: the RLS covariance can overflow (phi P phi^T) while theta
      * stays finite, and the operators' next states are what the next sample starts from */
-    if (!(isfinite(v) && isfinite(q) && isfinite(pred_error) && operators_finite) || !sample_state_finite(s))
+    if (!(isfinite(v) && isfinite(q) && isfinite(pred_error) && operators_finite) || !sample_state_finite(c, s))
         return PIEZO_ERR_DIVERGED;
     /* the monitor: a run of the window, or a quarter of the window's samples (a loop
      * that restarts its detection between runs, or oscillates between the limits) */
@@ -878,4 +879,61 @@ const char *piezo_controller_check(const piezo_controller *c)
     if (o->delay < 0 || o->delay > PIEZO_MV_MAX_D || (o->preview != 0 && o->preview != 1))
         return "delay or preview output out of range";
     return NULL;
+}
+
+/* the running length of a text written piece by piece (what it wanted) */
+static void said(int *used, int w)
+{
+    if (w > 0) *used += w;
+}
+
+int piezo_controller_explain(const piezo_controller *c, int st, char *text, size_t size)
+{
+    int used = 0;
+#define AT (used >= 0 && (size_t)used < size ? text + used : NULL)
+#define LEFT (used >= 0 && (size_t)used < size ? size - (size_t)used : 0)
+    if (text != NULL && size > 0) text[0] = '\0';
+    if (c == NULL) return 0;
+    if (st == PIEZO_ERR_FAULT) {
+        /* the words harness/fmu.py LOOP_FAILURES knows this Error by */
+        said(&used, snprintf(AT, LEFT, "supervision stopped the loop (%s): ",
+                                         piezo_supervisor_fault_name(c->verdict.fault)));
+        said(&used, piezo_supervisor_explain(&c->verdict, c->sup.h, AT, LEFT));
+        return used;
+    }
+    if (st == PIEZO_ERR_UNSTABLE) {
+        double share = c->mon_weight > 0.0 ? 100.0 * c->mon_share / c->mon_weight : 0.0;
+        said(&used, snprintf(AT, LEFT, "the closed loop is unstable: |pred_error| stayed above "
+             "monitor.pred_error_max = %g um for %llu consecutive samples and in %.0f %% of the last %llu (the "
+             "loop is stopped after monitor.divergence_samples = %llu in a row, or at %d %% of them; where v was "
+             "clipped the nominal model's prediction error counts too; largest |pred_error| so far %.6g um). ",
+             c->pred_error_max, (unsigned long long)(c->run_large_error + 1), share,
+             (unsigned long long)(c->k < c->divergence_samples ? c->k + 1 : c->divergence_samples),
+             (unsigned long long)c->divergence_samples, PIEZO_MONITOR_SHARE_PERCENT, c->max_abs_pred_error));
+        /* the supervisor's evidence: how far y_meas went against the model's expectation */
+        if (c->sup.enabled && c->sup.travel_model > 0.0 && c->sup.travel_meas > 2.0 * c->sup.travel_model)
+            said(&used, snprintf(AT, LEFT, "y_meas travelled %.3g times as far as the model "
+                 "expects (%.4g um against %.4g um over about the last %llu samples): the loop's gain is far "
+                 "above the model's. Check the amplifier's gain, the units of v (V) and y_meas (um), and that "
+                 "the controller's model (pi.*, tf.*, creep.*) is this stage's",
+                 c->sup.travel_meas / c->sup.travel_model, c->sup.travel_meas, c->sup.travel_model,
+                 (unsigned long long)c->sup.weight));
+        else
+            said(&used, snprintf(AT, LEFT, "Usual causes: the controller's loop delay d = %d %s "
+                 "does not match the loop (a master that hands the plant the controller's post-step output "
+                 "removes a sample, as does mv.feedthrough; an extra plant or actuation delay adds one), a gain of "
+                 "the sensor or amplifier far from the model's, or a plant far from the nominal model", c->d,
+                 !c->auto_delay ? "(1 + mv.delay, set)"
+                 : c->detecting ? "(the start-up law's, still detecting)" : "(detected)"));
+        return used;
+    }
+    if (st == PIEZO_ERR_DIVERGED) {
+        said(&used, snprintf(AT, LEFT, "the closed loop diverged: a value computed by the controller "
+             "is not finite although its inputs are (loop delay d = %d%s; check it against the master and the "
+             "plant)", c->d, c->auto_delay ? ", mv.delay = -1: detected" : " = 1 + mv.delay"));
+        return used;
+    }
+#undef AT
+#undef LEFT
+    return 0;
 }

@@ -241,6 +241,16 @@ piezo_status piezo_controller_commit(piezo_controller *ctrl, const piezo_control
                                      piezo_controller_output *out);
 size_t piezo_controller_history_needed(const piezo_controller *ctrl);
 /*
+ * Why the controller refused a sample with status st, in its own words, into
+ * text (NUL-terminated, at most size bytes; the core still does no I/O):
+ * PIEZO_ERR_FAULT "supervision stopped the loop (<verdict>): ..." (the
+ * supervisor's explanation of ctrl->verdict), PIEZO_ERR_UNSTABLE "the closed
+ * loop is unstable: ..." with the monitor's counts and the supervisor's
+ * evidence, PIEZO_ERR_DIVERGED "the closed loop diverged: ...". Returns the
+ * length it wanted, 0 for another status (nothing written).
+ */
+int piezo_controller_explain(const piezo_controller *ctrl, int st, char *text, size_t size);
+/*
  * Invariants of a restored controller (e.g. from a deserialized FMU state):
  * NULL when every index, count and flag is in range, the sample counters agree,
  * the monitor counts fit the sample count and every value is finite, else a

@@ -76,7 +76,6 @@ void piezo_supervisor_reset(piezo_supervisor *s)
     s->z1 = s->zr1 = s->w1 = 0.0;
     memset(s->dw, 0, sizeof s->dw);
     memset(s->sww, 0, sizeof s->sww);
-    s->head = 0;
     s->szz = s->srr = 0.0;
     memset(s->szw, 0, sizeof s->szw);
     memset(s->srw, 0, sizeof s->srw);
@@ -94,17 +93,10 @@ void piezo_supervisor_reset(piezo_supervisor *s)
     s->weight = s->travel_model = s->travel_meas = 0.0;
 }
 
-/* the i-th older entry of an 8-ring (i = 0: the newest) */
-static int ring_at(int head, int i)
-{
-    int at = head + i;
-    return at < PIEZO_SUP_MAX_D ? at : at - PIEZO_SUP_MAX_D;
-}
-
-/* Sww_d(k) = Sww_1(k - d + 1): the new one for d = 1, the ring's for d >= 2 */
+/* Sww_d(k) = Sww_1(k - d + 1): the new one for d = 1, the kept ones for d >= 2 */
 static double sww_of(const piezo_supervisor *s, const piezo_supervisor_next *n, int d)
 {
-    return d == 1 ? n->sww1 : s->sww[ring_at(s->head, d - 2)];
+    return d == 1 ? n->sww1 : s->sww[d - 2];
 }
 
 /* E_d = Szz - Szw_d^2 / Sww_d (Szz when Sww_d = 0: nothing expected) */
@@ -121,10 +113,10 @@ static int best_delay(const piezo_supervisor *s, const piezo_supervisor_next *n)
     int d, best = 0;
     double num = 0.0, den = 1.0;
     for (d = 1; d <= PIEZO_SUP_MAX_D; ++d) {
-        double sww = sww_of(s, n, d), szw = n->szw[d - 1];
-        if (sww > 0.0 && (best == 0 || szw * szw * den > num * sww)) {
+        double sww = d == 1 ? n->sww1 : s->sww[d - 2], szw2 = n->szw[d - 1] * n->szw[d - 1];
+        if (sww > 0.0 && (best == 0 || szw2 * den > num * sww)) {
             best = d;
-            num = szw * szw;
+            num = szw2;
             den = sww;
         }
     }
@@ -179,7 +171,7 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     double dz, dzr, kind_gain = 0.0, e;
     int d, kind, kind_delay = 0;
     if (!s->enabled) {
-        memset(n, 0, sizeof *n);    /* switched off: no statistics, no verdict */
+        n->fault = PIEZO_SUP_NONE;  /* switched off: no statistics, no verdict */
         return;
     }
 
@@ -192,14 +184,15 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     n->dw = n->w - s->w1;
     n->szz = lam * s->szz + dz * dz;
     n->srr = lam * s->srr + dzr * dzr;
-    n->sww1 = lam * s->sww[ring_at(s->head, 0)] + n->dw * n->dw;
-    /* Szw_d uses dw(k - d + 1): the new dw for d = 1, the ring's for d >= 2 */
+    n->sww1 = lam * s->sww[0] + n->dw * n->dw;
+    /* Szw_d uses dw(k - d + 1): the new dw for d = 1, the kept ones (a shift register:
+     * contiguous, so the loop vectorises) for d >= 2 */
     n->szw[0] = lam * s->szw[0] + dz * n->dw;
     for (d = 2; d <= PIEZO_SUP_MAX_D; ++d)
-        n->szw[d - 1] = lam * s->szw[d - 1] + dz * s->dw[ring_at(s->head, d - 2)];
+        n->szw[d - 1] = lam * s->szw[d - 1] + dz * s->dw[d - 2];
     n->srw[0] = lam * s->srw[0] + dzr * n->dw;
     for (d = 2; d <= PIEZO_SUP_DEFAULT_DETECTABLE; ++d)
-        n->srw[d - 1] = lam * s->srw[d - 1] + dzr * s->dw[ring_at(s->head, d - 2)];
+        n->srw[d - 1] = lam * s->srw[d - 1] + dzr * s->dw[d - 2];
     /* the model's y_meas(k) from q (delay 1): yhat = -a1 yhat(k-1) - a2 yhat(k-2) + w */
     n->yhat = n->w - s->a1 * s->yhat1 - s->a2 * s->yhat2;
     n->y_same = s->k > 0 && in->y_meas == s->y1 ? s->y_same + 1 : 0;
@@ -213,7 +206,9 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     n->gain = s->gain;
     n->delay = s->delay;
     n->fault = PIEZO_SUP_NONE;
-    kind = response_kind(s, in, n, &kind_gain, &kind_delay);
+    /* judged every PIEZO_SUP_JUDGE_EVERY samples, and every sample while a fault candidate runs */
+    kind = s->candidate != 0 || s->k % PIEZO_SUP_JUDGE_EVERY == 0
+           ? response_kind(s, in, n, &kind_gain, &kind_delay) : -1;
     if (kind >= 0) {
         n->gain = kind_gain;
         n->delay = kind_delay;
@@ -227,13 +222,14 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         if (kind == 0) n->status = 1;
     }
     /* the clipping watchdog: mean |y_d - y_meas| over the clipped run */
-    {
+    n->clip_error_sum = 0.0;
+    if (in->clipped1) {
         int dl = in->law_delay >= 1 && in->law_delay <= PIEZO_SUP_REF_RING ? in->law_delay : 1;
         int at = s->ref_head + dl - 1;
         double target = s->k >= (uint64_t)dl ? s->ref[at < PIEZO_SUP_REF_RING ? at : at - PIEZO_SUP_REF_RING]
                                              : 0.0;
         e = fabs(target - in->y_meas);
-        n->clip_error_sum = in->clipped1 ? s->clip_error_sum + e : 0.0;
+        n->clip_error_sum = s->clip_error_sum + e;
     }
     if (n->candidate_run >= PIEZO_SUP_CONFIRM)
         n->fault = n->candidate;
@@ -247,6 +243,7 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
 void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *in,
                              const piezo_supervisor_next *n, double r)
 {
+    int i;
     if (!s->enabled) {
         s->k += 1;
         return;
@@ -258,9 +255,12 @@ void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *
     s->z1 = n->z;
     s->zr1 = n->zr;
     s->w1 = n->w;
-    s->head = s->head == 0 ? PIEZO_SUP_MAX_D - 1 : s->head - 1;
-    s->dw[s->head] = n->dw;
-    s->sww[s->head] = n->sww1;
+    for (i = PIEZO_SUP_MAX_D - 1; i > 0; --i) {     /* the shift registers: no call */
+        s->dw[i] = s->dw[i - 1];
+        s->sww[i] = s->sww[i - 1];
+    }
+    s->dw[0] = n->dw;
+    s->sww[0] = n->sww1;
     s->szz = n->szz;
     s->srr = n->srr;
     memcpy(s->szw, n->szw, sizeof s->szw);
@@ -471,7 +471,7 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
         || !(s->gain_min > 0.0 && s->gain_min < 1.0 && s->gain_max > 1.0 && isfinite(s->gain_max))
         || s->clip_samples < 1 || s->detect_samples < 1 || !(isfinite(s->h) && s->h > 0.0))
         return "supervisor parameters out of range";
-    if (s->head < 0 || s->head >= PIEZO_SUP_MAX_D || s->ref_head < 0 || s->ref_head >= PIEZO_SUP_REF_RING)
+    if (s->ref_head < 0 || s->ref_head >= PIEZO_SUP_REF_RING)
         return "supervisor ring index out of range";
     if (s->candidate < 0 || s->candidate > PIEZO_SUP_UNDETECTED || s->candidate_run < 0
         || s->candidate_run >= PIEZO_SUP_CONFIRM || (s->candidate == 0 && s->candidate_run != 0)

@@ -31,8 +31,9 @@
  *     b not a delay the law runs (1..3 detected, or 1 + mv.delay), and those
  *     leave PIEZO_SUP_DELAY_PERCENT % of the response unexplained: the loop
  *     delay is beyond the controller's
- * and otherwise the loop is verified (status 1). A fault kind held for
- * PIEZO_SUP_CONFIRM consecutive samples is the verdict. Measured on 1,800
+ * and otherwise the loop is verified (status 1). The response is judged every
+ * PIEZO_SUP_JUDGE_EVERY samples, and every sample once a fault kind appears; a
+ * fault kind held for PIEZO_SUP_CONFIRM consecutive samples is the verdict. Measured on 1,800
  * legitimate runs (docs/robustness.md) and on every fault of the fault table.
  *
  * A loop whose response no linear model explains (a far too high gain makes
@@ -65,6 +66,8 @@
 #define PIEZO_SUP_REF_RING 10        /* references kept: r(k-1)..r(k-10) */
 #define PIEZO_SUP_MIN_SAMPLES 20     /* no verdict before this many samples */
 #define PIEZO_SUP_CONFIRM 10         /* consecutive samples of one fault kind make the verdict */
+#define PIEZO_SUP_JUDGE_EVERY 4      /* the response is judged every 4th sample (every sample while
+                                        a fault candidate runs) */
 #define PIEZO_SUP_EVIDENCE 32        /* explained (or expected) / unexplained response energy */
 #define PIEZO_SUP_DELAY_PERCENT 25   /* the law's delays leave this much of the response unexplained */
 #define PIEZO_SUP_TRAVEL_PERCENT 5   /* evidence needs the model to expect y_meas to travel this share
@@ -147,9 +150,8 @@ typedef struct {
     double r1, r2;               /* y_ref(k-1), y_ref(k-2) */
     double z1, zr1;              /* A y_meas and A y_ref at k-1 */
     double w1;                   /* B q at k-1: b1 q(k-2) + b2 q(k-3) */
-    double dw[PIEZO_SUP_MAX_D];  /* dw(k-1) .. dw(k-8) at dw[(head + i) % 8], i = 0.. */
-    double sww[PIEZO_SUP_MAX_D]; /* Sww_1(k-1) .. Sww_1(k-8), the same ring */
-    int head;
+    double dw[PIEZO_SUP_MAX_D];  /* dw(k-1) .. dw(k-8): dw[i] = dw(k-1-i) */
+    double sww[PIEZO_SUP_MAX_D]; /* Sww_1(k-1) .. Sww_1(k-8), the same way */
     double szz, srr;             /* Szz, and the same for y_ref */
     double szw[PIEZO_SUP_MAX_D]; /* Szw_d, d = 1..8 */
     double srw[PIEZO_SUP_DEFAULT_DETECTABLE];    /* y_ref against d = 1..3 */
@@ -193,7 +195,8 @@ piezo_status piezo_supervisor_init(piezo_supervisor *sup, const piezo_supervisor
                                    piezo_diag *diag);
 void piezo_supervisor_reset(piezo_supervisor *sup);
 /* The statistics and the verdict of sample k (sup->k) into *next; *sup unchanged.
- * Disabled (sup.enabled = false): nothing computed, next zeroed, no verdict. */
+ * Disabled (sup.enabled = false): nothing computed, next->fault 0 (the rest of
+ * next is not set), no verdict. */
 void piezo_supervisor_evaluate(const piezo_supervisor *sup, const piezo_supervisor_input *in,
                                piezo_supervisor_next *next);
 /* Make the evaluated sample the state; r: the reference the law used at k. */
