@@ -185,8 +185,8 @@ class CoreDivergedError(FloatingPointError):
 
 class CoreUnstableError(CoreDivergedError):
     """The controller's monitor found the loop unstable: ``|pred_error|`` stayed above
-    ``monitor.pred_error_max`` for ``monitor.divergence_samples`` consecutive samples;
-    the step was refused and the state is unchanged."""
+    ``monitor.pred_error_max`` for ``monitor.divergence_samples`` consecutive samples, or in a
+    quarter of a window that long; the step was refused and the state is unchanged."""
 
 
 class CoreFaultError(CoreDivergedError):
@@ -231,9 +231,10 @@ def _raise_step(status: int, what: str, inputs: dict) -> None:
         desc = ", ".join(f"{k} = {v!r}" for k, v in inputs.items())
         raise ValueError(f"{what}: an input is out of its range ({desc}); state unchanged")
     if status == PIEZO_ERR_UNSTABLE:
-        raise CoreUnstableError(f"{what}: the loop is unstable: |pred_error| stayed above "
+        raise CoreUnstableError(f"{what}: the closed loop is unstable: |pred_error| stayed above "
                                 f"monitor.pred_error_max for monitor.divergence_samples consecutive "
-                                f"samples; step refused, state unchanged")
+                                f"samples, or in a quarter of a window that long; step refused, state "
+                                f"unchanged")
     raise RuntimeError(f"{what} failed with piezo_status {status}")
 
 
@@ -639,19 +640,24 @@ class Controller:
         _raise_step(st, name, {"y_ref": y_ref, "y_meas": y_meas})
         return _ctrl_out(self._out)
 
-    def verdict_text(self) -> str:
-        """The supervision's explanation of the last refused sample (``piezo_supervisor_explain``
-        of ``ctrl.verdict``): the signal at fault, the evidence, what to check."""
+    def explain(self, status: int) -> str:
+        """Why the controller refused a sample with ``status``, in its own words
+        (``piezo_controller_explain``, the FMU's message): the supervision's verdict and
+        evidence, the monitor's counts, or the divergence; "" for another status."""
         size = 1024
         buf = ffi.new("char[]", size)
-        self._lib.piezo_supervisor_explain(ffi.addressof(self._c, "verdict"), self._params.h, buf, size)
+        self._lib.piezo_controller_explain(self._c, int(status), buf, size)
         return ffi.string(buf).decode()
 
     def _raise_fault(self, status, name):
+        """Raise the loop's refusals (supervision, monitor, divergence) with the core's words."""
         if status == PIEZO_ERR_FAULT:
             fault = _str(self._lib.piezo_supervisor_fault_name(self._c.verdict.fault))
-            raise CoreFaultError(f"{name}: supervision stopped the loop ({fault}): {self.verdict_text()}",
-                                 fault)
+            raise CoreFaultError(f"{name}: {self.explain(status)}", fault)
+        if status == PIEZO_ERR_UNSTABLE:
+            raise CoreUnstableError(f"{name}: {self.explain(status)}; step refused, state unchanged")
+        if status == PIEZO_ERR_DIVERGED:
+            raise CoreDivergedError(f"{name}: {self.explain(status)}; step refused, state unchanged")
 
     def peek(self, y_ref: float, y_meas: float) -> ControllerOutput:
         """Control of the current sample without committing anything.

@@ -236,10 +236,7 @@ def test_a_failing_run_exits_3_with_one_line(tmp_path, backend, name, fragment):
     assert proc.returncode == 3, proc.stderr
     lines = [line for line in proc.stderr.splitlines() if "error:" in line]
     assert len(lines) == 1 and f"run / {name}:" in lines[0], proc.stderr
-    if backend == "fmpy" or fragment != "the closed loop is unstable":
-        assert fragment in lines[0], lines[0]
-    else:
-        assert "the loop is unstable" in lines[0], lines[0]
+    assert fragment in lines[0], lines[0]          # the FMU's words and the core's alike
 
 
 @pytest.mark.parametrize("values,count", [({"creep.alpha": 0.001}, "1 parameter"),

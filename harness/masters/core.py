@@ -75,37 +75,43 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
     def c_step(k, y_meas):
         return step_input(y_ref[k], y_meas, y_preview[k], lead if k > 0 else 0)[:8]
 
-    published = ctrl.output[:8]      # the controller's outputs before its first step
-    if not setup.feedthrough:
-        # v computed from the inputs of t_k is published at t_(k+1) (FMU default)
-        for k in samples:
-            rows[k, 2] = out.y
-            rows[k, 3] = out.y_meas
-            rows[k, 4:] = published
-            applied = published[0]
-            published = c_step(k, out.y_meas)
-            out = p_step(applied)
-    elif setup.master == "gauss-seidel":
-        # direct feedthrough read after the inputs are set: v(k) from the inputs of t_k
-        for k in samples:
-            c = c_step(k, out.y_meas)
-            rows[k, 2] = out.y
-            rows[k, 3] = out.y_meas
-            rows[k, 4:] = c
-            out = p_step(c[0])
-    else:
-        # direct feedthrough under a Jacobi master: the v read at t_k is a peek with the
-        # inputs held from t_(k-1) (their stamps have not advanced since: no stamped
-        # preview); the step then commits v from the inputs of t_k
-        held = (0.0, 0.0)
-        for k in samples:
-            c = ctrl.peek(*held)[:8]
-            rows[k, 2] = out.y
-            rows[k, 3] = out.y_meas
-            rows[k, 4:] = c
-            held = (y_ref[k], out.y_meas)
-            c_step(k, out.y_meas)
-            out = p_step(c[0])
+    k = 0
+    try:
+        published = ctrl.output[:8]      # the controller's outputs before its first step
+        if not setup.feedthrough:
+            # v computed from the inputs of t_k is published at t_(k+1) (FMU default)
+            for k in samples:
+                rows[k, 2] = out.y
+                rows[k, 3] = out.y_meas
+                rows[k, 4:] = published
+                applied = published[0]
+                published = c_step(k, out.y_meas)
+                out = p_step(applied)
+        elif setup.master == "gauss-seidel":
+            # direct feedthrough read after the inputs are set: v(k) from the inputs of t_k
+            for k in samples:
+                c = c_step(k, out.y_meas)
+                rows[k, 2] = out.y
+                rows[k, 3] = out.y_meas
+                rows[k, 4:] = c
+                out = p_step(c[0])
+        else:
+            # direct feedthrough under a Jacobi master: the v read at t_k is a peek with the
+            # inputs held from t_(k-1) (their stamps have not advanced since: no stamped
+            # preview); the step then commits v from the inputs of t_k
+            held = (0.0, 0.0)
+            for k in samples:
+                c = ctrl.peek(*held)[:8]
+                rows[k, 2] = out.y
+                rows[k, 3] = out.y_meas
+                rows[k, 4:] = c
+                held = (y_ref[k], out.y_meas)
+                c_step(k, out.y_meas)
+                out = p_step(c[0])
+    except core.CoreDivergedError as exc:
+        # say where, as the FMU masters do (the class and its attributes stay)
+        exc.args = (f"{exc.args[0]} (at t = {k * setup.h:.6g} s, sample {k})",) + exc.args[1:]
+        raise
     return as_structured(rows, CLOSED_LOOP_DTYPE)
 
 

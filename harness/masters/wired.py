@@ -18,8 +18,9 @@ Schedules (docs/cosimulation.md, section 2):
 A :class:`Fault` changes what one input receives: nothing (``"open"``: the input keeps its
 start value, as an unconnected input does), a constant, the first value it received
 (``"stuck"``), the value times a factor (``"scale"``: -1 for an inverted sign, 1e-3 for mm
-fed to a µm input), or another output (``"source"``: ``y_meas`` fed from the reference's
-``y_ref``), from a given time on. :func:`simulate_wired` runs the loop until the end or
+fed to a µm input), another output (``"source"``: ``y_meas`` fed from the reference's
+``y_ref``), or +value and -value in turn whatever the loop does (``"alternate"``: a
+measurement no stage gives), from a given time on. :func:`simulate_wired` runs the loop until the end or
 until an FMU's doStep fails, and returns what happened: the samples, the status, the first
 Error message and every Warning (:class:`WiredRun`).
 
@@ -39,7 +40,7 @@ import numpy as np
 
 from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, REFERENCE_MODEL, check_fmi_version, fmu_path, load
 from ..ssp import SSP_CONNECTIONS, parameter_set_for_scenario
-from .fmpy import _Instance, _ScalarFunctions, _vr_array
+from .fmpy import _Instance, _ScalarFunctions, _raw_function, _vr_array
 
 __all__ = ["COMPONENTS", "SCHEDULES", "FAULT_KINDS", "WIRED_FIELDS", "Fault", "WiredRun",
            "simulate_wired", "schedule_name"]
@@ -48,7 +49,7 @@ __all__ = ["COMPONENTS", "SCHEDULES", "FAULT_KINDS", "WIRED_FIELDS", "Fault", "W
 COMPONENTS = {"reference": REFERENCE_MODEL, "controller": CONTROLLER_MODEL, "plant": PLANT_MODEL}
 #: every schedule: the two exchanging ones, then the six sequential orders
 SCHEDULES = ("exchange", "player") + tuple(itertools.permutations(("reference", "controller", "plant")))
-FAULT_KINDS = ("open", "constant", "stuck", "scale", "source")
+FAULT_KINDS = ("open", "constant", "stuck", "scale", "source", "alternate")
 
 # the Real outputs read from each component after each step (what the connections and the
 # record need); the controller's Integer and Boolean outputs are read separately
@@ -77,8 +78,8 @@ class Fault:
     kind : str
         One of :data:`FAULT_KINDS`.
     value : float or str
-        The constant (``"constant"``), the factor (``"scale"``) or the output
-        ``"component.variable"`` it is fed from (``"source"``).
+        The constant (``"constant"``), the factor (``"scale"``), the amplitude
+        (``"alternate"``) or the output ``"component.variable"`` it is fed from (``"source"``).
     start : float
         The time [s] from which the fault acts (before it the connection is sound).
     """
@@ -100,7 +101,7 @@ class Fault:
             if comp not in _REAL_OUTPUTS or var not in _REAL_OUTPUTS[comp]:
                 raise ValueError(f"fault source {self.value!r}: one of "
                                  + ", ".join(f"{c}.{v}" for c, vs in _REAL_OUTPUTS.items() for v in vs))
-        elif self.kind in ("constant", "scale") and not math.isfinite(float(self.value)):
+        elif self.kind in ("constant", "scale", "alternate") and not math.isfinite(float(self.value)):
             raise ValueError(f"fault value {self.value!r}: a finite number")
 
 
@@ -233,8 +234,10 @@ def _run(inst, schedule, fault_of, n, h):
     vr_sat = _vr_array([ctrl.info.vr("saturated")])
     int_out = (ctypes.c_int32 * len(_INT_OUTPUTS))()
     sat_out = (ctypes.c_uint8 * 1)() if ctrl.fmi3 else (ctypes.c_int * 1)()
-    get_int = ctrl.fmu.getInt32 if ctrl.fmi3 else ctrl.fmu.getInteger
-    first = {}
+    vr_sat_addr, sat_addr = ctypes.addressof(vr_sat), ctypes.addressof(sat_out)
+    vr_int_addr, int_addr = ctypes.addressof(vr_int), ctypes.addressof(int_out)
+    get_int_raw = _int_getter(ctrl)
+    first, turns = {}, {}
     rows = np.zeros((n, len(WIRED_FIELDS)))
     failed = None
 
@@ -249,23 +252,35 @@ def _run(inst, schedule, fault_of, n, h):
         c, i = slot[(comp, var)]
         return out_arr[c][i]
 
+    # per component: (input index, source slot, fault) and the set call's arguments
+    plan = {}
+    for comp, conns in ins.items():
+        if conns:
+            fc = fn[comp]
+            plan[comp] = ([(i, slot[(a, ac)], bc, fault_of.get(bc)) for i, (a, ac, bc) in enumerate(conns)],
+                          fc, ctypes.addressof(vr_in[comp]), ctypes.addressof(in_arr[comp]), len(conns))
+
     def write(comp, t, zero=False):
-        conns = ins[comp]
-        if not conns:
+        if comp not in plan:
             return
+        links, fc, vr_addr, arr_addr, n_in = plan[comp]
         arr = in_arr[comp]
-        for i, (a, ac, bc) in enumerate(conns):
-            x = 0.0 if zero else value(a, ac)
-            f = fault_of.get(bc)
+        opened = []
+        for i, (c_src, j), bc, f in links:
+            x = 0.0 if zero else out_arr[c_src][j]
             if f is not None and t >= f.start - 0.5 * h:
                 if f.kind == "open":
-                    continue                # never set: keeps what it had (its start value)
+                    opened.append(i)        # never set: keeps what it had (its start value)
+                    continue
                 if f.kind == "constant":
                     x = float(f.value)
                 elif f.kind == "stuck":
                     x = first.setdefault(bc, x)
                 elif f.kind == "scale":
                     x = x * float(f.value)
+                elif f.kind == "alternate":
+                    turns[bc] = turns.get(bc, 0) + 1
+                    x = float(f.value) if turns[bc] % 2 else -float(f.value)
                 else:
                     x = value(*str(f.value).split(".", 1))
             else:
@@ -273,21 +288,20 @@ def _run(inst, schedule, fault_of, n, h):
             arr[i] = x
             if bc == "y_meas":
                 rows[k, 9] = x
-        fc = fn[comp]
-        sets = [(i, bc) for i, (_, _, bc) in enumerate(conns)
-                if not (bc in fault_of and fault_of[bc].kind == "open" and t >= fault_of[bc].start - 0.5 * h)]
-        if len(sets) == len(conns):
-            st = fc.set(fc.c, ctypes.addressof(vr_in[comp]), len(conns), ctypes.addressof(arr))
+        if not opened:
+            st = fc.set(fc.c, vr_addr, n_in, arr_addr)
             if st > 1:
                 raise _Failed(comp, fc.names[1])
-        else:
-            for i, bc in sets:
-                one = reals([arr[i]])
-                vr = _vr_array([inst[comp].info.vr(bc)])
-                keep.append(vr)
-                st = fc.set(fc.c, ctypes.addressof(vr), 1, ctypes.addressof(one))
-                if st > 1:
-                    raise _Failed(comp, fc.names[1])
+            return
+        for i, _, bc, _ in links:
+            if i in opened:
+                continue
+            one = reals([arr[i]])
+            vr = _vr_array([inst[comp].info.vr(bc)])
+            keep.append(vr)
+            st = fc.set(fc.c, ctypes.addressof(vr), 1, ctypes.addressof(one))
+            if st > 1:
+                raise _Failed(comp, fc.names[1])
 
     def step(comp, t):
         f = fn[comp]
@@ -304,9 +318,10 @@ def _run(inst, schedule, fault_of, n, h):
         rows[k, 5] = value("controller", "q")
         rows[k, 6] = value("controller", "pred_error")
         fc = fn["controller"]
-        fc.get_bool(fc.c, ctypes.addressof(vr_sat), 1, ctypes.addressof(sat_out))
+        fc.get_bool(fc.c, vr_sat_addr, 1, sat_addr)
+        get_int_raw(fc.c, vr_int_addr, 1, int_addr)
         rows[k, 7] = float(sat_out[0] != 0)
-        rows[k, 8] = float(get_int([vr_int[0]])[0])
+        rows[k, 8] = float(int_out[0])
 
     k = 0
     try:
@@ -341,6 +356,16 @@ def _run(inst, schedule, fault_of, n, h):
         errors = [line[len("[Error] "):] for line in log if line.startswith("[Error]")]
         run.error = errors[0] if errors else f"{failed.call} returned an error"
     return run
+
+
+def _int_getter(inst):
+    """The instance's Integer (FMI 3.0: Int32) getter as a bare C function, called the FMI 2.0
+    way: ``get(c, vr, n, address)``."""
+    vp, sz = ctypes.c_void_p, ctypes.c_size_t
+    if not inst.fmi3:
+        return _raw_function(inst.fmu, "fmi2GetInteger", vp, vp, sz, vp)
+    raw = _raw_function(inst.fmu, "fmi3GetInt32", vp, vp, sz, vp, sz)
+    return lambda c, vr, n, addr: raw(c, vr, n, addr, n)
 
 
 class _Failed(Exception):

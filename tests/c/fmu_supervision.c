@@ -20,7 +20,8 @@
  * monitor's for a loop no model explains), or, for a degraded loop, a Warning
  * once and sup.status = 2. The sound loop must run 2 s without an Error or a
  * supervision warning and end verified (sup.status = 1), and the supervision
- * switched off (sup.enabled = false) must let an open loop run.
+ * switched off for open-loop use (sup.enabled = false, with the divergence
+ * monitor off: monitor.divergence_samples = 0) must let an open loop run.
  *
  * usage: fmu_supervision PiezoStage.xml PiezoStage.so AdaptiveCompoundController.xml
  *            AdaptiveCompoundController.so ReferenceSignal.xml ReferenceSignal.so
@@ -201,6 +202,9 @@ static int start(loop *l, const fault_case *c)
     if (c->ctrl_param != NULL)
         host_set_named(&ctrl, l->in[CTRL].c, c->ctrl_param,
                        strcmp(c->ctrl_param, "mv.delay") == 0 && c->ctrl_value < -1.5 ? 0.0 : c->ctrl_value);
+    /* open-loop use switches the divergence monitor off too */
+    if (c->ctrl_param != NULL && strcmp(c->ctrl_param, "sup.enabled") == 0)
+        host_set_named(&ctrl, l->in[CTRL].c, "monitor.divergence_samples", 0.0);
     host_set_named(&ref, l->in[REF].c, "frequency[1]", c->frequency);
     host_set_named(&ref, l->in[REF].c, "amplitude[1]", c->amplitude);
     for (j = 0; j < N_COMP; j++)
@@ -294,7 +298,8 @@ static void check_case(const fault_case *c, int sequential)
         break;
     default:
         check(failed < 0 && l.in[CTRL].log.n_errors == 0,
-              "%s, %s: runs 2 s without an error (open-loop use)", c->name, schedule);
+              "%s, %s: runs 2 s without an error (open-loop use) (%s)", c->name, schedule,
+              l.in[CTRL].log.errors[0] ? l.in[CTRL].log.errors : "no error");
         break;
     }
     stop(&l);

@@ -1,0 +1,454 @@
+"""The controller's supervision, measured: the fault table of docs/robustness.md and the
+validation family (no false alarm, and how close the legitimate runs came to each threshold).
+
+::
+
+    python -m harness.supervision_table faults                # the fault table, in Markdown
+    python -m harness.supervision_table family --stages 50    # the legitimate family and its margins
+    python -m harness.supervision_table family --stages 50 --duration 120 --scenarios 1hz 20hz
+
+**Faults** (:data:`FAULTS`): each is a wiring or rig fault a user can make, run on the three
+FMUs wired by hand (:mod:`harness.masters.wired`) in both FMI editions, in a master that
+exchanges values at communication points and in true Gauss-Seidel (plant, controller,
+reference), and, where a parameter expresses it, on the harness's own masters (fmpy, native,
+core). Each cell is the time of the Error from the controller's doStep ("-": none), or for a
+degraded loop whether its Warning came.
+
+**Family** (:func:`family_specs`): stages drawn at random (fixed seed) from the identification
+family (:func:`harness.identify.family.draw_stage`) with the paper's sensor (2 nm resolution,
+1 nm rms noise), the controller given the stage's own model (as ``export`` makes it) or the
+paper's, the six tracking references, ``tf.delay`` 0 and 1, under every schedule of the wired
+master (the exchange, fmpy's player, the six sequential orders: each the samples of the real
+importer bit for bit, ``tests/test_supervision_family.py``) and, with ``--masters real``, under
+the real importers (the harness's fmpy master, fmpy's SSP player, the container of
+fmu-manipulation-toolbox in parallel and in each sequential order); and the saturation runs
+(the mismatch scenarios with voltage limits at 90, 70 and 50 % of the peak they need). A
+legitimate run must end without an Error and without a supervision warning; the wired runs
+also give their margins (:func:`harness.supervision.margins`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+import itertools
+import re
+import sys
+
+import numpy as np
+
+from . import core, masters
+from .fmu import FMUError
+from .identify.family import SENSOR, draw_stage
+from .masters.container import CONTAINER_ORDER
+from .masters.wired import SCHEDULES, Fault, schedule_name, simulate_wired
+from .scenarios import MISMATCH_SCENARIOS, get_scenario
+from .supervision import controller_samples, margins, thresholds
+
+__all__ = ["FaultCase", "FAULTS", "FAULT_SCHEDULES", "FaultResult", "run_fault", "harness_fault",
+           "fault_results", "fault_markdown", "RunSpec", "RunResult", "family_specs", "run_spec",
+           "summarize", "family_markdown", "main"]
+
+H = 0.0005
+#: the schedules of the fault table: an exchanging master and true Gauss-Seidel
+FAULT_SCHEDULES = ("exchange", ("plant", "controller", "reference"))
+_SEQ = (("plant", "controller", "reference"),)
+#: the supervision warnings (the stamps), by their words
+_SUPERVISION_WARNINGS = ("is not connected (", "cannot be aligned")
+
+
+@dataclass(frozen=True)
+class FaultCase:
+    """One fault of the table.
+
+    Attributes
+    ----------
+    name : str
+    faults : tuple of Fault
+        What the wiring does (:class:`harness.masters.wired.Fault`).
+    plant, controller, reference : dict
+        Parameter overrides that make the fault (a plant delay, a wrong ``mv.delay``, ...).
+    scenario : str
+    harness : bool
+        The fault is a parameter: the harness's own masters run it too.
+    degraded : bool
+        A loop that works, degraded: a Warning is expected, not an Error.
+    schedules : tuple
+        The schedules it is a fault in (a set ``mv.delay`` is right in some).
+    """
+
+    name: str
+    faults: tuple = ()
+    plant: dict = field(default_factory=dict)
+    controller: dict = field(default_factory=dict)
+    reference: dict = field(default_factory=dict)
+    scenario: str = "mismatch_5hz"
+    harness: bool = False
+    degraded: bool = False
+    schedules: tuple = FAULT_SCHEDULES
+
+
+#: the fault table's rows
+FAULTS = (
+    FaultCase("y_meas not connected (0)", (Fault("y_meas", "constant", 0.0),)),
+    FaultCase("y_meas stuck at its first value", (Fault("y_meas", "stuck"),)),
+    FaultCase("y_meas stuck from t = 1 s (a sensor that fails)", (Fault("y_meas", "stuck", start=1.0),)),
+    FaultCase("y_meas inverted", (Fault("y_meas", "scale", -1.0),)),
+    FaultCase("y_meas inverted from t = 1 s", (Fault("y_meas", "scale", -1.0, start=1.0),)),
+    FaultCase("y_meas in mm (x 0.001)", (Fault("y_meas", "scale", 1e-3),)),
+    FaultCase("y_meas in nm (x 1000)", (Fault("y_meas", "scale", 1e3),)),
+    FaultCase("y_meas alternating +-10 um, whatever v does", (Fault("y_meas", "alternate", 10.0),)),
+    FaultCase("v not reaching the plant (0)", (Fault("v", "constant", 0.0),)),
+    FaultCase("v lost from t = 1 s", (Fault("v", "constant", 0.0, start=1.0),)),
+    FaultCase("v inverted (amplifier or wiring)", (Fault("v", "scale", -1.0),)),
+    FaultCase("amplifier gain 0.1", (Fault("v", "scale", 0.1),)),
+    FaultCase("amplifier gain 10", (Fault("v", "scale", 10.0),)),
+    FaultCase("y_ref and y_meas swapped", (Fault("y_meas", "source", "reference.y_ref"),
+                                          Fault("y_ref", "source", "plant.y_meas"))),
+    FaultCase("y_meas fed ReferenceSignal's y_ref", (Fault("y_meas", "source", "reference.y_ref"),)),
+    FaultCase("plant input delay of 4 samples (tf.delay = 4)", plant={"tf.delay": 4}, harness=True),
+    FaultCase("mv.delay = 0 set for a loop of d = 2", controller={"mv.delay": 0}, harness=True,
+              schedules=("exchange",)),
+    FaultCase("mv.delay = 2 set for a loop of d = 2", controller={"mv.delay": 2}, harness=True,
+              schedules=("exchange",)),
+    FaultCase("reference beyond reach (500 um at 0.25 Hz)",
+              reference={"amplitude[1]": 500.0, "frequency[1]": 0.25}, scenario="mismatch_1hz"),
+    FaultCase("t_meas not connected", (Fault("t_meas", "open"),), degraded=True, schedules=_SEQ),
+    FaultCase("t_preview not connected", (Fault("t_preview", "open"),), degraded=True, schedules=_SEQ),
+)
+
+
+@dataclass
+class FaultResult:
+    """One fault under one master: the time of the controller's Error (None: none came) and its
+    message, or for a degraded loop whether its Warning came (``time`` None) and the Warning."""
+
+    case: str
+    master: str
+    time: float | None
+    message: str
+    warned: bool = False
+
+
+def _supervision_warnings(warnings):
+    return [w for w in warnings if any(words in w for words in _SUPERVISION_WARNINGS)]
+
+
+def run_fault(case, schedule, fmi_version=2, duration=2.0, fmu_dir=None):
+    """Run one fault on the wired master (:class:`FaultResult`)."""
+    res = simulate_wired(case.scenario, schedule, case.faults, duration=duration, plant_params=case.plant,
+                         controller_params=case.controller, reference_params=case.reference,
+                         fmu_dir=fmu_dir, fmi_version=fmi_version)
+    master = f"FMI {fmi_version}.0, {schedule_name(schedule)}"
+    warned = _supervision_warnings(res.warnings["controller"])
+    return FaultResult(case.name, master, res.error_time, res.error or (warned[0] if warned else ""),
+                       bool(warned))
+
+
+def harness_fault(case, backend, duration=2.0):
+    """Run a parameter fault on one of the harness's masters (``fmpy``, ``native``, ``core``):
+    the time of the stop and its message (:class:`FaultResult`)."""
+    try:
+        masters.closed_loop(backend)(case.scenario, plant_params=case.plant, controller_params=case.controller,
+                                     duration=duration)
+    except (FMUError, core.CoreDivergedError) as exc:
+        text = str(exc)
+        found = re.search(r"sample (\d+)", text)
+        return FaultResult(case.name, backend, int(found.group(1)) * H if found else None, text)
+    return FaultResult(case.name, backend, None, "")
+
+
+def fault_results(fmi_versions=(2, 3), backends=("fmpy", "native", "core"), progress=None):
+    """Every fault under every applicable master: a list of :class:`FaultResult`."""
+    out = []
+    for case in FAULTS:
+        for fmi, schedule in itertools.product(fmi_versions, FAULT_SCHEDULES):
+            if schedule in case.schedules:
+                out.append(run_fault(case, schedule, fmi))
+        if case.harness:
+            for backend in backends:
+                out.append(harness_fault(case, backend))
+        if progress is not None:
+            progress(case.name)
+    return out
+
+
+def _message_gist(text):
+    """The verdict's words: the message from its subject to its first full stop or colon."""
+    for start in ("supervision stopped the loop", "the closed loop is unstable", "t_meas is", "t_preview is"):
+        if start in text:
+            text = text[text.index(start):]
+            break
+    return text.split("; fmi")[0]
+
+
+def _onset(case):
+    """When the fault begins [s] (a Fault's start; 0 for a parameter)."""
+    return min((f.start for f in case.faults), default=0.0)
+
+
+def fault_markdown(results):
+    """The fault table (docs/robustness.md) from :func:`fault_results`: per fault and master,
+    how long after the fault began the controller's doStep failed (or whether the Warning of a
+    degraded loop came), then what the controller says, under the first master, per fault."""
+    masters_ = []
+    for r in results:
+        if r.master not in masters_:
+            masters_.append(r.master)
+    lines = ["| # | fault | " + " | ".join(masters_) + " |",
+             "|---|---|" + "---|" * len(masters_)]
+    by = {(r.case, r.master): r for r in results}
+    said = []
+    for i, case in enumerate(FAULTS, start=1):
+        cells = []
+        for m in masters_:
+            r = by.get((case.name, m))
+            if r is None:
+                cells.append("n/a")
+            elif case.degraded:
+                cells.append("Warning" if r.warned else "**none**")
+            else:
+                cells.append(f"{1e3 * (r.time - _onset(case)):.1f} ms" if r.time is not None else "**not stopped**")
+        lines.append(f"| {i} | {case.name} | " + " | ".join(cells) + " |")
+        first = next((by[(case.name, m)] for m in masters_ if (case.name, m) in by), None)
+        if first is not None:
+            said.append(f"{i}. {case.name} ({first.master}): \"{_message_gist(first.message)}\"")
+    return "\n".join(lines) + "\n\n" + "\n".join(said)
+
+
+# ---------------------------------------------------------------------------
+# the validation family
+# ---------------------------------------------------------------------------
+
+#: the real importers of docs/cosimulation.md, section 4
+REAL_MASTERS = ("harness Jacobi", "harness Gauss-Seidel, plant first", "harness Gauss-Seidel, controller first",
+                "fmpy SSP player", "container, parallel") + tuple(
+    "container, sequential: " + ", ".join(o) for o in itertools.permutations(("reference", "controller", "plant")))
+_CONTAINER_FILE = {"reference": "ReferenceSignal.fmu", "controller": "AdaptiveCompoundController.fmu",
+                   "plant": "PiezoStage.fmu"}
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One legitimate run of the family."""
+
+    group: str
+    master: str                 # a real importer (REAL_MASTERS) or "wired: <schedule>"
+    scenario: str
+    plant: dict
+    controller: dict
+    reference: dict
+    duration: float | None
+
+
+@dataclass
+class RunResult:
+    """What one legitimate run did: the Error that stopped it (""), the supervision warnings,
+    and its margins (wired runs)."""
+
+    spec: RunSpec
+    error: str
+    warnings: list
+    margins: object = None
+
+
+def _tracking(names=None):
+    names = names or [n.split("mismatch_", 1)[1] for n in MISMATCH_SCENARIOS]
+    return [f"track_{n}" for n in names]
+
+
+def family_specs(stages=50, seed=2028, scenarios=None, masters_=("wired",), duration=None,
+                 models=("own", "paper"), tf_delays=(0, 1), saturation=True):
+    """The legitimate runs of the validation family (:class:`RunSpec`).
+
+    Parameters
+    ----------
+    stages : int
+        Stages drawn from the identification family.
+    seed : int
+    scenarios : list of str, optional
+        The references (``1hz``, ``5hz``, ..., ``1_10_20hz``; default all six).
+    masters_ : tuple of str
+        ``"wired"`` (every schedule of the wired master) and/or ``"real"`` (:data:`REAL_MASTERS`).
+    duration : float, optional
+        Override the scenarios' 3 s.
+    models : tuple of str
+        The controller's model: the stage's ``"own"`` (identified) and/or the ``"paper"``'s.
+    tf_delays : tuple of int
+    saturation : bool
+        Add the saturation runs (mismatch plant, limits at 90, 70, 50 % of the needed peak).
+    """
+    rng = np.random.default_rng(seed)
+    draws = [draw_stage(rng) for _ in range(stages)]
+    names = _tracking(scenarios)
+    schedules = []
+    if "wired" in masters_:
+        schedules += [f"wired: {schedule_name(s)}" for s in SCHEDULES]
+    if "real" in masters_:
+        schedules += list(REAL_MASTERS)
+    specs = []
+    for i, stage in enumerate(draws):
+        for model in models:
+            controller = dict(stage) if model == "own" else {}
+            for master, td, sc in itertools.product(schedules, tf_delays, names):
+                plant = {**stage, **SENSOR, "sensor.seed": i + 1, "tf.delay": td}
+                specs.append(RunSpec(f"stages, {model} model", master, sc, plant, controller, {}, duration))
+    if saturation:
+        peak = {"1hz": 18.0, "5hz": 18.0, "10hz": 18.5, "20hz": 19.0}   # |v| the mismatch runs need [V]
+        for frac, master, td, sc in itertools.product((0.9, 0.7, 0.5), schedules, tf_delays,
+                                                     [n.split("track_", 1)[1] for n in names]):
+            limit = peak.get(sc, 49.0) * frac
+            specs.append(RunSpec(f"saturation, limits {int(100 * frac)} % of the peak", master,
+                                 f"mismatch_{sc}", {"tf.delay": td}, {"sat.v_min": -limit, "sat.v_max": limit},
+                                 {}, duration))
+    return specs
+
+
+def _schedule_of(master):
+    text = master.split("wired: ", 1)[1]
+    return text if text in ("exchange", "player") else tuple(text.split(", "))
+
+
+def run_spec(spec):
+    """Run one :class:`RunSpec`; a :class:`RunResult` (its margins on the wired master)."""
+    sc = get_scenario(spec.scenario)
+    error, warnings, mg = "", [], None
+    try:
+        if spec.master.startswith("wired: "):
+            res = simulate_wired(sc.name, _schedule_of(spec.master), (), duration=spec.duration,
+                                 plant_params=spec.plant, controller_params=spec.controller,
+                                 reference_params=spec.reference)
+            error = res.error
+            warnings = _supervision_warnings(res.warnings["controller"])
+            c = {**core.default_controller_params(), **spec.controller}
+            mg = margins(controller_samples(res), tuple(c[k] for k in ("tf.a1", "tf.a2", "tf.b1", "tf.b2")),
+                         spec.controller)
+        else:
+            _run_real(spec)
+    except (FMUError, core.CoreDivergedError) as exc:
+        error = str(exc)
+    return RunResult(spec, error, warnings, mg)
+
+
+def _run_real(spec):
+    m = spec.master
+    kwargs = {"plant_params": spec.plant, "controller_params": spec.controller}
+    if spec.duration is not None and m.startswith("harness"):
+        kwargs["duration"] = spec.duration
+    if m.startswith("harness"):
+        extra = {"master": "jacobi"} if "Jacobi" in m else \
+            {"step_order": "controller-first" if "controller first" in m else "plant-first"}
+        masters.closed_loop("fmpy")(spec.scenario, **kwargs, **extra)
+    elif m == "fmpy SSP player":
+        masters.closed_loop("ssp-player")(spec.scenario, **kwargs)
+    else:
+        sequential = "sequential" in m
+        order = CONTAINER_ORDER
+        if sequential:
+            order = tuple(_CONTAINER_FILE[n] for n in m.split(": ")[1].split(", "))
+        masters.closed_loop("container")(spec.scenario, sequential=sequential, order=order, **kwargs)
+
+
+def _run_all(specs, jobs, progress=None):
+    if jobs <= 1:
+        for spec in specs:
+            yield run_spec(spec)
+        return
+    with ProcessPoolExecutor(jobs) as ex:
+        for i, r in enumerate(ex.map(run_spec, specs, chunksize=8)):
+            if progress is not None and i % 200 == 0:
+                progress(f"{i} of {len(specs)} runs")
+            yield r
+
+
+def summarize(results):
+    """Per group: runs, Errors, supervision warnings, and the closest approach to each
+    threshold over its wired runs (the worst margin)."""
+    th = thresholds()
+    groups = {}
+    for r in results:
+        g = groups.setdefault(r.spec.group, {"runs": 0, "errors": [], "warnings": [], "margins": []})
+        g["runs"] += 1
+        if r.error:
+            g["errors"].append((r.spec, r.error))
+        if r.warnings:
+            g["warnings"].append((r.spec, r.warnings[0]))
+        if r.margins is not None:
+            g["margins"].append(r.margins)
+    out = {}
+    for name, g in groups.items():
+        ms = g["margins"]
+        lows = [m.gain_low for m in ms if m.gain_low is not None]
+        highs = [m.gain_high for m in ms if m.gain_high is not None]
+        delays = [m.delay_unexplained for m in ms if m.delay_unexplained is not None]
+        out[name] = {
+            "runs": g["runs"], "errors": g["errors"], "warnings": g["warnings"],
+            "gain_low": (min(lows) if lows else None, th.gain_min),
+            "gain_high": (max(highs) if highs else None, th.gain_max),
+            "delay_unexplained": (max(delays) if delays else None, th.delay_fraction),
+            "candidate_run": (max((m.candidate_run for m in ms), default=0), th.confirm),
+            "monitor_share": (max((m.monitor_share for m in ms), default=0.0), core.lib().PIEZO_MONITOR_SHARE_PERCENT / 100),
+            "clip_run": (max((m.clip_run for m in ms), default=0), round(th.clip_time / H)),
+            "detection_run": (max((m.detection_run for m in ms), default=0), round(th.detect_time / H)),
+            "monitor_run": (max((m.monitor_run for m in ms), default=0),
+                            core.default_controller_params()["monitor.divergence_samples"]),
+        }
+    return out
+
+
+def family_markdown(summary):
+    """The family's table: one row per group."""
+    def fmt(value, digits=3):
+        if value is None:
+            return "-"
+        return f"{value:.{digits}g}" if isinstance(value, float) else str(value)
+
+    rows = ["| runs | Errors | supervision warnings | weakest gain (>= 0.25) | strongest gain (<= 4) | "
+            "unexplained by the law's delays (< 0.25) | longest fault candidate (< 10) | share of large "
+            "errors (< 0.25) | longest clipping [samples] (< 1000) | longest detection [samples] (< 1000) | "
+            "longest large-error run (< 200) | group |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, s in summary.items():
+        rows.append(f"| {s['runs']} | {len(s['errors'])} | {len(s['warnings'])} | {fmt(s['gain_low'][0])} | "
+                    f"{fmt(s['gain_high'][0])} | {fmt(s['delay_unexplained'][0])} | {s['candidate_run'][0]} | "
+                    f"{fmt(s['monitor_share'][0])} | {s['clip_run'][0]} | {s['detection_run'][0]} | "
+                    f"{s['monitor_run'][0]} | {name} |")
+    return "\n".join(rows)
+
+
+def main(argv=None):
+    """``python -m harness.supervision_table``: the fault table or the family, in Markdown."""
+    ap = argparse.ArgumentParser(prog="python -m harness.supervision_table",
+                                 description="The controller's supervision, measured (docs/robustness.md).")
+    sub = ap.add_subparsers(dest="job", required=True)
+    fa = sub.add_parser("faults", help="the fault table")
+    fa.add_argument("--fmi", type=int, nargs="+", default=[2, 3], choices=[2, 3])
+    fm = sub.add_parser("family", help="the legitimate family: Errors, warnings, margins")
+    fm.add_argument("--stages", type=int, default=50)
+    fm.add_argument("--seed", type=int, default=2028)
+    fm.add_argument("--scenarios", nargs="+", default=None, help="e.g. 1hz 20hz (default: the six)")
+    fm.add_argument("--masters", nargs="+", default=["wired"], choices=["wired", "real"])
+    fm.add_argument("--models", nargs="+", default=["own", "paper"], choices=["own", "paper"])
+    fm.add_argument("--duration", type=float, default=None, help="seconds per run (default: the scenario's 3 s)")
+    fm.add_argument("--no-saturation", action="store_true")
+    fm.add_argument("--jobs", type=int, default=2)
+    args = ap.parse_args(argv)
+    say = lambda text: print(text, file=sys.stderr, flush=True)   # noqa: E731
+    if args.job == "faults":
+        print(fault_markdown(fault_results(tuple(args.fmi), progress=say)))
+        return 0
+    specs = family_specs(args.stages, args.seed, args.scenarios, tuple(args.masters), args.duration,
+                         tuple(args.models), saturation=not args.no_saturation)
+    say(f"{len(specs)} runs")
+    summary = summarize(_run_all(specs, args.jobs, progress=say))
+    print(family_markdown(summary))
+    bad = [(g, s) for g, s in summary.items() if s["errors"] or s["warnings"]]
+    for g, s in bad:
+        for spec, text in (s["errors"] + s["warnings"])[:5]:
+            print(f"FALSE ALARM ({g}): {spec.master}, {spec.scenario}: {text[:300]}", file=sys.stderr)
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
