@@ -7,8 +7,9 @@
 * saturated persistently: the controller clipped ``v`` in more than
   :data:`MAX_SATURATED_FRACTION` of the samples of the metric window.
 
-A run the controller itself stopped (its monitor found the loop unstable, or a
-computed value overflowed) raises :class:`harness.fmu.LoopDivergedError`
+A run the controller itself stopped (its supervision found a loop that cannot work:
+:class:`harness.fmu.LoopFaultError`; its monitor found the loop unstable, or a computed
+value overflowed) raises :class:`harness.fmu.LoopDivergedError`
 during the run.  The command line turns both into exit code
 :data:`EXIT_RUN_FAILED` and one line saying why.
 """

@@ -481,10 +481,12 @@ static int all_finite(const double *x, int n)
  * finite states. */
 static int sample_state_finite(const piezo_controller *c, const piezo_controller_sample *s)
 {
-    /* the supervisor's next doubles, z .. clip_error_sum, are contiguous (set when it runs) */
+    /* the supervisor's next doubles, z .. clip_error_sum, are contiguous (set when it runs);
+     * its gain szw / sww overflows where sww is tiny and szw huge (a restored state) */
     enum { SUP_DOUBLES = (offsetof(piezo_supervisor_next, clip_error_sum) - offsetof(piezo_supervisor_next, z))
                          / sizeof(double) + 1 };
-    return all_finite(s->out.theta, 4) && (!c->sup.enabled || all_finite(&s->sup.z, SUP_DOUBLES))
+    return all_finite(s->out.theta, 4)
+           && (!c->sup.enabled || (all_finite(&s->sup.z, SUP_DOUBLES) && isfinite(s->sup.gain)))
            && (!s->rls_updated || all_finite(s->P, 16))
            && (!s->detecting || (all_finite(s->det_theta, PIEZO_DETECT_THETA)
                                  && all_finite(s->det_P, PIEZO_DETECT_P) && all_finite(s->det_score, PIEZO_DETECT_N)));
