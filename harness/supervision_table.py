@@ -35,13 +35,14 @@ from dataclasses import dataclass, field
 import itertools
 import re
 import sys
+import warnings as _warnings
 
 import numpy as np
 
 from . import core, masters
 from .fmu import FMUError
 from .identify.family import SENSOR, draw_stage
-from .masters.container import CONTAINER_ORDER
+from .masters.container import CONTAINER_ORDER, ContainerTerminateWarning
 from .masters.wired import SCHEDULES, Fault, schedule_name, simulate_wired
 from .scenarios import MISMATCH_SCENARIOS, get_scenario
 from .supervision import controller_samples, margins, thresholds
@@ -245,12 +246,14 @@ class RunSpec:
 @dataclass
 class RunResult:
     """What one legitimate run did: the Error that stopped it (""), the supervision warnings,
-    and its margins (wired runs)."""
+    its margins (wired runs) and what the importer said besides (a container refusing to
+    terminate after a run whose FMUs end with a Warning)."""
 
     spec: RunSpec
     error: str
     warnings: list
     margins: object = None
+    notes: tuple = ()
 
 
 def _tracking(names=None):
@@ -313,7 +316,7 @@ def _schedule_of(master):
 def run_spec(spec):
     """Run one :class:`RunSpec`; a :class:`RunResult` (its margins on the wired master)."""
     sc = get_scenario(spec.scenario)
-    error, warnings, mg = "", [], None
+    error, warnings, mg, notes = "", [], None, ()
     try:
         if spec.master.startswith("wired: "):
             res = simulate_wired(sc.name, _schedule_of(spec.master), (), duration=spec.duration,
@@ -325,10 +328,15 @@ def run_spec(spec):
             mg = margins(controller_samples(res), tuple(c[k] for k in ("tf.a1", "tf.a2", "tf.b1", "tf.b2")),
                          spec.controller)
         else:
-            _run_real(spec)
+            with _warnings.catch_warnings(record=True) as caught:
+                _warnings.simplefilter("always", ContainerTerminateWarning)
+                _run_real(spec)
+            notes = tuple(str(w.message) for w in caught if issubclass(w.category, ContainerTerminateWarning))
     except (FMUError, core.CoreDivergedError) as exc:
         error = str(exc)
-    return RunResult(spec, error, warnings, mg)
+    except Exception as exc:     # an importer's own failure is a finding too; keep the family going
+        error = f"{type(exc).__name__}: {exc}"
+    return RunResult(spec, error, warnings, mg, notes)
 
 
 def _run_real(spec):
@@ -368,8 +376,10 @@ def summarize(results):
     th = thresholds()
     groups = {}
     for r in results:
-        g = groups.setdefault(r.spec.group, {"runs": 0, "errors": [], "warnings": [], "margins": []})
+        g = groups.setdefault(r.spec.group, {"runs": 0, "errors": [], "warnings": [], "margins": [],
+                                             "notes": []})
         g["runs"] += 1
+        g["notes"] += [(r.spec, n) for n in r.notes]
         if r.error:
             g["errors"].append((r.spec, r.error))
         if r.warnings:
@@ -383,7 +393,7 @@ def summarize(results):
         highs = [m.gain_high for m in ms if m.gain_high is not None]
         delays = [m.delay_unexplained for m in ms if m.delay_unexplained is not None]
         out[name] = {
-            "runs": g["runs"], "errors": g["errors"], "warnings": g["warnings"],
+            "runs": g["runs"], "errors": g["errors"], "warnings": g["warnings"], "notes": g["notes"],
             "gain_low": (min(lows) if lows else None, th.gain_min),
             "gain_high": (max(highs) if highs else None, th.gain_max),
             "delay_unexplained": (max(delays) if delays else None, th.delay_fraction),
@@ -404,13 +414,13 @@ def family_markdown(summary):
             return "-"
         return f"{value:.{digits}g}" if isinstance(value, float) else str(value)
 
-    rows = ["| runs | Errors | supervision warnings | weakest gain (>= 0.25) | strongest gain (<= 4) | "
+    rows = ["| runs | Errors | supervision warnings | importer notes | weakest gain (>= 0.25) | strongest gain (<= 4) | "
             "unexplained by the law's delays (< 0.25) | longest fault candidate (< 10) | share of large "
             "errors (< 0.25) | longest clipping [samples] (< 1000) | longest detection [samples] (< 1000) | "
             "longest large-error run (< 200) | group |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, s in summary.items():
-        rows.append(f"| {s['runs']} | {len(s['errors'])} | {len(s['warnings'])} | {fmt(s['gain_low'][0])} | "
+        rows.append(f"| {s['runs']} | {len(s['errors'])} | {len(s['warnings'])} | {len(s['notes'])} | {fmt(s['gain_low'][0])} | "
                     f"{fmt(s['gain_high'][0])} | {fmt(s['delay_unexplained'][0])} | {s['candidate_run'][0]} | "
                     f"{fmt(s['monitor_share'][0])} | {s['clip_run'][0]} | {s['detection_run'][0]} | "
                     f"{s['monitor_run'][0]} | {name} |")
@@ -447,6 +457,9 @@ def main(argv=None):
     for g, s in bad:
         for spec, text in (s["errors"] + s["warnings"])[:5]:
             print(f"FALSE ALARM ({g}): {spec.master}, {spec.scenario}: {text[:300]}", file=sys.stderr)
+    for g, s in summary.items():
+        for spec, text in s["notes"][:5]:
+            print(f"NOTE ({g}): {spec.master}, {spec.scenario}: {text[:400]}", file=sys.stderr)
     return 1 if bad else 0
 
 

@@ -110,6 +110,24 @@ def test_exchange_at_communication_points_gives_the_same_samples(name, tf_delay,
     assert e_rms(name, gs) <= E_RMS_MAX
 
 
+def test_a_container_refusing_to_terminate_keeps_the_run(workdir):
+    """The controller's voltage limits at 70 % of the peak the 5 Hz run needs: it clips, so
+    its terminate returns a Warning with the count, which fmu-manipulation-toolbox's
+    container turns into an Error of its own terminate (measured: "failed to terminate").
+    simulate_container keeps the run: every sample within 1e-12 of our Gauss-Seidel run with
+    the same limits (reference), and a ContainerTerminateWarning quoting the controller's
+    summary."""
+    name, limits = "mismatch_5hz", {"sat.v_min": -12.6, "sat.v_max": 12.6}
+    sc = get_scenario(name)
+    path = container.build_closed_loop_container(name, workdir / "clipping.fmu", controller_params=limits)
+    with pytest.warns(container.ContainerTerminateWarning, match="v was clipped in [1-9]"):
+        run = container.simulate_container(path, sc.duration, sc.step_size)
+    ref = simulate_closed_loop(name, controller_params=limits)
+    assert len(run) == len(ref)
+    assert max_diff(run, ref) <= TOL
+    assert np.any(np.abs(ref["v"]) == 12.6)
+
+
 @pytest.mark.parametrize("tf_delay", [0, 1])
 @pytest.mark.parametrize("name", MISMATCH_SCENARIOS)
 def test_fmpy_ssp_player_runs_our_loop_from_its_zero_start(name, tf_delay):

@@ -22,6 +22,7 @@ import math
 from pathlib import Path
 import shutil
 import tempfile
+import warnings
 
 from fmpy import simulate_fmu
 import numpy as np
@@ -31,7 +32,7 @@ from ..loop import IMPORTER_DTYPE, IMPORTER_FIELDS
 from ..scenarios import get_scenario
 from ..ssp import SSP_CONNECTIONS, parameter_set_for_scenario
 
-__all__ = ["CONTAINER_ORDER", "MissingImporterError", "build_closed_loop_container",
+__all__ = ["CONTAINER_ORDER", "ContainerTerminateWarning", "MissingImporterError", "build_closed_loop_container",
            "simulate_container", "simulate_closed_loop_container"]
 
 #: FMU files of the loop, in the topological order of its links (reference -> controller -> plant)
@@ -42,6 +43,10 @@ _FMU_OF = {"reference": "ReferenceSignal.fmu", "controller": "AdaptiveCompoundCo
 
 class MissingImporterError(ImportError):
     """An optional importer package is not installed; the message says how to get it."""
+
+
+class ContainerTerminateWarning(UserWarning):
+    """The container refused to terminate after a complete run (see :func:`simulate_container`)."""
 
 
 def _container_class():
@@ -144,10 +149,16 @@ def simulate_container(container_path, stop_time, step_size, *, sequential=False
     ndarray
         ``time, y_d, y, y_meas, v`` and the controller's timing outputs (with ``v``'s
         timing) at ``t_0 .. t_(n-1)``.
+    
+    Warns
+    -----
+    ContainerTerminateWarning
+        The container returned an error from terminate after the last step, as it does
+        when an FMU in it ends with a Warning (a clipped or poorly predicted run): the samples
+        are complete and returned.
     """
     n = int(round(stop_time / step_size))
-    res = simulate_fmu(str(container_path), stop_time=stop_time, step_size=step_size,
-                       output_interval=step_size, output=list(IMPORTER_FIELDS[1:]))
+    res = _simulate_keeping_results(container_path, stop_time, step_size)
     if res.shape[0] < n + 1 or not math.isclose(res["time"][n], stop_time, rel_tol=1e-9):
         raise RuntimeError(f"{container_path}: expected {n + 1} rows up to t = {stop_time}, "
                            f"got {res.shape[0]}")
@@ -159,6 +170,49 @@ def simulate_container(container_path, stop_time, step_size, *, sequential=False
     for name in IMPORTER_FIELDS[5:]:
         out[name] = res[name][1:n + 1] if sequential else res[name][:n]
     return out
+
+
+def _simulate_keeping_results(container_path, stop_time, step_size):
+    """``fmpy.simulate_fmu`` on the container, terminating it here rather than in fmpy.
+
+    The container (fmu-manipulation-toolbox 2.0) returns Error from terminate when an FMU in
+    it returns anything but OK there, a Warning included; our controller and plant return a
+    Warning from terminate with their run's summary (samples clipped, ``|pred_error|`` above
+    its bound). fmpy would raise and lose the run; here the samples are kept and the
+    container's terminate status becomes a :class:`ContainerTerminateWarning` quoting what
+    the container and its FMUs logged.
+    """
+    from fmpy import extract, instantiate_fmu, read_model_description
+    from fmpy.fmi1 import FMICallException
+
+    log = []
+
+    def logger(_env, _name, status, _category, message):
+        log.append((int(status), message.decode(errors="replace") if isinstance(message, bytes)
+                    else str(message)))
+
+    unzipdir = extract(str(container_path))
+    try:
+        md = read_model_description(unzipdir)
+        fmu = instantiate_fmu(unzipdir, md, "CoSimulation", logger=logger)
+        try:
+            res = simulate_fmu(unzipdir, model_description=md, fmu_instance=fmu, stop_time=stop_time,
+                               step_size=step_size, output_interval=step_size,
+                               output=list(IMPORTER_FIELDS[1:]), terminate=False)
+            try:
+                fmu.terminate()
+            except FMICallException as exc:
+                said = " | ".join(text for _status, text in log
+                                  if "Terminate:" in text or "failed to terminate" in text)
+                warnings.warn(ContainerTerminateWarning(
+                    f"{container_path}: the container's terminate returned status {exc.status} "
+                    f"(it counts an FMU's Warning at terminate as a failure), the run's samples are "
+                    f"complete; logged at terminate: {said or 'nothing'}"), stacklevel=3)
+        finally:
+            fmu.freeInstance()
+    finally:
+        shutil.rmtree(unzipdir, ignore_errors=True)
+    return res
 
 
 def simulate_closed_loop_container(scenario, *, sequential=False, order=CONTAINER_ORDER,
