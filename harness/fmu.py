@@ -48,8 +48,8 @@ FMI_VERSIONS = (2, 3)
 
 #: the controller's outputs that say what it detected (Integer, except loop_delay_time)
 TIMING_OUTPUTS = ("loop_delay", "loop_delay_time", "preview_lead", "meas_offset")
-#: the folder of the Windows binary in each FMI version's binaries/
-WINDOWS_PLATFORM = {2: "win64", 3: "x86_64-windows"}
+#: the folder of the Windows binary in each FMI version's binaries/ (harness/platforms.py)
+from .platforms import WINDOWS_PLATFORM  # noqa: E402
 
 
 class FMUError(RuntimeError):

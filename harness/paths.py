@@ -9,7 +9,7 @@ The artefacts are looked for in order:
    ``lib/libpiezo_core.so``, ``include/*.h``; see the ``install()`` rules in CMakeLists.txt);
 3. a source checkout: ``<repo>/build/fmus``, ``<repo>/build/libpiezo_core.so``,
    ``<repo>/fmu_src/core`` (the build of ``cmake -S . -B build && cmake --build build``);
-4. the ``_data/`` of an installed ``harness`` distribution, when this copy of the package is
+4. the ``_data/`` of an installed distribution of the package (``piezo-stage-fmus``), when this copy of the package is
    a source checkout without a build (``pip install . && python -m harness`` run from the
    repository's root imports the checkout's ``harness``).
 
@@ -20,7 +20,7 @@ was expected.
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, distribution
+from importlib.metadata import PackageNotFoundError, distribution, packages_distributions
 import hashlib
 import os
 from pathlib import Path
@@ -40,13 +40,17 @@ CORE_LIBRARY_NAME = "libpiezo_core.so"
 
 
 def _installed_data_dir():
-    """``_data/`` of an installed ``harness`` distribution, or None."""
-    try:
-        dist = distribution("harness")
-    except PackageNotFoundError:
-        return None
-    data = Path(dist.locate_file("harness/_data"))
-    return data if data.is_dir() else None
+    """``_data/`` of an installed distribution of the ``harness`` package (named in
+    pyproject.toml; found by the import package it provides), or None."""
+    for name in packages_distributions().get("harness", []):
+        try:
+            dist = distribution(name)
+        except PackageNotFoundError:
+            continue
+        data = Path(dist.locate_file("harness/_data"))
+        if data.is_dir():
+            return data
+    return None
 
 
 def _first(env, relative, checkout):

@@ -30,7 +30,16 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 BUILD_DIR = REPO / "build"
 FMU_DIR = BUILD_DIR / "fmus"
 FMU3_DIR = FMU_DIR / "fmi3"
-FMU_NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
+
+
+def _cmake_fmu_ids():
+    """The FMUs the build makes: FMU_IDS of CMakeLists.txt, their one home."""
+    import re
+    m = re.search(r"^set\(FMU_IDS ([^)]*)\)", (REPO / "CMakeLists.txt").read_text(), re.M)
+    return tuple(m.group(1).split())
+
+
+FMU_NAMES = _cmake_fmu_ids()
 _FMU_SOURCE_SUFFIXES = {".c", ".h", ".xml", ".map", ".txt", ".cmake", ".py", ".html", ".png"}
 
 
@@ -288,19 +297,56 @@ def make_fmu():
 
 
 # =============================================================================
-# Optional tools: MinGW-w64 (the win64 binaries) and wine64 (running them)
+# Optional tools: the cross compilers of the platforms (harness/platforms.py) and what
+# runs their binaries here (wine64, wine, qemu-aarch64)
 #
-# Without them the build makes Linux-only FMUs, and the tests that need them skip with
-# the reason. .ci/run installs both and sets PIEZO_REQUIRE_WIN64=1: there such a skip is
-# a failure, so CI still proves the win64 binaries.
+# Without them the build makes FMUs with fewer platforms, and the tests that need them skip
+# with the reason. .ci/run installs all of them and sets PIEZO_REQUIRE_PLATFORMS=1: there
+# such a skip is a failure, so CI still proves every platform's binaries.
+# PIEZO_REQUIRE_WIN64=1 (before there were other platforms) requires the x86_64-windows ones.
 # =============================================================================
 
-#: set by .ci/run: a missing MinGW-w64 or wine64, or FMUs built without them, fail the test
+from harness.platforms import CROSS as CROSS_PLATFORMS, HOST as HOST_PLATFORM  # noqa: E402
+from harness.platforms import by_key as platform_by_key  # noqa: E402
+
+#: set by .ci/run: a missing cross compiler or runner, or FMUs built without it, fail the test
+REQUIRE_PLATFORMS = os.environ.get("PIEZO_REQUIRE_PLATFORMS", "") == "1"
 REQUIRE_WIN64 = os.environ.get("PIEZO_REQUIRE_WIN64", "") == "1"
+#: where Debian puts wine64 and wine (not on PATH)
+WINE_DIRS = ("/usr/lib/wine",)
+WINE64_DIRS = WINE_DIRS
 WIN64_HINT = ("install MinGW-w64 and wine64 (Debian: gcc-mingw-w64-x86-64 wine64, as .ci/run "
               "does) and rebuild")
-#: where Debian's wine64 package puts wine64 (not on PATH)
-WINE64_DIRS = ("/usr/lib/wine",)
+
+
+def platform_hint(platform):
+    """How to get what a platform's tests need, for skip messages."""
+    if platform.key == "x86_64-windows":
+        return WIN64_HINT
+    return (f"install {platform.triple}-gcc and {platform.runner} (Debian: "
+            f"{' '.join(platform.toolchain_packages + platform.runner_packages)}, as .ci/run "
+            f"does) and rebuild")
+
+
+def _required(platform):
+    return REQUIRE_PLATFORMS or (REQUIRE_WIN64 and platform.key == "x86_64-windows")
+
+
+def need_platform(platform, reason):
+    """Skip the calling test because `reason` (what the platform's tests miss); with
+    PIEZO_REQUIRE_PLATFORMS=1 (or PIEZO_REQUIRE_WIN64=1 for x86_64-windows) fail it instead,
+    with the same reason."""
+    platform = platform_by_key(platform) if isinstance(platform, str) else platform
+    text = f"{reason}: {platform_hint(platform)}"
+    if _required(platform):
+        variable = "PIEZO_REQUIRE_PLATFORMS" if REQUIRE_PLATFORMS else "PIEZO_REQUIRE_WIN64"
+        pytest.fail(f"{text} ({variable}=1 makes this a failure, not a skip)", pytrace=False)
+    pytest.skip(text)
+
+
+def need_win64(reason):
+    """need_platform for 64-bit Windows."""
+    need_platform("x86_64-windows", reason)
 
 
 def error_lines(stderr):
@@ -312,31 +358,36 @@ def error_lines(stderr):
             if not (": warning: the FMUs in " in line and " have no Windows binaries " in line)]
 
 
-def need_win64(reason):
-    """Skip the calling test because `reason` (what is missing); with PIEZO_REQUIRE_WIN64=1
-    fail it instead, with the same reason."""
-    text = f"{reason}: {WIN64_HINT}"
-    if REQUIRE_WIN64:
-        pytest.fail(f"{text} (PIEZO_REQUIRE_WIN64=1 makes this a failure, not a skip)",
-                    pytrace=False)
-    pytest.skip(text)
+def cross_tool(platform, name):
+    """Path of the platform's tool <triple>-<name> (gcc, objdump) on PATH, or skip (see
+    need_platform)."""
+    platform = platform_by_key(platform) if isinstance(platform, str) else platform
+    tool = f"{platform.triple}-{name}"
+    path = shutil.which(tool)
+    if not path:
+        need_platform(platform, f"{tool} not found on PATH")
+    return path
 
 
 def mingw_tool(name):
-    """Path of the MinGW-w64 tool x86_64-w64-mingw32-<name> on PATH, or skip (see need_win64)."""
-    tool = f"x86_64-w64-mingw32-{name}"
-    path = shutil.which(tool)
+    """Path of the MinGW-w64 tool x86_64-w64-mingw32-<name> on PATH, or skip."""
+    return cross_tool("x86_64-windows", name)
+
+
+def platform_runner(platform):
+    """Path of the program that runs the platform's binaries here (PATH, then Debian's
+    /usr/lib/wine for wine64 and wine), or skip (see need_platform)."""
+    platform = platform_by_key(platform) if isinstance(platform, str) else platform
+    path = (shutil.which(platform.runner)
+            or shutil.which(platform.runner, path=os.pathsep.join(WINE_DIRS)))
     if not path:
-        need_win64(f"{tool} not found on PATH")
+        need_platform(platform, f"{platform.runner} not found (on PATH or in /usr/lib/wine)")
     return path
 
 
 def wine64():
-    """Path of wine64 (PATH, then Debian's /usr/lib/wine), or skip (see need_win64)."""
-    path = shutil.which("wine64") or shutil.which("wine64", path=os.pathsep.join(WINE64_DIRS))
-    if not path:
-        need_win64("wine64 not found (on PATH or in /usr/lib/wine)")
-    return path
+    """Path of wine64, or skip (see need_platform)."""
+    return platform_runner("x86_64-windows")
 
 
 def fmu_platforms(path):
@@ -347,11 +398,33 @@ def fmu_platforms(path):
                        if n.startswith("binaries/") and n.count("/") >= 2 and not n.endswith("/")})
 
 
-def need_windows_binaries(path, folder="win64"):
-    """Skip (see need_win64) unless the FMU at `path` has binaries/<folder>/: the build
-    cross-compiles them only when MinGW-w64 is installed."""
+def need_platform_binaries(path, platform, fmi_version):
+    """Skip (see need_platform) unless the FMU at `path` has the platform's binaries/ folder:
+    the build cross-compiles them only when the platform's compiler is installed."""
+    platform = platform_by_key(platform) if isinstance(platform, str) else platform
+    folder = platform.folder(fmi_version)
     if folder not in fmu_platforms(path):
-        need_win64(f"{pathlib.Path(path).name} has no binaries/{folder}/ (MinGW-w64 was not "
-                   f"found when it was built)")
+        need_platform(platform, f"{pathlib.Path(path).name} has no binaries/{folder}/ "
+                                f"({platform.triple}-gcc was not found when it was built)")
+
+
+def need_windows_binaries(path, folder="win64"):
+    """Skip (see need_platform) unless the FMU at `path` has binaries/<folder>/ (a Windows
+    folder of either FMI version)."""
+    platform = platform_by_key(folder)
+    need_platform_binaries(path, platform, 2 if folder == platform.fmi2 else 3)
+
+
+def expected_binaries(name, fmi_version, path):
+    """The binaries/ files an FMU of this build should hold: the host's, and those of every
+    cross platform whose folder it has (each must be a platform of harness/platforms.py in
+    that FMI version). Reference: the table, not the archive."""
+    present = set(fmu_platforms(path))
+    files = []
+    for platform in (HOST_PLATFORM, *CROSS_PLATFORMS):
+        folder = platform.folder(fmi_version)
+        if folder and (platform is HOST_PLATFORM or folder in present):
+            files.append(f"binaries/{folder}/{name}{platform.suffix}")
+    return sorted(files)
 
 # ======================== end of optional tools =========================

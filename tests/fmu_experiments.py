@@ -2,7 +2,7 @@
 or FMI 3.0: an element of an FMI 3.0 array is named ``name[j]`` in the parameter file).
 
 Used by the tests that re-run it: with fmpy (test_fmu_reference_results.py), with a C host
-on the linux64 and win64 binaries (test_fmu_win64.py), and on a binary rebuilt from the
+on every platform's binaries (test_fmu_platforms.py), and on a binary rebuilt from the
 FMU's sources (test_fmu_build_description.py).
 """
 

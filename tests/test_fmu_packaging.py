@@ -30,7 +30,7 @@ from xml.etree import ElementTree as ET
 
 import pytest
 
-from conftest import fmu_platforms
+from conftest import expected_binaries
 from test_repository import FORBIDDEN
 
 REPO = Path(__file__).resolve().parents[1]
@@ -60,9 +60,9 @@ def _source_files(root):
 def test_fmu_holds_binaries_sources_documentation_licence_and_references(fmu_paths, name):
     names = set(_names(fmu_paths[name]))
     root = _xml(fmu_paths[name])
-    # binaries/win64 when the build had MinGW-w64 (test_fmu_win64.py requires it, or skips)
-    win64 = {f"binaries/win64/{name}.dll"} if "win64" in fmu_platforms(fmu_paths[name]) else set()
-    expected = win64 | {
+    # the cross platforms' binaries the build had compilers for (test_fmu_platforms.py
+    # requires them, or skips)
+    expected = set(expected_binaries(name, 2, fmu_paths[name])) | {
         "modelDescription.xml", "model.png",
         f"binaries/linux64/{name}.so",
         "sources/buildDescription.xml",
