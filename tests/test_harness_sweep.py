@@ -105,6 +105,34 @@ def test_pole_zero_and_gain_moves_against_np_roots():
     assert max(np.abs(moved)) <= 0.1 + 1e-12 and max(np.abs(moved)) > 0.08
 
 
+def test_draws_for_many_runs_are_those_of_each_run():
+    """Reference: apply_spreads(run_deltas(...)), each run's parameters drawn and moved on
+    their own. draw_columns, which moves whole columns, gives every moved value bit for bit
+    (and the seed as the same int) for every kind of spread: relative and absolute, uniform
+    and normal, a PI weight moved by name before the group, real and complex poles, zero and
+    gain, a named Real parameter, the seed; on runs far apart and out of order."""
+    from harness.sweep.spreads import apply_spreads, draw_columns, run_deltas
+
+    complex_poles = {**BASE, "tf.a1": -1.6, "tf.a2": 0.8}          # a1^2 < 4 a2
+    cases = [(BASE, ["pi.weights=10%", "sensor.seed"]),
+             (BASE, ["pi.w0=3%", "pi.weights=normal:0.002", "tf.poles=5%", "tf.zero=0.01",
+                     "tf.gain=normal:2%", "creep.k_c=5%", "creep.alpha=normal:0.002", "sensor.seed"]),
+             (complex_poles, ["tf.poles=0.01", "tf.gain=10%", "pi.weights=60%"])]
+    runs = [7, 0, 123456, 3, 2**40]
+    for base, specs in cases:
+        spreads = [spread(s) for s in specs]
+        columns = draw_columns(base, spreads, 5, runs)
+        for j, i in enumerate(runs):
+            want = apply_spreads(base, spreads, run_deltas(spreads, 5, i))
+            moved = {k for k in want if want[k] != base[k] or k in columns}
+            assert moved <= set(columns), moved - set(columns)
+            for k, col in columns.items():
+                if k == "sensor.seed":
+                    assert isinstance(want[k], int) and col.dtype == np.int64 and int(col[j]) == want[k]
+                else:
+                    assert np.float64(col[j]).view(np.uint64) == np.float64(want[k]).view(np.uint64), (k, i)
+
+
 def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path):
     """Reference: native runs of the drawn parameter sets. A sweep with spreads wide enough to
     make runs diverge, clip or be refused (workers = 0: no Dask) counts every run exactly
