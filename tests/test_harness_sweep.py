@@ -133,6 +133,37 @@ def test_draws_for_many_runs_are_those_of_each_run():
                     assert np.float64(col[j]).view(np.uint64) == np.float64(want[k]).view(np.uint64), (k, i)
 
 
+def test_task_rows_are_the_csv_modules_rows(tmp_path):
+    """Reference: csv_line (the csv module's writer) row by row. A task's rows written in one
+    go are the same bytes, whatever the text: a reason with commas, quotes and a non-ASCII
+    character, nan and inf, ints and floats among the values, no varied column; the store
+    finds each row where it is (the byte offsets hold after a multi-byte character) and
+    records a run given twice once."""
+    from harness.sweep.store import csv_line, task_rows
+
+    rows = [(4, "ok", 1.2345678901234567e-3, 0.01, "", 0.01234, [1.5, 7, -0.0]),
+            (0, "diverged", math.nan, math.nan, 'y is nan at t = 1 s, "quoted", 5 µm', 2.5, [math.inf, 2, 1e-300]),
+            (9, "saturated", math.nan, math.nan, "clipped in 3.0%", 0.00004, [3.0, 0, 2.0])]
+    index, status, e_rms, e_r, reason, seconds, values = zip(*rows)
+    task = task_rows("mismatch_5hz", index, status, e_rms, e_r, seconds, list(zip(*values)), reason)
+    want = b"".join(csv_line(["mismatch_5hz", i, st, repr(float(e)), repr(float(r)), f"{s:.4f}",
+                              *[repr(v) for v in vals], why]) for i, st, e, r, why, s, vals in rows)
+    assert task.data == want
+    bare = task_rows("s", [1], ["ok"], [0.5], [0.25], [1.0], [], [""])
+    assert bare.data == csv_line(["s", 1, "ok", "0.5", "0.25", "1.0000", ""])
+    store = RunStore(tmp_path, ["mismatch_5hz"], 10, ["a", "b", "c"])
+    store.open(fresh=True)
+    assert store.add_rows("mismatch_5hz", task).tolist() == [True, True, True]
+    again = task_rows("mismatch_5hz", [9, 9, 2], ["ok"] * 3, [1.0] * 3, [1.0] * 3, [0.0] * 3,
+                      [[1.0] * 3] * 3, [""] * 3)
+    assert store.add_rows("mismatch_5hz", again).tolist() == [False, False, True]
+    store.close()
+    for i, line in zip(index, want.splitlines(keepends=True)):
+        assert store.row("mismatch_5hz", i) == next(__import__("csv").reader([line.decode()]))
+    assert store.row("mismatch_5hz", 2)[:3] == ["mismatch_5hz", "2", "ok"]
+    assert store.done() == 4 and list(store.missing("mismatch_5hz")) == [1, 3, 5, 6, 7, 8]
+
+
 def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path):
     """Reference: native runs of the drawn parameter sets. A sweep with spreads wide enough to
     make runs diverge, clip or be refused (workers = 0: no Dask) counts every run exactly
