@@ -105,6 +105,27 @@ def test_pole_zero_and_gain_moves_against_np_roots():
     assert max(np.abs(moved)) <= 0.1 + 1e-12 and max(np.abs(moved)) > 0.08
 
 
+def _one_by_one(sc, params, loop):
+    """A run as the harness runs a single one (the sweep's reference): the native master,
+    the run's checks, its metrics; (status, e_rms, e_r, reason)."""
+    from harness.checks import RunSaturatedError, check_tracking_run
+    from harness.fmu import FMUError, FMUInitializationError
+    from harness.loop import prepare_closed_loop
+    from harness.metrics import compute_metrics
+
+    try:
+        data = loop.run(prepare_closed_loop(sc, plant_params=params))
+        check_tracking_run(data, sc)
+    except RunSaturatedError as exc:
+        return "saturated", math.nan, math.nan, str(exc)
+    except FMUInitializationError as exc:
+        return "invalid", math.nan, math.nan, str(exc)
+    except (FMUError, RuntimeError) as exc:             # the monitor, an FMI error, a failed check
+        return "diverged", math.nan, math.nan, str(exc)
+    m = compute_metrics(data["time"], data["y_d"], data["y"], sc.metric_window, sc.step_size)
+    return "ok", m.e_rms, m.e_r, ""
+
+
 def test_draws_for_many_runs_are_those_of_each_run():
     """Reference: apply_spreads(run_deltas(...)), each run's parameters drawn and moved on
     their own. draw_columns, which moves whole columns, gives every moved value bit for bit
@@ -164,30 +185,64 @@ def test_task_rows_are_the_csv_modules_rows(tmp_path):
     assert store.done() == 4 and list(store.missing("mismatch_5hz")) == [1, 3, 5, 6, 7, 8]
 
 
-def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path):
-    """Reference: native runs of the drawn parameter sets. A sweep with spreads wide enough to
-    make runs diverge, clip or be refused (workers = 0: no Dask) counts every run exactly
-    once, reports the not-ok ones without stopping, its e_rms equal fresh native runs of the
-    same parameters bit for bit, and the worst parameter file, loaded as a scenario file,
-    reproduces the worst e_rms exactly."""
-    from harness.loop import prepare_closed_loop
+def test_tasks_hand_out_each_missing_run_once_and_shrink_at_the_end(tmp_path):
+    """Reference: the store's missing runs. The tasks, made as they are handed out, cover
+    every missing run of every scenario exactly once, in order, also across the store's
+    blocks and around runs already done; the largest is the size asked for, and towards the
+    end they shrink to a quarter of each worker's share of what is left; a fixed size
+    stays fixed. The automatic size follows the runner's cost per run."""
+    from harness.sweep import run as sweep_run
+
+    store = RunStore(tmp_path, ["a", "b"], 150_000, [])
+    done = np.zeros(150_000, bool)
+    done[[0, 5, 6, 70_000, 149_999]] = True
+    store.status["a"][done] = 0
+    tasks = list(sweep_run._chunks(store, ["a", "b"], 3000, False, 2))
+    got = {n: np.concatenate([p for name, p in tasks if name == n]) for n in ("a", "b")}
+    assert np.array_equal(got["a"], np.flatnonzero(~done)) and np.array_equal(got["b"], np.arange(150_000))
+    sizes = [p.size for _, p in tasks]
+    assert max(sizes) == 3000 and sizes[-1] == 1 and sizes[-2] <= sizes[-20] <= 3000
+    left = 2 * 150_000 - 5 - sum(sizes[:-10])
+    assert sizes[-10] <= math.ceil(left / 8)
+    fixed = [p.size for _, p in sweep_run._chunks(store, ["b"], 10, True, 2)]
+    assert set(fixed) == {10}
+    assert sweep_run._chunk_sizes(100_000, 2, 165e-6, None) == (round(sweep_run.TASK_SECONDS / 165e-6), False)
+    assert sweep_run._chunk_sizes(100_000, 2, 0.01, None) == (50, False)
+    assert sweep_run._chunk_sizes(40, 2, 1e-4, None) == (5, False)
+    assert sweep_run._chunk_sizes(100_000, 2, None, None) == (sweep_run.FMPY_CHUNK, False)
+    assert sweep_run._chunk_sizes(100_000, 2, 1e-4, 7) == (7, True)
+
+
+def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path, monkeypatch):
+    """Reference: every drawn parameter set run on its own the way a single run is run (the
+    native master, harness.checks, harness.metrics). A sweep with spreads wide enough to
+    make runs diverge, clip or be refused (workers = 0: no Dask; its native batches) counts
+    every run exactly once and reports the not-ok ones without stopping: each run's status,
+    e_rms and e_r (bit for bit) and reason are those of the run on its own. The worst
+    parameter file, loaded as a scenario file, reproduces the worst e_rms exactly."""
     from harness.metrics import compute_metrics
 
+    batches = []
+    real_batch = native.NativeLoop.run_batch
+    monkeypatch.setattr(native.NativeLoop, "run_batch",
+                        lambda self, *a, **k: batches.append(len(a[1]["tf.a1"])) or real_batch(self, *a, **k))
     spreads = ["tf.poles=0.01", "pi.weights=60%", "tf.zero=0.01"]
     result = sweep.run_sweep(["mismatch_20hz"], spreads, 24, seed=11, workers=0)
+    assert sum(batches) == 24                           # every run went through a native batch
     c = result.counts("mismatch_20hz")
     assert sum(c.values()) == 24
     assert c["ok"] >= 10 and c["ok"] < 24
-    assert c["diverged"] + c["saturated"] >= 1 and c["invalid"] >= 1
+    assert c["diverged"] >= 1 and c["saturated"] >= 1 and c["invalid"] >= 1
     runs = result.runs["mismatch_20hz"]
     sc = load_scenarios()["mismatch_20hz"]
-    for i in [i for i, r in enumerate(runs) if r[0] == "ok"][:3]:
-        data = native.NativeLoop().run(prepare_closed_loop(sc, plant_params=result.parameters["mismatch_20hz"][i]))
-        m = compute_metrics(data["time"], data["y_d"], data["y"], sc.metric_window, sc.step_size)
-        assert m.e_rms == runs[i][1]
-    for r in runs:
-        if r[0] != "ok":
-            assert r[3] and math.isnan(r[1])
+    loop = native.NativeLoop()
+    for i, (status, e_rms, e_r, reason, _) in enumerate(runs):
+        want = _one_by_one(sc, result.parameters["mismatch_20hz"][i], loop)
+        assert (status, reason) == (want[0], " ".join(want[3].split())[:400]), i
+        assert np.float64(e_rms).view(np.uint64) == np.float64(want[1]).view(np.uint64), i
+        assert np.float64(e_r).view(np.uint64) == np.float64(want[2]).view(np.uint64), i
+        assert (status == "ok") == (reason == "")
+    loop.close()
     files = sweep.write_outputs(result, tmp_path, plots=True)
     names = {p.name for p in files}
     assert {"sweep_summary.csv", "sweep_summary.md", "sweep_runs.csv", "worst_mismatch_20hz.toml",

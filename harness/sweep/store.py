@@ -332,6 +332,17 @@ class SweepResult:
         Peak resident set sizes in bytes: ``client`` (this process, where a local cluster's
         scheduler also runs) and ``worker`` (the largest of the workers; None without Dask).
     store : RunStore
+    compute_seconds : float
+        Wall-clock seconds from the first task handed out to the last one collected (nan
+        when nothing was computed).
+    bound : harness.sweep.bound.Bound or None
+        The native runner's cost measured in this call, and the cores (None with fmpy, or
+        when nothing was computed).
+    load : tuple or None
+        The load average (1, 5, 15 min) when the call started.
+    cpu_seconds : dict
+        CPU seconds while computing: ``tasks`` (the tasks' processes, summed over the tasks)
+        and ``client`` (this process besides the tasks).
     """
 
     scenarios: list
@@ -344,6 +355,10 @@ class SweepResult:
     computed: int = 0
     peak_rss: dict = field(default_factory=dict)
     store: object = None
+    compute_seconds: float = math.nan
+    bound: object = None
+    load: tuple = None
+    cpu_seconds: dict = field(default_factory=dict)
 
     def counts(self, name):
         codes = self.store.status[name]

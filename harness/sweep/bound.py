@@ -1,0 +1,95 @@
+"""The compute bound of a sweep: how many runs per second the native runner alone would
+run on the cores the sweep has, measured in the sweep's own command.
+
+The runner's cost per sample is measured as ``python -m harness bench`` measures it (the
+native runner recording every output, thread CPU time in blocks of
+:data:`harness.bench.measure.BLOCK` samples, the median of the blocks), on each swept
+scenario's own experiment with its nominal plant. The bound is then the cores divided by
+the CPU time of the runs: ``cores / sum over the runs of (ns/sample x samples)``. Whatever
+a sweep spends besides (drawing the parameters, setting up each run, the checks and metrics,
+the rows, Dask) keeps it below the bound.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import statistics
+
+import numpy as np
+
+from ..bench.measure import BLOCK
+from ..loop import prepare_closed_loop
+from ..masters.native import NativeLoop
+
+__all__ = ["Bound", "TIMED_SAMPLES", "measure_runner", "nominal_setups"]
+
+#: samples timed per scenario (at least; whole runs, at least three)
+TIMED_SAMPLES = 100_000
+
+
+@dataclass(frozen=True)
+class Bound:
+    """The native runner's cost per scenario, and the cores it is divided among.
+
+    Attributes
+    ----------
+    ns_per_sample : dict
+        Scenario name -> the runner's median ns per sample.
+    samples : dict
+        Scenario name -> samples per run.
+    cores : int
+        Runs computed at once (the local cluster's workers, at most the machine's cores; the
+        worker threads of a cluster given by address; 1 in this process).
+    """
+
+    ns_per_sample: dict
+    samples: dict
+    cores: int
+
+    def runs_per_second(self, counts):
+        """The bound for ``counts`` (scenario name -> runs): runs per second."""
+        ns = sum(c * self.ns_per_sample[k] * self.samples[k] for k, c in counts.items())
+        return self.cores * sum(counts.values()) / (ns * 1e-9) if ns > 0 else float("nan")
+
+    def seconds_per_run(self, name):
+        """The runner's CPU seconds for one run of ``name``."""
+        return self.ns_per_sample[name] * self.samples[name] * 1e-9
+
+
+def measure_runner(setups, fmu_dir=None, samples=TIMED_SAMPLES):
+    """The native runner's median ns/sample on each experiment.
+
+    Parameters
+    ----------
+    setups : dict
+        Scenario name -> :class:`harness.loop.ClosedLoopSetup`.
+    fmu_dir : path, optional
+    samples : int
+        Samples to time per experiment (whole runs, at least three).
+
+    Returns
+    -------
+    dict
+        Scenario name -> ns/sample.
+    """
+    loop = NativeLoop(fmu_dir)
+    try:
+        out = {}
+        for name, setup in setups.items():
+            block = min(BLOCK, setup.n)
+            per_block = []
+            runs = max(3, -(-samples // setup.n))
+            for _ in range(runs):
+                loop.run(setup, block=block)
+                per_block.extend((np.asarray(loop.last_block_ns) / block).tolist())
+            out[name] = statistics.median(per_block)
+        return out
+    finally:
+        loop.close()
+
+
+def nominal_setups(scs, bases, options):
+    """Each scenario's experiment with its nominal plant (``bases``) and the sweep's options."""
+    return {sc.name: prepare_closed_loop(sc, plant_params=bases[sc.name], adaptation=options["adaptation"],
+                                         preview=options["preview"], master=options["master"])
+            for sc in scs}
