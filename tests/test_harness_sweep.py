@@ -126,6 +126,31 @@ def _one_by_one(sc, params, loop):
     return "ok", m.e_rms, m.e_r, ""
 
 
+def test_generators_seeded_for_a_task_are_numpys():
+    """Reference: np.random.default_rng([seed, i]), NumPy's SeedSequence and PCG64. The states
+    pcg64_states computes for a whole task equal its bit generator's state for seeds and
+    runs of one, two and three 32-bit words (0, 2^32 - 1, 2^32, 2^64 + 1 among them), in any
+    order, and a PCG64 given such a state draws what default_rng draws (uniform, normal,
+    integers); a negative run is refused as NumPy refuses it."""
+    from harness.sweep.seeding import pcg64_states
+
+    runs = [3, 0, 1, 2**32 - 1, 2**32, 2**40 + 3, 2**64 + 1, 999_999]
+    bits = np.random.PCG64()
+    rng = np.random.Generator(bits)
+    for seed in (0, 1, 4, 2**31 - 1, 2**32 + 5):
+        for i, state in zip(runs, pcg64_states(seed, runs)):
+            want = np.random.default_rng([seed, i])
+            assert state == want.bit_generator.state, (seed, i)
+            bits.state = state
+            assert np.array_equal(rng.uniform(-0.1, 0.1, 17), want.uniform(-0.1, 0.1, 17))
+            assert rng.normal(0.0, 2.0) == want.normal(0.0, 2.0)
+            assert rng.integers(0, 2**31 - 1) == want.integers(0, 2**31 - 1)
+    with pytest.raises(ValueError):
+        np.random.default_rng([1, -1])
+    with pytest.raises(ValueError, match=">= 0"):
+        pcg64_states(1, [-1])
+
+
 def test_draws_for_many_runs_are_those_of_each_run():
     """Reference: apply_spreads(run_deltas(...)), each run's parameters drawn and moved on
     their own. draw_columns, which moves whole columns, gives every moved value bit for bit

@@ -13,6 +13,8 @@ import re
 
 import numpy as np
 
+from .seeding import pcg64_states
+
 __all__ = ["Spread", "parse_spread", "apply_spreads", "run_deltas", "draw_plant_parameters",
            "draw_columns", "varied_keys", "varies_something"]
 
@@ -163,11 +165,12 @@ def _moved_coefficients(base, structural):
 def draw_columns(base, spreads, seed, indices):
     """The parameters the spreads move, for many runs at once.
 
-    Each run still draws from its own generator (:func:`run_deltas`); the moves are then
-    made on whole columns, with the operations of :func:`apply_spreads` in its order, so
-    every value is the one ``apply_spreads(base, spreads, run_deltas(spreads, seed, i))``
-    gives, bit for bit (G's coefficients, moved through complex roots, are computed run by
-    run by the same function).
+    Each run still draws from its own generator, the one :func:`run_deltas` builds, here
+    one PCG64 given each run's state in turn (:func:`harness.sweep.seeding.pcg64_states`);
+    the moves are then made on whole columns, with the operations of :func:`apply_spreads`
+    in its order, so every value is the one ``apply_spreads(base, spreads,
+    run_deltas(spreads, seed, i))`` gives, bit for bit (G's coefficients, moved through
+    complex roots, are computed run by run by the same function).
 
     Parameters
     ----------
@@ -188,8 +191,11 @@ def draw_columns(base, spreads, seed, indices):
     m = len(indices)
     draws = [np.empty(m, np.int64) if s.distribution == "seed" else np.empty((m, _N_DELTAS.get(s.key, 1)))
              for s in spreads]
-    for j, i in enumerate(indices):
-        for column, d in zip(draws, _run_draws(spreads, seed, i)):
+    bits = np.random.PCG64()
+    rng = np.random.Generator(bits)
+    for j, state in enumerate(pcg64_states(seed, indices)):
+        bits.state = state
+        for column, d in zip(draws, _draws_from(rng, spreads)):
             column[j] = d
     cols = {}
 
@@ -246,7 +252,11 @@ def run_deltas(spreads, seed, i):
 
 def _run_draws(spreads, seed, i):
     """Run i's deltas, one per spread in order: a seed (int) or an array of deltas."""
-    rng = np.random.default_rng([int(seed), int(i)])
+    return _draws_from(np.random.default_rng([int(seed), int(i)]), spreads)
+
+
+def _draws_from(rng, spreads):
+    """A run's deltas from its generator, one per spread in order."""
     return [int(rng.integers(0, 2**31 - 1)) if s.distribution == "seed"
             else _draw(rng, s, _N_DELTAS.get(s.key, 1)) for s in spreads]
 
