@@ -21,7 +21,7 @@ from .bound import Bound, measure_runner, nominal_setups
 from .manifest import prepare_folder, sweep_identity, write_manifest
 from .spreads import Spread, parse_spread, varied_keys, varies_something
 from .store import STATUS_CODE, ParameterSets, RunRows, RunStore, SweepResult
-from .worker import first_line, peak_rss, remove_at_exit, run_chunk, scenario_fields
+from .worker import first_line, peak_rss, prepare_worker, remove_at_exit, run_chunk, scenario_fields
 
 __all__ = ["run_sweep", "SweepIncompleteError", "plant_start_values"]
 
@@ -258,6 +258,7 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
     try:
         if scheduler is None and n_workers == 0:
             where, cores = "this process (no Dask)", 1
+            prepare_worker(package, options)
             clock["start"], cpu = time.perf_counter(), time.process_time()
             for name, part in tasks(1):
                 rows, _, used = run_chunk(package, fields_[name], bases[name], spreads, seed, part,
@@ -322,6 +323,9 @@ def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, 
         cores = max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
     try:
         shipped = client.scatter(package, broadcast=True)
+        # the workers there now load the FMUs before the clock starts (part of the start, like
+        # the cluster's); a worker that joins later does it in its first task
+        client.run(prepare_worker, package, options)
         source = tasks(cores)
         retry = deque()
         inflight = {}

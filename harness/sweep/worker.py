@@ -34,8 +34,8 @@ from ..scenarios import Scenario
 from .spreads import apply_spreads, draw_columns, run_deltas
 from .store import task_rows
 
-__all__ = ["run_chunk", "scenario_fields", "scenario_from_fields", "first_line", "peak_rss",
-           "remove_at_exit"]
+__all__ = ["run_chunk", "prepare_worker", "scenario_fields", "scenario_from_fields", "first_line",
+           "peak_rss", "remove_at_exit"]
 
 _TEMP_DIRS = {}        # the folders this process made, removed at its exit
 
@@ -150,6 +150,14 @@ def _native_batch(scenario, base, columns, options, fmu_dir):
              & ~error_above_reference(e_rms, reference_rms(setup.y_d[window]))
              & ~clipped_too_often(out["saturated"] / where.size))
     return e_rms, e_r, out["seconds"], clean
+
+
+def prepare_worker(package, options):
+    """Ready this process for the sweep's tasks: the FMU files written, and with the native
+    backend the FMUs loaded and instantiated (what a worker's first task would do first)."""
+    fmu_dir = _fmu_dir_for(package)
+    if options["backend"] == "native":
+        masters.native.native_loop(fmu_dir)
 
 
 def run_chunk(package, description, base, spreads, seed, indices, varied, options):
