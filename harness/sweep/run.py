@@ -324,8 +324,12 @@ def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, 
     try:
         shipped = client.scatter(package, broadcast=True)
         # the workers there now load the FMUs before the clock starts (part of the start, like
-        # the cluster's); a worker that joins later does it in its first task
-        client.run(prepare_worker, package, options)
+        # the cluster's); a worker that joins later does it in its first task, and a worker
+        # that cannot fails its tasks, which are retried and reported as any failed task
+        try:
+            client.run(prepare_worker, package, options)
+        except Exception:                       # noqa: BLE001 - the tasks meet it again and report it
+            pass
         source = tasks(cores)
         retry = deque()
         inflight = {}
