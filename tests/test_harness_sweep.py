@@ -8,6 +8,7 @@ worker`` on 127.0.0.1 for ``--scheduler``.
 import json
 import math
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -367,6 +368,17 @@ def test_cli_sweep_local_cluster_and_errors(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "a local Dask cluster of 1 worker process" in proc.stdout
     assert (tmp_path / "worst_mismatch_1hz.toml").exists()
+    # the rate next to the bound measured in the same command: 1 core / (ns/sample x samples)
+    m = re.search(r"this call: 6 runs computed: (\d+) runs/s while computing \(([\d.]+) s\), (\d+) runs/s "
+                  r"including the start \(([\d.]+) s\)\ncompute bound: (\d+) runs/s \(the native runner's "
+                  r"(\d+) ns/sample x 6000 samples a run, / 1 core; measured in this call\): (\d+)% of it "
+                  r"while computing, (\d+)% including the start\nCPU while computing: ([\d.]+) s in the tasks",
+                  proc.stdout)
+    assert m, proc.stdout
+    steady, bound, ns = float(m.group(1)), float(m.group(5)), float(m.group(6))
+    assert math.isclose(bound, 1e9 / (ns * 6000), rel_tol=0.01)
+    assert abs(float(m.group(7)) - 100 * steady / bound) <= 1 + 100 * steady / bound * 0.01
+    assert float(m.group(2)) < float(m.group(4)) and float(m.group(9)) >= 0
     for args, fragment in ((["track_1hz", "--vary", "tf.pole=1%"], "unknown key 'tf.pole'"),
                            (["validate_1hz"], "is a validation scenario"),
                            (["nosuch"], "nosuch"),

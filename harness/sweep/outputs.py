@@ -59,7 +59,7 @@ def _throughput_lines(result):
                      f"of it while computing, {rate / bound:.0%} including the start")
         cpu = result.cpu_seconds or {}
         used = cpu.get("tasks", math.nan) + cpu.get("client", math.nan)
-        need = b.cores * done / bound
+        need = done * b.seconds_per_run(counts)
         if used > 0:
             lines.append(f"CPU while computing: {cpu['tasks']:.1f} s in the tasks, {cpu['client']:.1f} s in "
                          f"this process; the runs need {need:.1f} s of it at the runner's cost: "

@@ -14,10 +14,10 @@ import time
 import numpy as np
 
 from .. import masters
+from ..bench.bound import Bound, measure_runner
 from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, fmu_path, load, starts_of
-from ..loop import normalize_master
+from ..loop import normalize_master, prepare_closed_loop
 from ..scenarios import get_scenario
-from .bound import Bound, measure_runner, nominal_setups
 from .manifest import prepare_folder, sweep_identity, write_manifest
 from .spreads import Spread, parse_spread, varied_keys, varies_something
 from .store import STATUS_CODE, ParameterSets, RunRows, RunStore, SweepResult
@@ -75,6 +75,14 @@ def _chunks(store, names, largest, fixed, parallel):
         if held.size:
             left -= held.size
             yield name, held
+
+
+def _nominal_setups(scs, bases, options):
+    """Each scenario's experiment with its nominal plant (``bases``) and the sweep's options:
+    what the compute bound is measured on."""
+    return {sc.name: prepare_closed_loop(sc, plant_params=bases[sc.name], adaptation=options["adaptation"],
+                                         preview=options["preview"], master=options["master"])
+            for sc in scs}
 
 
 def _fmu_package(fmu_dir):
@@ -246,7 +254,7 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
     if backend == "native" and total > done_before:
         if progress is not None:
             progress.write("sweep: timing the native runner on each scenario (the compute bound)\n")
-        runner = measure_runner(nominal_setups(scs, bases, options), fmu_dir)
+        runner = measure_runner(_nominal_setups(scs, bases, options), fmu_dir)
     n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
 
     def tasks(parallel):

@@ -1,5 +1,6 @@
 """The compute bound of a sweep: how many runs per second the native runner alone would
-run on the cores the sweep has, measured in the sweep's own command.
+run on the cores the sweep has (``python -m harness sweep`` measures it in its own command,
+``bench`` shows it for runs of a few lengths).
 
 The runner's cost per sample is measured as ``python -m harness bench`` measures it (the
 native runner recording every output, thread CPU time in blocks of
@@ -17,14 +18,15 @@ import statistics
 
 import numpy as np
 
-from ..bench.measure import BLOCK
-from ..loop import prepare_closed_loop
 from ..masters.native import NativeLoop
+from .measure import BLOCK
 
-__all__ = ["Bound", "TIMED_SAMPLES", "measure_runner", "nominal_setups"]
+__all__ = ["Bound", "RUN_SECONDS", "TIMED_SAMPLES", "measure_runner"]
 
 #: samples timed per scenario (at least; whole runs, at least three)
 TIMED_SAMPLES = 100_000
+#: the run lengths [s] whose bound ``bench`` shows (those of docs/speed.md's sweep table)
+RUN_SECONDS = (0.5, 3.0, 30.0)
 
 
 @dataclass(frozen=True)
@@ -46,14 +48,15 @@ class Bound:
     samples: dict
     cores: int
 
-    def runs_per_second(self, counts):
-        """The bound for ``counts`` (scenario name -> runs): runs per second."""
+    def seconds_per_run(self, counts):
+        """The runner's mean CPU seconds per run, over ``counts`` (scenario name -> runs)."""
+        total = sum(counts.values())
         ns = sum(c * self.ns_per_sample[k] * self.samples[k] for k, c in counts.items())
-        return self.cores * sum(counts.values()) / (ns * 1e-9) if ns > 0 else float("nan")
+        return ns * 1e-9 / total if total else float("nan")
 
-    def seconds_per_run(self, name):
-        """The runner's CPU seconds for one run of ``name``."""
-        return self.ns_per_sample[name] * self.samples[name] * 1e-9
+    def runs_per_second(self, counts):
+        """The bound for ``counts`` (scenario name -> runs): runs per second on the cores."""
+        return self.cores / self.seconds_per_run(counts)
 
 
 def measure_runner(setups, fmu_dir=None, samples=TIMED_SAMPLES):
@@ -87,9 +90,3 @@ def measure_runner(setups, fmu_dir=None, samples=TIMED_SAMPLES):
     finally:
         loop.close()
 
-
-def nominal_setups(scs, bases, options):
-    """Each scenario's experiment with its nominal plant (``bases``) and the sweep's options."""
-    return {sc.name: prepare_closed_loop(sc, plant_params=bases[sc.name], adaptation=options["adaptation"],
-                                         preview=options["preview"], master=options["master"])
-            for sc in scs}
