@@ -522,27 +522,61 @@ static int set_params(piezo_runner *r, int role, const piezo_runner_params *p, s
     return 0;
 }
 
+/* One run of a batch (parameters set): its samples in blocks whose rows stay in the cache;
+ * y kept for the sums, the finite and clipped samples counted as the blocks complete. */
+static void batch_run(piezo_runner *r, const piezo_runner_experiment *x, double *block, double *y,
+                      piezo_runner_result *res, size_t i, piezo_runner_outcomes *out)
+{
+    piezo_runner_result part;
+    size_t k0, k, len, sat = 0;
+    int finite = 1;
+    for (k0 = 0; k0 < x->n; k0 += len) {
+        len = x->n - k0 < PIEZO_RUNNER_BATCH_BLOCK ? x->n - k0 : PIEZO_RUNNER_BATCH_BLOCK;
+        piezo_runner_run(r, len, x->h, x->master, x->step_order, x->y_ref + k0,
+                         x->y_preview != NULL ? x->y_preview + k0 : NULL,
+                         x->t_preview != NULL ? x->t_preview + k0 : NULL,
+                         block, PIEZO_RUNNER_ROW, 0, NULL, &part);
+        if (part.status > res->status) res->status = part.status;
+        res->samples = k0 + part.samples;
+        if (part.status > fmi2Warning) {
+            res->failed_role = part.failed_role;
+            res->failed_call = part.failed_call;
+            return;
+        }
+        for (k = 0; k < len; ++k) {
+            const double *row = block + k * PIEZO_RUNNER_ROW;
+            finite &= isfinite(row[0]) && isfinite(row[1]) && isfinite(row[2]);    /* y, y_meas, v */
+            y[k0 + k] = row[0];
+            sat += k0 + k >= x->window_start && k0 + k < x->window_stop && row[PIEZO_RUNNER_ROW - 1] != 0.0;
+        }
+    }
+    out->finite[i] = finite;
+    out->saturated[i] = sat;
+    out->sum_error2[i] = 0.0 + pairwise(SUM_ERROR2, x->y_d + x->window_start, y + x->window_start, 1,
+                                        x->window_stop - x->window_start);
+    out->sum_y2[i] = 0.0 + pairwise(SUM_SQUARE, NULL, y + x->window_start, 1, x->window_stop - x->window_start);
+}
+
 size_t piezo_runner_batch(piezo_runner *r, const piezo_runner_experiment *x,
                           const piezo_runner_params *plant, const piezo_runner_params *controller,
                           size_t runs, int fresh, piezo_runner_outcomes *out)
 {
-    size_t i, k, w0, w1, sat;
+    size_t i;
     piezo_runner_result res;
-    double t0;
-    int finite;
+    double t0, *block, *y;
     if (r == NULL || x == NULL || out == NULL || bad_params(plant) || bad_params(controller)
-        || x->rows == NULL || x->y_ref == NULL || x->y_d == NULL
+        || x->y_ref == NULL || x->y_d == NULL || (x->y_preview != NULL && x->t_preview == NULL)
         || x->window_start > x->window_stop || x->window_stop > x->n
         || out->status == NULL || out->failed_call == NULL || out->samples == NULL || out->finite == NULL
         || out->sum_error2 == NULL || out->sum_y2 == NULL || out->saturated == NULL || out->seconds == NULL)
         return 0;
-    w0 = x->window_start;
-    w1 = x->window_stop;
+    block = malloc((PIEZO_RUNNER_BATCH_BLOCK * PIEZO_RUNNER_ROW + x->n + 1) * sizeof *block);
+    if (block == NULL) return 0;
+    y = block + PIEZO_RUNNER_BATCH_BLOCK * PIEZO_RUNNER_ROW;
     for (i = 0; i < runs; ++i) {
         t0 = wall_seconds();
         if (i > 0 || !fresh) piezo_runner_reset(r);
         piezo_runner_clear_log(r);
-        out->samples[i] = 0;
         out->finite[i] = 0;
         out->sum_error2[i] = out->sum_y2[i] = 0.0;
         out->saturated[i] = 0;
@@ -550,30 +584,15 @@ size_t piezo_runner_batch(piezo_runner *r, const piezo_runner_experiment *x,
         if (!set_params(r, PIEZO_RUNNER_PLANT, plant, i, &res)
             && !set_params(r, PIEZO_RUNNER_CONTROLLER, controller, i, &res)
             && piezo_runner_initialize(r, 0.0, (double)x->n * x->h, &res) <= fmi2Warning) {
-            piezo_runner_run(r, x->n, x->h, x->master, x->step_order, x->y_ref, x->y_preview, x->t_preview,
-                             x->rows, PIEZO_RUNNER_ROW, 0, NULL, &res);
-            out->samples[i] = res.samples;
-            if (res.status <= fmi2Warning) {
-                piezo_runner_terminate(r);
-                finite = 1;
-                sat = 0;
-                for (k = 0; k < x->n; ++k) {
-                    const double *row = x->rows + k * PIEZO_RUNNER_ROW;
-                    finite &= isfinite(row[0]) && isfinite(row[1]) && isfinite(row[2]);   /* y, y_meas, v */
-                }
-                for (k = w0; k < w1; ++k) sat += x->rows[k * PIEZO_RUNNER_ROW + PIEZO_RUNNER_ROW - 1] != 0.0;
-                out->finite[i] = finite;
-                out->saturated[i] = sat;
-                out->sum_error2[i] = 0.0 + pairwise(SUM_ERROR2, x->y_d + w0, x->rows + w0 * PIEZO_RUNNER_ROW,
-                                                    PIEZO_RUNNER_ROW, w1 - w0);
-                out->sum_y2[i] = 0.0 + pairwise(SUM_SQUARE, NULL, x->rows + w0 * PIEZO_RUNNER_ROW,
-                                                PIEZO_RUNNER_ROW, w1 - w0);
-            }
+            batch_run(r, x, block, y, &res, i, out);
+            if (res.status <= fmi2Warning) piezo_runner_terminate(r);
         }
         out->status[i] = res.status;
         out->failed_call[i] = res.failed_call;
+        out->samples[i] = res.samples;
         out->seconds[i] = wall_seconds() - t0;
     }
+    free(block);
     return runs;
 }
 

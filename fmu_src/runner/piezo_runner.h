@@ -134,13 +134,17 @@ int piezo_runner_run(piezo_runner *runner, size_t n, double h, int master, int s
  * the harness runs one (harness/masters/native.py): fmi2Reset of both
  * (except before the first run of fresh instances), the parameters set (the
  * plant's, then the controller's; Reals, then Integers, then Booleans),
- * initialization over [0, n h], piezo_runner_run into the rows, then
- * fmi2Terminate when the run completed. Nothing returns to the caller between
+ * initialization over [0, n h], piezo_runner_run (in blocks of
+ * PIEZO_RUNNER_BATCH_BLOCK samples, whose rows stay in the cache: the same
+ * calls as one piezo_runner_run), then fmi2Terminate when the run completed. Nothing returns to the caller between
  * runs; every run is summarised by what the harness's checks and metrics
  * read (harness/checks.py, harness/metrics.py), so the caller decides on
  * them, and runs again on its own path any run whose FMI calls failed, to
  * report it with its messages.
  */
+
+/* samples a batch runs at a time (a block's rows are 80 KB) */
+#define PIEZO_RUNNER_BATCH_BLOCK 1024
 
 /* The parameters set on one FMU in each run of a batch: row r of each table
  * for run r, or row 0 for every run when per_run is 0. */
@@ -169,7 +173,6 @@ typedef struct {
     const double *y_d;          /* n: the desired displacement the error is taken from */
     size_t window_start;        /* the metric window: samples [window_start, window_stop) */
     size_t window_stop;
-    double *rows;               /* scratch of n * PIEZO_RUNNER_ROW doubles: a run's rows (the last run's stay) */
 } piezo_runner_experiment;
 
 /* What each run of a batch gave: arrays of one value per run. */
@@ -190,7 +193,8 @@ typedef struct {
  * combined as ((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7)), then the
  * rest in order; more: the first n/2 rounded down to a multiple of 8 and the
  * rest, each summed so, then added), so they are the bits np.sum gives.
- * Returns the number of runs done (all of them unless an argument is bad). */
+ * Returns the number of runs done (all of them unless an argument is bad or
+ * memory for a block's rows and a run's y cannot be had). */
 size_t piezo_runner_batch(piezo_runner *runner, const piezo_runner_experiment *experiment,
                           const piezo_runner_params *plant, const piezo_runner_params *controller,
                           size_t runs, int fresh, piezo_runner_outcomes *outcomes);

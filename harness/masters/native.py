@@ -339,8 +339,6 @@ class NativeLoop:
                   "y_d": np.ascontiguousarray(setup.y_d, dtype=np.float64),
                   "y_preview": np.ascontiguousarray(setup.y_preview if stamped else [], dtype=np.float64),
                   "t_preview": np.ascontiguousarray(setup.t_preview if stamped else [], dtype=np.float64)}
-        if getattr(self, "_rows", None) is None or self._rows.size != setup.n * lib.PIEZO_RUNNER_ROW:
-            self._rows = np.empty(setup.n * lib.PIEZO_RUNNER_ROW)      # the runs' rows, kept for the next batch
         x = ffi.new("piezo_runner_experiment *")
         x.n, x.h = setup.n, setup.h
         x.master = 1 if setup.master == "jacobi" else 0
@@ -350,7 +348,6 @@ class NativeLoop:
         for name in ("y_preview", "t_preview"):
             setattr(x, name, ffi.from_buffer("double[]", arrays[name]) if stamped else ffi.NULL)
         x.window_start, x.window_stop = start, stop
-        x.rows = ffi.from_buffer("double[]", self._rows)
         out = {"status": np.zeros(runs, np.intc), "failed_call": np.zeros(runs, np.intc),
                "samples": np.zeros(runs, np.uintp), "finite": np.zeros(runs, np.intc),
                "sum_error2": np.zeros(runs), "sum_y2": np.zeros(runs),
@@ -361,7 +358,8 @@ class NativeLoop:
             setattr(o, name, ffi.from_buffer(ctype, arr))
         done = lib.piezo_runner_batch(self._runner, x, plant, controller, runs, 1 if self._fresh else 0, o)
         if done != runs:
-            raise ValueError("piezo_runner_batch refused its arguments (more than 64 parameters of a type?)")
+            raise ValueError("piezo_runner_batch refused its arguments (more than 64 parameters of a type?) "
+                             "or found no memory for a run")
         self._fresh = False
         out["finite"] = out["finite"].astype(bool)
         return out
