@@ -21,10 +21,12 @@ import numpy as np
 from ..masters.native import NativeLoop
 from .measure import BLOCK
 
-__all__ = ["Bound", "RUN_SECONDS", "TIMED_SAMPLES", "measure_runner"]
+__all__ = ["Bound", "INSTANCES", "RUN_SECONDS", "TIMED_SAMPLES", "measure_runner"]
 
-#: samples timed per scenario (at least; whole runs, at least three)
-TIMED_SAMPLES = 100_000
+#: samples timed per scenario (at least; whole runs)
+TIMED_SAMPLES = 150_000
+#: fresh instance pairs they are spread over
+INSTANCES = 3
 #: the run lengths [s] whose bound ``bench`` shows (those of docs/speed.md's sweep table)
 RUN_SECONDS = (0.5, 3.0, 30.0)
 
@@ -59,7 +61,7 @@ class Bound:
         return self.cores / self.seconds_per_run(counts)
 
 
-def measure_runner(setups, fmu_dir=None, samples=TIMED_SAMPLES):
+def measure_runner(setups, fmu_dir=None, samples=TIMED_SAMPLES, instances=INSTANCES):
     """The native runner's median ns/sample on each experiment.
 
     Parameters
@@ -68,25 +70,26 @@ def measure_runner(setups, fmu_dir=None, samples=TIMED_SAMPLES):
         Scenario name -> :class:`harness.loop.ClosedLoopSetup`.
     fmu_dir : path, optional
     samples : int
-        Samples to time per experiment (whole runs, at least three).
+        Samples to time per experiment (whole runs, at least one per instance).
+    instances : int
+        Fresh instance pairs the samples are spread over: the cost moves by a few percent
+        from one pair to the next (where their memory lies), and the median over the pairs'
+        blocks does not bet on one of them.
 
     Returns
     -------
     dict
         Scenario name -> ns/sample.
     """
-    loop = NativeLoop(fmu_dir)
-    try:
-        out = {}
-        for name, setup in setups.items():
-            block = min(BLOCK, setup.n)
-            per_block = []
-            runs = max(3, -(-samples // setup.n))
-            for _ in range(runs):
-                loop.run(setup, block=block)
-                per_block.extend((np.asarray(loop.last_block_ns) / block).tolist())
-            out[name] = statistics.median(per_block)
-        return out
-    finally:
-        loop.close()
-
+    per_block = {name: [] for name in setups}
+    for _ in range(instances):
+        loop = NativeLoop(fmu_dir)
+        try:
+            for name, setup in setups.items():
+                block = min(BLOCK, setup.n)
+                for _ in range(max(1, -(-samples // (instances * setup.n)))):
+                    loop.run(setup, block=block)
+                    per_block[name].extend((np.asarray(loop.last_block_ns) / block).tolist())
+        finally:
+            loop.close()
+    return {name: statistics.median(values) for name, values in per_block.items()}

@@ -153,8 +153,9 @@ def _native_batch(scenario, base, columns, options, fmu_dir):
 
 
 def prepare_worker(package, options):
-    """Ready this process for the sweep's tasks: the FMU files written, and with the native
-    backend the FMUs loaded and instantiated (what a worker's first task would do first)."""
+    """Ready this process for the sweep's tasks (what a worker's first task would do first):
+    the FMU files written and, with the native backend, extracted, their binaries loaded and
+    a pair instantiated, so the thread that runs the tasks only instantiates its own pair."""
     fmu_dir = _fmu_dir_for(package)
     if options["backend"] == "native":
         masters.native.native_loop(fmu_dir)
