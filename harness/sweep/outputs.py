@@ -61,10 +61,12 @@ def _throughput_lines(result):
         used = cpu.get("tasks", math.nan) + cpu.get("client", math.nan)
         need = done * b.seconds_per_run(counts)
         if used > 0:
-            lines.append(f"CPU while computing: {cpu['tasks']:.1f} s in the tasks, {cpu['client']:.1f} s in "
-                         f"this process; the runs need {need:.1f} s of it at the runner's cost: "
-                         f"{need / used:.0%} (the rest is the sweep's own work; other jobs on the "
-                         f"machine slow the runs/s, not this)")
+            wall = cpu.get("tasks_wall", math.nan)
+            share = (f" ({cpu['tasks'] / wall:.0%} of their {wall:.1f} s on the clock; other processes "
+                     f"had the rest)" if wall > 0 else "")
+            lines.append(f"CPU while computing: {cpu['tasks']:.1f} s in the tasks{share}, {cpu['client']:.1f} s "
+                         f"in this process; the runs need {need:.1f} s of it at the runner's cost: "
+                         f"{need / used:.0%} (the rest is the sweep's own work)")
     peak = result.peak_rss or {}
     load = (f"; load average {', '.join(f'{x:.2f}' for x in result.load)} at the start"
             if result.load else "")

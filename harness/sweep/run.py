@@ -238,11 +238,13 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
     prog = _Progress(total, done_before, progress) if progress is not None else None
     fields_ = {sc.name: scenario_fields(sc) for sc in scs}
     failures = []
-    tally = {"worker_rss": None, "task_cpu": 0.0}       # the largest worker's peak RSS, the tasks' CPU
+    # the largest worker's peak RSS; the tasks' CPU and wall-clock seconds
+    tally = {"worker_rss": None, "task_cpu": 0.0, "task_wall": 0.0}
 
     def collect(name, result):
-        rows, rss, cpu = result
+        rows, rss, (cpu, wall) = result
         tally["task_cpu"] += cpu
+        tally["task_wall"] += wall
         if rss is not None:
             tally["worker_rss"] = max(rss, tally["worker_rss"] or 0)
         new = store.add_rows(name, rows)
@@ -299,7 +301,8 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
                        peak_rss=peak, store=store,
                        compute_seconds=clock["end"] - clock["start"] if "end" in clock else math.nan,
                        bound=bound, load=load,
-                       cpu_seconds={"tasks": tally["task_cpu"], "client": clock.get("cpu", math.nan)})
+                       cpu_seconds={"tasks": tally["task_cpu"], "client": clock.get("cpu", math.nan),
+                                    "tasks_wall": tally["task_wall"]})
 
 
 _ATTEMPTS = 4          # a task whose worker is lost is run again; after this many failures its runs are missing

@@ -342,7 +342,8 @@ class SweepResult:
         The load average (1, 5, 15 min) when the call started.
     cpu_seconds : dict
         CPU seconds while computing: ``tasks`` (the tasks' processes, summed over the tasks)
-        and ``client`` (this process besides the tasks).
+        and ``client`` (this process besides the tasks); and ``tasks_wall``, the tasks'
+        wall-clock seconds summed (more than their CPU when other processes had the cores).
     """
 
     scenarios: list

@@ -183,12 +183,12 @@ def run_chunk(package, description, base, spreads, seed, indices, varied, option
 
     Returns
     -------
-    (harness.sweep.store.TaskRows, int or None, float)
+    (harness.sweep.store.TaskRows, int or None, (float, float))
         The runs' journal rows (scenario, run, status, e_rms [um], e_r, seconds, the values
         of ``varied``, reason), this worker's peak RSS in bytes, and the CPU seconds this
-        process spent on the task (all its threads).
+        process spent on the task (all its threads) with the wall-clock seconds it took.
     """
-    cpu = time.process_time()
+    cpu, wall = time.process_time(), time.perf_counter()
     fmu_dir = _fmu_dir_for(package)
     scenario = scenario_from_fields(description)
     indices = [int(i) for i in indices]
@@ -210,4 +210,4 @@ def run_chunk(package, description, base, spreads, seed, indices, varied, option
             scenario, base, spreads, seed, indices[j], options, fmu_dir)
     values = [columns[k].tolist() if k in columns else [base[k]] * m for k in varied]
     rows = task_rows(scenario.name, indices, statuses, e_rms, e_r, seconds, values, reasons)
-    return rows, peak_rss(), time.process_time() - cpu
+    return rows, peak_rss(), (time.process_time() - cpu, time.perf_counter() - wall)
