@@ -239,6 +239,27 @@ def test_tasks_hand_out_each_missing_run_once_and_shrink_at_the_end(tmp_path):
     assert sweep_run._chunk_sizes(100_000, 2, 1e-4, 7) == (7, True)
 
 
+def test_cdf_drawn_stays_within_a_step_of_the_exact_one():
+    """Reference: the exact empirical CDF (np.searchsorted over all values). The points the
+    figure draws for a million runs are at most CDF_POINTS, include the smallest and the
+    largest value, and the step function they make is within 1/(CDF_POINTS - 1) of the runs
+    of the exact CDF everywhere; for a few runs every value is drawn."""
+    from harness.sweep.plot import CDF_POINTS, cdf_points
+
+    rng = np.random.default_rng(9)
+    vals = np.sort(rng.lognormal(0.0, 1.5, 1_000_000))
+    total = 1_050_000                                       # not-ok runs count as above every x
+    x, f = cdf_points(vals, total)
+    assert x.size <= CDF_POINTS and x[0] == vals[0] and x[-1] == vals[-1] and f[-1] == vals.size / total
+    grid = np.concatenate((np.geomspace(vals[0], vals[-1], 20_000), vals[::997]))
+    exact = np.searchsorted(vals, grid, side="right") / total
+    drawn = np.where(grid < x[0], 0.0, f[np.clip(np.searchsorted(x, grid, side="right") - 1, 0, None)])
+    assert np.max(np.abs(drawn - exact)) <= 1 / (CDF_POINTS - 1)
+    few = np.sort(rng.random(50))
+    x, f = cdf_points(few, 60)
+    assert np.array_equal(x, few) and np.array_equal(f, np.arange(1, 51) / 60)
+
+
 def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path, monkeypatch):
     """Reference: every drawn parameter set run on its own the way a single run is run (the
     native master, harness.checks, harness.metrics). A sweep with spreads wide enough to
