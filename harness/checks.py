@@ -12,6 +12,11 @@ A run the controller itself stopped (its supervision found a loop that cannot wo
 value overflowed) raises :class:`harness.fmu.LoopDivergedError`
 during the run.  The command line turns both into exit code
 :data:`EXIT_RUN_FAILED` and one line saying why.
+
+The rules themselves (:func:`error_above_reference`, :func:`clipped_too_often`) also
+decide on whole columns of runs: a sweep's native batches (:mod:`harness.sweep.worker`)
+apply them to the sums the C runner takes, and run every run they fail again through
+:func:`check_tracking_run` for its message.
 """
 
 from __future__ import annotations
@@ -27,6 +32,9 @@ __all__ = [
     "RunDivergedError",
     "RunSaturatedError",
     "check_tracking_run",
+    "clipped_too_often",
+    "error_above_reference",
+    "reference_rms",
 ]
 
 #: Exit code of the command line when a run diverged or saturated persistently.
@@ -76,15 +84,33 @@ def check_tracking_run(run, scenario, label=None):
     if not win.any():
         return
     err = float(np.sqrt(np.mean((run["y_d"][win] - run["y"][win]) ** 2)))
-    ref = float(np.sqrt(np.mean(run["y_d"][win] ** 2)))
-    if ref > 0 and err > ref:
+    ref = reference_rms(run["y_d"][win])
+    if error_above_reference(err, ref):
         raise RunDivergedError(f"{label}: the run diverged: e_rms = {err:.4g} um over the metric "
                                f"window is larger than the reference itself (rms {ref:.4g} um)")
     if "saturated" in run.dtype.names:
         frac = float(np.mean(run["saturated"][win] != 0))
-        if frac > MAX_SATURATED_FRACTION:
+        if clipped_too_often(frac):
             vmax = float(np.max(np.abs(run["v"][win])))
             raise RunSaturatedError(
                 f"{label}: the controller clipped v in {frac:.1%} of the samples of the metric "
                 f"window (more than {MAX_SATURATED_FRACTION:.0%}; |v| up to {vmax:.4g} V): "
                 f"the reference needs more voltage than sat.v_min/sat.v_max allow")
+
+
+def reference_rms(y_d):
+    """The rms of the reference over the metric window (``y_d`` there), the bound of the
+    error of a run that did not diverge."""
+    return float(np.sqrt(np.mean(np.asarray(y_d, dtype=float) ** 2)))
+
+
+def error_above_reference(e_rms, ref):
+    """Whether a run diverged by its error (elementwise for arrays): its e_rms over the
+    metric window exceeds the reference's rms there (a reference of rms 0 bounds nothing)."""
+    return np.logical_and(np.greater(ref, 0), np.greater(e_rms, ref))
+
+
+def clipped_too_often(fraction):
+    """Whether a run clipped persistently (elementwise for arrays): the controller clipped v
+    in more than :data:`MAX_SATURATED_FRACTION` of the samples of the metric window."""
+    return np.greater(fraction, MAX_SATURATED_FRACTION)

@@ -20,6 +20,8 @@ __all__ = [
     "window_mask",
     "rms_error",
     "relative_error",
+    "rms_from_sum",
+    "relative_from_sums",
     "compute_metrics",
 ]
 
@@ -98,7 +100,7 @@ def rms_error(reference, output):
     """
     reference, output = _paired(reference, output)
     err = reference - output
-    return math.sqrt(float(np.mean(err * err)))
+    return float(rms_from_sum(np.sum(err * err), err.size))
 
 
 def relative_error(reference, output, normalizer=None):
@@ -121,10 +123,46 @@ def relative_error(reference, output, normalizer=None):
     reference, output = _paired(reference, output)
     norm = output if normalizer is None else np.asarray(normalizer, dtype=float)
     err = reference - output
-    den = float(np.sum(norm * norm))
-    if den == 0.0:
-        return math.nan
-    return math.sqrt(float(np.sum(err * err)) / den)
+    return float(relative_from_sums(np.sum(err * err), np.sum(norm * norm)))
+
+
+def rms_from_sum(sum_squared_error, n):
+    """Eq 36 from the sum of the n squared errors: ``sqrt(sum / n)`` (elementwise).
+
+    The sum is NumPy's (``np.sum``), so this is :func:`rms_error`'s value, which it
+    computes; the native master's batches (``piezo_runner_batch``) take the same sums
+    in C and give their runs' e_rms through here.
+
+    Parameters
+    ----------
+    sum_squared_error : float or ndarray
+    n : int or ndarray
+        Samples summed (at least one).
+
+    Returns
+    -------
+    float or ndarray
+    """
+    return np.sqrt(np.asarray(sum_squared_error, dtype=float) / n)
+
+
+def relative_from_sums(sum_squared_error, sum_squared_normalizer):
+    """Eq 37 from the sums of the squared errors and of the squared normalizer:
+    ``sqrt(error sum / normalizer sum)``, ``nan`` where the normalizer sum is 0
+    (elementwise; :func:`relative_error`'s value, which it computes).
+
+    Parameters
+    ----------
+    sum_squared_error, sum_squared_normalizer : float or ndarray
+
+    Returns
+    -------
+    float or ndarray
+    """
+    num = np.asarray(sum_squared_error, dtype=float)
+    den = np.asarray(sum_squared_normalizer, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den == 0.0, math.nan, np.sqrt(num / np.where(den == 0.0, 1.0, den)))
 
 
 def compute_metrics(time, reference, output, window=None, step=None, normalizer=None):

@@ -60,6 +60,13 @@ def test_bench_command_reports_every_loop(tmp_path):
                                     if line.startswith("plant ns/sample")).split()[2:]]
     assert len(exact) == 2 and all(x > 0 for x in exact)
     assert re.search(r"one 3 s run end to end .*: native [\d.]+ ms, fmpy [\d.]+ ms", out)
+    # a sweep's bound: cores / (the native runner's ns/sample at the last point x samples a run)
+    runner = float(next(line for line in out.splitlines() if line.startswith("native runner")).split()[3])
+    m = re.search(r"compute bound \(the native runner's (\d+) ns/sample at 2e4 x samples a run / (\d+) "
+                  r"cores\): (\d+) runs/s of 0.5 s, (\d+) runs/s of 3 s, (\d+) runs/s of 30 s", out)
+    assert m and float(m.group(1)) == runner and int(m.group(2)) == os.cpu_count(), out
+    for rate, samples in zip(m.groups()[2:], (1000, 6000, 60000)):
+        assert math.isclose(float(rate), os.cpu_count() / (runner * 1e-9 * samples), rel_tol=0.01)
 
 
 def test_bench_loops_run_the_closed_loop_trajectory():

@@ -55,3 +55,68 @@ def test_normalizer_and_errors():
         rms_error([1.0, 2.0], [1.0])
     with pytest.raises(ValueError, match="holds no samples"):
         compute_metrics([0.0, 1.0], [1.0, 1.0], [1.0, 1.0], window=(5.0, 6.0))
+
+
+def test_metrics_from_sums_are_the_metrics_of_the_signals():
+    # Reference: eq 36 and 37 written out with np.mean and np.sum (the definitions before
+    # the sums got their own functions), on random windows of many lengths: rms_from_sum and
+    # relative_from_sums, given np.sum's sums, give the same bits, for one window and for a
+    # column of them; a normalizer of energy 0 gives nan.
+    from harness.metrics import relative_from_sums, rms_from_sum
+    rng = np.random.default_rng(2)
+    sums, want_rms, want_r, ns = [], [], [], []
+    for n in (1, 7, 8, 129, 4000, 8193):
+        y_d, y = rng.standard_normal(n), rng.standard_normal(n) * 1e-3
+        err = y_d - y
+        want_rms.append(math.sqrt(float(np.mean(err * err))))
+        want_r.append(math.sqrt(float(np.sum(err * err)) / float(np.sum(y * y))))
+        sums.append((np.sum(err * err), np.sum(y * y)))
+        ns.append(n)
+        assert rms_error(y_d, y) == want_rms[-1] and relative_error(y_d, y) == want_r[-1]
+    e2, y2 = np.array(sums).T
+    assert np.array_equal(rms_from_sum(e2, np.array(ns)), want_rms)
+    assert np.array_equal(relative_from_sums(e2, y2), want_r)
+    assert math.isnan(relative_from_sums(1.0, 0.0)) and relative_error([1.0], [0.0]) != relative_error([1.0], [0.0])
+
+
+def test_check_rules_decide_columns_as_single_runs():
+    # Reference: check_tracking_run's own decisions on hand-made runs. The rules it applies
+    # decide arrays the same way, element by element: an error above the reference's rms
+    # diverges (not when the reference is 0, nor at equality); clipping in more than 1 % of
+    # the window saturates (exactly 1 % does not).
+    from harness.checks import (MAX_SATURATED_FRACTION, RunDivergedError, RunSaturatedError,
+                                check_tracking_run, clipped_too_often, error_above_reference)
+    from harness.loop import CLOSED_LOOP_DTYPE
+    from harness.scenarios import get_scenario
+    sc = get_scenario("track_1hz")
+    n = sc.n_samples
+    t = np.arange(n) * sc.step_size
+
+    def run(gain, clipped):
+        r = np.zeros(n, CLOSED_LOOP_DTYPE)
+        r["time"], r["y_d"] = t, np.sin(2 * np.pi * t)
+        r["y"] = gain * r["y_d"]
+        r["saturated"][np.flatnonzero(window_mask(t, sc.metric_window, sc.step_size))[:clipped]] = 1
+        return r
+
+    window = int(window_mask(t, sc.metric_window, sc.step_size).sum())
+    at_limit = int(MAX_SATURATED_FRACTION * window)
+    outcomes = []
+    for gain, clipped in ((1.0, 0), (0.5, 0), (2.5, 0), (1.0, at_limit), (1.0, at_limit + 1)):
+        try:
+            check_tracking_run(run(gain, clipped), sc)
+            outcomes.append("ok")
+        except RunDivergedError:
+            outcomes.append("diverged")
+        except RunSaturatedError:
+            outcomes.append("saturated")
+    assert outcomes == ["ok", "ok", "diverged", "ok", "saturated"]
+    # the same decisions on columns: the error is |1 - gain| times the reference's rms
+    ref = 1 / math.sqrt(2)
+    errors = np.abs(1 - np.array([1.0, 0.5, 2.5, 1.0, 1.0])) * ref
+    fractions = np.array([0, 0, 0, at_limit, at_limit + 1]) / window
+    diverged = error_above_reference(errors, ref)
+    saturated = clipped_too_often(fractions)
+    assert diverged.tolist() == [False, False, True, False, False]
+    assert saturated.tolist() == [False, False, False, False, True]
+    assert not error_above_reference(1.0, 0.0) and not error_above_reference(ref, ref)

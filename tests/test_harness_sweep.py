@@ -8,6 +8,7 @@ worker`` on 127.0.0.1 for ``--scheduler``.
 import json
 import math
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -105,30 +106,190 @@ def test_pole_zero_and_gain_moves_against_np_roots():
     assert max(np.abs(moved)) <= 0.1 + 1e-12 and max(np.abs(moved)) > 0.08
 
 
-def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path):
-    """Reference: native runs of the drawn parameter sets. A sweep with spreads wide enough to
-    make runs diverge, clip or be refused (workers = 0: no Dask) counts every run exactly
-    once, reports the not-ok ones without stopping, its e_rms equal fresh native runs of the
-    same parameters bit for bit, and the worst parameter file, loaded as a scenario file,
-    reproduces the worst e_rms exactly."""
+def _one_by_one(sc, params, loop):
+    """A run as the harness runs a single one (the sweep's reference): the native master,
+    the run's checks, its metrics; (status, e_rms, e_r, reason)."""
+    from harness.checks import RunSaturatedError, check_tracking_run
+    from harness.fmu import FMUError, FMUInitializationError
     from harness.loop import prepare_closed_loop
     from harness.metrics import compute_metrics
 
+    try:
+        data = loop.run(prepare_closed_loop(sc, plant_params=params))
+        check_tracking_run(data, sc)
+    except RunSaturatedError as exc:
+        return "saturated", math.nan, math.nan, str(exc)
+    except FMUInitializationError as exc:
+        return "invalid", math.nan, math.nan, str(exc)
+    except (FMUError, RuntimeError) as exc:             # the monitor, an FMI error, a failed check
+        return "diverged", math.nan, math.nan, str(exc)
+    m = compute_metrics(data["time"], data["y_d"], data["y"], sc.metric_window, sc.step_size)
+    return "ok", m.e_rms, m.e_r, ""
+
+
+def test_generators_seeded_for_a_task_are_numpys():
+    """Reference: np.random.default_rng([seed, i]), NumPy's SeedSequence and PCG64. The states
+    pcg64_states computes for a whole task equal its bit generator's state for seeds and
+    runs of one, two and three 32-bit words (0, 2^32 - 1, 2^32, 2^64 + 1 among them), in any
+    order, and a PCG64 given such a state draws what default_rng draws (uniform, normal,
+    integers); a negative run is refused as NumPy refuses it."""
+    from harness.sweep.seeding import pcg64_states
+
+    runs = [3, 0, 1, 2**32 - 1, 2**32, 2**40 + 3, 2**64 + 1, 999_999]
+    bits = np.random.PCG64()
+    rng = np.random.Generator(bits)
+    for seed in (0, 1, 4, 2**31 - 1, 2**32 + 5):
+        for i, state in zip(runs, pcg64_states(seed, runs)):
+            want = np.random.default_rng([seed, i])
+            assert state == want.bit_generator.state, (seed, i)
+            bits.state = state
+            assert np.array_equal(rng.uniform(-0.1, 0.1, 17), want.uniform(-0.1, 0.1, 17))
+            assert rng.normal(0.0, 2.0) == want.normal(0.0, 2.0)
+            assert rng.integers(0, 2**31 - 1) == want.integers(0, 2**31 - 1)
+    with pytest.raises(ValueError):
+        np.random.default_rng([1, -1])
+    with pytest.raises(ValueError, match=">= 0"):
+        pcg64_states(1, [-1])
+
+
+def test_draws_for_many_runs_are_those_of_each_run():
+    """Reference: apply_spreads(run_deltas(...)), each run's parameters drawn and moved on
+    their own. draw_columns, which moves whole columns, gives every moved value bit for bit
+    (and the seed as the same int) for every kind of spread: relative and absolute, uniform
+    and normal, a PI weight moved by name before the group, real and complex poles, zero and
+    gain, a named Real parameter, the seed; on runs far apart and out of order."""
+    from harness.sweep.spreads import apply_spreads, draw_columns, run_deltas
+
+    complex_poles = {**BASE, "tf.a1": -1.6, "tf.a2": 0.8}          # a1^2 < 4 a2
+    cases = [(BASE, ["pi.weights=10%", "sensor.seed"]),
+             (BASE, ["pi.w0=3%", "pi.weights=normal:0.002", "tf.poles=5%", "tf.zero=0.01",
+                     "tf.gain=normal:2%", "creep.k_c=5%", "creep.alpha=normal:0.002", "sensor.seed"]),
+             (complex_poles, ["tf.poles=0.01", "tf.gain=10%", "pi.weights=60%"])]
+    runs = [7, 0, 123456, 3, 2**40]
+    for base, specs in cases:
+        spreads = [spread(s) for s in specs]
+        columns = draw_columns(base, spreads, 5, runs)
+        for j, i in enumerate(runs):
+            want = apply_spreads(base, spreads, run_deltas(spreads, 5, i))
+            moved = {k for k in want if want[k] != base[k] or k in columns}
+            assert moved <= set(columns), moved - set(columns)
+            for k, col in columns.items():
+                if k == "sensor.seed":
+                    assert isinstance(want[k], int) and col.dtype == np.int64 and int(col[j]) == want[k]
+                else:
+                    assert np.float64(col[j]).view(np.uint64) == np.float64(want[k]).view(np.uint64), (k, i)
+
+
+def test_task_rows_are_the_csv_modules_rows(tmp_path):
+    """Reference: csv_line (the csv module's writer) row by row. A task's rows written in one
+    go are the same bytes, whatever the text: a reason with commas, quotes and a non-ASCII
+    character, nan and inf, ints and floats among the values, no varied column; the store
+    finds each row where it is (the byte offsets hold after a multi-byte character) and
+    records a run given twice once."""
+    from harness.sweep.store import csv_line, task_rows
+
+    rows = [(4, "ok", 1.2345678901234567e-3, 0.01, "", 0.01234, [1.5, 7, -0.0]),
+            (0, "diverged", math.nan, math.nan, 'y is nan at t = 1 s, "quoted", 5 µm', 2.5, [math.inf, 2, 1e-300]),
+            (9, "saturated", math.nan, math.nan, "clipped in 3.0%", 0.00004, [3.0, 0, 2.0])]
+    index, status, e_rms, e_r, reason, seconds, values = zip(*rows)
+    task = task_rows("mismatch_5hz", index, status, e_rms, e_r, seconds, list(zip(*values)), reason)
+    want = b"".join(csv_line(["mismatch_5hz", i, st, repr(float(e)), repr(float(r)), f"{s:.4f}",
+                              *[repr(v) for v in vals], why]) for i, st, e, r, why, s, vals in rows)
+    assert task.data == want
+    bare = task_rows("s", [1], ["ok"], [0.5], [0.25], [1.0], [], [""])
+    assert bare.data == csv_line(["s", 1, "ok", "0.5", "0.25", "1.0000", ""])
+    store = RunStore(tmp_path, ["mismatch_5hz"], 10, ["a", "b", "c"])
+    store.open(fresh=True)
+    assert store.add_rows("mismatch_5hz", task).tolist() == [True, True, True]
+    again = task_rows("mismatch_5hz", [9, 9, 2], ["ok"] * 3, [1.0] * 3, [1.0] * 3, [0.0] * 3,
+                      [[1.0] * 3] * 3, [""] * 3)
+    assert store.add_rows("mismatch_5hz", again).tolist() == [False, False, True]
+    store.close()
+    for i, line in zip(index, want.splitlines(keepends=True)):
+        assert store.row("mismatch_5hz", i) == next(__import__("csv").reader([line.decode()]))
+    assert store.row("mismatch_5hz", 2)[:3] == ["mismatch_5hz", "2", "ok"]
+    assert store.done() == 4 and list(store.missing("mismatch_5hz")) == [1, 3, 5, 6, 7, 8]
+
+
+def test_tasks_hand_out_each_missing_run_once_and_shrink_at_the_end(tmp_path):
+    """Reference: the store's missing runs. The tasks, made as they are handed out, cover
+    every missing run of every scenario exactly once, in order, also across the store's
+    blocks and around runs already done; the largest is the size asked for, and towards the
+    end they shrink to a quarter of each worker's share of what is left; a fixed size
+    stays fixed. The automatic size follows the runner's cost per run."""
+    from harness.sweep import run as sweep_run
+
+    store = RunStore(tmp_path, ["a", "b"], 150_000, [])
+    done = np.zeros(150_000, bool)
+    done[[0, 5, 6, 70_000, 149_999]] = True
+    store.status["a"][done] = 0
+    tasks = list(sweep_run._chunks(store, ["a", "b"], 3000, False, 2))
+    got = {n: np.concatenate([p for name, p in tasks if name == n]) for n in ("a", "b")}
+    assert np.array_equal(got["a"], np.flatnonzero(~done)) and np.array_equal(got["b"], np.arange(150_000))
+    sizes = [p.size for _, p in tasks]
+    assert max(sizes) == 3000 and sizes[-1] == 1 and sizes[-2] <= sizes[-20] <= 3000
+    left = 2 * 150_000 - 5 - sum(sizes[:-10])
+    assert sizes[-10] <= math.ceil(left / 8)
+    fixed = [p.size for _, p in sweep_run._chunks(store, ["b"], 10, True, 2)]
+    assert set(fixed) == {10}
+    assert sweep_run._chunk_sizes(100_000, 2, 165e-6, None) == (round(sweep_run.TASK_SECONDS / 165e-6), False)
+    assert sweep_run._chunk_sizes(100_000, 2, 0.01, None) == (50, False)
+    assert sweep_run._chunk_sizes(40, 2, 1e-4, None) == (5, False)
+    assert sweep_run._chunk_sizes(100_000, 2, None, None) == (sweep_run.FMPY_CHUNK, False)
+    assert sweep_run._chunk_sizes(100_000, 2, 1e-4, 7) == (7, True)
+
+
+def test_cdf_drawn_stays_within_a_step_of_the_exact_one():
+    """Reference: the exact empirical CDF (np.searchsorted over all values). The points the
+    figure draws for a million runs are at most CDF_POINTS, include the smallest and the
+    largest value, and the step function they make is within 1/(CDF_POINTS - 1) of the runs
+    of the exact CDF everywhere; for a few runs every value is drawn."""
+    from harness.sweep.plot import CDF_POINTS, cdf_points
+
+    rng = np.random.default_rng(9)
+    vals = np.sort(rng.lognormal(0.0, 1.5, 1_000_000))
+    total = 1_050_000                                       # not-ok runs count as above every x
+    x, f = cdf_points(vals, total)
+    assert x.size <= CDF_POINTS and x[0] == vals[0] and x[-1] == vals[-1] and f[-1] == vals.size / total
+    grid = np.concatenate((np.geomspace(vals[0], vals[-1], 20_000), vals[::997]))
+    exact = np.searchsorted(vals, grid, side="right") / total
+    drawn = np.where(grid < x[0], 0.0, f[np.clip(np.searchsorted(x, grid, side="right") - 1, 0, None)])
+    assert np.max(np.abs(drawn - exact)) <= 1 / (CDF_POINTS - 1)
+    few = np.sort(rng.random(50))
+    x, f = cdf_points(few, 60)
+    assert np.array_equal(x, few) and np.array_equal(f, np.arange(1, 51) / 60)
+
+
+def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path, monkeypatch):
+    """Reference: every drawn parameter set run on its own the way a single run is run (the
+    native master, harness.checks, harness.metrics). A sweep with spreads wide enough to
+    make runs diverge, clip or be refused (workers = 0: no Dask; its native batches) counts
+    every run exactly once and reports the not-ok ones without stopping: each run's status,
+    e_rms and e_r (bit for bit) and reason are those of the run on its own. The worst
+    parameter file, loaded as a scenario file, reproduces the worst e_rms exactly."""
+    from harness.metrics import compute_metrics
+
+    batches = []
+    real_batch = native.NativeLoop.run_batch
+    monkeypatch.setattr(native.NativeLoop, "run_batch",
+                        lambda self, *a, **k: batches.append(len(a[1]["tf.a1"])) or real_batch(self, *a, **k))
     spreads = ["tf.poles=0.01", "pi.weights=60%", "tf.zero=0.01"]
     result = sweep.run_sweep(["mismatch_20hz"], spreads, 24, seed=11, workers=0)
+    assert sum(batches) == 24                           # every run went through a native batch
     c = result.counts("mismatch_20hz")
     assert sum(c.values()) == 24
     assert c["ok"] >= 10 and c["ok"] < 24
-    assert c["diverged"] + c["saturated"] >= 1 and c["invalid"] >= 1
+    assert c["diverged"] >= 1 and c["saturated"] >= 1 and c["invalid"] >= 1
     runs = result.runs["mismatch_20hz"]
     sc = load_scenarios()["mismatch_20hz"]
-    for i in [i for i, r in enumerate(runs) if r[0] == "ok"][:3]:
-        data = native.NativeLoop().run(prepare_closed_loop(sc, plant_params=result.parameters["mismatch_20hz"][i]))
-        m = compute_metrics(data["time"], data["y_d"], data["y"], sc.metric_window, sc.step_size)
-        assert m.e_rms == runs[i][1]
-    for r in runs:
-        if r[0] != "ok":
-            assert r[3] and math.isnan(r[1])
+    loop = native.NativeLoop()
+    for i, (status, e_rms, e_r, reason, _) in enumerate(runs):
+        want = _one_by_one(sc, result.parameters["mismatch_20hz"][i], loop)
+        assert (status, reason) == (want[0], " ".join(want[3].split())[:400]), i
+        assert np.float64(e_rms).view(np.uint64) == np.float64(want[1]).view(np.uint64), i
+        assert np.float64(e_r).view(np.uint64) == np.float64(want[2]).view(np.uint64), i
+        assert (status == "ok") == (reason == "")
+    loop.close()
     files = sweep.write_outputs(result, tmp_path, plots=True)
     names = {p.name for p in files}
     assert {"sweep_summary.csv", "sweep_summary.md", "sweep_runs.csv", "worst_mismatch_20hz.toml",
@@ -228,6 +389,17 @@ def test_cli_sweep_local_cluster_and_errors(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "a local Dask cluster of 1 worker process" in proc.stdout
     assert (tmp_path / "worst_mismatch_1hz.toml").exists()
+    # the rate next to the bound measured in the same command: 1 core / (ns/sample x samples)
+    m = re.search(r"this call: 6 runs computed: (\d+) runs/s while computing \(([\d.]+) s\), (\d+) runs/s "
+                  r"including the start \(([\d.]+) s\)\ncompute bound: (\d+) runs/s \(the native runner's "
+                  r"(\d+) ns/sample x 6000 samples a run, / 1 core; measured in this call\): (\d+)% of it "
+                  r"while computing, (\d+)% including the start\nCPU while computing: ([\d.]+) s in the tasks",
+                  proc.stdout)
+    assert m, proc.stdout
+    steady, bound, ns = float(m.group(1)), float(m.group(5)), float(m.group(6))
+    assert math.isclose(bound, 1e9 / (ns * 6000), rel_tol=0.01)
+    assert abs(float(m.group(7)) - 100 * steady / bound) <= 1 + 100 * steady / bound * 0.01
+    assert float(m.group(2)) < float(m.group(4)) and float(m.group(9)) >= 0
     for args, fragment in ((["track_1hz", "--vary", "tf.pole=1%"], "unknown key 'tf.pole'"),
                            (["validate_1hz"], "is a validation scenario"),
                            (["nosuch"], "nosuch"),

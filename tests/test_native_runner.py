@@ -219,3 +219,84 @@ def test_cli_native_backend_failing_run_exits_3(tmp_path):
     lines = error_lines(proc.stderr)
     assert len(lines) == 1 and "supervision stopped the loop" in lines[0], proc.stderr
     assert "Set mv.delay = 1 (d = 2)" in lines[0], proc.stderr
+
+
+def test_pairwise_sum_is_numpys():
+    """Reference: np.sum, NumPy's pairwise summation. piezo_runner_pairwise_sum (the sums of a
+    batch's checks and metrics) gives the same bits for every length up to 300 and across
+    the recursion's splits (8192 and beyond, the 58000 of a 30 s window), on terms spread
+    over 24 decades; summing in order gives other bits for some of them (the test tells the
+    two apart)."""
+    ffi, lib = native._binding()
+    rng = np.random.default_rng(4)
+    in_order_differs = 0
+    for n in [*range(0, 300), 1000, 4000, 8191, 8192, 8193, 58000]:
+        x = rng.standard_normal(n) ** 2 * 10.0 ** rng.uniform(-12, 12, n)
+        got = lib.piezo_runner_pairwise_sum(ffi.from_buffer("double[]", x), n)
+        assert np.float64(got).view(BITS) == np.sum(x).view(BITS), n
+        in_order = 0.0
+        for v in x.tolist():
+            in_order += v
+        in_order_differs += in_order != got
+    assert in_order_differs > 10
+
+
+def _batch_parameters(n):
+    """n plant parameter sets of mismatch_20hz wide enough that runs clip, diverge or are
+    refused (the spreads of the sweep test), as per-run columns and one by one."""
+    from harness.sweep import parse_spread, plant_start_values
+    from harness.sweep.spreads import apply_spreads, draw_columns, run_deltas
+    base_all = plant_start_values()
+    reals = [k for k, v in base_all.items() if isinstance(v, float)]
+    spreads = [parse_spread(s, reals) for s in ("tf.poles=0.01", "pi.weights=60%", "tf.zero=0.01",
+                                                "sensor.seed")]
+    sc = prepare_closed_loop("mismatch_20hz").scenario
+    base = {**base_all, **dict(sc.plant), "h": sc.step_size}
+    columns = draw_columns(base, spreads, 11, range(n))
+    return sc, base, columns, [apply_spreads(base, spreads, run_deltas(spreads, 11, i)) for i in range(n)]
+
+
+def test_batch_equals_runs_one_by_one():
+    """Reference: each parameter set run on its own by NativeLoop.run (itself equal to the
+    fmpy master bit for bit) and NumPy on its rows. One piezo_runner_batch over 24 sets:
+    every run that completes has the status of the run on its own and the sums np.sum takes
+    of (y_d - y)^2 and y^2 over the metric window, bit for bit, with its clipped samples
+    there and whether y, y_meas and v stayed finite; every run whose FMI calls fail on its
+    own fails in the batch too, at the same sample. The batch is the same with fresh
+    instances and with used ones, and a run after it equals a fresh loop's."""
+    from harness.metrics import window_mask
+    sc, base, columns, sets = _batch_parameters(24)
+    setup = prepare_closed_loop(sc, plant_params=base)
+    win = window_mask(setup.time, sc.metric_window, sc.step_size)
+    w = np.flatnonzero(win)
+    loop, alone = native.NativeLoop(), native.NativeLoop()
+    out = loop.run_batch(setup, columns, (w[0], w[-1] + 1))
+    again = loop.run_batch(setup, columns, (w[0], w[-1] + 1))
+    for key in out:
+        assert np.array_equal(np.asarray(out[key]).view(np.uint8), np.asarray(again[key]).view(np.uint8)) \
+            or key == "seconds", key
+    kinds = set()
+    for i, params in enumerate(sets):
+        try:
+            data = alone.run(prepare_closed_loop(sc, plant_params=params))
+        except fmu.FMUInitializationError:
+            kinds.add("refused")
+            assert out["status"][i] > 1 and out["samples"][i] == 0, i
+            continue
+        except fmu.FMUError:
+            kinds.add("stopped")
+            assert out["status"][i] > 1 and out["failed_call"][i] == 4, i       # fmi2DoStep
+            assert out["samples"][i] < setup.n, i
+            continue
+        assert out["status"][i] <= 1 and out["samples"][i] == setup.n, i
+        err = data["y_d"][win] - data["y"][win]
+        assert out["sum_error2"][i].view(BITS) == np.sum(err * err).view(BITS), i
+        assert out["sum_y2"][i].view(BITS) == np.sum(data["y"][win] ** 2).view(BITS), i
+        assert out["saturated"][i] == np.count_nonzero(data["saturated"][win]), i
+        assert out["finite"][i] == all(np.isfinite(data[f]).all() for f in ("y", "y_meas", "v")), i
+        kinds.add("clipped" if out["saturated"][i] else "completed")
+    assert kinds == {"refused", "stopped", "clipped", "completed"}, kinds
+    check = prepare_closed_loop("mismatch_5hz", duration=0.5)
+    assert np.array_equal(bits(loop.run(check)), bits(native.NativeLoop().run(check)))
+    loop.close()
+    alone.close()

@@ -1,6 +1,7 @@
 /* piezo_runner.c - native closed-loop co-simulation master. See piezo_runner.h. */
 #define _POSIX_C_SOURCE 200809L
 #include <dlfcn.h>
+#include <math.h>
 #include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -434,6 +435,165 @@ int piezo_runner_run(piezo_runner *r, size_t n, double h, int master, int step_o
 stop:
     r->k += res->samples;
     return res->status;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Batches                                                                   */
+
+/* The terms the batch sums: x[i] (SUM_PLAIN), (x[i] - y[i s])^2 (SUM_ERROR2), y[i s]^2 (SUM_SQUARE) */
+enum { SUM_PLAIN, SUM_ERROR2, SUM_SQUARE };
+
+static double term(int kind, const double *x, const double *y, size_t stride, size_t i)
+{
+    double e;
+    switch (kind) {
+    case SUM_ERROR2:
+        e = x[i] - y[i * stride];
+        return e * e;
+    case SUM_SQUARE:
+        e = y[i * stride];
+        return e * e;
+    default:
+        return x[i];
+    }
+}
+
+/* NumPy's pairwise summation (see piezo_runner.h), without the leading 0.0 + */
+static double pairwise(int kind, const double *x, const double *y, size_t stride, size_t n)
+{
+    size_t i, j, n2;
+    double s[8], sum;
+    if (n < 8) {
+        sum = 0.0;
+        for (i = 0; i < n; ++i) sum += term(kind, x, y, stride, i);
+        return sum;
+    }
+    if (n <= 128) {
+        for (j = 0; j < 8; ++j) s[j] = term(kind, x, y, stride, j);
+        for (i = 8; i < n - n % 8; i += 8)
+            for (j = 0; j < 8; ++j) s[j] += term(kind, x, y, stride, i + j);
+        sum = ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]));
+        for (; i < n; ++i) sum += term(kind, x, y, stride, i);
+        return sum;
+    }
+    n2 = n / 2;
+    n2 -= n2 % 8;
+    return pairwise(kind, x, y, stride, n2)
+        + pairwise(kind, x == NULL ? NULL : x + n2, y == NULL ? NULL : y + n2 * stride, stride, n - n2);
+}
+
+double piezo_runner_pairwise_sum(const double *x, size_t n)
+{
+    if (x == NULL && n > 0) return 0.0;
+    return 0.0 + pairwise(SUM_PLAIN, x, NULL, 0, n);
+}
+
+static double wall_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static int bad_params(const piezo_runner_params *p)
+{
+    return p == NULL || p->n_real > 64 || p->n_int > 64 || p->n_bool > 64
+        || (p->n_real > 0 && (p->real_refs == NULL || p->reals == NULL))
+        || (p->n_int > 0 && (p->int_refs == NULL || p->ints == NULL))
+        || (p->n_bool > 0 && (p->bool_refs == NULL || p->bools == NULL));
+}
+
+/* Set one FMU's parameters of run i; 1 if a call failed (recorded in res). */
+static int set_params(piezo_runner *r, int role, const piezo_runner_params *p, size_t i, piezo_runner_result *res)
+{
+    size_t row = p->per_run ? i : 0;
+    if (p->n_real > 0
+        && failed(res, piezo_runner_set_real(r, role, p->real_refs, p->reals + row * p->n_real, p->n_real),
+                  role, PIEZO_RUNNER_CALL_SET_REAL))
+        return 1;
+    if (p->n_int > 0
+        && failed(res, piezo_runner_set_integer(r, role, p->int_refs, p->ints + row * p->n_int, p->n_int),
+                  role, PIEZO_RUNNER_CALL_SET_INTEGER))
+        return 1;
+    if (p->n_bool > 0
+        && failed(res, piezo_runner_set_boolean(r, role, p->bool_refs, p->bools + row * p->n_bool, p->n_bool),
+                  role, PIEZO_RUNNER_CALL_SET_BOOLEAN))
+        return 1;
+    return 0;
+}
+
+/* One run of a batch (parameters set): its samples in blocks whose rows stay in the cache;
+ * y kept for the sums, the finite and clipped samples counted as the blocks complete. */
+static void batch_run(piezo_runner *r, const piezo_runner_experiment *x, double *block, double *y,
+                      piezo_runner_result *res, size_t i, piezo_runner_outcomes *out)
+{
+    piezo_runner_result part;
+    size_t k0, k, len, sat = 0;
+    int finite = 1;
+    for (k0 = 0; k0 < x->n; k0 += len) {
+        len = x->n - k0 < PIEZO_RUNNER_BATCH_BLOCK ? x->n - k0 : PIEZO_RUNNER_BATCH_BLOCK;
+        piezo_runner_run(r, len, x->h, x->master, x->step_order, x->y_ref + k0,
+                         x->y_preview != NULL ? x->y_preview + k0 : NULL,
+                         x->t_preview != NULL ? x->t_preview + k0 : NULL,
+                         block, PIEZO_RUNNER_ROW, 0, NULL, &part);
+        if (part.status > res->status) res->status = part.status;
+        res->samples = k0 + part.samples;
+        if (part.status > fmi2Warning) {
+            res->failed_role = part.failed_role;
+            res->failed_call = part.failed_call;
+            return;
+        }
+        for (k = 0; k < len; ++k) {
+            const double *row = block + k * PIEZO_RUNNER_ROW;
+            finite &= isfinite(row[0]) && isfinite(row[1]) && isfinite(row[2]);    /* y, y_meas, v */
+            y[k0 + k] = row[0];
+            sat += k0 + k >= x->window_start && k0 + k < x->window_stop && row[PIEZO_RUNNER_ROW - 1] != 0.0;
+        }
+    }
+    out->finite[i] = finite;
+    out->saturated[i] = sat;
+    out->sum_error2[i] = 0.0 + pairwise(SUM_ERROR2, x->y_d + x->window_start, y + x->window_start, 1,
+                                        x->window_stop - x->window_start);
+    out->sum_y2[i] = 0.0 + pairwise(SUM_SQUARE, NULL, y + x->window_start, 1, x->window_stop - x->window_start);
+}
+
+size_t piezo_runner_batch(piezo_runner *r, const piezo_runner_experiment *x,
+                          const piezo_runner_params *plant, const piezo_runner_params *controller,
+                          size_t runs, int fresh, piezo_runner_outcomes *out)
+{
+    size_t i;
+    piezo_runner_result res;
+    double t0, *block, *y;
+    if (r == NULL || x == NULL || out == NULL || bad_params(plant) || bad_params(controller)
+        || x->y_ref == NULL || x->y_d == NULL || (x->y_preview != NULL && x->t_preview == NULL)
+        || x->window_start > x->window_stop || x->window_stop > x->n
+        || out->status == NULL || out->failed_call == NULL || out->samples == NULL || out->finite == NULL
+        || out->sum_error2 == NULL || out->sum_y2 == NULL || out->saturated == NULL || out->seconds == NULL)
+        return 0;
+    block = malloc((PIEZO_RUNNER_BATCH_BLOCK * PIEZO_RUNNER_ROW + x->n + 1) * sizeof *block);
+    if (block == NULL) return 0;
+    y = block + PIEZO_RUNNER_BATCH_BLOCK * PIEZO_RUNNER_ROW;
+    for (i = 0; i < runs; ++i) {
+        t0 = wall_seconds();
+        if (i > 0 || !fresh) piezo_runner_reset(r);
+        piezo_runner_clear_log(r);
+        out->finite[i] = 0;
+        out->sum_error2[i] = out->sum_y2[i] = 0.0;
+        out->saturated[i] = 0;
+        result_start(&res);
+        if (!set_params(r, PIEZO_RUNNER_PLANT, plant, i, &res)
+            && !set_params(r, PIEZO_RUNNER_CONTROLLER, controller, i, &res)
+            && piezo_runner_initialize(r, 0.0, (double)x->n * x->h, &res) <= fmi2Warning) {
+            batch_run(r, x, block, y, &res, i, out);
+            if (res.status <= fmi2Warning) piezo_runner_terminate(r);
+        }
+        out->status[i] = res.status;
+        out->failed_call[i] = res.failed_call;
+        out->samples[i] = res.samples;
+        out->seconds[i] = wall_seconds() - t0;
+    }
+    free(block);
+    return runs;
 }
 
 int piezo_runner_terminate(piezo_runner *r)

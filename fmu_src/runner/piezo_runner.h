@@ -129,6 +129,78 @@ int piezo_runner_run(piezo_runner *runner, size_t n, double h, int master, int s
                      double *rows, size_t row_stride,
                      size_t timing_block, double *block_ns, piezo_runner_result *result);
 
+/*
+ * A batch: the same experiment run once per set of parameters, each run as
+ * the harness runs one (harness/masters/native.py): fmi2Reset of both
+ * (except before the first run of fresh instances), the parameters set (the
+ * plant's, then the controller's; Reals, then Integers, then Booleans),
+ * initialization over [0, n h], piezo_runner_run (in blocks of
+ * PIEZO_RUNNER_BATCH_BLOCK samples, whose rows stay in the cache: the same
+ * calls as one piezo_runner_run), then fmi2Terminate when the run completed. Nothing returns to the caller between
+ * runs; every run is summarised by what the harness's checks and metrics
+ * read (harness/checks.py, harness/metrics.py), so the caller decides on
+ * them, and runs again on its own path any run whose FMI calls failed, to
+ * report it with its messages.
+ */
+
+/* samples a batch runs at a time (a block's rows are 80 KB) */
+#define PIEZO_RUNNER_BATCH_BLOCK 1024
+
+/* The parameters set on one FMU in each run of a batch: row r of each table
+ * for run r, or row 0 for every run when per_run is 0. */
+typedef struct {
+    size_t n_real;
+    const int *real_refs;
+    const double *reals;        /* n_real per row */
+    size_t n_int;
+    const int *int_refs;
+    const int *ints;            /* n_int per row */
+    size_t n_bool;
+    const int *bool_refs;
+    const int *bools;           /* n_bool per row, 0 or 1 */
+    int per_run;
+} piezo_runner_params;
+
+/* The experiment of every run of a batch. */
+typedef struct {
+    size_t n;                   /* samples per run */
+    double h;
+    int master;                 /* PIEZO_RUNNER_GAUSS_SEIDEL or _JACOBI */
+    int step_order;             /* PIEZO_RUNNER_PLANT_FIRST or _CONTROLLER_FIRST */
+    const double *y_ref;        /* n, as piezo_runner_run */
+    const double *y_preview;    /* n or NULL, as piezo_runner_run */
+    const double *t_preview;
+    const double *y_d;          /* n: the desired displacement the error is taken from */
+    size_t window_start;        /* the metric window: samples [window_start, window_stop) */
+    size_t window_stop;
+} piezo_runner_experiment;
+
+/* What each run of a batch gave: arrays of one value per run. */
+typedef struct {
+    int *status;                /* worst FMI status; above fmi2Warning the run stopped at failed_call */
+    int *failed_call;           /* PIEZO_RUNNER_CALL_*, 0 when nothing failed */
+    size_t *samples;            /* samples completed */
+    int *finite;                /* 1 when y, y_meas and v are finite in every sample */
+    double *sum_error2;         /* sum of (y_d - y)^2 over the window, summed as NumPy sums (below) */
+    double *sum_y2;             /* sum of y^2 over the window, likewise */
+    size_t *saturated;          /* samples of the window with saturated set */
+    double *seconds;            /* wall-clock seconds of the run, reset to terminate */
+} piezo_runner_outcomes;
+
+/* Run `runs` runs (fresh: the instances are fresh, the first run resets
+ * nothing). The sums are NumPy's pairwise summation of float64 (0.0 plus:
+ * fewer than 8 terms in order; up to 128 in 8 interleaved partial sums
+ * combined as ((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7)), then the
+ * rest in order; more: the first n/2 rounded down to a multiple of 8 and the
+ * rest, each summed so, then added), so they are the bits np.sum gives.
+ * Returns the number of runs done (all of them unless an argument is bad or
+ * memory for a block's rows and a run's y cannot be had). */
+size_t piezo_runner_batch(piezo_runner *runner, const piezo_runner_experiment *experiment,
+                          const piezo_runner_params *plant, const piezo_runner_params *controller,
+                          size_t runs, int fresh, piezo_runner_outcomes *outcomes);
+/* NumPy's pairwise sum of x[0..n-1] (as in piezo_runner_batch). */
+double piezo_runner_pairwise_sum(const double *x, size_t n);
+
 /* fmi2Terminate on both (the controller's summary comes as a warning). */
 int piezo_runner_terminate(piezo_runner *runner);
 /* fmi2Reset on both: back to the start values, ready for new parameters. */

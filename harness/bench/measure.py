@@ -207,5 +207,5 @@ def measure(scenario="mismatch_1_5_10hz", *, n_max=CHECKPOINTS[-1], repeat=5, fm
         "checkpoints": checkpoints,
         "loops": {name: col.medians(name) for name in col.values},
         "memory": memory, "exact": exact, "end_to_end": end_to_end, "short_n": short.n,
-        "machine": machine_description(),
+        "machine": machine_description(), "cores": os.cpu_count() or 1,
     }

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from .bound import RUN_SECONDS, Bound
 from .measure import BLOCK, EXACT_WINDOW, WINDOW
 
 __all__ = ["format_figures"]
@@ -63,4 +64,12 @@ def format_figures(f):
         f"result; wall clock): native {f['end_to_end']['native'] * 1e3:.1f} ms, "
         f"fmpy {f['end_to_end']['fmpy'] * 1e3:.1f} ms",
     ]
+    if "native runner" in f["loops"]:
+        runner = f["loops"]["native runner"][last]
+        bounds = [(s, Bound({"run": runner}, {"run": round(s / h)}, f["cores"]).runs_per_second({"run": 1}))
+                  for s in RUN_SECONDS]
+        lines.append(f"a sweep's compute bound (the native runner's {runner:.0f} ns/sample at {_count(last)} x "
+                     f"samples a run / {f['cores']} cores): "
+                     + ", ".join(f"{rate:.0f} runs/s of {s:g} s" for s, rate in bounds)
+                     + "; `sweep` measures its own on its scenarios")
     return "\n".join(lines) + "\n"

@@ -267,6 +267,102 @@ class NativeLoop:
         self._run(setup, self._ffi.NULL, 0, block)
         return self.last_block_ns
 
+    # -- many runs ----------------------------------------------------------------------
+    def _table(self, info, params, per_run=None, runs=1):
+        """A ``piezo_runner_params`` of ``params`` (name -> value, the order set), with the
+        columns of ``per_run`` (name -> one value per run) varying from run to run; and the
+        arrays it points into (keep them alive with it)."""
+        ffi = self._ffi
+        table = ffi.new("piezo_runner_params *")
+        keep = [table]
+        typed = typed_parameters(info, params)
+        columns = {info.vr(name): values for name, values in (per_run or {}).items()}
+        for (vrs, values), kind, dtype in zip(typed, ("real", "int", "bool"), (np.float64, np.intc, np.intc)):
+            rows = np.tile(np.asarray(values, dtype=dtype), (runs if per_run else 1, 1))
+            for j, vr in enumerate(vrs):
+                if vr in columns:
+                    rows[:, j] = np.asarray(columns.pop(vr), dtype=dtype)
+            refs = np.asarray(vrs, dtype=np.intc)
+            keep += [rows, refs]
+            setattr(table, f"n_{kind}", len(vrs))
+            ctype = "double[]" if dtype is np.float64 else "int[]"
+            setattr(table, f"{kind}_refs", ffi.from_buffer("int[]", refs) if len(vrs) else ffi.NULL)
+            setattr(table, f"{kind}s", ffi.from_buffer(ctype, rows) if len(vrs) else ffi.NULL)
+        if columns:
+            raise ValueError(f"{info.model}: varied parameters missing from the parameter set "
+                             f"(value references {sorted(columns)})")
+        table.per_run = 1 if per_run else 0
+        return table, keep
+
+    def run_batch(self, setup, per_run, window):
+        """Run the closed loop of ``setup`` once per set of plant parameters, all in one C
+        call (``piezo_runner_batch``): the runs of :meth:`run`, bit for bit, summarised by
+        what the harness's checks and metrics read.
+
+        Parameters
+        ----------
+        setup : harness.loop.ClosedLoopSetup
+            The experiment. Its ``plant_params`` give the parameters set in every run (in
+            their order), and the values of those not in ``per_run``; its
+            ``controller_params`` are set in every run.
+        per_run : dict
+            Plant parameter name -> one value per run (1-D arrays of one length).
+        window : (int, int)
+            The metric window in samples, ``[start, stop)``.
+
+        Returns
+        -------
+        dict of ndarray
+            Per run: ``status`` (the worst FMI status; above 1 the run stopped at
+            ``failed_call`` after ``samples`` samples), ``finite`` (y, y_meas and v finite
+            in every sample), ``sum_error2`` and ``sum_y2`` (the sums of (y_d - y)^2 and
+            y^2 over the window, as ``np.sum`` takes them), ``saturated`` (clipped samples
+            in the window) and ``seconds`` (wall clock).
+
+        Raises
+        ------
+        TypeError, harness.fmu.UnknownParameterError
+            A parameter the FMU does not have, or a value of the wrong type.
+        """
+        ffi, lib = self._ffi, self._lib
+        runs = len(next(iter(per_run.values()))) if per_run else 1
+        if any(len(v) != runs for v in per_run.values()):
+            raise ValueError("run_batch: the per-run columns differ in length")
+        start, stop = (int(w) for w in window)
+        if not 0 <= start <= stop <= setup.n:
+            raise ValueError(f"run_batch: window {window!r} is not within the {setup.n} samples")
+        plant, keep_p = self._table(self.plant_info, setup.plant_params, per_run, runs)
+        controller, keep_c = self._table(self.controller_info, setup.controller_params)
+        stamped = setup.y_preview is not None
+        arrays = {"y_ref": np.ascontiguousarray(setup.y_ref, dtype=np.float64),
+                  "y_d": np.ascontiguousarray(setup.y_d, dtype=np.float64),
+                  "y_preview": np.ascontiguousarray(setup.y_preview if stamped else [], dtype=np.float64),
+                  "t_preview": np.ascontiguousarray(setup.t_preview if stamped else [], dtype=np.float64)}
+        x = ffi.new("piezo_runner_experiment *")
+        x.n, x.h = setup.n, setup.h
+        x.master = 1 if setup.master == "jacobi" else 0
+        x.step_order = 1 if setup.step_order == "controller-first" else 0
+        for name in ("y_ref", "y_d"):
+            setattr(x, name, ffi.from_buffer("double[]", arrays[name]))
+        for name in ("y_preview", "t_preview"):
+            setattr(x, name, ffi.from_buffer("double[]", arrays[name]) if stamped else ffi.NULL)
+        x.window_start, x.window_stop = start, stop
+        out = {"status": np.zeros(runs, np.intc), "failed_call": np.zeros(runs, np.intc),
+               "samples": np.zeros(runs, np.uintp), "finite": np.zeros(runs, np.intc),
+               "sum_error2": np.zeros(runs), "sum_y2": np.zeros(runs),
+               "saturated": np.zeros(runs, np.uintp), "seconds": np.zeros(runs)}
+        o = ffi.new("piezo_runner_outcomes *")
+        for name, arr in out.items():
+            ctype = {np.dtype(np.intc): "int[]", np.dtype(np.uintp): "size_t[]"}.get(arr.dtype, "double[]")
+            setattr(o, name, ffi.from_buffer(ctype, arr))
+        done = lib.piezo_runner_batch(self._runner, x, plant, controller, runs, 1 if self._fresh else 0, o)
+        if done != runs:
+            raise ValueError("piezo_runner_batch refused its arguments (more than 64 parameters of a type?) "
+                             "or found no memory for a run")
+        self._fresh = False
+        out["finite"] = out["finite"].astype(bool)
+        return out
+
     def close(self):
         """Free both instances and unload the binaries (also done when collected)."""
         if getattr(self, "_runner", None) is not None:

@@ -30,12 +30,20 @@ diverges (the controller's monitor stops it, a value overflows, or its error exc
 reference: :mod:`harness.checks`), clips its voltage persistently, or whose drawn
 parameters the FMU refuses is counted and reported; it does not stop the sweep.
 
+Speed: a task is a batch of runs in one C call of the native runner
+(``piezo_runner_batch``: no Python between runs), its parameters drawn for the whole task
+and its rows written in one go; the checks' rules decide on the batch's sums, and a run
+that fails them is run again on its own for its status and message (:mod:`.worker`). A
+task is about half a second of the runner's CPU time (fewer runs towards the end). The
+summary prints the runs/s next to the compute bound measured in the same command
+(:mod:`harness.bench.bound`: the runner's ns/sample x samples per run / cores).
+
 Scale: each task's rows are appended to ``sweep_runs.journal.csv`` (and flushed) as it
-completes; the client keeps 25 bytes per run and queues a few tasks per worker, so its
-memory does not grow with the number of runs. A task lost with its worker is run again and
-a run is recorded once. ``--resume`` continues an interrupted sweep from its journal
-(``sweep_manifest.json`` says what the runs depend on; a different sweep is refused): only
-the missing runs are computed.
+completes; the client keeps 25 bytes per run, queues a few tasks per worker and makes each
+task as it hands it out, so its memory grows by those 25 bytes per run only. A task lost
+with its worker is run again and a run is recorded once. ``--resume`` continues an
+interrupted sweep from its journal (``sweep_manifest.json`` says what the runs depend on; a
+different sweep is refused): only the missing runs are computed.
 
 Results (under ``--out``, default ``out/sweep``): the table of percentiles and worst case
 of e_rms and e_r per scenario (printed, ``sweep_summary.csv``/``.md``), every run with its

@@ -39,6 +39,43 @@ def _mb(n):
     return "?" if n is None else f"{n / 1e6:.0f} MB"
 
 
+def _throughput_lines(result):
+    """What this call computed, how fast, against the compute bound, and its peak RSS."""
+    done = result.computed
+    resumed = sum(len(v) for v in result.runs.values()) - done
+    rate = done / result.elapsed if result.elapsed > 0 else math.nan
+    steady = done / result.compute_seconds if result.compute_seconds > 0 else math.nan
+    lines = [f"this call: {done} runs computed" + (f" ({resumed} from the journal)" if resumed else "")
+             + (f": {steady:.0f} runs/s while computing ({result.compute_seconds:.1f} s), "
+                f"{rate:.0f} runs/s including the start ({result.elapsed:.1f} s)" if done else "")]
+    b = result.bound
+    if b is not None and done:
+        counts = {name: len(result.runs[name]) for name in result.scenarios}
+        bound = b.runs_per_second(counts)
+        costs = "; ".join(f"{b.ns_per_sample[k]:.0f} ns/sample x {b.samples[k]} samples a run"
+                          + (f" ({k})" if len(counts) > 1 else "") for k in counts)
+        lines.append(f"compute bound: {bound:.0f} runs/s (the native runner's {costs}, / {b.cores} "
+                     f"core{'s' if b.cores != 1 else ''}; measured in this call): {steady / bound:.0%} "
+                     f"of it while computing, {rate / bound:.0%} including the start")
+        cpu = result.cpu_seconds or {}
+        used = cpu.get("tasks", math.nan) + cpu.get("client", math.nan)
+        need = done * b.seconds_per_run(counts)
+        if used > 0:
+            wall = cpu.get("tasks_wall", math.nan)
+            share = (f" ({cpu['tasks'] / wall:.0%} of their {wall:.1f} s on the clock; other processes "
+                     f"had the rest)" if wall > 0 else "")
+            lines.append(f"CPU while computing: {cpu['tasks']:.1f} s in the tasks{share}, {cpu['client']:.1f} s "
+                         f"in this process; the runs need {need:.1f} s of it at the runner's cost: "
+                         f"{need / used:.0%} (the rest is the sweep's own work)")
+    peak = result.peak_rss or {}
+    load = (f"; load average {', '.join(f'{x:.2f}' for x in result.load)} at the start"
+            if result.load else "")
+    lines.append(f"peak RSS {_mb(peak.get('client'))} in this process"
+                 + (f", {_mb(peak.get('worker'))} in the largest worker" if peak.get("worker") is not None else "")
+                 + load)
+    return lines
+
+
 def format_summary(result):
     """The printed table."""
     n = len(next(iter(result.runs.values())))
@@ -59,13 +96,7 @@ def format_summary(result):
                      + " ".join(f"{x:>7.3g}" for x in e) + "  " + " ".join(f"{x:>7.3g}" for x in r))
     lines.append("div: diverged (monitor, overflow or error above the reference), sat: clipped "
                  "persistently, inv: parameters refused by the FMU; percentiles over the ok runs")
-    rate = result.computed / result.elapsed if result.elapsed > 0 else math.nan
-    resumed = sum(len(v) for v in result.runs.values()) - result.computed
-    peak = result.peak_rss or {}
-    lines.append(f"this call: {result.computed} runs computed" + (f" ({resumed} from the journal)" if resumed else "")
-                 + f", {rate:.0f} runs/s including the start; peak RSS {_mb(peak.get('client'))} in this "
-                 f"process" + (f", {_mb(peak.get('worker'))} in the largest worker"
-                               if peak.get("worker") is not None else ""))
+    lines += _throughput_lines(result)
     return "\n".join(lines) + "\n"
 
 

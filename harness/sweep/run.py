@@ -11,14 +11,17 @@ from pathlib import Path
 import tempfile
 import time
 
+import numpy as np
+
 from .. import masters
+from ..bench.bound import Bound, measure_runner
 from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, fmu_path, load, starts_of
-from ..loop import normalize_master
+from ..loop import normalize_master, prepare_closed_loop
 from ..scenarios import get_scenario
 from .manifest import prepare_folder, sweep_identity, write_manifest
 from .spreads import Spread, parse_spread, varied_keys, varies_something
-from .store import ParameterSets, RunRows, RunStore, SweepResult
-from .worker import first_line, peak_rss, remove_at_exit, run_chunk, scenario_fields
+from .store import STATUS_CODE, ParameterSets, RunRows, RunStore, SweepResult
+from .worker import first_line, peak_rss, prepare_worker, remove_at_exit, run_chunk, scenario_fields
 
 __all__ = ["run_sweep", "SweepIncompleteError", "plant_start_values"]
 
@@ -33,10 +36,53 @@ def plant_start_values(fmu_dir=None):
     return starts_of(load(fmu_path(PLANT_MODEL, fmu_dir)).md)
 
 
-def _chunks_of(indices, size):
-    """The indices in lists of at most ``size``."""
-    for i in range(0, len(indices), size):
-        yield [int(j) for j in indices[i:i + size]]
+#: CPU seconds of the runner per task the chunk size aims at (native backend)
+TASK_SECONDS = 0.5
+#: runs per task without a measured cost (the fmpy backend), at most
+FMPY_CHUNK = 50
+
+
+def _chunk_sizes(n_runs, n_workers, cost, chunk):
+    """(largest runs per task, whether it is fixed): ``chunk`` when given; else about
+    :data:`TASK_SECONDS` of the runner's CPU time per task (``cost``: seconds per run), and
+    at most a quarter of each worker's share of a scenario's runs."""
+    if chunk:
+        return int(chunk), True
+    share = math.ceil(n_runs / (4 * max(n_workers, 1)))
+    if cost:
+        return max(1, min(share, round(TASK_SECONDS / cost))), False
+    return max(1, min(FMPY_CHUNK, share)), False
+
+
+def _chunks(store, names, largest, fixed, parallel):
+    """The missing runs as tasks ``(name, indices)``, made as they are handed out: nothing the
+    size of all the runs is held. Unless fixed, a task shrinks towards the end (at most a
+    quarter of each worker's share of the runs still to hand out), so the workers finish
+    together."""
+    left = sum(store.n - store.done(name) for name in names)
+
+    def size():
+        return largest if fixed else max(1, min(largest, math.ceil(left / (4 * max(parallel, 1)))))
+
+    for name in names:
+        held = np.empty(0, np.int64)
+        for block in store.missing_blocks(name):
+            held = np.concatenate((held, block))
+            while held.size >= size():
+                part, held = held[:size()], held[size():]
+                left -= part.size
+                yield name, part
+        if held.size:
+            left -= held.size
+            yield name, held
+
+
+def _nominal_setups(scs, bases, options):
+    """Each scenario's experiment with its nominal plant (``bases``) and the sweep's options:
+    what the compute bound is measured on."""
+    return {sc.name: prepare_closed_loop(sc, plant_params=bases[sc.name], adaptation=options["adaptation"],
+                                         preview=options["preview"], master=options["master"])
+            for sc in scs}
 
 
 def _fmu_package(fmu_dir):
@@ -63,9 +109,10 @@ class _Progress:
         self.tty = bool(getattr(stream, "isatty", lambda: False)())
         self.next_mark = (math.floor(10 * done / total) + 1) / 10 if total else 1.0
 
-    def update(self, new):
-        self.done += len(new)
-        self.bad += sum(1 for _, status in new if status != "ok")
+    def update(self, new, bad):
+        """``new`` runs recorded, ``bad`` of them not ok."""
+        self.done += int(new)
+        self.bad += int(bad)
         now = time.perf_counter()
         frac = self.done / self.total
         elapsed = now - self.t0
@@ -111,7 +158,9 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
         Local worker processes (default: the number of cores); 0 runs everything in this
         process without Dask.
     chunk : int, optional
-        Runs per task (default: about four tasks per worker and scenario, at most 50).
+        Runs per task (default: with the native backend about :data:`TASK_SECONDS` of the
+        runner's CPU time per task, shrinking towards the end; with fmpy at most
+        :data:`FMPY_CHUNK`; either way at most a quarter of each worker's share).
     backend : {"native", "fmpy"}
     adaptation, preview, master
         As :func:`harness.masters.fmpy.simulate_closed_loop`.
@@ -188,30 +237,48 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
                        f"{total - done_before} to compute\n")
     prog = _Progress(total, done_before, progress) if progress is not None else None
     fields_ = {sc.name: scenario_fields(sc) for sc in scs}
-    worker_rss = []
     failures = []
+    # the largest worker's peak RSS; the tasks' CPU and wall-clock seconds
+    tally = {"worker_rss": None, "task_cpu": 0.0, "task_wall": 0.0}
 
     def collect(name, result):
-        rows, rss = result
+        rows, rss, (cpu, wall) = result
+        tally["task_cpu"] += cpu
+        tally["task_wall"] += wall
         if rss is not None:
-            worker_rss.append(rss)
-        new = store.add(name, rows)
+            tally["worker_rss"] = max(rss, tally["worker_rss"] or 0)
+        new = store.add_rows(name, rows)
         if prog:
-            prog.update(new)
+            prog.update(np.count_nonzero(new), np.count_nonzero(new & (rows.codes != STATUS_CODE["ok"])))
 
+    load = os.getloadavg() if hasattr(os, "getloadavg") else None
+    runner = None
+    if backend == "native" and total > done_before:
+        if progress is not None:
+            progress.write("sweep: timing the native runner on each scenario (the compute bound)\n")
+        runner = measure_runner(_nominal_setups(scs, bases, options), fmu_dir)
     n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
-    size = chunk or max(1, min(50, math.ceil(n_runs / (4 * max(n_workers, 1)))))
+
+    def tasks(parallel):
+        cost = max(runner[k] * sc.n_samples * 1e-9 for k, sc in zip(names, scs)) if runner else None
+        largest, fixed = _chunk_sizes(n_runs, parallel, cost, chunk)
+        return _chunks(store, names, largest, fixed, parallel)
+
+    clock = {}
     try:
         if scheduler is None and n_workers == 0:
-            where = "this process (no Dask)"
-            for sc in scs:
-                for part in _chunks_of(store.missing(sc.name), size):
-                    rows, _ = run_chunk(package, fields_[sc.name], bases[sc.name], spreads, seed, part,
-                                        varied, options)
-                    collect(sc.name, (rows, None))
+            where, cores = "this process (no Dask)", 1
+            prepare_worker(package, options)
+            clock["start"], cpu = time.perf_counter(), time.process_time()
+            for name, part in tasks(1):
+                rows, _, used = run_chunk(package, fields_[name], bases[name], spreads, seed, part,
+                                          varied, options)
+                collect(name, (rows, None, used))
+            clock["end"] = time.perf_counter()
+            clock["cpu"] = time.process_time() - cpu - tally["task_cpu"]     # this process besides the tasks
         else:
-            where = _run_on_dask(scheduler, n_workers, package, scs, store, size, collect, failures,
-                                 (fields_, bases, spreads, seed, varied, options), prog)
+            where, cores = _run_on_dask(scheduler, n_workers, package, tasks, collect, failures,
+                                        (fields_, bases, spreads, seed, varied, options), prog, clock)
     except KeyboardInterrupt:
         store.close()
         if progress is not None:
@@ -225,21 +292,29 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
         why = f" (last error: {failures[-1]})" if failures else ""
         raise SweepIncompleteError(f"{missing} of {total} runs are missing: their tasks failed on every "
                                    f"attempt{why}; the others are in {store.path}: rerun with --resume")
-    peak = {"client": peak_rss(), "worker": max(worker_rss) if worker_rss else None}
+    peak = {"client": peak_rss(), "worker": tally["worker_rss"]}
+    bound = (Bound(runner, {sc.name: sc.n_samples for sc in scs}, cores) if runner else None)
     return SweepResult(names, spreads,
                        {sc.name: ParameterSets(bases[sc.name], spreads, seed, n_runs) for sc in scs},
                        {name: RunRows(store, name) for name in names},
                        time.perf_counter() - t_start, where, options, computed=total - done_before,
-                       peak_rss=peak, store=store)
+                       peak_rss=peak, store=store,
+                       compute_seconds=clock["end"] - clock["start"] if "end" in clock else math.nan,
+                       bound=bound, load=load,
+                       cpu_seconds={"tasks": tally["task_cpu"], "client": clock.get("cpu", math.nan),
+                                    "tasks_wall": tally["task_wall"]})
 
 
 _ATTEMPTS = 4          # a task whose worker is lost is run again; after this many failures its runs are missing
 
 
-def _run_on_dask(scheduler, n_workers, package, scs, store, size, collect, failures, task, prog):
-    """Run the missing runs on Dask; return where. At most a few tasks per worker are
-    queued at a time (memory does not grow with the number of runs). A task lost with its
-    worker is rescheduled by Dask; a task that fails anyway is submitted again."""
+def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, prog, clock):
+    """Run the missing runs on Dask; return (where, the runs computed at once). At most a few
+    tasks per worker are queued at a time, made as they are handed out (memory does not grow
+    with the number of runs). A task lost with its worker is rescheduled by Dask; a task that
+    fails anyway is submitted again. ``clock`` gets the start (the first task handed out),
+    the end (the last one collected) and the CPU seconds of this process in between (the
+    client, and a local cluster's scheduler)."""
     from dask.distributed import Client, LocalCluster, as_completed     # heavy: only here
 
     fields_, bases, spreads, seed, varied, options = task
@@ -249,28 +324,46 @@ def _run_on_dask(scheduler, n_workers, package, scs, store, size, collect, failu
                                dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
         where = f"a local Dask cluster of {n_workers} worker process{'es' if n_workers > 1 else ''}"
+        cores = min(n_workers, os.cpu_count() or n_workers)
     else:
         client = Client(scheduler, timeout=30)
         info = client.scheduler_info()
         nw = len(info.get("workers", {}))
         where = f"the Dask cluster at {scheduler} ({nw} worker{'s' if nw != 1 else ''})"
         n_workers = max(nw, 1)
+        cores = max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
     try:
         shipped = client.scatter(package, broadcast=True)
-        pending = deque((sc.name, part, 1) for sc in scs for part in _chunks_of(store.missing(sc.name), size))
+        # the workers there now load the FMUs before the clock starts (part of the start, like
+        # the cluster's); a worker that joins later does it in its first task, and a worker
+        # that cannot fails its tasks, which are retried and reported as any failed task
+        try:
+            client.run(prepare_worker, package, options)
+        except Exception:                       # noqa: BLE001 - the tasks meet it again and report it
+            pass
+        source = tasks(cores)
+        retry = deque()
         inflight = {}
         queue = as_completed()
         limit = max(8, 4 * n_workers)
 
         def submit():
-            name, part, attempt = pending.popleft()
+            if retry:
+                name, part, attempt = retry.popleft()
+            else:
+                nxt = next(source, None)
+                if nxt is None:
+                    return False
+                (name, part), attempt = nxt, 1
             fut = client.submit(run_chunk, shipped, fields_[name], bases[name], spreads, seed, part,
                                 varied, options, pure=False)
             inflight[fut] = (name, part, attempt)
             queue.add(fut)
+            return True
 
-        while pending and len(inflight) < limit:
-            submit()
+        clock["start"], cpu = time.perf_counter(), time.process_time()
+        while len(inflight) < limit and submit():
+            pass
         for fut in queue:
             name, part, attempt = inflight.pop(fut)
             try:
@@ -278,18 +371,18 @@ def _run_on_dask(scheduler, n_workers, package, scs, store, size, collect, failu
             except Exception as exc:                # noqa: BLE001 - any failure of a task is retried
                 failures.append(first_line(exc) or type(exc).__name__)
                 if attempt < _ATTEMPTS:
-                    pending.appendleft((name, part, attempt + 1))
+                    retry.append((name, part, attempt + 1))
                     if prog is not None:
                         prog.say(f"sweep: a task of {len(part)} runs failed ({failures[-1]}); "
                                  f"running it again (attempt {attempt + 1} of {_ATTEMPTS})")
             else:
                 collect(name, result)
             fut.release()
-            while pending and len(inflight) < limit:
-                submit()
+            while len(inflight) < limit and submit():
+                pass
+        clock["end"], clock["cpu"] = time.perf_counter(), time.process_time() - cpu
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
-    return where
-
+    return where, cores

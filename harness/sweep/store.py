@@ -1,6 +1,6 @@
 """The runs of a sweep, streamed to disk: the journal (one CSV row per run, appended as
-each task completes), what is kept in memory (25 bytes per run) and the result that reads
-its rows back."""
+each task completes, a task's rows in one write), what is kept in memory (25 bytes per run)
+and the result that reads its rows back."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import numpy as np
 from .spreads import apply_spreads, run_deltas
 
 __all__ = ["STATUSES", "JOURNAL", "RUNS", "STATUS_CODE", "RunStore", "ParameterSets",
-           "RunRows", "SweepResult", "csv_line"]
+           "RunRows", "SweepResult", "TaskRows", "csv_line", "task_rows"]
 
 #: outcomes of a run
 STATUSES = ("ok", "diverged", "saturated", "invalid")
@@ -31,6 +31,75 @@ def csv_line(cells):
     buf = io.StringIO()
     csv.writer(buf, lineterminator="\n").writerow(cells)
     return buf.getvalue().encode("utf-8")
+
+
+def _cell(text):
+    """One text field as :func:`csv_line` writes it among others (quoted when it must be)."""
+    return csv_line([text]).decode("utf-8")[:-1] if text else ""
+
+
+@dataclass(frozen=True)
+class TaskRows:
+    """A task's runs, as the journal records them: what is kept in memory of each run and
+    its journal row (``data``, every row ending in a newline; row j ends at ``ends[j]``).
+
+    Attributes
+    ----------
+    indices : ndarray of int64
+    codes : ndarray of int8
+        ``STATUS_CODE`` of each run's status.
+    e_rms, e_r : ndarray of float64
+    data : bytes
+    ends : ndarray of int64
+    """
+
+    indices: np.ndarray
+    codes: np.ndarray
+    e_rms: np.ndarray
+    e_r: np.ndarray
+    data: bytes
+    ends: np.ndarray
+
+    def __len__(self):
+        return int(self.indices.size)
+
+
+def task_rows(name, indices, statuses, e_rms, e_r, seconds, columns, reasons):
+    """The journal rows of some runs of scenario ``name``, in the columns of
+    :attr:`RunStore.header`, written as :func:`csv_line` writes them (the numbers as their
+    shortest exact text, ``seconds`` to 0.1 ms), all in one go.
+
+    Parameters
+    ----------
+    name : str
+    indices : sequence of int
+    statuses : sequence of str
+        One of :data:`STATUSES` per run.
+    e_rms, e_r, seconds : sequence of float
+    columns : sequence of sequences
+        The varied parameters' values: one sequence per column, one value per run (Python
+        floats and ints, as their text is written).
+    reasons : sequence of str
+        One line each (a row holds no newline), empty for a run that is ok.
+
+    Returns
+    -------
+    TaskRows
+    """
+    indices = [int(i) for i in indices]
+    e_rms = [float(e) for e in e_rms]
+    e_r = [float(e) for e in e_r]
+    head = _cell(name)
+    values = zip(*columns) if columns else ((),) * len(indices)
+    lines = [",".join([head, str(i), st, repr(e), repr(r), f"{s:.4f}", *map(repr, vals), _cell(why)])
+             for i, st, e, r, s, vals, why in zip(indices, statuses, e_rms, e_r, seconds, values, reasons)]
+    data = ("\n".join(lines) + "\n").encode("utf-8") if lines else b""
+    ends = np.flatnonzero(np.frombuffer(data, np.uint8) == ord("\n")).astype(np.int64) + 1
+    if ends.size != len(lines):
+        raise ValueError("a journal row holds a newline")
+    return TaskRows(np.asarray(indices, dtype=np.int64),
+                    np.asarray([STATUS_CODE[s] for s in statuses], dtype=np.int8),
+                    np.asarray(e_rms, dtype=float), np.asarray(e_r, dtype=float), data, ends)
 
 
 class RunStore:
@@ -67,6 +136,15 @@ class RunStore:
 
     def missing(self, name):
         return np.flatnonzero(self.status[name] == MISSING)
+
+    def missing_blocks(self, name, block=1 << 16):
+        """The missing runs of ``name`` in order, as arrays of at most ``block`` indices
+        (nothing the size of all the runs is made)."""
+        codes = self.status[name]
+        for start in range(0, self.n, block):
+            found = np.flatnonzero(codes[start:start + block] == MISSING)
+            if found.size:
+                yield found + start
 
     def load(self):
         """Read the journal of an interrupted sweep: every complete row of a known run is
@@ -113,22 +191,42 @@ class RunStore:
         self._pos = self._out.tell()
 
     def add(self, name, rows):
-        """Record a task's rows and append them to the journal (flushed). Returns the rows
-        that were new."""
-        new = []
-        chunk = bytearray()
-        for index, status, e_rms, e_r, reason, seconds, values in rows:
-            if self.status[name][index] != MISSING:
-                continue
-            line = csv_line([name, index, status, repr(float(e_rms)), repr(float(e_r)),
-                              f"{seconds:.4f}", *[repr(v) for v in values], reason])
-            self._record(name, index, STATUS_CODE[status], e_rms, e_r, self._pos + len(chunk))
-            chunk += line
-            new.append((index, status))
+        """Record rows ``(index, status, e_rms, e_r, reason, seconds, [values])`` (see
+        :meth:`add_rows`). Returns the ``(index, status)`` of the rows that were new."""
+        rows = list(rows)
+        if not rows:
+            return []
+        index, status, e_rms, e_r, reason, seconds, values = zip(*rows)
+        task = task_rows(name, index, status, e_rms, e_r, seconds, list(zip(*values)), reason)
+        new = self.add_rows(name, task)
+        return [(i, s) for i, s, keep in zip(index, status, new) if keep]
+
+    def add_rows(self, name, task):
+        """Record a task's runs (:class:`TaskRows`) and append their rows to the journal in
+        one write (flushed). A run already recorded, or given twice, is recorded once.
+        Returns whether each run was new (bool array)."""
+        idx = task.indices
+        new = self.status[name][idx] == MISSING
+        if idx.size:
+            first = np.zeros(idx.size, bool)
+            first[np.unique(idx, return_index=True)[1]] = True
+            new &= first
+        starts = np.concatenate(([0], task.ends[:-1])).astype(np.int64)
+        if new.all():
+            chunk, lengths = task.data, task.ends - starts
+        else:
+            chunk = b"".join(task.data[a:b] for a, b, keep in zip(starts, task.ends, new) if keep)
+            lengths = (task.ends - starts)[new]
         if chunk:
+            offsets = self._pos + np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
             self._out.write(chunk)
             self._out.flush()
             self._pos += len(chunk)
+            kept = idx[new]
+            self.status[name][kept] = task.codes[new]
+            self.e_rms[name][kept] = task.e_rms[new]
+            self.e_r[name][kept] = task.e_r[new]
+            self.offset[name][kept] = offsets
         return new
 
     def close(self):
@@ -234,6 +332,18 @@ class SweepResult:
         Peak resident set sizes in bytes: ``client`` (this process, where a local cluster's
         scheduler also runs) and ``worker`` (the largest of the workers; None without Dask).
     store : RunStore
+    compute_seconds : float
+        Wall-clock seconds from the first task handed out to the last one collected (nan
+        when nothing was computed).
+    bound : harness.sweep.bound.Bound or None
+        The native runner's cost measured in this call, and the cores (None with fmpy, or
+        when nothing was computed).
+    load : tuple or None
+        The load average (1, 5, 15 min) when the call started.
+    cpu_seconds : dict
+        CPU seconds while computing: ``tasks`` (the tasks' processes, summed over the tasks)
+        and ``client`` (this process besides the tasks); and ``tasks_wall``, the tasks'
+        wall-clock seconds summed (more than their CPU when other processes had the cores).
     """
 
     scenarios: list
@@ -246,6 +356,10 @@ class SweepResult:
     computed: int = 0
     peak_rss: dict = field(default_factory=dict)
     store: object = None
+    compute_seconds: float = math.nan
+    bound: object = None
+    load: tuple = None
+    cpu_seconds: dict = field(default_factory=dict)
 
     def counts(self, name):
         codes = self.store.status[name]

@@ -1,5 +1,14 @@
 """The worker side of a sweep: a task runs some runs of one scenario, each on its own drawn
-parameters, on this process's instances of the shipped FMUs."""
+parameters, on this process's instances of the shipped FMUs, and returns their journal rows.
+
+On the native master a task's runs are one C call (``piezo_runner_batch``): the
+parameters are drawn for the whole task (:func:`harness.sweep.spreads.draw_columns`), the
+runner runs them back to back and returns per run the sums the checks and metrics are made
+of, and the checks' rules (:mod:`harness.checks`) decide on all of them at once. A run that
+fails a rule, or whose FMI calls failed, is run again on its own, the way every run is run
+otherwise (:func:`harness.masters.prepared_loop`, :func:`harness.checks.check_tracking_run`),
+and reported with that run's status and message. Both ways give the same bits.
+"""
 
 from __future__ import annotations
 
@@ -13,16 +22,20 @@ import tempfile
 import time
 from types import MappingProxyType
 
+import numpy as np
+
 from .. import masters
-from ..checks import RunCheckError, RunSaturatedError, check_tracking_run
+from ..checks import (RunCheckError, RunSaturatedError, check_tracking_run, clipped_too_often,
+                      error_above_reference, reference_rms)
 from ..fmu import FMUError, FMUInitializationError, LoopDivergedError, UnknownParameterError
 from ..loop import prepare_closed_loop
-from ..metrics import compute_metrics
+from ..metrics import compute_metrics, relative_from_sums, rms_from_sum, window_mask
 from ..scenarios import Scenario
-from .spreads import apply_spreads, run_deltas
+from .spreads import apply_spreads, draw_columns, run_deltas
+from .store import task_rows
 
-__all__ = ["run_chunk", "scenario_fields", "scenario_from_fields", "first_line", "peak_rss",
-           "remove_at_exit"]
+__all__ = ["run_chunk", "prepare_worker", "scenario_fields", "scenario_from_fields", "first_line",
+           "peak_rss", "remove_at_exit"]
 
 _TEMP_DIRS = {}        # the folders this process made, removed at its exit
 
@@ -106,6 +119,48 @@ def peak_rss():
     return int(peak if sys.platform == "darwin" else peak * 1024)
 
 
+def _run_alone(scenario, base, spreads, seed, index, options, fmu_dir):
+    """Run i on its own: (status, e_rms, e_r, reason, seconds)."""
+    params = apply_spreads(base, spreads, run_deltas(spreads, seed, index))
+    t0 = time.perf_counter()
+    status, e_rms, e_r, reason = _one_run(scenario, params, options, fmu_dir)
+    return status, e_rms, e_r, reason, time.perf_counter() - t0
+
+
+def _native_batch(scenario, base, columns, options, fmu_dir):
+    """The runs as one native batch: (e_rms, e_r, seconds, clean) arrays, ``clean`` False for
+    a run a check's rule fails or whose FMI calls failed; None when the batch does not
+    apply (the setup or the parameters are refused: every run then says why on its own)."""
+    try:
+        setup = prepare_closed_loop(scenario, plant_params=base, adaptation=options["adaptation"],
+                                    preview=options["preview"], master=options["master"])
+    except (TypeError, ValueError):
+        return None
+    window = window_mask(setup.time, scenario.metric_window, scenario.step_size)
+    where = np.flatnonzero(window)
+    if where.size == 0 or where[-1] - where[0] + 1 != where.size:
+        return None
+    try:
+        out = masters.native.native_loop(fmu_dir).run_batch(setup, columns, (where[0], where[-1] + 1))
+    except (TypeError, ValueError, UnknownParameterError):
+        return None
+    e_rms = rms_from_sum(out["sum_error2"], where.size)
+    e_r = relative_from_sums(out["sum_error2"], out["sum_y2"])
+    clean = ((out["status"] <= 1) & out["finite"]
+             & ~error_above_reference(e_rms, reference_rms(setup.y_d[window]))
+             & ~clipped_too_often(out["saturated"] / where.size))
+    return e_rms, e_r, out["seconds"], clean
+
+
+def prepare_worker(package, options):
+    """Ready this process for the sweep's tasks (what a worker's first task would do first):
+    the FMU files written and, with the native backend, extracted, their binaries loaded and
+    a pair instantiated, so the thread that runs the tasks only instantiates its own pair."""
+    fmu_dir = _fmu_dir_for(package)
+    if options["backend"] == "native":
+        masters.native.native_loop(fmu_dir)
+
+
 def run_chunk(package, description, base, spreads, seed, indices, varied, options):
     """Worker task: some runs of one scenario, each drawing its own parameters.
 
@@ -119,7 +174,7 @@ def run_chunk(package, description, base, spreads, seed, indices, varied, option
         The scenario's complete plant parameter set, before the spreads.
     spreads : list of Spread
     seed : int
-    indices : list of int
+    indices : sequence of int
         The runs (run i draws from the generator seeded by (seed, i)).
     varied : list of str
         Parameter names whose drawn values are returned with each run.
@@ -128,18 +183,31 @@ def run_chunk(package, description, base, spreads, seed, indices, varied, option
 
     Returns
     -------
-    (list of tuple, int or None)
-        ``(index, status, e_rms_um, e_r, reason, seconds, [values of varied])`` per run,
-        and this worker's peak RSS in bytes.
+    (harness.sweep.store.TaskRows, int or None, (float, float))
+        The runs' journal rows (scenario, run, status, e_rms [um], e_r, seconds, the values
+        of ``varied``, reason), this worker's peak RSS in bytes, and the CPU seconds this
+        process spent on the task (all its threads) with the wall-clock seconds it took.
     """
+    cpu, wall = time.process_time(), time.perf_counter()
     fmu_dir = _fmu_dir_for(package)
     scenario = scenario_from_fields(description)
-    out = []
-    for index in indices:
-        params = apply_spreads(base, spreads, run_deltas(spreads, seed, index))
-        t0 = time.perf_counter()
-        status, e_rms, e_r, reason = _one_run(scenario, params, options, fmu_dir)
-        out.append((int(index), status, e_rms, e_r, reason, time.perf_counter() - t0,
-                    [params[k] for k in varied]))
-    return out, peak_rss()
-
+    indices = [int(i) for i in indices]
+    m = len(indices)
+    columns = draw_columns(base, spreads, seed, indices)
+    statuses, reasons = ["ok"] * m, [""] * m
+    batch = None
+    if options["backend"] == "native" and m:
+        batch = _native_batch(scenario, base, columns, options, fmu_dir)
+    if batch is not None:
+        e_rms, e_r, seconds, clean = batch
+        e_rms, e_r, seconds = e_rms.tolist(), e_r.tolist(), seconds.tolist()
+        again = np.flatnonzero(~clean).tolist()
+    else:
+        e_rms, e_r, seconds = [math.nan] * m, [math.nan] * m, [math.nan] * m
+        again = range(m)
+    for j in again:
+        statuses[j], e_rms[j], e_r[j], reasons[j], seconds[j] = _run_alone(
+            scenario, base, spreads, seed, indices[j], options, fmu_dir)
+    values = [columns[k].tolist() if k in columns else [base[k]] * m for k in varied]
+    rows = task_rows(scenario.name, indices, statuses, e_rms, e_r, seconds, values, reasons)
+    return rows, peak_rss(), (time.process_time() - cpu, time.perf_counter() - wall)
