@@ -30,7 +30,17 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 BUILD_DIR = REPO / "build"
 FMU_DIR = BUILD_DIR / "fmus"
 FMU3_DIR = FMU_DIR / "fmi3"
-FMU_NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
+
+
+
+def _fmu_ids():
+    """The FMUs the build makes: FMU_IDS of CMakeLists.txt, their one list."""
+    import re
+    text = (REPO / "CMakeLists.txt").read_text()
+    return tuple(re.search(r"^set\(FMU_IDS ([^)]*)\)", text, re.M).group(1).split())
+
+
+FMU_NAMES = _fmu_ids()
 _FMU_SOURCE_SUFFIXES = {".c", ".h", ".xml", ".map", ".txt", ".cmake", ".py", ".html", ".png"}
 
 
@@ -140,6 +150,11 @@ def controller(_fmu_packages):
 @pytest.fixture(scope="session")
 def reference_signal(_fmu_packages):
     return _fmu_packages["ReferenceSignal"]
+
+
+@pytest.fixture(scope="session")
+def closed_loop(_fmu_packages):
+    return _fmu_packages["PiezoStageClosedLoop"]
 
 
 # fmpy's native logger proxy (which formats the variadic message) keeps ONE

@@ -345,7 +345,7 @@ def core_table_mismatches(model: str, table: dict) -> list[str]:
         ctype = ffi.typeof(struct)
         for step in path:
             ctype = ctype.item if isinstance(step, int) else dict(ctype.fields)[step].type
-        got = (_KIND[kind], ctype.cname, table["params_offset"] + ffi.offsetof(struct, *path),
+        got = (_KIND[kind], ctype.cname, table["param_structs"]["params"][0] + ffi.offsetof(struct, *path),
                int(default[name]) if kind != "float" else default[name])
         want = (e["type"], _C_TYPE[e["type"]], e["offset"], e["start"])
         if got != want:
