@@ -314,21 +314,31 @@ def piezo_stage_closed_loop(start_values=None, plant_start_values=None):
     fields = (("y", None), ("y_meas", None), ("v", "v"), ("reference", None), ("error", None),
               ("u", None), ("x", None), ("q", "q"), ("est.a1", "a1"), ("est.a2", "a2"),
               ("est.b1", "b1"), ("est.b2", "b2"), ("pred_error", "pred_error"),
-              ("saturated", "saturated"))
+              ("saturated", "saturated"), ("loop_delay", None), ("loop_delay_time", None),
+              ("preview_lead", None), ("sup.status", None), ("sup.gain", None), ("sup.delay", None))
     refs = {"time": time, **{name: [] for name, _ in fields}}
     published, out = ctrl.output, plant.output
+    sup = ctrl.raw.sup
+    # the delay of the committed samples and the sample from which it has held (0 while detecting)
+    delay, delay_time, lead_used = (0 if ctrl.raw.detecting else int(ctrl.raw.d)), 0.0, 0
     for k in range(n + 1):
-        stage = {"y": out.y, "y_meas": out.y_meas, "u": out.u, "x": out.x,
-                 "reference": ref.y_d, "error": ref.y_d - out.y}
+        loop = {"y": out.y, "y_meas": out.y_meas, "u": out.u, "x": out.x,
+                "reference": ref.y_d, "error": ref.y_d - out.y, "loop_delay": delay,
+                "loop_delay_time": delay_time, "preview_lead": lead_used,
+                "sup.status": int(sup.status), "sup.gain": sup.gain, "sup.delay": int(sup.delay)}
         for name, field in fields:
-            value = stage[name] if field is None else getattr(published, field)
+            value = loop[name] if field is None else getattr(published, field)
             refs[name].append(int(value) if name == "saturated" else value)
         if k < n:
-            c = ctrl.step_input(ref.y_ref, out.y_meas, ref.y_preview, preview if k > 0 else 0)
+            lead = preview if k > 0 else 0
+            c = ctrl.step_input(ref.y_ref, out.y_meas, ref.y_preview, lead)
             out = plant.step(lib.piezo_plant_rated_voltage(c.v if feedthrough else published.v))
             published = c
             if lib.piezo_reference_step(ref) != core.PIEZO_OK:
                 raise RuntimeError(f"piezo_reference_step failed at sample {k}")
+            lead_used = lead if c.preview else 0
+            if c.delay != delay:
+                delay, delay_time = c.delay, k * STEP
     return params, None, refs
 
 
