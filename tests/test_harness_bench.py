@@ -60,6 +60,17 @@ def test_bench_command_reports_every_loop(tmp_path):
                                     if line.startswith("plant ns/sample")).split()[2:]]
     assert len(exact) == 2 and all(x > 0 for x in exact)
     assert re.search(r"one 3 s run end to end .*: native [\d.]+ ms, fmpy [\d.]+ ms", out)
+    # the closed-loop FMU through fmpy.simulate_fmu beside the loops of several FMUs: each run's
+    # time, its time per sample (over 6000 samples of 3 s) and how much faster than the fmpy master
+    rows = [line for line in out.splitlines() if re.search(r" ms +[\d.]+ us +[\d.]+x +[\d.]+x$", line)]
+    labels = [re.split(r"\s{2,}", line.strip())[0] for line in rows]
+    assert labels[0].startswith("fmpy.simulate_fmu PiezoStageClosedLoop, 10 ms step") and len(rows) == 7, rows
+    assert labels[-1] == "fmpy's SSP player, the three FMUs"
+    for line in rows:
+        ms, us, same_run = re.search(r"([\d.]+) ms +([\d.]+) us +([\d.]+)x", line).groups()
+        assert float(ms) > 0 and math.isclose(float(us), float(ms) * 1e3 / 6000, rel_tol=0.01, abs_tol=0.002)
+    fmpy_master = next(line for line in rows if line.startswith("fmpy master"))
+    assert re.search(r" 1\.0x +[\d.]+x$", fmpy_master)        # itself
 
 
 def test_bench_loops_run_the_closed_loop_trajectory():
