@@ -202,8 +202,9 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_preview] = REF_INT("preview", preview),
 };
 
-/* ModelData.refused_by: which block refused the last refused sample (for its message) */
-enum { REFUSED_NONE = 0, REFUSED_CONTROLLER, REFUSED_STAGE, REFUSED_REFERENCE };
+/* ModelData.refused_by: which block refused the last refused sample (for its message), or
+ * REFUSED_ERROR: the outputs' error = reference - y overflowed */
+enum { REFUSED_NONE = 0, REFUSED_CONTROLLER, REFUSED_STAGE, REFUSED_REFERENCE, REFUSED_ERROR };
 
 /* A refusal: nothing of the loop changed; only what says why (as the controller's verdict). */
 static piezo_status refused(ModelData *data, int block, piezo_status st)
@@ -384,6 +385,8 @@ piezo_status model_update_outputs(ModelData *data, double *history, size_t histo
         r = sampled_y_d(data);      /* y_d_lead = 0, or fewer than y_d_lead samples so far */
     data->reference = r;
     data->error = r - data->plant.out.y;
+    if (!isfinite(data->error))      /* both finite, but |r - y| beyond the doubles */
+        return refused(data, REFUSED_ERROR, PIEZO_ERR_DIVERGED);
     data->loop_delay = data->track.delay;
     data->loop_delay_time = data->track.delay_time;
     data->preview_lead = data->lead_used;
@@ -481,6 +484,12 @@ int model_failure_text(const ModelData *data, piezo_status st, char *text, size_
                  -PIEZO_PLANT_V_RATED, PIEZO_PLANT_V_RATED);
         return 1;
     }
+    if (data->refused_by == REFUSED_ERROR) {
+        snprintf(text, size, "the tracking error reference - y = %.6g - (%.6g) um is beyond the doubles: "
+                 "the outputs cannot be given (an input y_d of that size is no displacement)",
+                 data->reference, data->plant.out.y);
+        return 1;
+    }
     if (data->refused_by == REFUSED_REFERENCE && st == PIEZO_ERR_DIVERGED) {
         snprintf(text, size, "the reference's time or the phase 2 pi frequency[i] t of a tone overflowed: "
                  "y_d(t) cannot be computed at t = %.9g s", sample_time(data, data->ctrl.k + 1));
@@ -500,12 +509,12 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         return "flags are not 0 or 1";
     if (!(isfinite(data->t0) && isfinite(data->y_d_latched)))
         return "time or latched input not finite";
-    if (data->refused_by < REFUSED_NONE || data->refused_by > REFUSED_REFERENCE)
+    if (data->refused_by < REFUSED_NONE || data->refused_by > REFUSED_ERROR)
         return "refusing block out of range";
     if (data->lead_used < 0 || data->lead_used >= PIEZO_PREVIEW_RING || data->preview_lead < 0
         || data->preview_lead >= PIEZO_PREVIEW_RING || data->loop_delay < 0 || data->loop_delay > PIEZO_MV_MAX_D
         || data->sup_status < 0 || data->sup_status > 2 || data->sup_delay < 0 || data->sup_delay > PIEZO_SUP_MAX_D
-        || !isfinite(data->sup_gain) || !isfinite(data->reference) || !isfinite(data->error))
+        || !isfinite(data->sup_gain))
         return "outputs out of range";
     if (data->control.mv_hold_inputs != 0)
         return "mv.hold_inputs set (this FMU has no such parameter)";

@@ -474,7 +474,8 @@ static int all_finite(const double *x, int n)
     return z0 + z1 == 0.0;
 }
 
-/* The estimates and the covariance of an evaluated sample are finite. The
+/* The estimates, the covariance and the supervisor's next statistics and gain (an output:
+ * szw / sww overflows where sww is tiny) of an evaluated sample are finite. The
  * operators' next states need no check of their own: each operator's output
  * is a finite-coefficient sum over its next states (SOE: sum c_i S_i; PI:
  * w0 u + sum w_i z_i), and an Inf or NaN state makes that sum Inf or NaN
@@ -485,7 +486,7 @@ static int sample_state_finite(const piezo_controller_sample *s)
     /* the supervisor's next doubles, z .. clip_error_sum, are contiguous */
     enum { SUP_DOUBLES = (offsetof(piezo_supervisor_next, clip_error_sum) - offsetof(piezo_supervisor_next, z))
                          / sizeof(double) + 1 };
-    return all_finite(s->out.theta, 4) && all_finite(&s->sup.z, SUP_DOUBLES)
+    return all_finite(s->out.theta, 4) && all_finite(&s->sup.z, SUP_DOUBLES) && all_finite(&s->sup.gain, 1)
            && (!s->rls_updated || all_finite(s->P, 16))
            && (!s->detecting || (all_finite(s->det_theta, PIEZO_DETECT_THETA)
                                  && all_finite(s->det_P, PIEZO_DETECT_P) && all_finite(s->det_score, PIEZO_DETECT_N)));
