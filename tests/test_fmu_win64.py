@@ -38,13 +38,13 @@ import pytest
 
 import fmpy
 
-from conftest import mingw_tool, need_windows_binaries, wine64
+from conftest import FMU_NAMES, mingw_tool, need_windows_binaries, wine64
 from fmu_experiments import SSP_TYPE, load_experiment, start_values, unzip
 
 REPO = Path(__file__).resolve().parents[1]
 HOST_SOURCE = REPO / "tests" / "wine_host" / "fmu_host.c"
 FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
-NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
+NAMES = FMU_NAMES
 
 FMI2_FUNCTIONS = {
     "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate",
