@@ -68,7 +68,8 @@ class LoopFaultError(LoopDivergedError):
 
 
 #: how the controller's Error messages begin when it stops the loop itself, and the error each means
-#: (fmu_src/AdaptiveCompoundController/model.c, model_failure_text)
+#: (fmu_src/fmi/fmu_controller.c, fmu_controller_failure: the words of AdaptiveCompoundController
+#: and PiezoStageClosedLoop alike)
 LOOP_FAILURES = (("supervision stopped the loop", LoopFaultError),
                  ("the closed loop is unstable", LoopDivergedError),
                  ("diverged", LoopDivergedError))
