@@ -239,8 +239,8 @@ atexit.register(_cleanup)
 
 
 def load(path, fmi_version=2):
-    """The FMU at ``path`` read and extracted (once per process and file content), checked to
-    be an FMI ``fmi_version``.0 Co-Simulation FMU.
+    """The FMU at ``path`` read and extracted (once per process, path and file content), checked
+    to be an FMI ``fmi_version``.0 Co-Simulation FMU.
 
     Raises
     ------
@@ -248,7 +248,9 @@ def load(path, fmi_version=2):
         Not an FMU, or an FMU of the other FMI version.
     """
     st = path.stat()
-    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    # the path as given too: messages name the file the caller asked for, also when another
+    # path (a link) led to the same file earlier in the process
+    key = (str(path), str(path.resolve()), st.st_mtime_ns, st.st_size)
     info = _EXTRACTED.get(key)
     if info is None:
         try:
