@@ -156,7 +156,8 @@ def fmu_path(model, fmu_dir=None, fmi_version=2):
 
 def _folder_contents(folder, model, fmi_version, from_env):
     """What a user-chosen FMU folder lacks and what it holds, for the message of a missing FMU."""
-    need = f"the harness runs {PLANT_MODEL}.fmu and {CONTROLLER_MODEL}.fmu from it"
+    need = (f"the harness runs {PLANT_MODEL}.fmu and {CONTROLLER_MODEL}.fmu from it"
+            if model in (PLANT_MODEL, CONTROLLER_MODEL) else f"the harness runs {model}.fmu from it")
     if fmi_version == 3:
         need += ", or from its fmi3/ subfolder, in their FMI 3.0 editions"
     name = f"{folder} ($PIEZO_FMU_DIR)" if from_env else str(folder)
