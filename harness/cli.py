@@ -89,8 +89,11 @@ def _backend_options(p, closed_loop=False):
     if closed_loop:
         p.add_argument("--backend", choices=masters.BACKENDS, default="auto",
                        help="auto (default): the native C master for long closed loops, fmpy "
-                            "otherwise; fmpy or native: that master for the FMUs; core: the C "
+                            "otherwise; fmpy or native: that master for the FMUs; closed-loop-fmu: "
+                            "the loop inside one FMU, PiezoStageClosedLoop, through fmpy; core: the C "
                             "core through cffi, no FMI")
+        p.add_argument("--master", dest="backend", choices=masters.BACKENDS, default=argparse.SUPPRESS,
+                       help="the same as --backend")
     else:
         p.add_argument("--backend", choices=masters.OPEN_LOOP_BACKENDS, default="fmpy",
                        help="fmpy: run the FMUs (default); core: the C core through cffi, no FMI")

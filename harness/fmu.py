@@ -68,7 +68,8 @@ class LoopFaultError(LoopDivergedError):
 
 
 #: how the controller's Error messages begin when it stops the loop itself, and the error each means
-#: (fmu_src/AdaptiveCompoundController/model.c, model_failure_text)
+#: (fmu_src/fmi/fmu_controller.c, fmu_controller_failure: the words of AdaptiveCompoundController
+#: and PiezoStageClosedLoop alike)
 LOOP_FAILURES = (("supervision stopped the loop", LoopFaultError),
                  ("the closed loop is unstable", LoopDivergedError),
                  ("diverged", LoopDivergedError))
@@ -155,7 +156,8 @@ def fmu_path(model, fmu_dir=None, fmi_version=2):
 
 def _folder_contents(folder, model, fmi_version, from_env):
     """What a user-chosen FMU folder lacks and what it holds, for the message of a missing FMU."""
-    need = f"the harness runs {PLANT_MODEL}.fmu and {CONTROLLER_MODEL}.fmu from it"
+    need = (f"the harness runs {PLANT_MODEL}.fmu and {CONTROLLER_MODEL}.fmu from it"
+            if model in (PLANT_MODEL, CONTROLLER_MODEL) else f"the harness runs {model}.fmu from it")
     if fmi_version == 3:
         need += ", or from its fmi3/ subfolder, in their FMI 3.0 editions"
     name = f"{folder} ($PIEZO_FMU_DIR)" if from_env else str(folder)
@@ -238,8 +240,8 @@ atexit.register(_cleanup)
 
 
 def load(path, fmi_version=2):
-    """The FMU at ``path`` read and extracted (once per process and file content), checked to
-    be an FMI ``fmi_version``.0 Co-Simulation FMU.
+    """The FMU at ``path`` read and extracted (once per process, path and file content), checked
+    to be an FMI ``fmi_version``.0 Co-Simulation FMU.
 
     Raises
     ------
@@ -247,7 +249,9 @@ def load(path, fmi_version=2):
         Not an FMU, or an FMU of the other FMI version.
     """
     st = path.stat()
-    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    # the path as given too: messages name the file the caller asked for, also when another
+    # path (a link) led to the same file earlier in the process
+    key = (str(path), str(path.resolve()), st.st_mtime_ns, st.st_size)
     info = _EXTRACTED.get(key)
     if info is None:
         try:

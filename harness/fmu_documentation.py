@@ -158,8 +158,28 @@ def _identity_table(root, platforms):
     return f"<table>{rows}</table>"
 
 
+def _system_model_section(do_step):
+    """PiezoStageClosedLoop's section instead of the wiring: the loop is inside."""
+    return f"""
+<h2 id="loop">Using it in a system model</h2>
+<p>The loop of the three FMUs PiezoStage, AdaptiveCompoundController and ReferenceSignal is
+inside: nothing to wire. Drop it into a master with any communication step (fixed, such as
+1 ms or 10 ms, or variable): every <code>{do_step}</code> computes the samples of
+<code>h</code> whose instants it passes. Read <code>y</code> (the true displacement),
+<code>y_meas</code> (the sensor), <code>v</code> and <code>error</code>; give the desired
+displacement either as the internal reference's parameters (the default) or through the input
+<code>y_d</code> with <code>use_internal_reference</code> = false, ahead of time by
+<code>y_d_lead</code> samples if the master knows it. With the defaults and a step of
+<code>h</code> = 0.5 ms it gives the samples of the three FMUs wired as in the project's
+closed-loop SSP (<code>PiezoStageClosedLoop.ssp</code>), bit for bit.</p>
+"""
+
+
 def _connection_section(model_identifier, do_step="fmi2DoStep"):
-    """The HTML section on wiring the closed loop, this model's connections in bold."""
+    """The HTML section on wiring the closed loop, this model's connections in bold (the
+    closed-loop FMU: how it goes into a system model instead)."""
+    if model_identifier not in {fmu[:-4] for fmu, _ in SSP_COMPONENTS.values()}:
+        return _system_model_section(do_step)
     fmu_of = {comp: fmu for comp, (fmu, _) in SSP_COMPONENTS.items()}
     units = {(comp, name): unit for comp, (_, conns) in SSP_COMPONENTS.items()
              for name, _, _, unit in conns}

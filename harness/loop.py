@@ -65,6 +65,40 @@ def reference_lead(controller_params):
     return 1 + mv_delay if mv_delay >= 0 else None
 
 
+#: the tones ReferenceSignal has
+REFERENCE_TONES = 8
+
+
+def reference_parameters(scenario):
+    """ReferenceSignal's parameters for a tracking scenario's sines reference: ``offset`` and all
+    eight tones (the unused ones 0, so the set is the whole reference, whatever the FMU's
+    defaults), and ``lead`` = 1 + ``mv.delay`` when the scenario sets ``mv.delay``.
+
+    Raises
+    ------
+    ValueError
+        Not a tracking scenario, a table reference, or more than 8 tones.
+    """
+    sig = scenario.signal
+    if scenario.kind != "tracking" or sig.kind != "sines":
+        raise ValueError(f"scenario '{scenario.name}' is not a tracking scenario with a sines "
+                         f"reference, which ReferenceSignal's parameters would carry")
+    if len(sig.amplitudes) > REFERENCE_TONES:
+        raise ValueError(f"scenario '{scenario.name}' has {len(sig.amplitudes)} tones; "
+                         f"ReferenceSignal has {REFERENCE_TONES}")
+    values = {"offset": float(sig.offset)}
+    tones = list(zip(sig.amplitudes, sig.frequencies, sig.phases))
+    tones += [(0.0, 0.0, 0.0)] * (REFERENCE_TONES - len(tones))
+    for i, (a, f, p) in enumerate(tones, start=1):
+        values[f"amplitude[{i}]"] = float(a)
+        values[f"frequency[{i}]"] = float(f)
+        values[f"phase[{i}]"] = float(p)
+    lead = reference_lead(scenario.controller)
+    if lead is not None:
+        values["lead"] = lead
+    return values
+
+
 #: the fields of a closed-loop result (every master's but other tools'), and of an open loop's
 CLOSED_LOOP_FIELDS = ("time", "y_d", "y", "y_meas", "v", "q", "a1", "a2", "b1", "b2", "pred_error",
                       "saturated")

@@ -41,7 +41,7 @@ import zipfile
 from fmpy.ssp.ssd import read_ssd
 
 from .fmu import fmu_path
-from .loop import reference_lead
+from .loop import reference_parameters
 from .scenarios import get_scenario
 
 __all__ = [
@@ -146,30 +146,16 @@ def parameter_set_for_scenario(name, registry=None):
         Not a tracking scenario, a table reference, or more than 8 tones.
     """
     sc = get_scenario(name, registry)
-    sig = sc.signal
-    if sc.kind != "tracking" or sig.kind != "sines":
-        raise ValueError(f"scenario '{sc.name}' is not a tracking scenario with a sines "
-                         f"reference; an SSP carries its reference as ReferenceSignal parameters")
-    if len(sig.amplitudes) > 8:
-        raise ValueError(f"scenario '{sc.name}' has {len(sig.amplitudes)} tones; "
-                         f"ReferenceSignal has 8")
+    try:
+        reference = reference_parameters(sc)
+    except ValueError as exc:
+        raise ValueError(f"{exc}; an SSP carries its reference as ReferenceSignal parameters") from None
     values = {}
     for comp, params in (("plant", sc.plant), ("controller", sc.controller)):
         for key, value in params.items():
             values[f"{comp}.{key}"] = value
     values["plant.h"] = values["controller.h"] = values["reference.h"] = float(sc.step_size)
-    values["reference.offset"] = float(sig.offset)
-    # all 8 tones, the unused ones 0: the set is the scenario's whole reference, whatever
-    # ReferenceSignal's defaults (its first tone defaults to the paper's 1 Hz, 10 um one)
-    tones = list(zip(sig.amplitudes, sig.frequencies, sig.phases))
-    tones += [(0.0, 0.0, 0.0)] * (8 - len(tones))
-    for i, (a, f, p) in enumerate(tones, start=1):
-        values[f"reference.amplitude[{i}]"] = float(a)
-        values[f"reference.frequency[{i}]"] = float(f)
-        values[f"reference.phase[{i}]"] = float(p)
-    lead = reference_lead(sc.controller)
-    if lead is not None:
-        values["reference.lead"] = lead
+    values.update({f"reference.{key}": value for key, value in reference.items()})
     return SspParameterSet(sc.name, sc.description, values, float(sc.duration),
                            float(sc.step_size))
 

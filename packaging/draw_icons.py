@@ -84,8 +84,29 @@ def reference_signal():
     _save(fig, "ReferenceSignal")
 
 
+def piezo_stage_closed_loop():
+    fig, ax, plt = _canvas()
+    boxes = [(0.8, "C", "#cfe0f5"), (5.6, "P", "#f2c27a")]     # controller, stage
+    for x, label, colour in boxes:
+        ax.add_patch(plt.Rectangle((x, 4.2), 3.4, 2.6, facecolor=colour, edgecolor="#234",
+                                   linewidth=1.5))
+        ax.text(x + 1.7, 5.5, label, fontsize=20, ha="center", va="center", style="italic")
+    ax.annotate("", xy=(5.6, 5.5), xytext=(4.2, 5.5),
+                arrowprops=dict(arrowstyle="->", linewidth=1.8))
+    ax.plot([9.0, 9.4, 9.4, 0.4, 0.4, 0.8], [5.5, 5.5, 2.6, 2.6, 5.0, 5.0], color="#c22",
+            linewidth=1.8)
+    ax.annotate("", xy=(0.8, 5.0), xytext=(0.45, 5.0),
+                arrowprops=dict(arrowstyle="->", color="#c22", linewidth=1.8))
+    t = np.linspace(0.0, 1.0, 200)
+    ax.plot(1.0 + 8.0 * t, 8.2 + 0.8 * np.sin(2 * np.pi * 2 * t), color="#235", linewidth=1.8)
+    ax.text(5.0, 0.55, "Stage, closed loop", fontsize=11, ha="center", color="#335",
+            weight="bold")
+    _save(fig, "PiezoStageClosedLoop")
+
+
 if __name__ == "__main__":
     piezo_stage()
     adaptive_compound_controller()
     reference_signal()
+    piezo_stage_closed_loop()
     print(f"wrote the icons in {OUT}")

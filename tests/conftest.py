@@ -151,6 +151,11 @@ def reference_signal(_fmu_packages):
     return _fmu_packages["ReferenceSignal"]
 
 
+@pytest.fixture(scope="session")
+def closed_loop(_fmu_packages):
+    return _fmu_packages["PiezoStageClosedLoop"]
+
+
 # fmpy's native logger proxy (which formats the variadic message) keeps ONE
 # Python logger per process, so every instance shares one dispatcher that
 # routes by componentEnvironment.

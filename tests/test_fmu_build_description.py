@@ -27,9 +27,10 @@ import numpy as np
 import pytest
 
 from fmu_experiments import load_experiment
+from conftest import FMU_NAMES
 
 FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
-NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
+NAMES = FMU_NAMES
 
 
 def _unzip_sources(fmu, folder):

@@ -109,17 +109,24 @@ def _creep_terms(n, a):
     return n * a + n * (n - 1) // 2
 
 
-@pytest.mark.parametrize("name", ["PiezoStage", "AdaptiveCompoundController"])
+#: what lets each FMU take a step of many samples: the controller holds its inputs over one only
+#: when told to (and its monitor has no loop to judge); the closed loop takes any step
+# the controller holds its inputs over a step of several samples only when told to (open loop:
+# no monitor, no supervision)
+LONG_STEP_PARAMS = {"PiezoStage": {},
+                    "AdaptiveCompoundController": {"monitor.divergence_samples": 0, "mv.hold_inputs": True,
+                                                   "sup.enabled": False},
+                    "PiezoStageClosedLoop": {}}
+
+
+@pytest.mark.parametrize("name", list(LONG_STEP_PARAMS))
 def test_the_longest_step_passes_and_one_sample_more_is_refused(_fmu_packages, make_fmu, name):
     """Reference: the bound docs/fmus.md states. A step of exactly that many samples passes (it
     ends at t = bound h); one of a sample more is refused, naming the bound, and changes
     nothing (the time stays); so is a step of 1e9 s."""
     samples, _ = _documented_bounds()
     fmu = make_fmu(_fmu_packages[name])
-    # the controller holds its inputs over a step of several samples only when told to (open
-    # loop: no monitor, no supervision)
-    fmu.initialize({"monitor.divergence_samples": 0, "mv.hold_inputs": True, "sup.enabled": False}
-                   if name != "PiezoStage" else None)
+    fmu.initialize(LONG_STEP_PARAMS[name] or None)
     for H_step in ((samples + 1) * H, 1e9):
         with pytest.raises(FMICallException):
             fmu.slave.doStep(0.0, H_step)
@@ -129,16 +136,14 @@ def test_the_longest_step_passes_and_one_sample_more_is_refused(_fmu_packages, m
     assert fmu.slave.getRealStatus(2) == samples * H
 
 
-@pytest.mark.parametrize("name", ["PiezoStage", "AdaptiveCompoundController"])
+@pytest.mark.parametrize("name", list(LONG_STEP_PARAMS))
 def test_with_exact_creep_the_longest_step_it_names_passes(_fmu_packages, make_fmu, name):
     """creep.exact = true: the sample at k sums its k + 1 past values. After 10 samples a step
     of the documented sample bound is refused, naming the bound on the terms (docs/fmus.md)
     and the longest step that passes from there; that step is the longest whose sums stay
     within the bound (closed form), it passes, and one sample more is refused."""
     samples, terms = _documented_bounds()
-    params = {"creep.exact": True}
-    if name != "PiezoStage":
-        params.update({"monitor.divergence_samples": 0, "mv.hold_inputs": True, "sup.enabled": False})
+    params = {"creep.exact": True, **LONG_STEP_PARAMS[name]}
     fmu = make_fmu(_fmu_packages[name])
     fmu.initialize(params)
     fmu.step(10)

@@ -30,11 +30,11 @@ from xml.etree import ElementTree as ET
 
 import pytest
 
-from conftest import expected_binaries
+from conftest import FMU_NAMES, expected_binaries
 from test_repository import FORBIDDEN
 
 REPO = Path(__file__).resolve().parents[1]
-NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
+NAMES = FMU_NAMES
 LS_REF = "extra/org.fmi-standard.fmi-ls-ref/"
 VERSION = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["version"]
 
@@ -145,9 +145,19 @@ def _bounded_parameters(name):
 COMPANIONS = {"tf.a1": {"tf.a2": 1 - 1e-12}, "rls.trace_max": {"rls.p0": 1e-12}}
 
 
+def _companions(parameter):
+    """COMPANIONS of a parameter; the closed-loop FMU's controller.<name> has controller.<its>."""
+    prefix = "controller."
+    if parameter.startswith(prefix):
+        return {prefix + k: v for k, v in COMPANIONS.get(parameter[len(prefix):], {}).items()} or None
+    return COMPANIONS.get(parameter)
+
+
 def _refusal(name, parameter, value, others=None):
     """The parameter the C core names when refusing `parameter` = `value`, or None."""
     from harness import core
+    if name == "PiezoStageClosedLoop":
+        return _closed_loop_refusal(parameter, value, others)
     if name == "PiezoStage":
         make = core.Plant
     elif name == "AdaptiveCompoundController":
@@ -159,6 +169,48 @@ def _refusal(name, parameter, value, others=None):
     except core.CoreParameterError as exc:
         return exc.parameter
     return None
+
+
+def _closed_loop_refusal(parameter, value, others=None):
+    """The closed-loop FMU's parameter refused (its component's core, the name mapped back), or
+    None; its own parameter y_d_lead through the FMU itself (it checks it, no core block)."""
+    from harness.closed_loop import CONTROLLER_PREFIX, component_parameters
+    plant, controller, rest = component_parameters({**(others or {}), parameter: value})
+    if parameter == "y_d_lead":
+        return _fmu_refusal("PiezoStageClosedLoop", parameter, value)
+    for comp, given in (("PiezoStage", plant), ("AdaptiveCompoundController", controller)):
+        if parameter in given or parameter.removeprefix(CONTROLLER_PREFIX) in given:
+            name = parameter.removeprefix(CONTROLLER_PREFIX)
+            found = _refusal(comp, name, value, {k: v for k, v in given.items() if k != name})
+            if found is None:
+                return None
+            return parameter if found == name else found
+    return _reference_refusal(parameter, value)
+
+
+def _fmu_refusal(model, parameter, value):
+    """`parameter` when the FMU's initialization refuses `parameter` = `value` alone, else None."""
+    import tempfile
+    import fmpy
+    from fmpy.fmi2 import FMU2Slave
+    path = REPO / "build" / "fmus" / f"{model}.fmu"
+    md = fmpy.read_model_description(str(path))
+    var = {v.name: v for v in md.modelVariables}[parameter]
+    with tempfile.TemporaryDirectory() as unzipdir:
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=fmpy.extract(str(path), unzipdir=unzipdir),
+                          modelIdentifier=model)
+        slave.instantiate(loggingOn=False)
+        try:
+            slave.setupExperiment(startTime=0.0)
+            slave.enterInitializationMode()
+            (slave.setInteger if var.type == "Integer" else slave.setReal)([var.valueReference], [value])
+            try:
+                slave.exitInitializationMode()
+            except Exception:
+                return parameter
+            return None
+        finally:
+            slave.freeInstance()
 
 
 def _reference_refusal(parameter, value):
@@ -187,10 +239,10 @@ def test_min_max_match_what_the_core_refuses(name):
     narrower than the core's fails one of the two."""
     bounded = _bounded_parameters(name)
     assert len(bounded) >= {"PiezoStage": 20, "AdaptiveCompoundController": 25,
-                            "ReferenceSignal": 10}[name]
+                            "ReferenceSignal": 10, "PiezoStageClosedLoop": 55}[name]
     not_refused = [(p, bound, out) for p, bound, out, _ in bounded if _refusal(name, p, out) != p]
     refused_inside = [(p, bound, inside) for p, bound, _, inside in bounded
-                      if _refusal(name, p, inside, COMPANIONS.get(p)) == p]
+                      if _refusal(name, p, inside, _companions(p)) == p]
     assert not not_refused, f"accepted outside the declared range: {not_refused}"
     assert not refused_inside, f"refused inside the declared range: {refused_inside}"
 
@@ -262,11 +314,13 @@ def test_documentation_explains_model_loop_paper_and_licence(fmu_paths, name):
         page = zf.read("documentation/index.html").decode("utf-8")
         licence = zf.read("documentation/licenses/license.txt")
         png = zf.read("model.png")
-    for heading in ("What it models", "Equations", "Variables", "Connecting the closed loop",
+    # the closed-loop FMU has the loop inside: how it goes into a system model instead
+    loop = "Using it in a system model" if name == "PiezoStageClosedLoop" else "Connecting the closed loop"
+    for heading in ("What it models", "Equations", "Variables", loop,
                     "Building from the sources", "Reference results", "Source", "Licence"):
         assert f">{heading}</h2>" in page, heading
-    for _, out, _, inp in SSP_CONNECTIONS:                   # the same wiring as the SSP
-        assert f"<code>{out}</code>" in page and f"<code>{inp}</code>" in page
+    for _, out, _, inp in SSP_CONNECTIONS if name != "PiezoStageClosedLoop" else ():
+        assert f"<code>{out}</code>" in page and f"<code>{inp}</code>" in page   # the SSP's wiring
     assert "https://www.hindawi.com/journals/mse/2022/2534439/" in page
     assert "BSD-3-Clause" in page and 'href="licenses/license.txt"' in page
     assert not [word for word in FORBIDDEN if word in page]

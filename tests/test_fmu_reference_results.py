@@ -27,8 +27,9 @@ from fmpy.util import validate_result
 
 import numpy_reference as ref
 from fmu_experiments import LS, LS_REF, load_experiment, manifest, worst_violation
+from conftest import FMU_NAMES
 
-NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
+NAMES = FMU_NAMES
 ROLE = re.compile(r"(document|requirement|specification|model|parameter|system|testcase|"
                   r"experiment(/(smoke-test|validation|uncertainty-analysis))?|result|method|"
                   r"rationale|report|request|delivery|configuration|signature|"
@@ -97,7 +98,7 @@ def _simulate(fmu, exp, parameters=None):
 
 #: a change too small to see in a plot that the comparison must still catch
 PERTURBATION = {"PiezoStage": ("creep.alpha", 1e-6), "AdaptiveCompoundController": ("rls.forgetting", -1e-6),
-                "ReferenceSignal": ("phase[1]", 1e-6)}
+                "ReferenceSignal": ("phase[1]", 1e-6), "PiezoStageClosedLoop": ("creep.alpha", 1e-6)}
 
 
 @pytest.mark.parametrize("name", NAMES)

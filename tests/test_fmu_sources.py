@@ -6,8 +6,9 @@
 (b) a binary built from the FMU's sources only (cc, C99, -Wall -Wextra -Wpedantic -Werror,
     the FMI headers of fmpy) and re-zipped as a new FMU
 (c) gives exactly the outputs of the shipped binary: PiezoStage open loop through
-    fmpy.simulate_fmu, and the two FMUs in a closed loop with a mismatched plant (RLS
-    adapting, sensor noise on).
+    fmpy.simulate_fmu, the two FMUs in a closed loop with a mismatched plant (RLS
+    adapting, sensor noise on), and PiezoStageClosedLoop on the mismatch benchmark through
+    fmpy.simulate_fmu at 10 ms steps.
 """
 import os
 import pathlib
@@ -22,10 +23,12 @@ import pytest
 from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 
+from conftest import FMU_NAMES
+
 REPO = pathlib.Path(__file__).resolve().parents[1]
 FMI_HEADERS_DIR = pathlib.Path(fmpy.__file__).parent / "c-code"
 FMI_HEADERS = {"fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"}
-NAMES = ("PiezoStage", "AdaptiveCompoundController")
+NAMES = FMU_NAMES
 INCLUDE = re.compile(r'^[ \t]*#[ \t]*include[ \t]*"([^"]+)"', re.MULTILINE)
 H = 0.0005
 
@@ -232,3 +235,24 @@ def test_closed_loop_from_sources_matches_shipped_binaries(fmu_paths, source_bui
     assert np.ptp(b1) > 1e-3                                # the RLS adapted
     assert np.max(np.abs(y[200:] - 5 - 5 * np.sin(2 * np.pi * 5 * np.arange(200, 1000) * H))) < 0.1
     assert np.array_equal(shipped, built)
+
+
+def test_closed_loop_fmu_from_sources_matches_shipped_binary(fmu_paths, source_built):
+    """The mismatch benchmark (harness.closed_loop's names) through fmpy.simulate_fmu, 1 s at
+    10 ms steps: the RLS adapting, the sensor noisy, the supervision on."""
+    from harness.closed_loop import closed_loop_parameters
+    from harness.loop import reference_parameters
+    from harness.scenarios import get_scenario
+    sc = get_scenario("mismatch_1_5_10hz")
+    start = closed_loop_parameters(plant=sc.plant, reference=reference_parameters(sc))
+    outputs = ["y", "y_meas", "v", "error", "est.b1"]
+
+    def run(fmu):
+        return fmpy.simulate_fmu(str(fmu), start_time=0, stop_time=1.0, output_interval=0.01,
+                                 output=outputs, start_values=start)
+
+    shipped, built = run(fmu_paths["PiezoStageClosedLoop"]), run(source_built["PiezoStageClosedLoop"])
+    assert shipped.size == built.size == 101
+    assert np.ptp(shipped["y"]) > 20 and np.max(np.abs(shipped["error"][20:])) < 0.01
+    for field in ["time"] + outputs:
+        assert np.array_equal(shipped[field], built[field]), field

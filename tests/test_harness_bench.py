@@ -68,6 +68,18 @@ def test_bench_command_reports_every_loop(tmp_path):
     for rate, samples in zip(m.groups()[2:], (1000, 6000, 60000)):
         assert math.isclose(float(rate), os.cpu_count() / (runner * 1e-9 * samples), rel_tol=0.01)
 
+    # the closed-loop FMU through fmpy.simulate_fmu beside the loops of several FMUs: each run's
+    # time, its time per sample (over 6000 samples of 3 s) and how much faster than the fmpy master
+    rows = [line for line in out.splitlines() if re.search(r" ms +[\d.]+ us +[\d.]+x +[\d.]+x$", line)]
+    labels = [re.split(r"\s{2,}", line.strip())[0] for line in rows]
+    assert labels[0].startswith("fmpy.simulate_fmu PiezoStageClosedLoop, 10 ms step") and len(rows) == 7, rows
+    assert labels[-1] == "fmpy's SSP player, the three FMUs"
+    for line in rows:
+        ms, us, same_run = re.search(r"([\d.]+) ms +([\d.]+) us +([\d.]+)x", line).groups()
+        assert float(ms) > 0 and math.isclose(float(us), float(ms) * 1e3 / 6000, rel_tol=0.01, abs_tol=0.002)
+    fmpy_master = next(line for line in rows if line.startswith("fmpy master"))
+    assert re.search(r" 1\.0x +[\d.]+x$", fmpy_master)        # itself
+
 
 def test_bench_loops_run_the_closed_loop_trajectory():
     """Reference: harness.masters.core.simulate_closed_loop_core (the core binding's loop with

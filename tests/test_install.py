@@ -21,8 +21,10 @@ import sys
 import time
 import zipfile
 
+from conftest import FMU_NAMES
+
 REPO = Path(__file__).resolve().parents[1]
-NAMES = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
+NAMES = FMU_NAMES
 
 
 def _env():
@@ -87,7 +89,7 @@ def test_pip_install_then_run_a_scenario_from_another_folder(fmu_paths, tmp_path
 
     assert (data / "lib" / "libpiezo_runner.so").is_file() and (data / "include" / "piezo_runner.h").is_file()
     e_rms = {}
-    for backend, fmi in (("fmpy", "2"), ("native", "2"), ("core", "2"), ("fmpy", "3")):
+    for backend, fmi in (("fmpy", "2"), ("native", "2"), ("core", "2"), ("fmpy", "3"), ("closed-loop-fmu", "2")):
         label = f"{backend}{fmi}"
         done = _run([python, "-m", "harness", "run", "mismatch_5hz", "--no-plots", "--out",
                      f"out_{label}", "--backend", backend, "--fmi", fmi], elsewhere, env)
@@ -99,8 +101,9 @@ def test_pip_install_then_run_a_scenario_from_another_folder(fmu_paths, tmp_path
         assert any((elsewhere / f"out_{label}").iterdir())
         with open(elsewhere / f"out_{label}" / "mismatch_5hz.csv") as fh:
             e_rms[label] = next(csv.DictReader(fh))["e_rms_um"]
-    # one loop, three masters, two FMI versions
-    assert e_rms["fmpy2"] == e_rms["native2"] == e_rms["core2"] == e_rms["fmpy3"], e_rms
+    # one loop, four masters (the closed-loop FMU one of them), two FMI versions
+    assert (e_rms["fmpy2"] == e_rms["native2"] == e_rms["core2"] == e_rms["fmpy3"]
+            == e_rms["closed-loop-fmu2"]), e_rms
 
     empty = tmp_path / "no_fmus"
     empty.mkdir()

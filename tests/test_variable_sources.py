@@ -58,6 +58,13 @@ _ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
 # the C table, printed by the C code
 
 
+def model_parts(model: str) -> list[Path]:
+    """The FMU-layer files a model shares with others (fmu_src/fmi/fmu_<part>.c), as
+    CMakeLists.txt's <model>_PARTS lists them."""
+    m = re.search(rf"^set\({model}_PARTS ([^)]*)\)", (REPO / "CMakeLists.txt").read_text(), re.M)
+    return [REPO / "fmu_src" / "fmi" / f"fmu_{part}.c" for part in (m.group(1).split() if m else [])]
+
+
 def compile_table(model: str, out_dir: Path, model_c: Path | None = None) -> dict:
     """Compile model_table.c against fmu_src/<model> (or another model.c) and return its JSON."""
     cc = shutil.which("cc") or shutil.which("gcc")
@@ -67,6 +74,7 @@ def compile_table(model: str, out_dir: Path, model_c: Path | None = None) -> dic
     subprocess.run([cc, "-std=c99", "-O0", "-Wall", "-Wextra", "-Wpedantic", "-Werror",
                     "-I", str(model_dir), "-I", str(REPO / "fmu_src" / "fmi"), "-I", str(CORE_DIR),
                     str(TABLE_SOURCE), str(model_c or model_dir / "model.c"),
+                    *(str(p) for p in model_parts(model)),
                     *sorted(str(p) for p in CORE_DIR.glob("*.c")), "-lm", "-o", str(exe)], check=True)
     return json.loads(subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout)
 
@@ -337,7 +345,7 @@ def core_table_mismatches(model: str, table: dict) -> list[str]:
         ctype = ffi.typeof(struct)
         for step in path:
             ctype = ctype.item if isinstance(step, int) else dict(ctype.fields)[step].type
-        got = (_KIND[kind], ctype.cname, table["params_offset"] + ffi.offsetof(struct, *path),
+        got = (_KIND[kind], ctype.cname, table["param_structs"]["params"][0] + ffi.offsetof(struct, *path),
                int(default[name]) if kind != "float" else default[name])
         want = (e["type"], _C_TYPE[e["type"]], e["offset"], e["start"])
         if got != want:

@@ -7,6 +7,7 @@
 #define ADAPTIVECOMPOUNDCONTROLLER_CONFIG_H
 
 #include "piezo_controller.h"
+#include "fmu_controller.h"
 
 #define MODEL_IDENTIFIER_STRING "AdaptiveCompoundController"
 /* optional hooks of fmu_model.h: it has direct feedthrough (mv.feedthrough), messages,
@@ -91,17 +92,15 @@ typedef struct {
     double loop_delay_time;         /* ... and the time of the sample from which it has held */
     int preview_lead;               /* lead of the stamped preview used (0: y_ref) */
     int meas_offset;                /* t_meas - t_k in samples */
-    int track_delay;                /* the same four for the committed samples: the outputs */
-    double track_time;              /* of the default timing, the base of the feedthrough's */
-    int track_lead;
+    fmu_controller_track track;     /* the delay of the committed samples (the outputs of the
+                                       default timing, the base of the feedthrough's) and what
+                                       was said (fmu_controller.h) */
+    int track_lead;                 /* preview_lead and meas_offset of the committed samples */
     int track_offset;
-    int said_delay;                 /* track_delay's value last logged as an event */
-    int said_redetect;              /* the restarted-detection warning was logged */
     int meas_stamped;               /* t_meas has advanced by h at some sample (connected) */
     int preview_stamped;            /* t_preview has */
     int preview_offset;             /* its last lead over the measurement [samples], clamped to +-99 */
     int said_stamps;                /* supervision warnings logged: 1 t_meas, 2 t_preview, 4 alignment */
-    int said_verified;              /* the verified loop was logged as an event */
     int sup_status;                 /* outputs: sup.status, ... */
     double sup_gain;                /* ... sup.gain, ... */
     int sup_delay;                  /* ... sup.delay */
@@ -113,8 +112,6 @@ typedef struct {
                                        outputs, committed by the next doStep when
                                        nothing changed in between (never trusted
                                        otherwise, so a restored copy is never used) */
-    int said_saturated;             /* the first-clipping warning was logged */
-    int said_large_error;           /* the first large-pred_error warning was logged */
 } ModelData;
 
 #endif

@@ -128,13 +128,9 @@ static double sample_time(const ModelData *data, uint64_t k)
 piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
 {
     piezo_status st;
-    data->said_saturated = 0;
-    data->said_large_error = 0;
-    data->said_redetect = 0;
     data->meas_stamped = data->preview_stamped = 0;
     data->preview_offset = 0;
     data->said_stamps = 0;
-    data->said_verified = 0;
     data->sup_status = data->sup_delay = 0;
     data->sup_gain = 0.0;
     /* the controller is time-invariant; t0 places the time stamps on its grid */
@@ -144,12 +140,10 @@ piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
     st = piezo_controller_init(&data->ctrl, &data->params, diag);
     if (st != PIEZO_OK)
         return st;
-    data->track_delay = data->ctrl.detecting ? 0 : data->ctrl.d;
-    data->track_time = start_time;
+    fmu_controller_track_init(&data->track, &data->ctrl, start_time);
     data->track_lead = data->track_offset = 0;
-    data->said_delay = data->track_delay;
-    data->loop_delay = data->track_delay;
-    data->loop_delay_time = start_time;
+    data->loop_delay = data->track.delay;
+    data->loop_delay_time = data->track.delay_time;
     data->preview_lead = data->meas_offset = 0;
     return PIEZO_OK;
 }
@@ -222,10 +216,7 @@ static void after_commit(ModelData *data, const piezo_controller_input *in, int 
     data->have_last = 1;
     data->track_lead = o->preview ? in->preview_lead : 0;
     data->track_offset = meas_offset;
-    if (o->delay != data->track_delay) {
-        data->track_delay = o->delay;
-        data->track_time = sample_time(data, data->ctrl.k - 1);
-    }
+    fmu_controller_track_commit(&data->track, &data->ctrl, data->t0, data->params.h);
 }
 
 double model_sample_period(const ModelData *data)
@@ -276,7 +267,7 @@ piezo_status model_update_outputs(ModelData *data, double *history, size_t histo
         data->preview_lead = data->out.preview ? in.preview_lead : 0;
         data->meas_offset = meas_offset;
         data->loop_delay = data->out.delay;
-        data->loop_delay_time = data->out.delay == data->track_delay ? data->track_time
+        data->loop_delay_time = data->out.delay == data->track.delay ? data->track.delay_time
                                                                      : sample_time(data, data->ctrl.k);
         return PIEZO_OK;
     }
@@ -284,8 +275,8 @@ piezo_status model_update_outputs(ModelData *data, double *history, size_t histo
     data->out = data->ctrl.out;
     data->preview_lead = data->track_lead;
     data->meas_offset = data->track_offset;
-    data->loop_delay = data->track_delay;
-    data->loop_delay_time = data->track_time;
+    data->loop_delay = data->track.delay;
+    data->loop_delay_time = data->track.delay_time;
     return PIEZO_OK;
 }
 
@@ -300,7 +291,7 @@ int model_direct_feedthrough(const ModelData *data)
 static int stamp_warning(ModelData *data, char *text, size_t size)
 {
     const piezo_controller *c = &data->ctrl;
-    int d = data->track_delay;
+    int d = data->track.delay;
     if (!data->params.sup.enabled || d == 0 || c->k < STAMP_WARN_SAMPLES)
         return 0;
     if (!(data->said_stamps & 1) && !data->meas_stamped && data->preview_stamped && d == 1) {
@@ -335,70 +326,15 @@ static int stamp_warning(ModelData *data, char *text, size_t size)
 
 int model_step_warning(ModelData *data, double start_time, char *text, size_t size)
 {
-    const piezo_controller *c = &data->ctrl;
     (void)start_time;   /* data->t0 is the same */
     if (stamp_warning(data, text, size))
         return 1;
-    if (c->n_detections > 1 && !data->said_redetect) {
-        data->said_redetect = 1;
-        snprintf(text, size, "the chosen loop delay no longer predicts the measurement (|pred_error| above "
-                 "monitor.pred_error_max = %g um for %d samples): delay detection restarted at t = %.9g s with "
-                 "the start-up law; later restarts are not logged (the terminate call counts them)",
-                 c->pred_error_max, PIEZO_DETECT_REDETECT, sample_time(data, c->k_delay));
-        return 1;
-    }
-    if (c->n_saturated > 0 && !data->said_saturated) {
-        data->said_saturated = 1;
-        snprintf(text, size, "v was clipped to [sat.v_min, sat.v_max] = [%g, %g] V, first at "
-                 "t = %.9g s (adaptation pauses while a clipped sample is in the regressor); "
-                 "further clipping is counted, not logged: the terminate call reports the count",
-                 c->sat_v_min, c->sat_v_max, sample_time(data, c->k_first_saturated));
-        return 1;
-    }
-    if (c->n_large_error > 0 && !data->said_large_error) {
-        char consequence[192];
-        data->said_large_error = 1;
-        /* monitor.divergence_samples = 0 switches the verdict off: say so, not "after 0 samples" */
-        if (c->divergence_samples > 0)
-            snprintf(consequence, sizeof consequence, "If it stays above for monitor.divergence_samples = %llu "
-                     "consecutive samples the loop is declared unstable and the doStep fails",
-                     (unsigned long long)c->divergence_samples);
-        else
-            snprintf(consequence, sizeof consequence, "With monitor.divergence_samples = 0 the loop is never "
-                     "declared unstable, however long it stays above");
-        snprintf(text, size, "|pred_error| exceeded monitor.pred_error_max = %g um, first at t = %.9g s: "
-                 "the model of G no longer predicts the measurement. %s; further exceedances are counted, "
-                 "not logged", c->pred_error_max, sample_time(data, c->k_first_large_error),
-                 consequence);
-        return 1;
-    }
-    return 0;
+    return fmu_controller_warning(&data->track, &data->ctrl, data->t0, data->params.h, text, size);
 }
 
 int model_step_event(ModelData *data, char *text, size_t size)
 {
-    const piezo_controller *c = &data->ctrl;
-    if (c->sup.status && !data->said_verified) {
-        data->said_verified = 1;
-        snprintf(text, size, "supervision: y_meas answers v as the model says (%.3g times its response, %d "
-                 "samples after it), verified at t = %.9g s", c->sup.verified_gain, c->sup.delay,
-                 sample_time(data, c->sup.k_verified));
-        return 1;
-    }
-    if (data->track_delay == data->said_delay)
-        return 0;
-    data->said_delay = data->track_delay;
-    if (data->track_delay > 0)
-        snprintf(text, size, "loop delay d = %d chosen at t = %.9g s (sample %llu): its sum of squared "
-                 "prediction errors was at most %g times every other candidate's (d = 1, 2, 3) for %d samples; "
-                 "the law uses d = %d and the observer pole mv.observer = %g from then on",
-                 data->track_delay, data->track_time,
-                 (unsigned long long)((data->track_time - data->t0) / data->params.h + 0.5),
-                 1.0 / PIEZO_DETECT_RATIO_INV, PIEZO_DETECT_CONFIRM, data->track_delay, c->observer);
-    else
-        snprintf(text, size, "loop delay detection restarted at t = %.9g s: the start-up law runs until "
-                 "a delay is chosen", data->track_time);
-    return 1;
+    return fmu_controller_event(&data->track, &data->ctrl, data->t0, data->params.h, text, size);
 }
 
 int model_check_step(const ModelData *data, uint64_t n, char *text, size_t size)
@@ -415,21 +351,12 @@ int model_check_step(const ModelData *data, uint64_t n, char *text, size_t size)
 
 int model_terminate_warning(const ModelData *data, char *text, size_t size)
 {
-    const piezo_controller *c = &data->ctrl;
-    if (c->n_saturated == 0 && c->n_large_error == 0 && c->n_detections <= 1)
-        return 0;
-    snprintf(text, size, "of %llu samples, v was clipped in %llu; |pred_error| exceeded "
-             "monitor.pred_error_max = %g um in %llu (largest %.6g um); delay detection ran %llu times",
-             (unsigned long long)c->k, (unsigned long long)c->n_saturated, c->pred_error_max,
-             (unsigned long long)c->n_large_error, c->max_abs_pred_error,
-             (unsigned long long)c->n_detections);
-    return 1;
+    return fmu_controller_summary(&data->ctrl, text, size);
 }
 
 int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size)
 {
-    /* the core's words (one home: the Python binding and any model of the loop use them too) */
-    return piezo_controller_explain(&data->ctrl, st, text, size) > 0;
+    return fmu_controller_failure(&data->ctrl, st, text, size);
 }
 
 const char *model_check_data(const ModelData *data, int core_initialized, double t0, uint64_t k,
@@ -437,51 +364,33 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
 {
     const piezo_controller *c = &data->ctrl;
     const piezo_controller_params *q = &data->params;
-    piezo_controller scratch;
     const char *fault;
-    if ((data->said_saturated != 0 && data->said_saturated != 1)
-        || (data->said_large_error != 0 && data->said_large_error != 1)
-        || (data->said_redetect != 0 && data->said_redetect != 1) || (data->have_last != 0 && data->have_last != 1)
-        || (data->said_verified != 0 && data->said_verified != 1) || data->said_stamps < 0 || data->said_stamps > 7
+    if ((fault = fmu_controller_track_check(&data->track, core_initialized, t0, k, data->params.h)) != NULL)
+        return fault;
+    if ((data->have_last != 0 && data->have_last != 1) || data->said_stamps < 0 || data->said_stamps > 7
         || (data->meas_stamped != 0 && data->meas_stamped != 1)
         || (data->preview_stamped != 0 && data->preview_stamped != 1))
         return "warning flags are not 0 or 1";
     if (abs(data->preview_offset) > 99 || data->sup_status < 0 || data->sup_status > 2
         || data->sup_delay < 0 || data->sup_delay > PIEZO_SUP_MAX_D || !isfinite(data->sup_gain))
         return "supervision outputs out of range";
-    if (!(isfinite(data->t0) && isfinite(data->last_t_preview) && isfinite(data->last_t_meas)
-          && isfinite(data->track_time)))
+    if (!(isfinite(data->t0) && isfinite(data->last_t_preview) && isfinite(data->last_t_meas)))
         return "time stamps not finite";
-    if (data->loop_delay < 0 || data->loop_delay > PIEZO_MV_MAX_D || data->track_delay < 0
-        || data->track_delay > PIEZO_MV_MAX_D || data->said_delay < 0 || data->said_delay > PIEZO_MV_MAX_D
+    if (data->loop_delay < 0 || data->loop_delay > PIEZO_MV_MAX_D
         || data->preview_lead < 0 || data->preview_lead >= PIEZO_PREVIEW_RING || data->track_lead < 0
         || data->track_lead >= PIEZO_PREVIEW_RING || abs(data->meas_offset) > MEAS_OFFSET_MAX
         || abs(data->track_offset) > MEAS_OFFSET_MAX)
         return "timing outputs out of range";
     if (!core_initialized)
         return NULL;    /* parameters are validated by model_init later */
-    /* a live core runs on parameters that passed init ... */
-    if (piezo_controller_init(&scratch, q, NULL) != PIEZO_OK)
-        return "parameters out of range";
     if ((fault = piezo_controller_check(c)) != NULL)
         return fault;
     if (c->k != k)
         return "controller sample counter differs from the FMU's k";
-    if (data->t0 != t0 || data->have_last != (k > 0) || data->track_time < t0
-        || data->track_time > sample_time(data, k))
+    if (data->t0 != t0 || data->have_last != (k > 0))
         return "controller time stamps differ from t0 + k h";
-    /* ... and on the copies init made of them */
-    if ((q->mv_delay == PIEZO_MV_AUTO_DELAY) != c->auto_delay || (!c->auto_delay && c->d != 1 + q->mv_delay)
-        || c->observer != q->mv_observer || c->fwd_pi.m != q->pi.m || c->inv_creep.exact != (q->creep_exact ? 1 : 0)
-        || c->inv_creep.alpha != -q->creep_alpha || c->lambda_u != q->mv_lambda_u
-        || c->rls_enabled != (q->rls_enabled ? 1 : 0) || c->sat_enabled != (q->sat_enabled ? 1 : 0)
-        || c->forgetting != q->rls_forgetting || c->p0 != q->rls_p0 || c->trace_max != q->rls_trace_max
-        || c->pred_error_max != q->monitor_pred_error_max
-        || c->divergence_samples != (uint64_t)q->monitor_divergence_samples
-        || (c->sat_enabled && (c->sat_v_min != q->sat_v_min || c->sat_v_max != q->sat_v_max))
-        || c->sup.enabled != q->sup.enabled || c->sup.gain_min != q->sup.gain_min
-        || c->sup.gain_max != q->sup.gain_max || c->sup.forgetting != scratch.sup.forgetting
-        || c->sup.clip_samples != scratch.sup.clip_samples || c->sup.detect_samples != scratch.sup.detect_samples)
-        return "controller state does not match its parameters";
+    /* a live core runs on parameters that passed init, and on the copies init made of them */
+    if ((fault = piezo_controller_check_params(c, q)) != NULL)
+        return fault;
     return piezo_gl_check_history(&c->inv_creep, history, n_history);
 }

@@ -15,11 +15,11 @@
 /* optional hooks of fmu_model.h: messages (v clamped to its declared range) */
 #define MODEL_HAS_MESSAGES 1
 
-/* The declared range of the input v, [min, max] in both model descriptions:
- * the stage applies v clamped to it (model.c; tests/test_fmu_edges.py reads
+/* The declared range of the input v, [min, max] in both model descriptions, the stage's
+ * rated range (piezo_plant.h): the stage applies v clamped to it (model.c; tests/test_fmu_edges.py reads
  * the range from the model descriptions and checks the clamp against it). */
-#define PIEZOSTAGE_V_MIN (-150.0)
-#define PIEZOSTAGE_V_MAX 150.0
+#define PIEZOSTAGE_V_MIN (-(double)PIEZO_PLANT_V_RATED)
+#define PIEZOSTAGE_V_MAX ((double)PIEZO_PLANT_V_RATED)
 
 typedef enum {
     vr_v = 0,               /* input  [V] */

@@ -105,7 +105,7 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
                         int outputs_current)
 {
     /* v_applied = min(max(v, V_MIN), V_MAX); v is finite (a NaN or Inf is refused when set) */
-    double v = data->v < PIEZOSTAGE_V_MIN ? PIEZOSTAGE_V_MIN : data->v > PIEZOSTAGE_V_MAX ? PIEZOSTAGE_V_MAX : data->v;
+    double v = piezo_plant_rated_voltage(data->v);
     uint64_t k = data->plant.k;
     piezo_status st;
     (void)outputs_current;      /* no direct feedthrough: nothing evaluated ahead */
@@ -166,7 +166,6 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
 {
     const piezo_plant *p = &data->plant;
     const piezo_plant_params *q = &data->params;
-    piezo_plant scratch;
     const char *fault;
     /* the clamp counters: as model_init leaves them, or counting committed samples */
     if (data->said_clamped != 0 && data->said_clamped != 1)
@@ -179,21 +178,15 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         return "clamp counters out of range";
     if (!core_initialized)
         return NULL;    /* parameters are validated by model_init later */
-    /* a live core runs on parameters that passed init ... */
-    if (piezo_plant_init(&scratch, q, NULL) != PIEZO_OK)
-        return "parameters out of range";
     if ((fault = piezo_plant_check(p)) != NULL)
         return fault;
     if (p->k != k)
         return "plant sample counter differs from the FMU's k";
     if (data->t0 != t0 || data->t_meas != sample_time(data, k))
         return "time stamp t_meas differs from t0 + k h";
-    /* ... and on the copies init made of them */
-    if (p->pi.m != q->pi.m || p->tf.delay != q->tf.delay || p->creep.exact != (q->creep_exact ? 1 : 0)
-        || p->creep_enabled != (q->creep_enabled ? 1 : 0) || p->creep.alpha != q->creep_alpha
-        || p->sensor_resolution != q->sensor_resolution || p->sensor_noise_rms != q->sensor_noise_rms
-        || p->sensor_seed != q->sensor_seed)
-        return "plant state does not match its parameters";
+    /* a live core runs on parameters that passed init, and on the copies init made of them */
+    if ((fault = piezo_plant_check_params(p, q)) != NULL)
+        return fault;
     if (!p->creep_enabled)
         return n_history == 0 ? NULL : "history stored while creep is disabled";
     return piezo_gl_check_history(&p->creep, history, n_history);

@@ -93,34 +93,13 @@ piezo_status model_update_outputs(ModelData *data, double *history, size_t histo
 const char *model_check_data(const ModelData *data, int core_initialized, double t0, uint64_t k,
                              const double *history, size_t n_history)
 {
-    const piezo_reference *r = &data->ref;
-    const piezo_reference_params *q = &data->params;
-    piezo_reference scratch;
     const char *fault;
-    int i;
     (void)history;
     if (n_history != 0)
         return "history stored for a model without history";
     if (!core_initialized)
         return NULL;    /* parameters are validated by model_init later */
-    if (piezo_reference_init(&scratch, q, t0, NULL) != PIEZO_OK)
-        return "parameters out of range";
-    if ((fault = piezo_reference_check(r)) != NULL)
+    if ((fault = piezo_reference_check(&data->ref)) != NULL)
         return fault;
-    if (r->k != k || r->t0 != t0)
-        return "reference time (t0, k) differs from the FMU's";
-    /* the core's parameters are a copy of the FMU's */
-    if (r->p.offset != q->offset || r->p.lead != q->lead || r->p.preview != q->preview || r->p.h != q->h)
-        return "reference state does not match its parameters";
-    for (i = 0; i < PIEZO_REF_MAX_TONES; i++)
-        if (r->p.amplitude[i] != q->amplitude[i] || r->p.frequency[i] != q->frequency[i]
-            || r->p.phase[i] != q->phase[i])
-            return "reference state does not match its parameters";
-    /* the outputs are a function of (parameters, t0, k): they must be that value */
-    if (r->y_d != piezo_reference_value(r, t0 + (double)k * r->p.h)
-        || r->y_ref != piezo_reference_value(r, t0 + (double)(k + (uint64_t)r->p.lead) * r->p.h)
-        || r->t_preview != t0 + (double)(k + (uint64_t)r->p.preview) * r->p.h
-        || r->y_preview != piezo_reference_value(r, r->t_preview))
-        return "reference outputs differ from y_d at t0 + k h";
-    return NULL;
+    return piezo_reference_check_params(&data->ref, &data->params, t0, k);
 }

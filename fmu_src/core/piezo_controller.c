@@ -457,6 +457,16 @@ static double reference(const piezo_controller *c, const piezo_controller_input 
     return in->y_ref;
 }
 
+int piezo_controller_preview(const piezo_controller *c, uint64_t sample, double *value)
+{
+    int slot;
+    if (!c || !value) return 0;
+    slot = (int)(sample % PIEZO_PREVIEW_RING);
+    if (c->preview_tag[slot] != sample + 1) return 0;
+    *value = c->preview_value[slot];
+    return 1;
+}
+
 /* 1 when every x[i] is finite: x * 0 is +-0 for a finite x and NaN for Inf or
  * NaN (IEEE 754; no -ffinite-math-only here), so a sum of those products is 0
  * exactly when all are finite. No branch per element, and two short chains of
@@ -473,7 +483,8 @@ static int all_finite(const double *x, int n)
     return z0 + z1 == 0.0;
 }
 
-/* The estimates and the covariance of an evaluated sample are finite. The
+/* The estimates, the covariance and the supervisor's next statistics and gain (an output:
+ * szw / sww overflows where sww is tiny) of an evaluated sample are finite. The
  * operators' next states need no check of their own: each operator's output
  * is a finite-coefficient sum over its next states (SOE: sum c_i S_i; PI:
  * w0 u + sum w_i z_i), and an Inf or NaN state makes that sum Inf or NaN
@@ -938,4 +949,24 @@ int piezo_controller_explain(const piezo_controller *c, int st, char *text, size
 #undef AT
 #undef LEFT
     return 0;
+}
+
+const char *piezo_controller_check_params(const piezo_controller *c, const piezo_controller_params *q)
+{
+    piezo_controller scratch;
+    if (!c || !q) return "controller missing";
+    if (piezo_controller_init(&scratch, q, NULL) != PIEZO_OK) return "parameters out of range";
+    if ((q->mv_delay == PIEZO_MV_AUTO_DELAY) != c->auto_delay || (!c->auto_delay && c->d != 1 + q->mv_delay)
+        || c->observer != q->mv_observer || c->fwd_pi.m != q->pi.m || c->inv_creep.exact != (q->creep_exact ? 1 : 0)
+        || c->inv_creep.alpha != -q->creep_alpha || c->lambda_u != q->mv_lambda_u
+        || c->rls_enabled != (q->rls_enabled ? 1 : 0) || c->sat_enabled != (q->sat_enabled ? 1 : 0)
+        || c->forgetting != q->rls_forgetting || c->p0 != q->rls_p0 || c->trace_max != q->rls_trace_max
+        || c->pred_error_max != q->monitor_pred_error_max
+        || c->divergence_samples != (uint64_t)q->monitor_divergence_samples
+        || (c->sat_enabled && (c->sat_v_min != q->sat_v_min || c->sat_v_max != q->sat_v_max))
+        || c->sup.enabled != q->sup.enabled || c->sup.gain_min != q->sup.gain_min
+        || c->sup.gain_max != q->sup.gain_max || c->sup.forgetting != scratch.sup.forgetting
+        || c->sup.clip_samples != scratch.sup.clip_samples || c->sup.detect_samples != scratch.sup.detect_samples)
+        return "controller state does not match its parameters";
+    return NULL;
 }

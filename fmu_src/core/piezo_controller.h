@@ -240,6 +240,8 @@ piezo_status piezo_controller_evaluate(const piezo_controller *ctrl, const piezo
 piezo_status piezo_controller_commit(piezo_controller *ctrl, const piezo_controller_sample *sample,
                                      piezo_controller_output *out);
 size_t piezo_controller_history_needed(const piezo_controller *ctrl);
+/* 1 with *value = y_d(sample) when the ring of stamped previews holds that sample's, else 0. */
+int piezo_controller_preview(const piezo_controller *ctrl, uint64_t sample, double *value);
 /*
  * Why the controller refused a sample with status st, in its own words, into
  * text (NUL-terminated, at most size bytes; the core still does no I/O):
@@ -258,6 +260,9 @@ int piezo_controller_explain(const piezo_controller *ctrl, int st, char *text, s
  * piezo_gl_check_history(&ctrl->inv_creep, ...).
  */
 const char *piezo_controller_check(const piezo_controller *ctrl);
+/* NULL when a controller runs on `params` (valid, and the copies piezo_controller_init keeps
+ * of them equal them), else a static text saying which does not hold. */
+const char *piezo_controller_check_params(const piezo_controller *ctrl, const piezo_controller_params *params);
 
 /* Diophantine 1 = A E + z^-d Gd for A = 1 + a1 z^-1 + a2 z^-2, 1 <= d <= 9:
  * e[0..d-1] (e[0] = 1), g[0..1]. */

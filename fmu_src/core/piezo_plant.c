@@ -258,17 +258,13 @@ size_t piezo_plant_history_needed(const piezo_plant *plant)
 }
 
 /*
- * In place, without copying the plant: every stage is first evaluated
- * without committing (the only refusal after the input checks is an
- * overflow, PIEZO_ERR_DIVERGED, which shows in u, x or y), then committed.
+ * Every stage is first evaluated without committing (the only refusal after the input
+ * checks is an overflow, PIEZO_ERR_DIVERGED, which shows in u, x or y), then committed.
  */
-piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_history,
-                              size_t history_capacity, piezo_plant_output *out)
+static inline piezo_status plant_eval(const piezo_plant *plant, double v, double *creep_history,
+                                      size_t history_capacity, piezo_plant_sample *s)
 {
-    double z_next[PIEZO_PI_MAX_OPERATORS];
     double u, x, y, y_meas, noise;
-    piezo_rng rng;
-    if (!plant) return PIEZO_ERR_NULL;
     if (!isfinite(v)) return PIEZO_ERR_NONFINITE;
     if (plant->creep_enabled && plant->creep.exact) {
         if (!creep_history) return PIEZO_ERR_NULL;
@@ -277,10 +273,10 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
     /* The reading's noise first: it does not depend on the sample, so its libm
      * calls overlap the operators below. The generator advances on a copy until
      * the sample is accepted. */
-    rng = plant->rng;
-    noise = sensor_noise(plant, &rng);
+    s->rng = plant->rng;
+    noise = sensor_noise(plant, &s->rng);
     /* v is finite, so a non-finite value from here on was computed: overflow, not bad input */
-    piezo_pi_eval(&plant->pi, v, z_next, &u);                         /* u(k) = P[v](k) */
+    piezo_pi_eval(&plant->pi, v, s->z, &u);                           /* u(k) = P[v](k) */
     if (!isfinite(u)) return PIEZO_ERR_DIVERGED;
     piezo_tf_eval(&plant->tf, u, &x);                                 /* x(k+1)         */
     if (!isfinite(x)) return PIEZO_ERR_DIVERGED;
@@ -295,17 +291,50 @@ piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_histor
     /* the reading before the commit: quantising a finite y can overflow (y / resolution) */
     y_meas = sense(plant, y, noise);
     if (!isfinite(y_meas)) return PIEZO_ERR_DIVERGED;
-    /* commit */
-    memcpy(plant->pi.z, z_next, (size_t)plant->pi.m * sizeof *z_next);
-    piezo_tf_commit(&plant->tf, u, x);
-    if (plant->creep_enabled) piezo_gl_commit(&plant->creep, x);
-    plant->rng = rng;
+    s->k = plant->k;
+    s->out.u = u;
+    s->out.x = x;
+    s->out.y = y;
+    s->out.y_meas = y_meas;
+    return PIEZO_OK;
+}
+
+static inline void plant_commit(piezo_plant *plant, const piezo_plant_sample *s)
+{
+    memcpy(plant->pi.z, s->z, (size_t)plant->pi.m * sizeof *s->z);
+    piezo_tf_commit(&plant->tf, s->out.u, s->out.x);
+    if (plant->creep_enabled) piezo_gl_commit(&plant->creep, s->out.x);
+    plant->rng = s->rng;
     plant->k += 1;
-    plant->out.u = u;
-    plant->out.x = x;
-    plant->out.y = y;
-    plant->out.y_meas = y_meas;
+    plant->out = s->out;
+}
+
+/* In place, without copying the plant: evaluated, then committed. */
+piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_history,
+                              size_t history_capacity, piezo_plant_output *out)
+{
+    piezo_plant_sample s;
+    piezo_status st;
+    if (!plant) return PIEZO_ERR_NULL;
+    st = plant_eval(plant, v, creep_history, history_capacity, &s);
+    if (st != PIEZO_OK) return st;
+    plant_commit(plant, &s);
     if (out) *out = plant->out;
+    return PIEZO_OK;
+}
+
+piezo_status piezo_plant_evaluate(const piezo_plant *plant, double v, double *creep_history,
+                                  size_t history_capacity, piezo_plant_sample *sample)
+{
+    if (!plant || !sample) return PIEZO_ERR_NULL;
+    return plant_eval(plant, v, creep_history, history_capacity, sample);
+}
+
+piezo_status piezo_plant_commit(piezo_plant *plant, const piezo_plant_sample *sample)
+{
+    if (!plant || !sample) return PIEZO_ERR_NULL;
+    if (sample->k != plant->k) return PIEZO_ERR_PARAM;
+    plant_commit(plant, sample);
     return PIEZO_OK;
 }
 
@@ -333,4 +362,23 @@ const char *piezo_plant_check(const piezo_plant *plant)
     if (!(isfinite(plant->out.u) && isfinite(plant->out.x) && isfinite(plant->out.y) && isfinite(plant->out.y_meas)))
         return "plant outputs not finite";
     return NULL;
+}
+
+const char *piezo_plant_check_params(const piezo_plant *p, const piezo_plant_params *q)
+{
+    piezo_plant scratch;
+    if (!p || !q) return "plant missing";
+    if (piezo_plant_init(&scratch, q, NULL) != PIEZO_OK) return "parameters out of range";
+    if (p->pi.m != q->pi.m || p->tf.delay != q->tf.delay || p->creep.exact != (q->creep_exact ? 1 : 0)
+        || p->creep_enabled != (q->creep_enabled ? 1 : 0) || p->creep.alpha != q->creep_alpha
+        || p->sensor_resolution != q->sensor_resolution || p->sensor_noise_rms != q->sensor_noise_rms
+        || p->sensor_seed != q->sensor_seed)
+        return "plant state does not match its parameters";
+    return NULL;
+}
+
+double piezo_plant_rated_voltage(double v)
+{
+    const double limit = (double)PIEZO_PLANT_V_RATED;
+    return v < -limit ? -limit : v > limit ? limit : v;
 }

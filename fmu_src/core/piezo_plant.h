@@ -25,6 +25,10 @@
 #include "piezo_tf.h"
 #include "piezo_creep.h"
 
+/* The stage's rated drive range, [-PIEZO_PLANT_V_RATED, PIEZO_PLANT_V_RATED] V: an amplifier
+ * cannot deliver more, so an FMU applies its v clamped to it (piezo_plant_rated_voltage). */
+#define PIEZO_PLANT_V_RATED 150
+
 typedef struct {
     piezo_pi_params pi;
     piezo_tf_params tf;
@@ -63,6 +67,19 @@ typedef struct {
     piezo_plant_output out;     /* outputs at sample k */
 } piezo_plant;
 
+/*
+ * One evaluated sample, for a caller that must know a sample is accepted before it
+ * commits anything (PiezoStageClosedLoop steps the plant and the controller of one
+ * sample, and either may refuse): piezo_plant_evaluate fills it, nothing changed;
+ * piezo_plant_commit makes it the plant's state. piezo_plant_step is the two.
+ */
+typedef struct {
+    uint64_t k;                 /* the sample evaluated (plant->k then) */
+    double z[PIEZO_PI_MAX_OPERATORS];   /* the play operators' states of k+1 */
+    piezo_rng rng;              /* the sensor's generator after the sample */
+    piezo_plant_output out;     /* u(k), x(k+1), y(k+1), y_meas(k+1) */
+} piezo_plant_sample;
+
 /* Defaults of docs/fmus.md. */
 void piezo_plant_default_params(piezo_plant_params *params);
 /* Validate every parameter (diag names the first bad one), derive, reset. */
@@ -77,6 +94,13 @@ void piezo_plant_reset(piezo_plant *plant);
  */
 piezo_status piezo_plant_step(piezo_plant *plant, double v, double *creep_history,
                               size_t history_capacity, piezo_plant_output *out);
+/* piezo_plant_step without the commit: the same checks, refusals and result, into *sample
+ * (exact mode writes the unused slots creep_history[2k], [2k+1]); nothing else changes. */
+piezo_status piezo_plant_evaluate(const piezo_plant *plant, double v, double *creep_history,
+                                  size_t history_capacity, piezo_plant_sample *sample);
+/* Make an evaluated sample the state (k -> k+1): PIEZO_ERR_PARAM, nothing done, unless
+ * sample->k == plant->k. Commit only the latest evaluation of the sample. */
+piezo_status piezo_plant_commit(piezo_plant *plant, const piezo_plant_sample *sample);
 /* History doubles the next step needs, 2(k+1) (0 unless exact creep is on). */
 size_t piezo_plant_history_needed(const piezo_plant *plant);
 /*
@@ -86,6 +110,11 @@ size_t piezo_plant_history_needed(const piezo_plant *plant);
  * exact-mode history is checked by piezo_gl_check_history(&plant->creep, ...).
  */
 const char *piezo_plant_check(const piezo_plant *plant);
+/* NULL when a plant runs on `params` (valid, and the copies piezo_plant_init keeps of them
+ * equal them), else a static text saying which does not hold. */
+const char *piezo_plant_check_params(const piezo_plant *plant, const piezo_plant_params *params);
+/* v clamped to the rated range: min(max(v, -PIEZO_PLANT_V_RATED), PIEZO_PLANT_V_RATED). */
+double piezo_plant_rated_voltage(double v);
 
 /* The sensor's quantiser, resolution * floor(reading / resolution + 0.5) for a
  * resolution > 0, bit for bit (exposed for tests; the plant keeps 1/resolution). */

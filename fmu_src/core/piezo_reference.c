@@ -149,3 +149,27 @@ const char *piezo_reference_check(const piezo_reference *ref)
         return "reference outputs not finite";
     return NULL;
 }
+
+const char *piezo_reference_check_params(const piezo_reference *r, const piezo_reference_params *q,
+                                         double t0, uint64_t k)
+{
+    piezo_reference scratch;
+    int i;
+    if (!r || !q) return "reference missing";
+    if (piezo_reference_init(&scratch, q, t0, NULL) != PIEZO_OK) return "parameters out of range";
+    if (r->k != k || r->t0 != t0) return "reference time (t0, k) differs from the FMU's";
+    /* the core's parameters are a copy of the FMU's */
+    if (r->p.offset != q->offset || r->p.lead != q->lead || r->p.preview != q->preview || r->p.h != q->h)
+        return "reference state does not match its parameters";
+    for (i = 0; i < PIEZO_REF_MAX_TONES; i++)
+        if (r->p.amplitude[i] != q->amplitude[i] || r->p.frequency[i] != q->frequency[i]
+            || r->p.phase[i] != q->phase[i])
+            return "reference state does not match its parameters";
+    /* the outputs are a function of (parameters, t0, k): they must be that value (update's times) */
+    if (r->y_d != piezo_reference_value(r, t0 + (double)k * r->p.h)
+        || r->y_ref != piezo_reference_value(r, t0 + (double)(k + (uint64_t)r->p.lead) * r->p.h)
+        || r->t_preview != t0 + (double)(k + (uint64_t)r->p.preview) * r->p.h
+        || r->y_preview != piezo_reference_value(r, r->t_preview))
+        return "reference outputs differ from y_d at t0 + k h";
+    return NULL;
+}

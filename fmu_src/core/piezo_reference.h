@@ -59,6 +59,10 @@ piezo_status piezo_reference_step(piezo_reference *ref);
 /* Invariants of a restored reference (e.g. from a deserialized FMU state):
  * NULL when its parameters are valid and its outputs finite, else why not. */
 const char *piezo_reference_check(const piezo_reference *ref);
+/* NULL when a reference runs on `params` from t0 at sample k (valid, its copy of them equal,
+ * its outputs those of sample k), else a static text saying which does not hold. */
+const char *piezo_reference_check_params(const piezo_reference *ref, const piezo_reference_params *params,
+                                         double t0, uint64_t k);
 /* y_d at time t [s]. */
 double piezo_reference_value(const piezo_reference *ref, double t);
 

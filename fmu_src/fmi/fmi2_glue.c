@@ -48,6 +48,11 @@
  * fmi2SetupExperiment is refused, and so is one that would do more work than a
  * host should wait for in one call (more than MAX_STEP_SAMPLES samples, or with
  * exact creep more than MAX_STEP_CREEP_TERMS terms of its sum: fmu_glue_core.c).
+ * A model that takes steps of any size (MODEL_HAS_ANY_STEP, fmu_model.h:
+ * PiezoStageClosedLoop) accepts every finite H > 0: the step computes the
+ * samples whose instants it passes, and the FMU's time may end between two
+ * of them, t0 + k h + t_off with 0 < t_off < h, the outputs held from the
+ * last instant; an end within the time tolerance of an instant is on it.
  * After a step the model may ask for a warning (logged once per kind, e.g.
  * the first clipped voltage, with a count at fmi2Terminate); fmi2DoStep then
  * returns fmi2Warning. Logging: messages go through the host's

@@ -52,6 +52,7 @@ struct glue_state {
     double t0;
     uint64_t k;
     double h;
+    double t_off;
     ModelData data;
     size_t n_history;
     size_t history_capacity;
@@ -650,6 +651,7 @@ glue_status glue_exit_init(void *c, const char *fname)
     }
     inst->h = h;
     inst->k = 0;
+    inst->t_off = 0.0;
     inst->mode = GLUE_MODE_STEP;
     inst->outputs_valid = 0;
     glue_log_event(inst, "%s: initialized, t0 = %.16g, h = %.16g", fname, inst->t0, h);
@@ -684,6 +686,7 @@ glue_status glue_reset(void *c, const char *fname)
     inst->t0 = 0.0;
     inst->k = 0;
     inst->h = 0.0;
+    inst->t_off = 0.0;
     inst->stop_time_defined = 0;
     inst->stop_time = 0.0;
     inst->outputs_valid = 0;
@@ -896,7 +899,11 @@ glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32
 
 double glue_time(const glue_instance *inst)
 {
+#if MODEL_ANY_STEP
+    return fmu_sample_time(inst->t0, inst->k, inst->h) + inst->t_off;
+#else
     return fmu_sample_time(inst->t0, inst->k, inst->h);
+#endif
 }
 
 /* fmax(a, b) inline (a libm call on baseline x86-64): the larger, or the other
@@ -952,10 +959,35 @@ static uint64_t longest_creep_step(double a)
     return n < 1.0 ? 1u : (uint64_t)n;
 }
 
+#if MODEL_ANY_STEP
+/* Where a step of H from the FMU's time t = t_k + t_off ends: *n samples on (the instants
+ * t_(k+1) .. t_(k+n) it passes) and *off past the last of them. An end within the time
+ * tolerance of an instant is on it (off = 0), so a master that steps by whole samples
+ * stays on the grid; 0 when the step is too long to count (the caller refuses it). */
+static int step_end(const glue_instance *inst, double t, double H, double *n, double *off)
+{
+    double h = inst->h, span = inst->t_off + H, ratio = span / h, m = floor(ratio + 0.5);
+    if (!(m <= (double)MAX_STEP_SAMPLES))
+        return 0;
+    *n = m;
+    *off = 0.0;
+    if (fabs(span - m * h) <= time_tolerance(h, t + H))
+        return 1;
+    m = floor(ratio);
+    *off = span - m * h;
+    if (!(*off > 0.0 && *off < h)) {     /* round-off at the edge of the tolerance: on the grid */
+        *off = 0.0;
+        m = floor(ratio + 0.5);
+    }
+    *n = m;
+    return 1;
+}
+#endif
+
 static glue_status do_step(glue_instance *inst, const char *fname, double currentCommunicationPoint,
                            double communicationStepSize)
 {
-    double t, ratio, n_real, t_end;
+    double t, ratio, n_real, t_end, off_end = 0.0;
     char t1[GLUE_REAL_TEXT_SIZE], t2[GLUE_REAL_TEXT_SIZE], t3[GLUE_REAL_TEXT_SIZE], t4[GLUE_REAL_TEXT_SIZE];
     uint64_t n, i;
     size_t needed;
@@ -967,25 +999,34 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
         if (!isfinite(currentCommunicationPoint)
             || fabs(currentCommunicationPoint - t) > time_tolerance(inst->h, t)) {
             glue_log_error(inst, "%s: currentCommunicationPoint = %s does not match the FMU time "
-                           "t0 + k h = %s (k = %llu, h = %s): step refused, state and time unchanged",
-                           fname, glue_real_text(t1, currentCommunicationPoint), glue_real_text(t2, t),
+                           "%s = %s (k = %llu, h = %s): step refused, state and time unchanged",
+                           fname, glue_real_text(t1, currentCommunicationPoint),
+                           MODEL_ANY_STEP && inst->t_off != 0.0 ? "t0 + k h + (the part of a sample the last step "
+                           "ended in)" : "t0 + k h", glue_real_text(t2, t),
                            (unsigned long long)inst->k, glue_real_text(t3, inst->h));
             return GLUE_ERROR;
         }
     }
-    if (communicationStepSize == inst->h) {
+    if (communicationStepSize == inst->h && (!MODEL_ANY_STEP || inst->t_off == 0.0)) {
         /* one sample, the usual step: H = 1 h (h > 0 and finite) passes the checks below exactly */
         n_real = 1.0;
     } else {
         if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
-            glue_log_error(inst, "%s: communicationStepSize = %s refused: the step size must be > 0, a whole "
-                           "multiple n >= 1 of h = %s (a positive step below 1e-9 h rounds to no sample and is a "
-                           "no-op); state and time unchanged", fname, glue_real_text(t1, communicationStepSize),
-                           glue_real_text(t2, inst->h));
+            glue_log_error(inst, "%s: communicationStepSize = %s refused: the step size must be > 0%s%s%s; "
+                           "state and time unchanged", fname, glue_real_text(t1, communicationStepSize),
+                           MODEL_ANY_STEP ? " and finite (of any size: the samples of h = "
+                           : ", a whole multiple n >= 1 of h = ", glue_real_text(t2, inst->h),
+                           MODEL_ANY_STEP ? " whose instants the step passes are computed)"
+                           : " (a positive step below 1e-9 h rounds to no sample and is a no-op)");
             return GLUE_ERROR;
         }
         ratio = communicationStepSize / inst->h;
+#if MODEL_ANY_STEP
+        if (!step_end(inst, t, communicationStepSize, &n_real, &off_end))
+            n_real = floor(ratio + 0.5);      /* refused just below, naming the bound */
+#else
         n_real = ratio == 1.0 ? 1.0 : floor(ratio + 0.5);
+#endif
         if (!(n_real <= (double)MAX_STEP_SAMPLES)) {
             glue_log_error(inst, "%s: communicationStepSize = %s is %s samples of h = %s: refused, one doStep "
                            "computes at most %llu samples (about a second of work: a host must not wait longer "
@@ -995,7 +1036,8 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
                            glue_real_text(t4, (double)MAX_STEP_SAMPLES * inst->h));
             return GLUE_ERROR;
         }
-        if (fabs(communicationStepSize - n_real * inst->h) > 1e-9 * max_of(1.0, n_real) * inst->h) {
+        if (!MODEL_ANY_STEP
+            && fabs(communicationStepSize - n_real * inst->h) > 1e-9 * max_of(1.0, n_real) * inst->h) {
             glue_log_error(inst, "%s: communicationStepSize = %s is not a whole multiple of h = %s "
                            "(H/h = %s; tolerance |H - n h| <= 1e-9 max(1, n) h): step refused, state and "
                            "time unchanged", fname, glue_real_text(t1, communicationStepSize),
@@ -1006,7 +1048,7 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
     n = (uint64_t)n_real;
     /* the end of the step must be a time: k + n <= 2^53 and t0 + (k + n) h finite
      * (k + n does not wrap: k <= 2^53, n <= MAX_STEP_SAMPLES) */
-    t_end = fmu_sample_time(inst->t0, inst->k + n, inst->h);
+    t_end = fmu_sample_time(inst->t0, inst->k + n, inst->h) + off_end;
     if (n > MAX_SAMPLES - inst->k || !isfinite(t_end)) {
         glue_log_error(inst, "%s: the step from t = %s over %s samples of h = %s ends beyond the FMU's time "
                        "range (at most 2^53 samples, finite t0 + k h): step refused, state and time unchanged",
@@ -1030,10 +1072,21 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
         }
     }
     if (n == 0) {
-        /* 0 < H < 1e-9 h: the step ends on the sample it starts from */
         inst->outputs_read = 0;
+#if MODEL_ANY_STEP
+        /* the step ends before the next sample: the outputs are held; a step from t_k
+         * passes the instant of sample k, whose inputs are those held now */
+        if (inst->t_off == 0.0 && off_end > 0.0)
+            model_latch_inputs(&inst->data);
+        inst->t_off = off_end;
+        glue_log_event(inst, "%s: the step from t = %s to t = %s ends before the next sample (h = %s): "
+                       "the outputs are held", fname, glue_real_text(t1, t), glue_real_text(t2, t_end),
+                       glue_real_text(t3, inst->h));
+#else
+        /* 0 < H < 1e-9 h: the step ends on the sample it starts from */
         glue_log_event(inst, "%s: communicationStepSize = %s holds no sample of h = %s: nothing to do",
                        fname, glue_real_text(t1, communicationStepSize), glue_real_text(t2, inst->h));
+#endif
         return GLUE_OK;
     }
     /* exact creep: the sample at k sums its k + 1 past values (the history holds
@@ -1084,6 +1137,12 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
         }
     }
     inst->k += n;
+#if MODEL_ANY_STEP
+    /* ends between two samples: the instant of the next sample lies in this step */
+    if (off_end > 0.0)
+        model_latch_inputs(&inst->data);
+    inst->t_off = off_end;
+#endif
     inst->outputs_valid = 0;
     return step_warnings(inst, fname);
 }
@@ -1210,6 +1269,7 @@ glue_status glue_get_state(void *c, const char *fname, void **state)
     st->t0 = inst->t0;
     st->k = inst->k;
     st->h = inst->h;
+    st->t_off = inst->t_off;
     memcpy(&st->data, &inst->data, sizeof st->data);
     if (n_hist > 0)
         memcpy(st->history, inst->history, n_hist * sizeof(double));
@@ -1236,6 +1296,7 @@ glue_status glue_set_state(void *c, const char *fname, void *state)
     inst->t0 = st->t0;
     inst->k = st->k;
     inst->h = st->h;
+    inst->t_off = st->t_off;
     inst->outputs_valid = 0;
     glue_log_event(inst, "%s: restored a state in %s at t = %.16g", fname, mode_name(inst, inst->mode),
                    glue_time(inst));
@@ -1285,7 +1346,9 @@ glue_status glue_free_state(void *c, const char *fname, void **state)
  *       96     8  k, samples since t0
  *      104     8  h (IEEE double)
  *      112     8  n_history, doubles of exact-mode history
- *      120     8  reserved (0)
+ *      120     8  t_off (IEEE double): 0 on the grid (every FMU but PiezoStageClosedLoop: always
+ *                 0, as when this field was reserved); a model that takes steps of any size
+ *                 (MODEL_ANY_STEP) may have its time past t0 + k h, 0 < t_off < h
  *      128     .  ModelData image (sizeof(ModelData) bytes)
  *        .     .  n_history doubles (IEEE, little-endian)
  *    end-8     8  FNV-1a 64 checksum of every preceding byte
@@ -1298,7 +1361,8 @@ glue_status glue_free_state(void *c, const char *fname, void **state)
  * (sizes compared without arithmetic that can wrap) and accepts only what
  * a live instance could have saved: the exact GUID field, a known mode, the
  * time fields of that mode (before initialization k = 0 and h = 0; after it
- * h = the model's h, k <= 2^53, t0 + k h finite), reserved = 0, finite Reals
+ * h = the model's h, k <= 2^53, t0 + k h finite), t_off = 0 (a MODEL_ANY_STEP
+ * model in a mode after initialization: 0 <= t_off < h), finite Reals
  * and 0/1 Booleans in every variable, and the model's own invariants
  * (model_check_data: indices, counts, flags, sample counters against k and the
  * history). Anything else is refused and nothing is changed.
@@ -1407,6 +1471,7 @@ glue_status glue_serialize(void *c, const char *fname, void *state, unsigned cha
     put_u64(b + 96, st->k);
     put_f64(b + 104, st->h);
     put_u64(b + 112, (uint64_t)st->n_history);
+    put_f64(b + 120, st->t_off);
     memcpy(b + BLOB_HEADER, &st->data, sizeof(ModelData));
     off = BLOB_HEADER + sizeof(ModelData);
     for (i = 0; i < st->n_history; i++, off += 8)
@@ -1443,7 +1508,7 @@ glue_status glue_deserialize(void *c, const char *fname, const unsigned char *b,
     uint64_t total, n_hist64, k;
     size_t n_hist, i, off;
     int mode, core_ready, bad_vr;
-    double t0, h, *history = NULL;
+    double t0, h, t_off, *history = NULL;
     const char *fault;
     glue_state *st;
     ModelData *data;
@@ -1500,12 +1565,15 @@ glue_status glue_deserialize(void *c, const char *fname, const unsigned char *b,
         glue_log_error(inst, "%s: refused: checksum mismatch (the blob is corrupted)", fname);
         return GLUE_ERROR;
     }
-    if (get_u64(b + 120) != 0) {
-        glue_log_error(inst, "%s: refused: reserved header field is %llu, not 0", fname,
-                       (unsigned long long)get_u64(b + 120));
+    mode = (int)get_u32(b + 84);
+    t_off = get_f64(b + 120);
+    /* all bits 0 (not -0), or a part of a sample past t0 + k h of a model that takes any step */
+    if (get_u64(b + 120) != 0
+        && !(MODEL_ANY_STEP && (mode & GLUE_MODE_CORE_READY) && t_off > 0.0 && t_off < get_f64(b + 104))) {
+        glue_log_error(inst, "%s: refused: the time past the last sample t_off = %s is not %s", fname,
+                       glue_real_text(t1, t_off), MODEL_ANY_STEP ? "0 or in (0, h) after initialization" : "0");
         return GLUE_ERROR;
     }
-    mode = (int)get_u32(b + 84);
     t0 = get_f64(b + 88);
     k = get_u64(b + 96);
     h = get_f64(b + 104);
@@ -1522,7 +1590,7 @@ glue_status glue_deserialize(void *c, const char *fname, const unsigned char *b,
     if (!isfinite(t0)
         || (!core_ready && (k != 0 || h != 0.0))
         || (core_ready && !(h > 0.0 && h == model_sample_period(data) && k <= MAX_SAMPLES
-                            && isfinite(t0 + (double)k * h)))) {
+                            && isfinite(t0 + (double)k * h + t_off)))) {
         glue_log_error(inst, "%s: refused: invalid time fields for state %s: t0 = %s, k = %llu, h = %s",
                        fname, mode_name(inst, mode), glue_real_text(t1, t0), (unsigned long long)k,
                        glue_real_text(t2, h));
@@ -1573,6 +1641,7 @@ glue_status glue_deserialize(void *c, const char *fname, const unsigned char *b,
     st->t0 = t0;
     st->k = k;
     st->h = h;
+    st->t_off = t_off;
     memcpy(&st->data, data, sizeof *data);
     *state = st;
     return GLUE_OK;

@@ -107,6 +107,8 @@ typedef struct {
     double t0;                  /* start time */
     uint64_t k;                 /* samples since t0 */
     double h;                   /* sample period, fixed at the end of initialization */
+    double t_off;               /* the FMU's time past t0 + k h: 0 on the grid, in (0, h) between
+                                   two samples (MODEL_ANY_STEP models only; else always 0) */
     int stop_time_defined;      /* a stopTime applies */
     double stop_time;
     int outputs_valid;          /* the output values match data (no set/step since) */
@@ -205,7 +207,7 @@ glue_status glue_no_such_type(void *c, const char *fname, int mask, const uint32
 /* ------------------------------------------------------------------------ */
 /* time and stepping                                                         */
 
-/* t0 + k h */
+/* The FMU's time: t0 + k h (+ t_off, between two samples of a MODEL_ANY_STEP model) */
 double glue_time(const glue_instance *inst);
 
 /* A communication step from t over H (see fmi2_glue.c for the rules). *t_end,

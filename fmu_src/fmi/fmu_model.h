@@ -163,6 +163,30 @@ static inline int model_check_step(const ModelData *data, uint64_t n, char *text
 }
 #endif
 
+#ifdef MODEL_HAS_ANY_STEP
+/*
+ * A model that takes a communication step of any positive size (a master at
+ * 1 ms, 10 ms or with variable steps), not only whole multiples of h. It is
+ * still a sampled system: the glue computes the samples whose instants
+ * t_k = t0 + k h the step passes and keeps the FMU's time t0 + k h + t_off,
+ * 0 <= t_off < h, where the step ended; the outputs between two instants are
+ * those of the last one (held). A sample reads its inputs at its instant: the
+ * values held there. A step that ends between instants after passing the
+ * instant of the next sample k (not yet computed: it completes at t_(k+1))
+ * calls model_latch_inputs: the model keeps the inputs held now for sample k,
+ * which the next step computes even if new inputs were set in between, and
+ * forgets them once sample k is committed (model_step).
+ */
+#define MODEL_ANY_STEP 1
+void model_latch_inputs(ModelData *data);
+#else
+#define MODEL_ANY_STEP 0
+static inline void model_latch_inputs(ModelData *data)
+{
+    (void)data;
+}
+#endif
+
 /* Validation of restored (deserialized, untrusted) data against the model's
  * invariants, the one place that knows them: NULL when data could have been
  * saved by a live instance, else a static description of the first fault.

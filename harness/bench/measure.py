@@ -8,23 +8,33 @@ import os
 import platform
 import statistics
 import subprocess
+import tempfile
 import time
 
+import fmpy
 import numpy as np
 
 from .. import core, masters
+from ..closed_loop import CLOSED_LOOP_MODEL
+from ..fmu import REFERENCE_MODEL, fmu_path
 from ..loop import prepare_closed_loop
+from ..masters.closed_loop_fmu import closed_loop_fmu_parameters
 from ..masters.fmpy import simulate_setup
 from ..masters.native import NativeLoop, live_bytes
+from ..masters.ssp import simulate_ssp_scenario
+from ..masters.wired import simulate_wired
 from ..paths import bench_include_dir, bench_library, where_to_get_it
 
-__all__ = ["CHECKPOINTS", "BLOCK", "WINDOW", "EXACT_WINDOW", "timing_library", "measure",
-           "machine_description"]
+__all__ = ["CHECKPOINTS", "BLOCK", "WINDOW", "EXACT_WINDOW", "CLOSED_LOOP_STEP", "CLOSED_LOOP_DURATION",
+           "timing_library", "measure", "closed_loop_fmu_times", "machine_description"]
 
 CHECKPOINTS = (2_000, 20_000, 120_000, 1_000_000)
 BLOCK = 250
 WINDOW = 10000
 EXACT_WINDOW = 1000      # exact creep costs O(k): fewer samples at each point
+#: the closed-loop FMU through fmpy.simulate_fmu: communication step and length of the run [s]
+CLOSED_LOOP_STEP = 0.01
+CLOSED_LOOP_DURATION = 3.0
 
 
 _BENCH = None
@@ -112,6 +122,71 @@ def machine_description():
             f"{cc} (-O2); load average {load}")
 
 
+def _median_time(fn, repeat):
+    """Median wall time [s] of `repeat` calls of fn after one to warm up."""
+    fn()
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def closed_loop_fmu_times(scenario="mismatch_1_5_10hz", *, fmu_dir=None, registry=None, repeat=5,
+                          ssp_repeat=1, progress=None):
+    """Wall times [s] of CLOSED_LOOP_DURATION of a sines scenario: PiezoStageClosedLoop through
+    ``fmpy.simulate_fmu`` at a step of CLOSED_LOOP_STEP (from the .fmu file, which fmpy extracts at
+    every call, and from a folder it was extracted to once, with the model description read once:
+    fmpy's own arguments for a repeated run) and at one sample (h), fmpy's own cost for the same
+    steps (ReferenceSignal alone, from its folder), and the loops of several FMUs over the same
+    time: the fmpy master (PiezoStage and AdaptiveCompoundController, the reference given), the
+    three FMUs wired by hand (exchange schedule) and fmpy's SSP player on the closed-loop SSP
+    (`ssp_repeat` runs, 0: not run). Medians of `repeat` runs after a warm-up. None for a
+    scenario whose reference is not a sum of sines."""
+    def say(text):
+        if progress is not None:
+            progress(text)
+
+    duration, step = CLOSED_LOOP_DURATION, CLOSED_LOOP_STEP
+    setup = prepare_closed_loop(scenario, registry=registry, duration=duration)
+    if setup.scenario.signal.kind != "sines":
+        return None         # the internal reference (and the wired loop, the SSP) need sines
+    params = closed_loop_fmu_parameters(setup)
+    path = fmu_path(CLOSED_LOOP_MODEL, fmu_dir)
+    ref_path = fmu_path(REFERENCE_MODEL, fmu_dir)
+    md, ref_md = fmpy.read_model_description(str(path)), fmpy.read_model_description(str(ref_path))
+    out = {"duration": duration, "step": step, "h": setup.h, "repeat": repeat}
+    with tempfile.TemporaryDirectory(prefix="bench_closed_loop_") as tmp:
+        folder, ref_folder = os.path.join(tmp, "loop"), os.path.join(tmp, "reference")
+        fmpy.extract(str(path), unzipdir=folder)
+        fmpy.extract(str(ref_path), unzipdir=ref_folder)
+        say(f"fmpy.simulate_fmu of {CLOSED_LOOP_MODEL}, {repeat} x {duration:g} s")
+        out["fmu file"] = _median_time(lambda: fmpy.simulate_fmu(
+            str(path), stop_time=duration, output_interval=step, start_values=params), repeat)
+        out["fmu folder"] = _median_time(lambda: fmpy.simulate_fmu(
+            folder, stop_time=duration, output_interval=step, start_values=params,
+            model_description=md), repeat)
+        out["fmu folder, one sample"] = _median_time(lambda: fmpy.simulate_fmu(
+            folder, stop_time=duration, output_interval=setup.h, start_values=params,
+            model_description=md), max(1, repeat // 2))
+        out["fmpy floor"] = _median_time(lambda: fmpy.simulate_fmu(
+            ref_folder, stop_time=duration, output_interval=step, model_description=ref_md), repeat)
+    say(f"the loops of several FMUs, {duration:g} s")
+    fmpy_master = masters.closed_loop("fmpy")
+    out["fmpy master"] = _median_time(lambda: fmpy_master(scenario, registry=registry, duration=duration,
+                                                          fmu_dir=fmu_dir), repeat)
+    out["wired"] = _median_time(lambda: simulate_wired(scenario, "exchange", duration=duration,
+                                                       fmu_dir=fmu_dir, registry=registry), repeat)
+    if ssp_repeat:
+        say("fmpy's SSP player")
+        # the player runs the scenario's own duration (the SSP's stop time)
+        out["ssp player duration"] = float(setup.scenario.duration)
+        out["ssp player"] = _median_time(lambda: simulate_ssp_scenario(scenario, fmu_dir=fmu_dir,
+                                                                       registry=registry), ssp_repeat)
+    return out
+
+
 def measure(scenario="mismatch_1_5_10hz", *, n_max=CHECKPOINTS[-1], repeat=5, fmpy_repeat=3,
             fmu_dir=None, registry=None, progress=None):
     """Measure every figure of the benchmark; return a dict (see :func:`format_figures`)."""
@@ -190,6 +265,10 @@ def measure(scenario="mismatch_1_5_10hz", *, n_max=CHECKPOINTS[-1], repeat=5, fm
             times.append(time.perf_counter() - t0)
         end_to_end[name] = statistics.median(times)
 
+    closed_loop = closed_loop_fmu_times(scenario, fmu_dir=fmu_dir, registry=registry,
+                                        repeat=max(3, repeat), ssp_repeat=1 if fmpy_repeat else 0,
+                                        progress=say)
+
     exact = {}
     for k in checkpoints:
         width = min(EXACT_WINDOW, k // 2) // BLOCK * BLOCK
@@ -207,5 +286,6 @@ def measure(scenario="mismatch_1_5_10hz", *, n_max=CHECKPOINTS[-1], repeat=5, fm
         "checkpoints": checkpoints,
         "loops": {name: col.medians(name) for name in col.values},
         "memory": memory, "exact": exact, "end_to_end": end_to_end, "short_n": short.n,
+        "closed_loop_fmu": closed_loop,
         "machine": machine_description(), "cores": os.cpu_count() or 1,
     }

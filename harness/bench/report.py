@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from ..closed_loop import CLOSED_LOOP_MODEL
 from .bound import RUN_SECONDS, Bound
 from .measure import BLOCK, EXACT_WINDOW, WINDOW
 
@@ -72,4 +73,41 @@ def format_figures(f):
                      f"samples a run / {f['cores']} cores): "
                      + ", ".join(f"{rate:.0f} runs/s of {s:g} s" for s, rate in bounds)
                      + "; `sweep` measures its own on its scenarios")
+    lines += _closed_loop_lines(f)
     return "\n".join(lines) + "\n"
+
+
+def _closed_loop_lines(f):
+    """PiezoStageClosedLoop through fmpy.simulate_fmu against the loops of several FMUs."""
+    c = f.get("closed_loop_fmu")
+    if not c:
+        return ["", "the closed-loop FMU through fmpy.simulate_fmu: not measured (it needs a scenario "
+                    "with a sines reference)"]
+    samples = c["duration"] / c["h"]
+    fmpy_loop = f["loops"].get("fmpy loop", {}).get(f["checkpoints"][-1])
+    per_sample = lambda seconds: seconds / samples * 1e6        # noqa: E731  [us]
+
+    def row(label, seconds):
+        ratios = f"{c['fmpy master'] / seconds:6.1f}x"
+        if fmpy_loop:
+            ratios += f"   {fmpy_loop * 1e-3 / per_sample(seconds):6.1f}x"
+        return f"{label:<58}{seconds * 1e3:9.2f} ms {per_sample(seconds):8.3f} us   {ratios}"
+
+    lines = [
+        "",
+        f"{c['duration']:g} s of the scenario (wall clock, medians of {c['repeat']}; per sample: the time over "
+        f"its {samples:.0f} samples of h = {c['h'] * 1e3:g} ms)",
+        f"{'':<58}{'run':>12} {'per sample':>11}   {'faster than the fmpy master':>28}",
+        f"{'':<58}{'':>12} {'':>11}   {'(same run)':>12}  {'(fmpy loop/sample)':>17}",
+        row(f"fmpy.simulate_fmu {CLOSED_LOOP_MODEL}, {c['step'] * 1e3:g} ms step, .fmu file", c["fmu file"]),
+        row(f"  the same from its folder, model description given", c["fmu folder"]),
+        row(f"  the same at a step of one sample ({c['h'] * 1e3:g} ms)", c["fmu folder, one sample"]),
+        row(f"  fmpy.simulate_fmu's own cost: ReferenceSignal alone, {c['step'] * 1e3:g} ms", c["fmpy floor"]),
+        row("fmpy master: PiezoStage + AdaptiveCompoundController", c["fmpy master"]),
+        row("the three FMUs wired (exchange), fmpy's raw calls", c["wired"]),
+    ]
+    if "ssp player" in c:
+        # the player runs the scenario's own duration: scaled to this one's
+        lines.append(row("fmpy's SSP player, the three FMUs",
+                         c["ssp player"] * c["duration"] / c["ssp player duration"]))
+    return lines

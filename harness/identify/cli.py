@@ -295,7 +295,7 @@ def _identify_records(args, holdout, max_evaluations, stream, say):
 
 
 def run_export(args, stream=sys.stdout):
-    """Run ``export``: the parameter file into both FMUs; return the exit code."""
+    """Run ``export``: the parameter file into the FMUs (harness.identify.export); return the exit code."""
     params = read_params(args.params)
     written = export_fmus(params, args.out, fmu_dir=args.fmu_dir, source=args.params)
     if stream is not None:

@@ -1,8 +1,11 @@
 """Parameterised FMUs: the built FMUs with a parameter file's values as start values.
 
-:func:`export_fmus` writes ``PiezoStage.fmu`` and ``AdaptiveCompoundController.fmu``
-into a folder.  Each is the built FMU (same binaries, sources and GUID: the
-binary checks the GUID it is instantiated with) with
+:func:`export_fmus` writes ``PiezoStage.fmu``, ``AdaptiveCompoundController.fmu`` and
+``PiezoStageClosedLoop.fmu`` into a folder: the stage, its controller with the stage as its
+nominal model, and both in one closed loop (the stage's parameters under their names and the
+controller's nominal model as ``controller.<name>``, :mod:`harness.closed_loop`).  Each is the
+built FMU (same binaries, sources and GUID: the binary checks the GUID it is instantiated with)
+with
 
 * ``modelDescription.xml``: the ``start`` attribute of each given parameter
   replaced (nothing else in the file changes);
@@ -29,8 +32,8 @@ Values are written as the shortest decimal text that reads back to the same
 double, so the FMU runs exactly the parameters of the file.  Before writing,
 each value is checked against the variable's type and declared range, and the
 complete parameter set of each FMU is initialised once in the C core (the
-FMUs' own validation); afterwards each FMU is checked with
-:func:`fmpy.validation.validate_fmu`.
+FMUs' own validation; the closed loop's, which adds rules of its own, in its FMU);
+afterwards each FMU is checked with :func:`fmpy.validation.validate_fmu`.
 """
 
 from __future__ import annotations
@@ -48,7 +51,8 @@ import fmpy
 from fmpy.validation import validate_fmu
 
 from .. import core, fmu_documentation, fmu_references
-from ..fmu import fmu_path, parameter_types
+from ..closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters
+from ..fmu import FMUInitializationError, fmu_path, load, parameter_types
 from ..fmu_archive import write_fmu_zip
 from ..paths import sha256_of
 from .params import CONTROLLER_MODEL, PLANT_MODEL, split_params
@@ -102,8 +106,22 @@ def _check_range(name, value, var, model, source):
                           f"{rng}")
 
 
-def _check_in_core(model, params, source):
-    """Initialise the complete parameter set in the C core (the FMUs' own checks)."""
+def _check_in_core(model, params, source, path=None):
+    """Initialise the complete parameter set in the C core (the FMUs' own checks); the closed
+    loop's in its FMU at ``path``, whose rules are more than its blocks'."""
+    if model == CLOSED_LOOP_MODEL:
+        from ..masters.fmpy import _Instance      # the closed loop's own rules live in its FMU
+        inst = None
+        try:
+            inst = _Instance(load(path), "export")
+            inst.initialize(params, 0.0)
+        except FMUInitializationError as exc:
+            text = str(exc).split("failed: ", 1)[-1]
+            raise ExportError(f"{source}: {model} refuses these start values: {text}") from None
+        finally:
+            if inst is not None:
+                inst.close()
+        return
     try:
         if model == PLANT_MODEL:
             core.Plant(params)
@@ -156,7 +174,7 @@ def _prepare(src, given, source):
     for name, value in given.items():
         _check_range(name, value, variables[name], model, source)
     complete.update(given)
-    _check_in_core(model, complete, source)
+    _check_in_core(model, complete, source, src)
     return md, kinds, complete
 
 
@@ -279,13 +297,16 @@ def _verify(path, original, complete, kinds):
 
 
 def export_fmus(params, out_dir, *, fmu_dir=None, source="parameters"):
-    """Write PiezoStage.fmu and AdaptiveCompoundController.fmu with ``params`` as start values.
+    """Write PiezoStage.fmu, AdaptiveCompoundController.fmu and PiezoStageClosedLoop.fmu with
+    ``params`` as start values.
 
     Parameters
     ----------
     params : dict
         FMU variable name -> value; each FMU takes the names it has (see
-        :func:`harness.identify.params.split_params`).
+        :func:`harness.identify.params.split_params`); the closed loop takes both FMUs' (its
+        stage the plant's, its controller the controller's: the identified stage is its
+        controller's nominal model too).
     out_dir : str or Path
         Folder to write into (created); existing FMUs there are replaced.
     fmu_dir : str or Path, optional
@@ -310,18 +331,22 @@ def export_fmus(params, out_dir, *, fmu_dir=None, source="parameters"):
         A value is out of range (declared in the model description, or
         refused by the model), or the written FMU fails its checks.
     """
-    sources = {m: fmu_path(m, fmu_dir) for m in (PLANT_MODEL, CONTROLLER_MODEL)}
-    kinds = {m: parameter_types(m, fmu_dir) for m in sources}
+    sources = {m: fmu_path(m, fmu_dir) for m in (PLANT_MODEL, CONTROLLER_MODEL, CLOSED_LOOP_MODEL)}
+    kinds = {m: parameter_types(m, fmu_dir) for m in (PLANT_MODEL, CONTROLLER_MODEL)}
     plant, controller = split_params(params, kinds[PLANT_MODEL], kinds[CONTROLLER_MODEL],
                                      source=source)
+    try:
+        loop = closed_loop_parameters(plant=plant, controller=controller)
+    except ValueError as exc:
+        raise ExportError(f"{source}: {exc}") from None
     out = Path(out_dir)
     jobs = []
-    for model, given in ((PLANT_MODEL, plant), (CONTROLLER_MODEL, controller)):
+    for model, given in ((PLANT_MODEL, plant), (CONTROLLER_MODEL, controller), (CLOSED_LOOP_MODEL, loop)):
         dst = out / f"{model}.fmu"
         if dst.resolve() == sources[model].resolve():
             raise ExportError(f"{dst} is the FMU being parameterised; choose another --out folder")
         jobs.append((model, dst, given, _prepare(sources[model], given, source)))
-    # both FMUs checked before either is written
+    # every FMU checked before any is written
     plant_complete = jobs[0][3][2]
     reports = _identification_files(source)
     out.mkdir(parents=True, exist_ok=True)

@@ -14,13 +14,15 @@ name                      closed loop   open loop   FMI          needs
 ``native``                yes           (fmpy's)    2.0          ``build/libpiezo_runner.so``
 ``auto``                  yes           (fmpy's)    2.0, 3.0     (native for long runs)
 ``core``                  yes           yes         none (cffi)  ``build/libpiezo_core.so``
+``closed-loop-fmu``       yes           (fmpy's)    2.0, 3.0     fmpy
 ``ssp-player``            yes           no          2.0          fmpy (its SSP player)
 ``container``             yes           no          2.0          fmu-manipulation-toolbox
 ========================  ============  ==========  ===========  =============================
 
-The first four are the command line's ``--backend`` choices; ``ssp-player`` and
-``container`` run the loop in other tools' schedules (docs/cosimulation.md) and are
-called by their own functions.
+The first five are the command line's ``--backend`` (or ``--master``) choices:
+``closed-loop-fmu`` runs the loop inside one FMU, PiezoStageClosedLoop, with the same result;
+``ssp-player`` and ``container`` run the loop in other tools' schedules
+(docs/cosimulation.md) and are called by their own functions.
 """
 
 from __future__ import annotations
@@ -28,9 +30,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 import functools
 
-from ..fmu import FMI_VERSIONS
+from ..closed_loop import CLOSED_LOOP_MODEL
+from ..fmu import CONTROLLER_MODEL, FMI_VERSIONS, PLANT_MODEL, REFERENCE_MODEL
 from ..scenarios import get_scenario
-from . import container, core, fmpy, native, ssp
+from . import closed_loop_fmu, container, core, fmpy, native, ssp
 
 __all__ = ["Master", "MASTERS", "BACKENDS", "OPEN_LOOP_BACKENDS", "SWEEP_BACKENDS",
            "LONG_RUN_SAMPLES", "get", "closed_loop", "open_loop", "prepared_loop",
@@ -57,6 +60,8 @@ class Master:
         One of the command line's ``--backend`` choices.
     fmi_note : str
         Why it runs only the FMI versions it runs (for messages), or "".
+    fmus : tuple of str
+        The FMUs it runs (a run's provenance names them), the plant's for the open loop too.
     """
 
     name: str
@@ -69,6 +74,7 @@ class Master:
     needs: str
     backend: bool = True
     fmi_note: str = ""
+    fmus: tuple = (PLANT_MODEL, CONTROLLER_MODEL)
 
 
 MASTERS = {m.name: m for m in (
@@ -80,9 +86,12 @@ MASTERS = {m.name: m for m in (
            True, False, (2,), "build/libpiezo_runner.so",
            fmi_note="the native master calls the fmi2 functions"),
     Master("core", "the C core through cffi, no FMI", True, True, (), "build/libpiezo_core.so",
-           fmi_note="the core backend runs no FMU"),
+           fmi_note="the core backend runs no FMU", fmus=()),
+    Master("closed-loop-fmu", "the loop inside one FMU, PiezoStageClosedLoop, through fmpy",
+           True, False, (2, 3), "fmpy", fmus=(CLOSED_LOOP_MODEL, PLANT_MODEL)),
     Master("ssp-player", "fmpy's SSP player on the closed-loop SSP (a Jacobi schedule)",
-           True, False, (2,), "fmpy", backend=False),
+           True, False, (2,), "fmpy", backend=False,
+           fmus=(PLANT_MODEL, CONTROLLER_MODEL, REFERENCE_MODEL)),
     Master("container", "an FMU container of fmu-manipulation-toolbox (parallel or sequential)",
            True, False, (2,), "fmu-manipulation-toolbox", backend=False),
 )}
@@ -139,7 +148,8 @@ def closed_loop(name, fmi_version=2):
     """The closed-loop function of a master.
 
     For the ``--backend`` choices: ``f(scenario, *, adaptation, preview, master, fmu_dir,
-    progress, ...)`` (see :func:`harness.masters.fmpy.simulate_closed_loop`); ``ssp-player``:
+    progress, ...)`` (see :func:`harness.masters.fmpy.simulate_closed_loop`;
+    ``closed-loop-fmu``: :func:`harness.masters.closed_loop_fmu.simulate_closed_loop_fmu`); ``ssp-player``:
     :func:`harness.masters.ssp.simulate_ssp_scenario`; ``container``:
     :func:`harness.masters.container.simulate_closed_loop_container`.
 
@@ -156,6 +166,8 @@ def closed_loop(name, fmi_version=2):
         return ssp.simulate_ssp_scenario
     if name == "container":
         return container.simulate_closed_loop_container
+    if name == "closed-loop-fmu":
+        return functools.partial(closed_loop_fmu.simulate_closed_loop_fmu, fmi_version=fmi_version)
     if fmi_version != 2:                 # fmpy (also for auto): the FMI 3.0 editions
         return functools.partial(fmpy.simulate_closed_loop, fmi_version=fmi_version)
     if name == "native":

@@ -16,8 +16,8 @@ from pathlib import Path
 import platform
 import sys
 
-from .. import _source, core, paths
-from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, fmu_path, fmu_platforms, model_description
+from .. import _source, core, masters, paths
+from ..fmu import fmu_path, fmu_platforms, model_description
 
 __all__ = ["FMUInfo", "Provenance", "collect_provenance", "fmu_info", "commit_id"]
 
@@ -137,7 +137,7 @@ def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None, 
     backend : {"auto", "fmpy", "native", "core"}
     fmu_dir : str or Path, optional
     models : sequence of str, optional
-        The FMUs that ran (default: PiezoStage and AdaptiveCompoundController).
+        The FMUs that ran (default: those of the backend's master, :attr:`harness.masters.Master.fmus`).
     command : str, optional
         The command line (default: ``sys.argv``).
     fmi_version : {2, 3}
@@ -147,7 +147,7 @@ def collect_provenance(backend="fmpy", fmu_dir=None, models=None, command=None, 
     -------
     Provenance
     """
-    models = (PLANT_MODEL, CONTROLLER_MODEL) if models is None else tuple(models)
+    models = masters.get(backend).fmus if models is None else tuple(models)
     prov = Provenance(commit=commit_id(), backend=backend,
                       fmi_version=None if backend == "core" else int(fmi_version))
     if backend != "core":

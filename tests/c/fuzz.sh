@@ -20,7 +20,10 @@ bin="$build/tests"
 mkdir -p "$work"
 failed=0
 total=0
-for id in PiezoStage AdaptiveCompoundController ReferenceSignal; do
+# every FMU the build made targets for (CMakeLists.txt FMU_IDS: tests/c/CMakeLists.txt)
+ids=$(cd "$bin" && ls fuzz_seeds_* | sed 's/^fuzz_seeds_//')
+[ -n "$ids" ] || { echo "no fuzz targets in $bin (build with --target fuzz_targets)" >&2; exit 2; }
+for id in $ids; do
     seeds="$work/seeds/$id"
     rm -rf "$seeds"
     mkdir -p "$seeds/deserialize" "$seeds/run"

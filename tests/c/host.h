@@ -155,6 +155,14 @@ static inline int host_hold_inputs(const host_fmu *f, void *c)
     return host_named(f, "mv.hold_inputs", NULL) == NULL || host_set_named(f, c, "mv.hold_inputs", 1.0) == HOST_OK;
 }
 
+/* The FMUs whose doStep takes a step of any size (fmu_model.h, MODEL_HAS_ANY_STEP in their
+ * config.h: the samples whose instants the step passes are computed, and the FMU's time may
+ * end between two); the others take whole multiples of h only. */
+static inline int host_any_step(const host_fmu *f)
+{
+    return strcmp(f->id, "PiezoStageClosedLoop") == 0;
+}
+
 /* Sets the j-th Real input of f to host_drive(i, j, k, h). */
 static inline int host_set_inputs(const host_fmu *f, void *c, int i, int k)
 {

@@ -12,8 +12,9 @@
  * Output, one JSON object:
  *   model, guid           MODEL_IDENTIFIER_STRING, MODEL_GUID
  *   n_variables           MODEL_N_VARIABLES (FMI 3.0: the value reference of time)
- *   params_offset, params_size
- *                         where ModelData.params lies (the core's parameter struct)
+ *   param_structs         where the core's parameter structs lie in ModelData: {field:
+ *                         [offset, size]}, ModelData.params, or the fields config.h names
+ *                         in MODEL_PARAM_STRUCTS (a model of several blocks)
  *   data_size             sizeof(ModelData): every offset lies inside it
  *   real_size, int_size   the sizes the glue reads at an offset per type
  *   variables             entry i of model_variables (value reference i):
@@ -29,6 +30,11 @@
 #include "fmu_model.h"
 
 static ModelData data;  /* static: zeroed, and not on the stack (it can be large) */
+
+/* X(field) for every core parameter struct in ModelData */
+#ifndef MODEL_PARAM_STRUCTS
+#define MODEL_PARAM_STRUCTS X(params)
+#endif
 
 static void print_string(const char *s)
 {
@@ -59,9 +65,15 @@ int main(void)
     print_string(MODEL_IDENTIFIER_STRING);
     printf(", \"guid\": ");
     print_string(MODEL_GUID);
-    printf(", \"n_variables\": %d, \"params_offset\": %zu, \"params_size\": %zu, \"data_size\": %zu, "
-           "\"real_size\": %zu, \"int_size\": %zu,\n \"variables\": [", (int)MODEL_N_VARIABLES,
-           offsetof(ModelData, params), sizeof data.params, sizeof data, sizeof(double), sizeof(int));
+    printf(", \"n_variables\": %d, \"param_structs\": {", (int)MODEL_N_VARIABLES);
+    {
+        const char *sep = "";
+#define X(field) printf("%s\"" #field "\": [%zu, %zu]", sep, offsetof(ModelData, field), sizeof data.field), sep = ", ";
+        MODEL_PARAM_STRUCTS
+#undef X
+    }
+    printf("}, \"data_size\": %zu, \"real_size\": %zu, \"int_size\": %zu,\n \"variables\": [", sizeof data,
+           sizeof(double), sizeof(int));
     for (i = 0; i < (size_t)MODEL_N_VARIABLES; i++) {
         const model_variable *v = &model_variables[i];
         const char *at = (const char *)&data + v->offset;

@@ -1,0 +1,125 @@
+/*
+ * fmu_controller.c - the controller as an FMU shows it (see fmu_controller.h).
+ */
+#include <math.h>
+#include <stdio.h>
+
+#include "fmu_controller.h"
+#include "fmu_model.h"
+
+void fmu_controller_track_init(fmu_controller_track *t, const piezo_controller *c, double t0)
+{
+    t->delay = c->detecting ? 0 : c->d;
+    t->delay_time = t0;
+    t->said_delay = t->delay;
+    t->said_verified = 0;
+    t->said_redetect = 0;
+    t->said_saturated = 0;
+    t->said_large_error = 0;
+}
+
+void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller *c, double t0, double h)
+{
+    if (c->out.delay != t->delay) {
+        t->delay = c->out.delay;
+        t->delay_time = fmu_sample_time(t0, c->k - 1, h);
+    }
+}
+
+int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
+                         char *text, size_t size)
+{
+    if (c->sup.status && !t->said_verified) {
+        t->said_verified = 1;
+        snprintf(text, size, "supervision: y_meas answers v as the model says (%.3g times its response, %d "
+                 "samples after it), verified at t = %.9g s", c->sup.verified_gain, c->sup.delay,
+                 fmu_sample_time(t0, c->sup.k_verified, h));
+        return 1;
+    }
+    if (t->delay == t->said_delay)
+        return 0;
+    t->said_delay = t->delay;
+    if (t->delay > 0)
+        snprintf(text, size, "loop delay d = %d chosen at t = %.9g s (sample %llu): its sum of squared "
+                 "prediction errors was at most %g times every other candidate's (d = 1, 2, 3) for %d samples; "
+                 "the law uses d = %d and the observer pole mv.observer = %g from then on",
+                 t->delay, t->delay_time, (unsigned long long)((t->delay_time - t0) / h + 0.5),
+                 1.0 / PIEZO_DETECT_RATIO_INV, PIEZO_DETECT_CONFIRM, t->delay, c->observer);
+    else
+        snprintf(text, size, "loop delay detection restarted at t = %.9g s: the start-up law runs until "
+                 "a delay is chosen", t->delay_time);
+    return 1;
+}
+
+int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
+                           char *text, size_t size)
+{
+    if (c->n_detections > 1 && !t->said_redetect) {
+        t->said_redetect = 1;
+        snprintf(text, size, "the chosen loop delay no longer predicts the measurement (|pred_error| above "
+                 "monitor.pred_error_max = %g um for %d samples): delay detection restarted at t = %.9g s with "
+                 "the start-up law; later restarts are not logged (the terminate call counts them)",
+                 c->pred_error_max, PIEZO_DETECT_REDETECT, fmu_sample_time(t0, c->k_delay, h));
+        return 1;
+    }
+    if (c->n_saturated > 0 && !t->said_saturated) {
+        t->said_saturated = 1;
+        snprintf(text, size, "v was clipped to [sat.v_min, sat.v_max] = [%g, %g] V, first at "
+                 "t = %.9g s (adaptation pauses while a clipped sample is in the regressor); "
+                 "further clipping is counted, not logged: the terminate call reports the count",
+                 c->sat_v_min, c->sat_v_max, fmu_sample_time(t0, c->k_first_saturated, h));
+        return 1;
+    }
+    if (c->n_large_error > 0 && !t->said_large_error) {
+        char consequence[192];
+        t->said_large_error = 1;
+        /* monitor.divergence_samples = 0 switches the verdict off: say so, not "after 0 samples" */
+        if (c->divergence_samples > 0)
+            snprintf(consequence, sizeof consequence, "If it stays above for monitor.divergence_samples = %llu "
+                     "consecutive samples the loop is declared unstable and the doStep fails",
+                     (unsigned long long)c->divergence_samples);
+        else
+            snprintf(consequence, sizeof consequence, "With monitor.divergence_samples = 0 the loop is never "
+                     "declared unstable, however long it stays above");
+        snprintf(text, size, "|pred_error| exceeded monitor.pred_error_max = %g um, first at t = %.9g s: "
+                 "the model of G no longer predicts the measurement. %s; further exceedances are counted, "
+                 "not logged", c->pred_error_max, fmu_sample_time(t0, c->k_first_large_error, h),
+                 consequence);
+        return 1;
+    }
+    return 0;
+}
+
+int fmu_controller_summary(const piezo_controller *c, char *text, size_t size)
+{
+    if (c->n_saturated == 0 && c->n_large_error == 0 && c->n_detections <= 1)
+        return 0;
+    snprintf(text, size, "of %llu samples, v was clipped in %llu; |pred_error| exceeded "
+             "monitor.pred_error_max = %g um in %llu (largest %.6g um); delay detection ran %llu times",
+             (unsigned long long)c->k, (unsigned long long)c->n_saturated, c->pred_error_max,
+             (unsigned long long)c->n_large_error, c->max_abs_pred_error,
+             (unsigned long long)c->n_detections);
+    return 1;
+}
+
+int fmu_controller_failure(const piezo_controller *c, piezo_status st, char *text, size_t size)
+{
+    /* the core's words (one home: the Python binding and every FMU that runs the controller) */
+    return piezo_controller_explain(c, st, text, size) > 0;
+}
+
+const char *fmu_controller_track_check(const fmu_controller_track *t, int core_initialized, double t0,
+                                       uint64_t k, double h)
+{
+    if ((t->said_verified != 0 && t->said_verified != 1) || (t->said_redetect != 0 && t->said_redetect != 1)
+        || (t->said_saturated != 0 && t->said_saturated != 1)
+        || (t->said_large_error != 0 && t->said_large_error != 1))
+        return "warning flags are not 0 or 1";
+    if (!isfinite(t->delay_time))
+        return "time stamps not finite";
+    if (t->delay < 0 || t->delay > PIEZO_MV_MAX_D || t->said_delay < 0 || t->said_delay > PIEZO_MV_MAX_D)
+        return "timing outputs out of range";
+    if (core_initialized && (t->delay_time < t0 || t->delay_time > fmu_sample_time(t0, k, h)))
+        return "controller time stamps differ from t0 + k h";
+    return NULL;
+}

@@ -1,0 +1,53 @@
+/*
+ * fmu_controller.h - the adaptive compound controller as an FMU shows it, for
+ * every FMU that runs one (AdaptiveCompoundController, PiezoStageClosedLoop):
+ * the loop delay its committed samples ran (the outputs loop_delay and
+ * loop_delay_time), and what it says: the events (the delay it chose, the loop
+ * its supervision verified), the warnings (detection restarted, v clipped,
+ * |pred_error| beyond its bound), the summary at terminate and why it refused a
+ * sample (the supervision's verdict, the monitor's, a diverged value). One text
+ * per fact, whichever FMU says it; the words harness/fmu.py LOOP_FAILURES knows
+ * the Errors by are here.
+ *
+ * Times are the FMU's t0 + k h (fmu_sample_time). The struct is flat, part of
+ * the FMU's ModelData, so an FMU state keeps what was already said.
+ */
+#ifndef FMU_CONTROLLER_H
+#define FMU_CONTROLLER_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include "piezo_controller.h"
+
+typedef struct {
+    int delay;                  /* d of the law over the committed samples, 0 while detecting */
+    double delay_time;          /* the time of the sample from which it has held [s] */
+    int said_delay;             /* delay's value last logged as an event */
+    int said_verified;          /* the loop the supervision verified was logged as an event */
+    int said_redetect;          /* the restarted-detection warning was logged */
+    int said_saturated;         /* the first-clipping warning was logged */
+    int said_large_error;       /* the first large-pred_error warning was logged */
+} fmu_controller_track;
+
+/* At initialization (the controller just initialized, sample 0 at t0). */
+void fmu_controller_track_init(fmu_controller_track *t, const piezo_controller *c, double t0);
+/* After a sample was committed (c->k is the next one). */
+void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller *c, double t0, double h);
+
+/* At most one event / one warning per call, each thing once: 1 with the text written, else 0. */
+int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
+                         char *text, size_t size);
+int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
+                           char *text, size_t size);
+/* The counts worth a warning at terminate, 1 if written. */
+int fmu_controller_summary(const piezo_controller *c, char *text, size_t size);
+/* Why the controller refused a sample with st (PIEZO_ERR_FAULT: "supervision stopped the loop (...)",
+ * PIEZO_ERR_UNSTABLE, PIEZO_ERR_DIVERGED), 1 if written; 0 for the glue's generic text. */
+int fmu_controller_failure(const piezo_controller *c, piezo_status st, char *text, size_t size);
+
+/* A restored struct against the controller it belongs to: NULL, or what is wrong.
+ * core_initialized: the state was saved after initialization (k samples since t0). */
+const char *fmu_controller_track_check(const fmu_controller_track *t, int core_initialized, double t0,
+                                       uint64_t k, double h);
+
+#endif

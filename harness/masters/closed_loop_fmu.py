@@ -1,0 +1,179 @@
+"""The closed-loop-FMU master: the closed loop of :func:`harness.masters.fmpy.simulate_closed_loop`
+run by one FMU, PiezoStageClosedLoop (the stage, the controller and the reference inside,
+fmu_src/PiezoStageClosedLoop), through fmpy, on its FMI 2.0 or FMI 3.0 edition.
+
+The scenario's parameters go to the FMU under its names (:func:`harness.closed_loop.
+closed_loop_parameters`: the controller's nominal model as ``controller.<name>``). A sines
+reference is the FMU's internal one (ReferenceSignal's parameters: the same ``y_ref`` =
+y_d(k + lead) and stamped preview y_d(k + 4) the other masters give the controller, from the
+second sample on); without preview, ``lead`` = ``preview`` = 0 (y_d(k), no stamped preview).
+A table reference goes through the input ``y_d``, given ``lead`` samples ahead with
+``y_d_lead`` = ``lead``: the controller gets the same y_d(k + lead), and the same loop where the
+loop delay d equals that lead (the default, d = 2), and with d > lead the controller of the
+other masters takes y_d(k + d) from their stamped preview from the second sample on, which this
+one has not: such runs differ.
+
+The FMU steps one sample per doStep and every output is read at every sample, so the rows are
+those of the other masters, bit for bit (the tests compare them): ``y_d`` is the scenario's (as
+theirs), the rest are the FMU's outputs at ``t_k``. With ``mv.feedthrough`` the FMU applies v(k)
+in sample k as a Gauss-Seidel master does, and publishes it at ``t_(k+1)``: row k takes the
+controller's outputs from there. A Jacobi master with ``mv.feedthrough`` (a stale v, which the
+fmpy master shows) is no loop this FMU runs, and is refused.
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from ..closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters
+from ..fmu import TIMING_OUTPUTS, FMUError, check_fmi_version, fmu_path, load, loop_error_class
+from ..loop import (CLOSED_LOOP_DTYPE, CLOSED_LOOP_FIELDS, REFERENCE_LEAD, REFERENCE_PREVIEW,
+                    as_structured, prepare_closed_loop, reference_lead, reference_parameters)
+from .fmpy import _Instance, _ScalarFunctions, _vr_array
+
+__all__ = ["simulate_closed_loop_fmu", "closed_loop_fmu_parameters"]
+
+#: the FMU's outputs of row k, in CLOSED_LOOP_FIELDS order from y (y_d is the scenario's)
+_OUTPUTS = ("y", "y_meas", "v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error")
+_N_PLANT = 2        # y, y_meas: of t_k also with mv.feedthrough
+
+
+def closed_loop_fmu_parameters(setup, preview=True):
+    """The closed-loop FMU's parameters of a prepared closed loop (:func:`harness.loop.
+    prepare_closed_loop`): the plant's and the controller's, and the reference's (sines) or
+    the input's lead (table)."""
+    sc = setup.scenario
+    lead = reference_lead(setup.controller_params) or REFERENCE_LEAD
+    if sc.signal.kind == "sines":
+        reference = reference_parameters(sc)
+        reference.update({"lead": lead, "preview": REFERENCE_PREVIEW} if preview
+                         else {"lead": 0, "preview": 0})
+        own = {}
+    else:
+        reference = {}
+        own = {"use_internal_reference": False, "y_d_lead": lead if preview else 0}
+    params = closed_loop_parameters(plant=setup.plant_params, controller=setup.controller_params,
+                                    reference=reference)
+    params.update(own)
+    return params
+
+
+def simulate_closed_loop_fmu(scenario, *, adaptation=None, preview=True, master="gauss-seidel",
+                             plant_params=None, controller_params=None, fmu_dir=None,
+                             duration=None, registry=None, step_order="plant-first", progress=None,
+                             fmi_version=2, timing=None):
+    """Run a tracking scenario through PiezoStageClosedLoop with fmpy.
+
+    Parameters
+    ----------
+    scenario, adaptation, preview, master, plant_params, controller_params, fmu_dir, duration, registry, step_order, progress, fmi_version, timing
+        As :func:`harness.masters.fmpy.simulate_closed_loop` (``step_order`` changes nothing:
+        the FMU runs its loop inside; ``timing``'s ``meas_offset`` is 0, the loop's own).
+
+    Returns
+    -------
+    ndarray
+        The fields of :func:`harness.masters.fmpy.simulate_closed_loop`, the same values.
+
+    Raises
+    ------
+    ValueError
+        A Jacobi master with ``mv.feedthrough`` (see the module docstring).
+    FileNotFoundError, UnknownParameterError, FMUInitializationError, LoopDivergedError, FMUError
+        As :func:`harness.masters.fmpy.simulate_closed_loop`.
+    """
+    setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,
+                                plant_params=plant_params, controller_params=controller_params,
+                                duration=duration, registry=registry, step_order=step_order)
+    if setup.feedthrough and setup.master == "jacobi":
+        raise ValueError(f"{CLOSED_LOOP_MODEL} runs its loop inside, as a Gauss-Seidel master does with "
+                         f"mv.feedthrough = true; a Jacobi master's stale v is no loop it runs: use "
+                         f"master='gauss-seidel'")
+    fmi_version = check_fmi_version(fmi_version)
+    info = load(fmu_path(CLOSED_LOOP_MODEL, fmu_dir, fmi_version), fmi_version)
+    n, h = setup.n, setup.h
+    rows = np.zeros((n, len(CLOSED_LOOP_FIELDS)))
+    rows[:, 0] = setup.time
+    rows[:, 1] = setup.y_d
+    inst = None
+    try:
+        inst = _Instance(info, "closed-loop")
+        inst.initialize(closed_loop_fmu_parameters(setup, preview), (n + 1) * h)
+        _run(inst, setup, rows, progress)
+        if timing is not None:
+            timing.update(_read_timing(inst))
+    finally:
+        if inst is not None:
+            inst.close()
+    return as_structured(rows, CLOSED_LOOP_DTYPE)
+
+
+def _read_timing(inst):
+    f, info = inst.fmu, inst.info
+    names = ("loop_delay", "preview_lead")
+    ints = (f.getInt32 if inst.fmi3 else f.getInteger)([info.vr(x) for x in names])
+    get_real = f.getFloat64 if inst.fmi3 else f.getReal
+    out = dict(zip(names, (int(v) for v in ints)), meas_offset=0,
+               loop_delay_time=float(get_real([info.vr("loop_delay_time")])[0]))
+    return {name: out[name] for name in TIMING_OUTPUTS}
+
+
+def _run(inst, setup, rows, progress):
+    """Row k: the outputs at t_k (with mv.feedthrough the controller's at t_(k+1)); one sample a step.
+    The y_d input of a table reference is set before each step."""
+    fn = _ScalarFunctions(inst)
+    info = inst.info
+    GET, SET, GET_BOOL, DO_STEP = fn.names
+    c, get, set_, get_bool, step = fn.c, fn.get, fn.set, fn.get_bool, fn.step
+    n, h = setup.n, setup.h
+    vr_out = _vr_array([info.vr(x) for x in _OUTPUTS])
+    vr_sat = _vr_array([info.vr("saturated")])
+    vr_y_d = _vr_array([info.vr("y_d")])
+    n_out = len(_OUTPUTS)
+    out = (ctypes.c_double * n_out)()
+    sat = (ctypes.c_uint8 * 1)() if inst.fmi3 else (ctypes.c_int * 1)()
+    y_d_in = (ctypes.c_double * 1)()
+    external = setup.scenario.signal.kind != "sines"
+    y_ref = setup.y_ref
+    lag = 1 if setup.feedthrough else 0          # the controller's outputs of row k are at t_(k+lag)
+    a_out, a_sat, a_y = ctypes.addressof(out), ctypes.addressof(sat), ctypes.addressof(y_d_in)
+    a_vr_out, a_vr_sat, a_vr_y = ctypes.addressof(vr_out), ctypes.addressof(vr_sat), ctypes.addressof(vr_y_d)
+    np_out = np.ctypeslib.as_array(out)
+    second = max(1, int(round(1.0 / h)))
+    total = n + lag                              # outputs read at t_0 .. t_(total-1)
+    failed, stage, k = False, GET, 0
+    for k in range(total):
+        stage = GET
+        failed = get(c, a_vr_out, n_out, a_out) > 1
+        if not failed:
+            stage = GET_BOOL
+            failed = get_bool(c, a_vr_sat, 1, a_sat) > 1
+        if failed:
+            break
+        if k < n:
+            rows[k, 2:2 + _N_PLANT] = np_out[:_N_PLANT]
+        if k >= lag:
+            rows[k - lag, 2 + _N_PLANT:-1] = np_out[_N_PLANT:]
+            rows[k - lag, -1] = float(sat[0] != 0)
+        if k == total - 1:
+            break
+        if external:
+            y_d_in[0] = y_ref[min(k, n - 1)]
+            stage = SET
+            failed = set_(c, a_vr_y, 1, a_y) > 1
+            if failed:
+                break
+        stage = DO_STEP
+        failed = step(c, k * h, h, 1) > 1
+        if failed:
+            break
+        if progress is not None and (k + 1) % second == 0:
+            progress(min(k + 1, n), n)
+    if failed:
+        message = inst._message(f"{stage} at t = {k * h:.6g} s (sample {k})",
+                                FMUError(f"{stage} returned an error"))
+        raise loop_error_class(inst.log)(message)
+    if progress is not None:
+        progress(n, n)
