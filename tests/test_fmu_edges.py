@@ -212,8 +212,9 @@ def test_fmi3_nvalues_without_value_references_is_refused(fmu3_paths):
 @pytest.mark.parametrize("window", [0, 200])
 def test_the_monitor_warning_says_what_divergence_samples_means(controller, make_fmu, window):
     """|pred_error| above monitor.pred_error_max = 0.001 um (y_meas = 5 um, the model predicts
-    0): the warning names the window when there is one, and says the loop is never declared
-    unstable when monitor.divergence_samples = 0 (no "0 consecutive samples")."""
+    0): the warning names the window and the share of it that stops the loop (PIEZO_MONITOR_SHARE_*)
+    when there is one, and says the loop is never declared unstable when
+    monitor.divergence_samples = 0 (no "0 consecutive samples")."""
     fmu = make_fmu(controller)
     fmu.initialize({"monitor.divergence_samples": window, "monitor.pred_error_max": 0.001,
                     "mv.hold_inputs": True, "sup.enabled": False})
@@ -221,7 +222,8 @@ def test_the_monitor_warning_says_what_divergence_samples_means(controller, make
     fmu.step(20)
     warning = next(text for status, _, text in fmu.messages if status == FMI2_WARNING and "pred_error" in text)
     if window:
-        assert f"monitor.divergence_samples = {window} consecutive samples the loop is declared unstable" in warning
+        assert (f"monitor.divergence_samples = {window} consecutive samples, or in 25 % of the last {window}, "
+                "the loop is declared unstable") in warning
     else:
         assert "With monitor.divergence_samples = 0 the loop is never declared unstable" in warning
         assert "0 consecutive" not in warning

@@ -76,7 +76,8 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, d
         /* monitor.divergence_samples = 0 switches the verdict off: say so, not "after 0 samples" */
         if (c->divergence_samples > 0)
             snprintf(consequence, sizeof consequence, "If it stays above for monitor.divergence_samples = %llu "
-                     "consecutive samples the loop is declared unstable and the doStep fails",
+                     "consecutive samples, or in %d %% of the last %llu, the loop is declared unstable and the "
+                     "doStep fails", (unsigned long long)c->divergence_samples, PIEZO_MONITOR_SHARE_PERCENT,
                      (unsigned long long)c->divergence_samples);
         else
             snprintf(consequence, sizeof consequence, "With monitor.divergence_samples = 0 the loop is never "
