@@ -40,6 +40,9 @@ def _cmake_fmu_ids():
 
 
 FMU_NAMES = _cmake_fmu_ids()
+#: a scenario whose sweeps have every kind of run: ok, stopped, clipped, refused (the file says why)
+NEAR_LIMITS = REPO / "tests" / "scenarios" / "near_limits.toml"
+NEAR_LIMITS_NAME = "near_limits_20hz"
 _FMU_SOURCE_SUFFIXES = {".c", ".h", ".xml", ".map", ".txt", ".cmake", ".py", ".html", ".png"}
 
 

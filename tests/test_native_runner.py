@@ -15,7 +15,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from harness import fmu, masters  # noqa: E402
-from conftest import error_lines  # noqa: E402
+from conftest import NEAR_LIMITS, NEAR_LIMITS_NAME, error_lines  # noqa: E402
 from harness.loop import prepare_closed_loop  # noqa: E402
 from harness.masters import fmpy as fmpy_master, native  # noqa: E402
 
@@ -242,15 +242,16 @@ def test_pairwise_sum_is_numpys():
 
 
 def _batch_parameters(n):
-    """n plant parameter sets of mismatch_20hz wide enough that runs clip, diverge or are
-    refused (the spreads of the sweep test), as per-run columns and one by one."""
+    """n plant parameter sets of the near-limits scenario wide enough that runs clip, are
+    stopped or are refused (the spreads of the sweep test), as per-run columns and one by one."""
+    from harness.scenarios import load_scenarios
     from harness.sweep import parse_spread, plant_start_values
     from harness.sweep.spreads import apply_spreads, draw_columns, run_deltas
     base_all = plant_start_values()
     reals = [k for k, v in base_all.items() if isinstance(v, float)]
     spreads = [parse_spread(s, reals) for s in ("tf.poles=0.01", "pi.weights=60%", "tf.zero=0.01",
                                                 "sensor.seed")]
-    sc = prepare_closed_loop("mismatch_20hz").scenario
+    sc = load_scenarios([NEAR_LIMITS])[NEAR_LIMITS_NAME]
     base = {**base_all, **dict(sc.plant), "h": sc.step_size}
     columns = draw_columns(base, spreads, 11, range(n))
     return sc, base, columns, [apply_spreads(base, spreads, run_deltas(spreads, 11, i)) for i in range(n)]
