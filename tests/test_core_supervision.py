@@ -175,6 +175,23 @@ def test_switched_off_there_is_no_verdict_and_no_statistic():
     assert (s.szz, s.travel_model, s.weight, s.status, s.k) == (0.0, 0.0, 0.0, 0, 2000)
 
 
+@pytest.mark.parametrize("limit", [9.0, 6.0])
+def test_switched_off_a_clipped_sound_loop_runs_the_same_samples(limit):
+    """The supervision only watches: a sound loop that clips (the mismatched plant, limits at
+    +-9 and +-6 V against the 5 Hz tone's 18 V) gives the same q, pred_error and clipping, bit
+    for bit, with sup.enabled true and false (reference: the run with it on). While v is
+    clipped the monitor also judges the nominal model's prediction error from A y(k), which
+    the controller computes itself: with the supervisor off it is still defined (valgrind
+    found it read uninitialised when it came from the supervisor's sums)."""
+    ctrl = {"sat.v_min": -limit, "sat.v_max": limit}
+    on, exc_on, _ = loop(3000, ctrl=ctrl)
+    off, exc_off, _ = loop(3000, ctrl={**ctrl, "sup.enabled": False})
+    assert exc_on is None and exc_off is None, (exc_on, exc_off)
+    assert sum(on["clipped"]) > 100
+    for name in ("q", "pred_error", "clipped", "y_meas"):
+        assert np.array_equal(np.asarray(on[name]).view(np.uint8), np.asarray(off[name]).view(np.uint8)), name
+
+
 def test_a_measurement_below_the_sensor_s_step_is_no_evidence():
     """Reference: a stage at rest behind a noise-free sensor of 10 nm resolution: the detection
     probes (1 nm, 2 nm, ...) move it less than one step, so y_meas stays exactly constant

@@ -610,9 +610,13 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
      * nominal model's prediction error, A y(k) - B q(k-d), which a working loop
      * keeps small while clipped (at most 0.13 um on the saturation family). */
     s->large_error = fabs(pred_error) > c->pred_error_max;
-    if (c->sat_hold > 0 && !s->large_error)
-        s->large_error = fabs(s->sup.z - (c->theta_nominal[2] * q_past(c, d) + c->theta_nominal[3] * q_past(c, d + 1)))
+    if (c->sat_hold > 0 && !s->large_error) {
+        /* A y(k) on the controller's own past (the supervisor's z, same operands and order,
+         * but computed here: a switched-off supervisor computes nothing) */
+        double a_y = y_meas + c->theta_nominal[0] * c->y_prev[0] + c->theta_nominal[1] * c->y_prev[1];
+        s->large_error = fabs(a_y - (c->theta_nominal[2] * q_past(c, d) + c->theta_nominal[3] * q_past(c, d + 1)))
                          > c->pred_error_max;
+    }
     s->run_large_error = s->large_error ? c->run_large_error + 1 : 0;
     /* a chosen loop whose prediction error stays beyond the bound since the
      * choice goes back to detection (from the next sample) */
