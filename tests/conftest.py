@@ -32,14 +32,18 @@ FMU_DIR = BUILD_DIR / "fmus"
 FMU3_DIR = FMU_DIR / "fmi3"
 
 
-def _cmake_fmu_ids():
-    """The FMUs the build makes: FMU_IDS of CMakeLists.txt, their one home."""
+def _cmake_list(path, name):
+    """The words of ``set(NAME ...)`` in a CMake file (the list's one home)."""
     import re
-    m = re.search(r"^set\(FMU_IDS ([^)]*)\)", (REPO / "CMakeLists.txt").read_text(), re.M)
+    m = re.search(rf"^set\({name} ([^)]*)\)", path.read_text(), re.M)
     return tuple(m.group(1).split())
 
 
-FMU_NAMES = _cmake_fmu_ids()
+#: the FMUs the build makes (CMakeLists.txt FMU_IDS)
+FMU_NAMES = _cmake_list(REPO / "CMakeLists.txt", "FMU_IDS")
+#: the three FMUs of the loop, in the argument order of the C hosts that wire them
+#: (fmu_regressions, fmu_supervision: tests/c/CMakeLists.txt PIEZO_LOOP_IDS)
+LOOP_FMUS = _cmake_list(REPO / "tests" / "c" / "CMakeLists.txt", "PIEZO_LOOP_IDS")
 #: a scenario whose sweeps have every kind of run: ok, stopped, clipped, refused (the file says why)
 NEAR_LIMITS = REPO / "tests" / "scenarios" / "near_limits.toml"
 NEAR_LIMITS_NAME = "near_limits_20hz"

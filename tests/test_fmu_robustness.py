@@ -35,11 +35,9 @@ from pathlib import Path
 
 import pytest
 
-from conftest import BUILD_DIR, FMU_NAMES
+from conftest import BUILD_DIR, FMU_NAMES, LOOP_FMUS
 
 HOSTS = BUILD_DIR / "tests"
-#: the FMUs fmu_regressions takes, in its argument order (tests/c/CMakeLists.txt PIEZO_LOOP_IDS)
-LOOP_FMUS = ("PiezoStage", "AdaptiveCompoundController", "ReferenceSignal")
 
 
 def loop_args(args):
@@ -229,7 +227,7 @@ def test_every_fault_of_the_table_is_stopped_from_c_under_memcheck(hosts, fmu_ar
     check passes (each fault's Error and words, the warnings, the verified sound loop, the
     supervision switched off), 0 memcheck errors, nothing lost."""
     prefix = valgrind_prefix()
-    proc, report = run_host(prefix + [str(hosts / host)] + (fmu_args if edition == 2 else fmu3_args))
+    proc, report = run_host(prefix + [str(hosts / host)] + loop_args(fmu_args if edition == 2 else fmu3_args))
     assert proc.returncode == 0, report
     if prefix:
         assert memcheck_clean(proc.stderr), proc.stderr[-5000:]
