@@ -94,8 +94,8 @@ def format_summary(result):
         r = [row[f"e_r_p{p}_%"] for p in PERCENTILES] + [row["e_r_worst_%"]]
         lines.append(f"{row['scenario']:<{width}}  " + " ".join(f"{c:>5}" for c in counts) + "  "
                      + " ".join(f"{x:>7.3g}" for x in e) + "  " + " ".join(f"{x:>7.3g}" for x in r))
-    lines.append("div: diverged (monitor, overflow or error above the reference), sat: clipped "
-                 "persistently, inv: parameters refused by the FMU; percentiles over the ok runs")
+    lines.append("div: diverged or stopped (supervision, monitor, overflow or error above the reference), "
+                 "sat: clipped persistently, inv: parameters refused by the FMU; percentiles over the ok runs")
     lines += _throughput_lines(result)
     return "\n".join(lines) + "\n"
 
