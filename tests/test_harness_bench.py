@@ -34,8 +34,8 @@ def test_bench_command_reports_every_loop(tmp_path):
     assert out.splitlines()[1].startswith("machine: ") and "cores" in out.splitlines()[1]
     header = next(line for line in out.splitlines() if line.strip().startswith("2e3"))
     assert header.split()[:2] == ["2e3", "2e4"] and "1.2e5" not in header   # beyond --samples
-    for name in ("plant core", "controller core", "core closed loop", "fmi2 API loop",
-                 "native runner", "fmpy loop"):
+    for name in ("plant core", "controller core", "core closed loop", "core loop, supervision off",
+                 "fmi2 API loop", "native runner", "fmpy loop"):
         line = next(line for line in out.splitlines() if line.startswith(name))
         cells = line[len(name):].split()
         ns = [float(c) for c in cells[:2]]
@@ -44,6 +44,11 @@ def test_bench_command_reports_every_loop(tmp_path):
         assert math.isclose(rtf, 0.0005 / (ns[1] * 1e-9), rel_tol=0.01), line   # h / cost
     assert float(next(line for line in out.splitlines() if line.startswith("core closed loop"))
                  .split()[5].rstrip("x")) == 1.0
+    # the supervision's cost: the difference of the two core loops' last cells
+    on, off = (float(next(line for line in out.splitlines() if line.startswith(name))[len(name):].split()[1])
+               for name in ("core closed loop", "core loop, supervision off"))
+    m = re.search(r"the supervision costs (-?[\d.]+) ns/sample at 2e4 \((-?\d+) % of the loop without it", out)
+    assert m and math.isclose(float(m.group(1)), on - off, abs_tol=1.0), out
     m = re.search(r"core piezo_plant (\d+) B, piezo_controller (\d+) B", out)
     assert (int(m.group(1)), int(m.group(2))) == (core.ffi.sizeof("piezo_plant"),
                                                   core.ffi.sizeof("piezo_controller"))

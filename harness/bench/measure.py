@@ -25,11 +25,14 @@ from ..masters.ssp import simulate_ssp_scenario
 from ..masters.wired import simulate_wired
 from ..paths import bench_include_dir, bench_library, where_to_get_it
 
-__all__ = ["CHECKPOINTS", "BLOCK", "WINDOW", "EXACT_WINDOW", "CLOSED_LOOP_STEP", "CLOSED_LOOP_DURATION",
+__all__ = ["CHECKPOINTS", "BLOCK", "SUPERVISION_OFF", "WINDOW", "EXACT_WINDOW", "CLOSED_LOOP_STEP",
+           "CLOSED_LOOP_DURATION",
            "timing_library", "measure", "closed_loop_fmu_times", "machine_description"]
 
 CHECKPOINTS = (2_000, 20_000, 120_000, 1_000_000)
 BLOCK = 250
+#: the row of the core closed loop with sup.enabled = false (the supervision's cost)
+SUPERVISION_OFF = "core loop, supervision off"
 WINDOW = 10000
 EXACT_WINDOW = 1000      # exact creep costs O(k): fewer samples at each point
 #: the closed-loop FMU through fmpy.simulate_fmu: communication step and length of the run [s]
@@ -205,8 +208,11 @@ def measure(scenario="mismatch_1_5_10hz", *, n_max=CHECKPOINTS[-1], repeat=5, fm
     ffi, blib = timing_library()
     pp = core.plant_params_struct(setup.plant_params)
     cp = core.controller_params_struct(setup.controller_params)
+    # the same loop without the controller's supervision (docs/robustness.md): what it costs
+    cp_off = core.controller_params_struct({**setup.controller_params, "sup.enabled": False})
     y_ref = np.ascontiguousarray(setup.y_ref, dtype=float)
     y_meas, v = np.zeros(n), np.zeros(n)
+    y_meas_off, v_off = np.zeros(n), np.zeros(n)
     status = ffi.new("int *")
     nb = n // BLOCK
     col = _Collector(checkpoints)
@@ -230,6 +236,12 @@ def measure(scenario="mismatch_1_5_10hz", *, n_max=CHECKPOINTS[-1], repeat=5, fm
         if done != n:
             _status_error("controller core", status[0], done, n)
         col.add("controller core", block_ns)
+        block_ns = np.zeros(nb)
+        done = blib.piezo_bench_closed_loop(pp, cp_off, buf(y_ref), n, buf(y_meas_off), buf(v_off), BLOCK,
+                                            buf(block_ns), status)
+        if done != n:
+            _status_error("core closed loop, supervision off", status[0], done, n)
+        col.add(SUPERVISION_OFF, block_ns)
 
     say(f"fmi2 API loop and native runner, {repeat} x {n} samples")
     loop = NativeLoop(fmu_dir)

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from ..closed_loop import CLOSED_LOOP_MODEL
 from .bound import RUN_SECONDS, Bound
-from .measure import BLOCK, EXACT_WINDOW, WINDOW
+from .measure import BLOCK, EXACT_WINDOW, SUPERVISION_OFF, WINDOW
 
 __all__ = ["format_figures"]
 
 PROG = "python -m harness bench"
-_ORDER = ("plant core", "controller core", "core closed loop", "fmi2 API loop", "native runner",
-          "fmpy loop")
+_ORDER = ("plant core", "controller core", "core closed loop", SUPERVISION_OFF, "fmi2 API loop",
+          "native runner", "fmpy loop")
 
 
 def _count(n):
@@ -47,6 +47,10 @@ def format_figures(f):
         lines.append(f"{name:<28}{cells}   {ratio:>12.2f}x   {rtf:>10.0f}x")
     spread = [core_loop[n] for n in cps]
     lines.append(f"core closed loop: largest / smallest over the points {max(spread) / min(spread):.3f}")
+    if SUPERVISION_OFF in f["loops"]:
+        off = f["loops"][SUPERVISION_OFF][last]
+        lines.append(f"the supervision costs {core_loop[last] - off:.1f} ns/sample at {_count(last)} "
+                     f"({100 * (core_loop[last] / off - 1):.0f} % of the loop without it; sup.enabled = false)")
     m = f["memory"]
     lines += [
         "",
