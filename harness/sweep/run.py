@@ -77,6 +77,14 @@ def _chunks(store, names, largest, fixed, parallel):
             yield name, held
 
 
+def _compact(indices):
+    """A task's runs as sent: a ``range`` when they follow each other (a few bytes, whatever
+    their number), else the array."""
+    if indices.size and int(indices[-1]) - int(indices[0]) + 1 == indices.size:
+        return range(int(indices[0]), int(indices[-1]) + 1)
+    return indices
+
+
 def _nominal_setups(scs, bases, options):
     """Each scenario's experiment with its nominal plant (``bases``) and the sweep's options:
     what the compute bound is measured on."""
@@ -333,7 +341,12 @@ def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, 
         n_workers = max(nw, 1)
         cores = max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
     try:
+        # everything a task needs but its runs goes to the workers once: the scheduler's and
+        # the workers' logs of recent messages (Dask keeps the last 1000) then hold small
+        # messages, whatever the number of tasks
         shipped = client.scatter(package, broadcast=True)
+        constant = {name: client.scatter([fields_[name], bases[name]], broadcast=True) for name in fields_}
+        common = client.scatter([spreads, varied, options], broadcast=True)
         # the workers there now load the FMUs before the clock starts (part of the start, like
         # the cluster's); a worker that joins later does it in its first task, and a worker
         # that cannot fails its tasks, which are retried and reported as any failed task
@@ -355,8 +368,10 @@ def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, 
                 if nxt is None:
                     return False
                 (name, part), attempt = nxt, 1
-            fut = client.submit(run_chunk, shipped, fields_[name], bases[name], spreads, seed, part,
-                                varied, options, pure=False)
+            description, base = constant[name]
+            spreads_, varied_, options_ = common
+            fut = client.submit(run_chunk, shipped, description, base, spreads_, seed, _compact(part),
+                                varied_, options_, pure=False)
             inflight[fut] = (name, part, attempt)
             queue.add(fut)
             return True
