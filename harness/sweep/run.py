@@ -323,13 +323,17 @@ def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, 
     fails anyway is submitted again. ``clock`` gets the start (the first task handed out),
     the end (the last one collected) and the CPU seconds of this process in between (the
     client, and a local cluster's scheduler)."""
-    from dask.distributed import Client, LocalCluster, as_completed     # heavy: only here
+    import dask                                                         # heavy: only here
+    from dask.distributed import Client, LocalCluster, as_completed
 
     fields_, bases, spreads, seed, varied, options = task
     cluster = None
     if scheduler is None:
-        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+        # without Dask's statistical profiler, which samples every worker's stack 100 times a
+        # second and keeps an hour of it: a worker's memory would grow with the sweep's length
+        with dask.config.set({"distributed.worker.profile.enabled": False}):
+            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
         where = f"a local Dask cluster of {n_workers} worker process{'es' if n_workers > 1 else ''}"
         cores = min(n_workers, os.cpu_count() or n_workers)
