@@ -110,7 +110,20 @@ def first_line(exc):
 
 
 def peak_rss():
-    """This process's peak resident set size in bytes (None where the OS does not say)."""
+    """This process's peak resident set size in bytes (None where the OS does not say).
+
+    On Linux the high-water mark of this process's own memory (``VmHWM``): ``getrusage``'s
+    ``ru_maxrss`` keeps, across the ``exec`` of a process started by fork and exec (a Dask
+    worker), the RSS its parent had at the fork, so a worker started by a client holding a
+    million runs' arrays would report those as its own.
+    """
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
     try:
         import resource                                     # POSIX only
     except ImportError:                                     # Windows
