@@ -15,7 +15,8 @@ import numpy as np
 
 from .. import masters
 from ..bench.bound import Bound, measure_runner
-from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, fmu_path, load, starts_of
+from ..fmu import (CONTROLLER_MODEL, PLANT_MODEL, FMUError, UnknownParameterError, fmu_path, load,
+                   starts_of)
 from ..loop import normalize_master, prepare_closed_loop
 from ..scenarios import get_scenario
 from .manifest import prepare_folder, sweep_identity, write_manifest
@@ -260,11 +261,15 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
             prog.update(np.count_nonzero(new), np.count_nonzero(new & (rows.codes != STATUS_CODE["ok"])))
 
     load = os.getloadavg() if hasattr(os, "getloadavg") else None
-    runner = None
+    runner, unbound = None, None
     if backend == "native" and total > done_before:
         if progress is not None:
             progress.write("sweep: timing the native runner on each scenario (the compute bound)\n")
-        runner = measure_runner(_nominal_setups(scs, bases, options), fmu_dir)
+        try:
+            runner = measure_runner(_nominal_setups(scs, bases, options), fmu_dir)
+        except (FMUError, UnknownParameterError, TypeError, ValueError) as exc:
+            # a nominal plant that fails its run: the sweep's runs say what they do; no bound
+            unbound = f"the nominal run failed: {first_line(exc)}"
     n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
 
     def tasks(parallel):
@@ -308,7 +313,7 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
                        time.perf_counter() - t_start, where, options, computed=total - done_before,
                        peak_rss=peak, store=store,
                        compute_seconds=clock["end"] - clock["start"] if "end" in clock else math.nan,
-                       bound=bound, load=load,
+                       bound=bound if bound is not None else unbound, load=load,
                        cpu_seconds={"tasks": tally["task_cpu"], "client": clock.get("cpu", math.nan),
                                     "tasks_wall": tally["task_wall"]})
 
