@@ -596,3 +596,18 @@ def test_resume_after_a_real_interruption_computes_only_the_missing_runs(tmp_pat
     assert table(resumed.stdout) == table(whole.stdout) and len(table(whole.stdout)) == 1
     assert _without_seconds(out / sweep.RUNS) == _without_seconds(tmp_path / "whole" / sweep.RUNS)
     assert (out / "sweep_summary.csv").read_text() == (tmp_path / "whole" / "sweep_summary.csv").read_text()
+
+
+def test_sweep_of_a_refused_plant_reports_every_run(tmp_path):
+    """Reference: the FMU's own refusal (creep.alpha outside [-1, 1]). A sweep whose nominal
+    plant the FMU refuses cannot time the runner on it: it still runs, reports every run as
+    refused with the FMU's message, and its summary says why there is no bound."""
+    f = tmp_path / "refused.toml"
+    f.write_text('[[scenario]]\nname = "refused_plant"\nextends = "mismatch_5hz"\nduration = 0.2\n'
+                 'metric_window = [0.0, 0.2]\nplant = { "creep.alpha" = 5.0 }\n')
+    result = sweep.run_sweep(["refused_plant"], ["pi.weights=10%"], 5, workers=0,
+                             registry=load_scenarios([f]))
+    assert result.counts("refused_plant") == {"ok": 0, "diverged": 0, "saturated": 0, "invalid": 5}
+    assert all("creep.alpha = 5 is out of range" in r[3] for r in result.runs["refused_plant"])
+    text = sweep.outputs.format_summary(result)
+    assert "compute bound: not measured (the nominal run failed: " in text and "creep.alpha" in text

@@ -136,11 +136,14 @@ int piezo_runner_run(piezo_runner *runner, size_t n, double h, int master, int s
  * plant's, then the controller's; Reals, then Integers, then Booleans),
  * initialization over [0, n h], piezo_runner_run (in blocks of
  * PIEZO_RUNNER_BATCH_BLOCK samples, whose rows stay in the cache: the same
- * calls as one piezo_runner_run), then fmi2Terminate when the run completed. Nothing returns to the caller between
- * runs; every run is summarised by what the harness's checks and metrics
- * read (harness/checks.py, harness/metrics.py), so the caller decides on
- * them, and runs again on its own path any run whose FMI calls failed, to
- * report it with its messages.
+ * calls as one piezo_runner_run), then fmi2Terminate when the run
+ * completed. Any status above fmi2Warning, whichever it is, stops that run
+ * and is recorded with the call; the next run starts with fmi2Reset.
+ * Nothing returns to the caller between runs; every run is summarised by
+ * what the harness's checks and metrics read (harness/checks.py,
+ * harness/metrics.py), so the caller decides on them, and runs again on its
+ * own path any run that fails them or whose FMI calls failed, to report it
+ * with its messages (the FMUs' log holds only the last run's).
  */
 
 /* samples a batch runs at a time (a block's rows are 80 KB) */

@@ -18,7 +18,8 @@ the plant and the controller timed alone):
 
 Also: memory per instance (core structs; bytes each FMU allocates in fmi2Instantiate),
 exact creep mode's O(k) cost and history, the end-to-end time of one 3 s run per
-master, and the machine.
+master, a sweep's compute bound for runs of 0.5, 3 and 30 s (:mod:`.bound`: the native
+runner's ns/sample x samples a run / cores; ``sweep`` measures its own), and the machine.
 """
 
 from .command import add_bench_arguments, run_bench

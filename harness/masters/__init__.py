@@ -36,7 +36,7 @@ from ..scenarios import get_scenario
 from . import closed_loop_fmu, container, core, fmpy, native, ssp
 
 __all__ = ["Master", "MASTERS", "BACKENDS", "OPEN_LOOP_BACKENDS", "SWEEP_BACKENDS",
-           "LONG_RUN_SAMPLES", "get", "closed_loop", "open_loop", "prepared_loop",
+           "LONG_RUN_SAMPLES", "get", "closed_loop", "open_loop", "prepared_loop", "prepared_batch",
            "simulators", "simulate_closed_loop_auto", "check_sweep_backend"]
 
 
@@ -220,3 +220,14 @@ def prepared_loop(backend, fmu_dir=None):
     if backend == "native":
         return native.native_loop(fmu_dir).run
     return functools.partial(fmpy.simulate_setup, fmu_dir=fmu_dir)
+
+
+def prepared_batch(backend, fmu_dir=None):
+    """A function ``run_batch(setup, per_run, window)`` that runs many parameter sets of one
+    prepared closed loop in one call on this thread's instances
+    (:meth:`harness.masters.native.NativeLoop.run_batch`), or None when the master has none
+    (fmpy: its runs go one by one through :func:`prepared_loop`). Raises as
+    :func:`check_sweep_backend`.
+    """
+    check_sweep_backend(backend)
+    return native.native_loop(fmu_dir).run_batch if backend == "native" else None

@@ -49,7 +49,9 @@ def _throughput_lines(result):
              + (f": {steady:.0f} runs/s while computing ({result.compute_seconds:.1f} s), "
                 f"{rate:.0f} runs/s including the start ({result.elapsed:.1f} s)" if done else "")]
     b = result.bound
-    if b is not None and done:
+    if isinstance(b, str) and done:
+        lines.append(f"compute bound: not measured ({b})")
+    elif b is not None and done:
         counts = {name: len(result.runs[name]) for name in result.scenarios}
         bound = b.runs_per_second(counts)
         costs = "; ".join(f"{b.ns_per_sample[k]:.0f} ns/sample x {b.samples[k]} samples a run"

@@ -15,7 +15,8 @@ import numpy as np
 
 from .. import masters
 from ..bench.bound import Bound, measure_runner
-from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, fmu_path, load, starts_of
+from ..fmu import (CONTROLLER_MODEL, PLANT_MODEL, FMUError, UnknownParameterError, fmu_path, load,
+                   starts_of)
 from ..loop import normalize_master, prepare_closed_loop
 from ..scenarios import get_scenario
 from .manifest import prepare_folder, sweep_identity, write_manifest
@@ -75,6 +76,14 @@ def _chunks(store, names, largest, fixed, parallel):
         if held.size:
             left -= held.size
             yield name, held
+
+
+def _compact(indices):
+    """A task's runs as sent: a ``range`` when they follow each other (a few bytes, whatever
+    their number), else the array."""
+    if indices.size and int(indices[-1]) - int(indices[0]) + 1 == indices.size:
+        return range(int(indices[0]), int(indices[-1]) + 1)
+    return indices
 
 
 def _nominal_setups(scs, bases, options):
@@ -252,11 +261,15 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
             prog.update(np.count_nonzero(new), np.count_nonzero(new & (rows.codes != STATUS_CODE["ok"])))
 
     load = os.getloadavg() if hasattr(os, "getloadavg") else None
-    runner = None
+    runner, unbound = None, None
     if backend == "native" and total > done_before:
         if progress is not None:
             progress.write("sweep: timing the native runner on each scenario (the compute bound)\n")
-        runner = measure_runner(_nominal_setups(scs, bases, options), fmu_dir)
+        try:
+            runner = measure_runner(_nominal_setups(scs, bases, options), fmu_dir)
+        except (FMUError, UnknownParameterError, TypeError, ValueError) as exc:
+            # a nominal plant that fails its run: the sweep's runs say what they do; no bound
+            unbound = f"the nominal run failed: {first_line(exc)}"
     n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
 
     def tasks(parallel):
@@ -300,7 +313,7 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
                        time.perf_counter() - t_start, where, options, computed=total - done_before,
                        peak_rss=peak, store=store,
                        compute_seconds=clock["end"] - clock["start"] if "end" in clock else math.nan,
-                       bound=bound, load=load,
+                       bound=bound if bound is not None else unbound, load=load,
                        cpu_seconds={"tasks": tally["task_cpu"], "client": clock.get("cpu", math.nan),
                                     "tasks_wall": tally["task_wall"]})
 
@@ -315,13 +328,17 @@ def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, 
     fails anyway is submitted again. ``clock`` gets the start (the first task handed out),
     the end (the last one collected) and the CPU seconds of this process in between (the
     client, and a local cluster's scheduler)."""
-    from dask.distributed import Client, LocalCluster, as_completed     # heavy: only here
+    import dask                                                         # heavy: only here
+    from dask.distributed import Client, LocalCluster, as_completed
 
     fields_, bases, spreads, seed, varied, options = task
     cluster = None
     if scheduler is None:
-        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+        # without Dask's statistical profiler, which samples every worker's stack 100 times a
+        # second and keeps an hour of it: a worker's memory would grow with the sweep's length
+        with dask.config.set({"distributed.worker.profile.enabled": False}):
+            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
         where = f"a local Dask cluster of {n_workers} worker process{'es' if n_workers > 1 else ''}"
         cores = min(n_workers, os.cpu_count() or n_workers)
@@ -333,7 +350,12 @@ def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, 
         n_workers = max(nw, 1)
         cores = max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
     try:
+        # everything a task needs but its runs goes to the workers once: the scheduler's and
+        # the workers' logs of recent messages (Dask keeps the last 1000) then hold small
+        # messages, whatever the number of tasks
         shipped = client.scatter(package, broadcast=True)
+        constant = {name: client.scatter([fields_[name], bases[name]], broadcast=True) for name in fields_}
+        common = client.scatter([spreads, varied, options], broadcast=True)
         # the workers there now load the FMUs before the clock starts (part of the start, like
         # the cluster's); a worker that joins later does it in its first task, and a worker
         # that cannot fails its tasks, which are retried and reported as any failed task
@@ -355,8 +377,10 @@ def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, 
                 if nxt is None:
                     return False
                 (name, part), attempt = nxt, 1
-            fut = client.submit(run_chunk, shipped, fields_[name], bases[name], spreads, seed, part,
-                                varied, options, pure=False)
+            description, base = constant[name]
+            spreads_, varied_, options_ = common
+            fut = client.submit(run_chunk, shipped, description, base, spreads_, seed, _compact(part),
+                                varied_, options_, pure=False)
             inflight[fut] = (name, part, attempt)
             queue.add(fut)
             return True

@@ -335,9 +335,9 @@ class SweepResult:
     compute_seconds : float
         Wall-clock seconds from the first task handed out to the last one collected (nan
         when nothing was computed).
-    bound : harness.sweep.bound.Bound or None
-        The native runner's cost measured in this call, and the cores (None with fmpy, or
-        when nothing was computed).
+    bound : harness.bench.bound.Bound, str or None
+        The native runner's cost measured in this call, and the cores; why it could not be
+        measured (str); None with fmpy, or when nothing was computed.
     load : tuple or None
         The load average (1, 5, 15 min) when the call started.
     cpu_seconds : dict

@@ -110,7 +110,20 @@ def first_line(exc):
 
 
 def peak_rss():
-    """This process's peak resident set size in bytes (None where the OS does not say)."""
+    """This process's peak resident set size in bytes (None where the OS does not say).
+
+    On Linux the high-water mark of this process's own memory (``VmHWM``): ``getrusage``'s
+    ``ru_maxrss`` keeps, across the ``exec`` of a process started by fork and exec (a Dask
+    worker), the RSS its parent had at the fork, so a worker started by a client holding a
+    million runs' arrays would report those as its own.
+    """
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
     try:
         import resource                                     # POSIX only
     except ImportError:                                     # Windows
@@ -127,10 +140,14 @@ def _run_alone(scenario, base, spreads, seed, index, options, fmu_dir):
     return status, e_rms, e_r, reason, time.perf_counter() - t0
 
 
-def _native_batch(scenario, base, columns, options, fmu_dir):
-    """The runs as one native batch: (e_rms, e_r, seconds, clean) arrays, ``clean`` False for
-    a run a check's rule fails or whose FMI calls failed; None when the batch does not
-    apply (the setup or the parameters are refused: every run then says why on its own)."""
+def _batch(scenario, base, columns, options, fmu_dir):
+    """The runs as one batch of the master: (e_rms, e_r, seconds, clean) arrays, ``clean``
+    False for a run a check's rule fails or whose FMI calls failed; None when the master has
+    no batch or the batch does not apply (the setup or the parameters are refused: every run
+    then says why on its own)."""
+    run_batch = masters.prepared_batch(options["backend"], fmu_dir)
+    if run_batch is None:
+        return None
     try:
         setup = prepare_closed_loop(scenario, plant_params=base, adaptation=options["adaptation"],
                                     preview=options["preview"], master=options["master"])
@@ -141,7 +158,7 @@ def _native_batch(scenario, base, columns, options, fmu_dir):
     if where.size == 0 or where[-1] - where[0] + 1 != where.size:
         return None
     try:
-        out = masters.native.native_loop(fmu_dir).run_batch(setup, columns, (where[0], where[-1] + 1))
+        out = run_batch(setup, columns, (where[0], where[-1] + 1))
     except (TypeError, ValueError, UnknownParameterError):
         return None
     e_rms = rms_from_sum(out["sum_error2"], where.size)
@@ -156,9 +173,7 @@ def prepare_worker(package, options):
     """Ready this process for the sweep's tasks (what a worker's first task would do first):
     the FMU files written and, with the native backend, extracted, their binaries loaded and
     a pair instantiated, so the thread that runs the tasks only instantiates its own pair."""
-    fmu_dir = _fmu_dir_for(package)
-    if options["backend"] == "native":
-        masters.native.native_loop(fmu_dir)
+    masters.prepared_loop(options["backend"], _fmu_dir_for(package))
 
 
 def run_chunk(package, description, base, spreads, seed, indices, varied, options):
@@ -195,9 +210,7 @@ def run_chunk(package, description, base, spreads, seed, indices, varied, option
     m = len(indices)
     columns = draw_columns(base, spreads, seed, indices)
     statuses, reasons = ["ok"] * m, [""] * m
-    batch = None
-    if options["backend"] == "native" and m:
-        batch = _native_batch(scenario, base, columns, options, fmu_dir)
+    batch = _batch(scenario, base, columns, options, fmu_dir) if m else None
     if batch is not None:
         e_rms, e_r, seconds, clean = batch
         e_rms, e_r, seconds = e_rms.tolist(), e_r.tolist(), seconds.tolist()
