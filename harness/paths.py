@@ -20,6 +20,7 @@ was expected.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from importlib.metadata import PackageNotFoundError, distribution, packages_distributions
 import hashlib
 import os
@@ -39,9 +40,13 @@ INSTALL_COMMAND = "pip install ."
 CORE_LIBRARY_NAME = "libpiezo_core.so"
 
 
+@lru_cache(maxsize=1)
 def _installed_data_dir():
     """``_data/`` of an installed distribution of the ``harness`` package (named in
-    pyproject.toml; found by the import package it provides), or None."""
+    pyproject.toml; found by the import package it provides), or None. Looked up once per
+    process and only when the earlier candidates are missing: ``packages_distributions``
+    reads every installed distribution's metadata (about 0.2 s with a few hundred), and a
+    sweep's workers ask for the runner's path at every chunk."""
     for name in packages_distributions().get("harness", []):
         try:
             dist = distribution(name)
@@ -58,16 +63,17 @@ def _first(env, relative, checkout):
     value = os.environ.get(env)
     if value:
         return Path(value)
-    candidates = [PACKAGE_DIR / "_data" / relative]
-    if IN_CHECKOUT:
-        candidates.append(REPO_ROOT / checkout)
-        installed = _installed_data_dir()
-        if installed is not None and installed != PACKAGE_DIR / "_data":
-            candidates.append(installed / relative)
-    for path in candidates:
-        if path.exists():
-            return path
-    return REPO_ROOT / checkout if IN_CHECKOUT else candidates[0]
+    own = PACKAGE_DIR / "_data" / relative
+    if own.exists():
+        return own
+    if not IN_CHECKOUT:
+        return own
+    if (REPO_ROOT / checkout).exists():
+        return REPO_ROOT / checkout
+    installed = _installed_data_dir()
+    if installed is not None and installed != PACKAGE_DIR / "_data" and (installed / relative).exists():
+        return installed / relative
+    return REPO_ROOT / checkout
 
 
 def fmu_dir() -> Path:
