@@ -142,8 +142,9 @@ class Margins:
     candidate_run : int
         The longest run of samples with one fault candidate (threshold ``PIEZO_SUP_CONFIRM``).
     monitor_share : float
-        The largest share of samples with ``|pred_error|`` beyond ``monitor.pred_error_max`` over
-        the divergence monitor's window, from its 33rd sample on (threshold
+        The largest exponentially weighted count of samples with ``|pred_error|`` beyond
+        ``monitor.pred_error_max``, as a share of the divergence monitor's whole window
+        (``monitor.divergence_samples``), from its 33rd sample on (threshold
         ``PIEZO_MONITOR_SHARE_PERCENT``).
     clip_run : int
         The longest run of clipped samples (threshold ``sup.clip_time`` / h).
@@ -231,7 +232,8 @@ def margins(samples, nominal, controller_params=None, h=0.0005):
         run = run + 1 if x and x == prev else (1 if x else 0)
         prev = x
         cand_run = max(cand_run, run)
-    share = np.where(k >= th.monitor_share_min, st["mon_share"] / st["mon_weight"], 0.0) if window > 0 \
+    # the monitor judges its count of large errors against the whole window (piezo_controller.c)
+    share = np.where(k >= th.monitor_share_min, st["mon_share"] / window, 0.0) if window > 0 \
         else np.zeros(n)
     return Margins(
         gain_low=float(np.nanmin(gs)) if np.isfinite(gs).any() else None,

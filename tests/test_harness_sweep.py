@@ -5,6 +5,7 @@ harness.masters.native runs (the native master, itself checked bit for bit again
 sweep's errors and for the worst parameter file; a real ``dask scheduler`` and ``dask
 worker`` on 127.0.0.1 for ``--scheduler``.
 """
+import csv
 import json
 import math
 import os
@@ -127,7 +128,9 @@ def _one_by_one(sc, params, loop):
     except FMUInitializationError as exc:
         return "invalid", math.nan, math.nan, str(exc)
     except (FMUError, RuntimeError) as exc:             # the monitor, an FMI error, a failed check
-        return "diverged", math.nan, math.nan, str(exc)
+        # the controller's own words when its supervision stops the loop (fmu_controller.c)
+        stopped = "supervision stopped the loop" in str(exc)
+        return "stopped" if stopped else "diverged", math.nan, math.nan, str(exc)
     m = compute_metrics(data["time"], data["y_d"], data["y"], sc.metric_window, sc.step_size)
     return "ok", m.e_rms, m.e_r, ""
 
@@ -267,12 +270,14 @@ def test_cdf_drawn_stays_within_a_step_of_the_exact_one():
 
 def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path, monkeypatch):
     """Reference: every drawn parameter set run on its own the way a single run is run (the
-    native master, harness.checks, harness.metrics). A sweep with spreads wide enough to
-    make runs diverge (or be stopped by the supervision), clip or be refused, on the scenario of
-    tests/scenarios/near_limits.toml (workers = 0: no Dask; its native batches) counts
-    every run exactly once and reports the not-ok ones without stopping: each run's status,
-    e_rms and e_r (bit for bit) and reason are those of the run on its own. The worst
-    parameter file, loaded as a scenario file, reproduces the worst e_rms exactly."""
+    native master, harness.checks, harness.metrics; "stopped" where the controller's message
+    says its supervision stopped the loop). A sweep with spreads wide enough to make runs be
+    stopped by the supervision, clip or be refused, on the scenario of
+    tests/scenarios/near_limits.toml, and to make them diverge on the same scenario with the
+    supervision off (workers = 0: no Dask; its native batches), counts every run exactly once
+    and reports the not-ok ones without stopping: each run's status, e_rms and e_r (bit for
+    bit) and reason are those of the run on its own. The worst parameter file, loaded as a
+    scenario file, reproduces the worst e_rms exactly."""
     from harness.metrics import compute_metrics
 
     batches = []
@@ -281,22 +286,25 @@ def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path, mo
                         lambda self, *a, **k: batches.append(len(a[1]["tf.a1"])) or real_batch(self, *a, **k))
     spreads = ["tf.poles=0.01", "pi.weights=60%", "tf.zero=0.01"]
     scenarios = load_scenarios([NEAR_LIMITS])
-    result = sweep.run_sweep([NAME], spreads, 24, seed=11, workers=0, registry=scenarios)
-    assert sum(batches) == 24                           # every run went through a native batch
-    c = result.counts(NAME)
-    assert sum(c.values()) == 24
-    assert c["ok"] >= 5 and c["ok"] < 24
-    assert c["diverged"] >= 1 and c["saturated"] >= 1 and c["invalid"] >= 1
-    runs = result.runs[NAME]
-    sc = scenarios[NAME]
+    off = NAME + "_unsupervised"
+    result = sweep.run_sweep([NAME, off], spreads, 24, seed=11, workers=0, registry=scenarios)
+    assert sum(batches) == 48                           # every run went through a native batch
+    c, c_off = result.counts(NAME), result.counts(off)
+    assert sum(c.values()) == sum(c_off.values()) == 24
+    assert 5 <= c["ok"] <= c_off["ok"] < 24               # the supervision only takes runs away
+    assert c["stopped"] >= 1 and c["diverged"] == 0 and c["saturated"] >= 1 and c["invalid"] >= 1, c
+    assert c_off["stopped"] == 0 and c_off["diverged"] >= 1, c_off
     loop = native.NativeLoop()
-    for i, (status, e_rms, e_r, reason, _) in enumerate(runs):
-        want = _one_by_one(sc, result.parameters[NAME][i], loop)
-        assert (status, reason) == (want[0], " ".join(want[3].split())[:400]), i
-        assert np.float64(e_rms).view(np.uint64) == np.float64(want[1]).view(np.uint64), i
-        assert np.float64(e_r).view(np.uint64) == np.float64(want[2]).view(np.uint64), i
-        assert (status == "ok") == (reason == "")
+    for name in (NAME, off):
+        sc = scenarios[name]
+        for i, (status, e_rms, e_r, reason, _) in enumerate(result.runs[name]):
+            want = _one_by_one(sc, result.parameters[name][i], loop)
+            assert (status, reason) == (want[0], " ".join(want[3].split())[:400]), (name, i)
+            assert np.float64(e_rms).view(np.uint64) == np.float64(want[1]).view(np.uint64), i
+            assert np.float64(e_r).view(np.uint64) == np.float64(want[2]).view(np.uint64), i
+            assert (status == "ok") == (reason == "")
     loop.close()
+    runs = result.runs[NAME]
     files = sweep.write_outputs(result, tmp_path, plots=True)
     names = {p.name for p in files}
     assert {"sweep_summary.csv", "sweep_summary.md", "sweep_runs.csv", f"worst_{NAME}.toml",
@@ -310,6 +318,18 @@ def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path, mo
     row = sweep.summary_rows(result)[0]
     ok = np.array([r[1] for r in runs if r[0] == "ok"]) * 1e3
     assert row["e_rms_worst_nm"] == ok.max() and row["e_rms_p50_nm"] == np.percentile(ok, 50)
+    # the tables count each status once: the printed one, its Markdown and its CSV
+    text = sweep.outputs.format_summary(result).splitlines()
+    line = next(x for x in text if x.startswith(NAME + " "))
+    assert line.split()[1:7] == [str(v) for v in (24, c["ok"], c["stopped"], c["diverged"],
+                                                   c["saturated"], c["invalid"])], line
+    md = (tmp_path / "sweep_summary.md").read_text().splitlines()
+    assert md[2].split("|")[2:8] == [" runs ", " ok ", " stopped ", " diverged ", " saturated ", " invalid "]
+    assert [v.strip() for v in md[4].split("|")[2:8]] == [str(v) for v in (24, c["ok"], c["stopped"],
+                                                                           c["diverged"], c["saturated"], c["invalid"])]
+    with open(tmp_path / "sweep_summary.csv") as f:
+        csv_row = next(csv.DictReader(f))
+    assert {s: int(csv_row[s]) for s in sweep.STATUSES} == c
 
 
 def _free_port():
@@ -607,7 +627,7 @@ def test_sweep_of_a_refused_plant_reports_every_run(tmp_path):
                  'metric_window = [0.0, 0.2]\nplant = { "creep.alpha" = 5.0 }\n')
     result = sweep.run_sweep(["refused_plant"], ["pi.weights=10%"], 5, workers=0,
                              registry=load_scenarios([f]))
-    assert result.counts("refused_plant") == {"ok": 0, "diverged": 0, "saturated": 0, "invalid": 5}
+    assert result.counts("refused_plant") == {"ok": 0, "diverged": 0, "saturated": 0, "invalid": 5, "stopped": 0}
     assert all("creep.alpha = 5 is out of range" in r[3] for r in result.runs["refused_plant"])
     text = sweep.outputs.format_summary(result)
     assert "compute bound: not measured (the nominal run failed: " in text and "creep.alpha" in text

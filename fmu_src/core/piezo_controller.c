@@ -633,13 +633,21 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
     if (!(isfinite(v) && isfinite(q) && isfinite(pred_error) && operators_finite) || !sample_state_finite(c, s))
         return PIEZO_ERR_DIVERGED;
     /* the monitor: a run of the window, or a quarter of the window's samples (a loop
-     * that restarts its detection between runs, or oscillates between the limits) */
+     * that restarts its detection between runs, or oscillates between the limits).
+     * The share is of the whole window, N = monitor.divergence_samples samples, the
+     * weight sum_j lambda^j = 1 / (1 - lambda) = N of a full one:
+     *     S(k) = lambda S(k-1) + [|e(k)| > bound],   refused when S(k) >= N / 4,
+     * so that the start-up transient of a stage far from the model (its first 30
+     * samples beyond the bound, say) is a share of N, not of the samples seen so
+     * far: a run of errors trips it after ln(3/4) / ln(lambda) = 58 samples of N = 200,
+     * errors in every other sample after 139. */
     s->mon_share = c->mon_forgetting * c->mon_share + (s->large_error ? 1.0 : 0.0);
     s->mon_weight = c->mon_forgetting * c->mon_weight + 1.0;
     s->reaches_window = c->divergence_samples > 0
                         && (s->run_large_error >= c->divergence_samples
                             || (c->k >= PIEZO_MONITOR_SHARE_MIN_SAMPLES
-                                && s->mon_share * 100.0 >= PIEZO_MONITOR_SHARE_PERCENT * s->mon_weight));
+                                && s->mon_share * 100.0
+                                   >= PIEZO_MONITOR_SHARE_PERCENT * (double)c->divergence_samples));
     return PIEZO_OK;
 }
 
@@ -883,7 +891,7 @@ const char *piezo_controller_check(const piezo_controller *c)
     if (c->divergence_samples > 0 && c->run_large_error >= c->divergence_samples)
         return "monitor run at or beyond the divergence window";
     if (c->divergence_samples > 0 && c->k > PIEZO_MONITOR_SHARE_MIN_SAMPLES
-        && c->mon_share * 100.0 >= PIEZO_MONITOR_SHARE_PERCENT * c->mon_weight)
+        && c->mon_share * 100.0 >= PIEZO_MONITOR_SHARE_PERCENT * (double)c->divergence_samples)
         return "monitor share at or beyond its bound";
     if ((fault = piezo_supervisor_check(&c->sup)) != NULL) return fault;
     if (c->sup.k != c->k) return "supervisor sample counter differs from the controller's";
@@ -919,13 +927,15 @@ int piezo_controller_explain(const piezo_controller *c, int st, char *text, size
         return used;
     }
     if (st == PIEZO_ERR_UNSTABLE) {
-        double share = c->mon_weight > 0.0 ? 100.0 * c->mon_share / c->mon_weight : 0.0;
-        said(&used, snprintf(AT, LEFT, "the closed loop is unstable: |pred_error| stayed above "
-             "monitor.pred_error_max = %g um for %llu consecutive samples and in %.0f %% of the last %llu (the "
-             "loop is stopped after monitor.divergence_samples = %llu in a row, or at %d %% of them; where v was "
-             "clipped the nominal model's prediction error counts too; largest |pred_error| so far %.6g um). ",
-             c->pred_error_max, (unsigned long long)(c->run_large_error + 1), share,
-             (unsigned long long)(c->k < c->divergence_samples ? c->k + 1 : c->divergence_samples),
+        /* the share the refused sample would have made, of the whole window */
+        double share = 100.0 * (c->mon_forgetting * c->mon_share + 1.0) / (double)c->divergence_samples;
+        said(&used, snprintf(AT, LEFT, "the closed loop is unstable: |pred_error| was beyond "
+             "monitor.pred_error_max = %g um in %.0f %% of the monitor's window of %llu samples, %llu of them "
+             "in a row now (the loop is stopped at monitor.divergence_samples = %llu in a row, or at %d %% of "
+             "the window, older samples counting less; where v was clipped the nominal model's prediction "
+             "error counts too; largest |pred_error| so far %.6g um). ",
+             c->pred_error_max, share, (unsigned long long)c->divergence_samples,
+             (unsigned long long)(c->run_large_error + 1),
              (unsigned long long)c->divergence_samples, PIEZO_MONITOR_SHARE_PERCENT, c->max_abs_pred_error));
         /* the supervisor's evidence: how far y_meas went against the model's expectation */
         if (c->sup.enabled && c->sup.travel_model > 0.0 && c->sup.travel_meas > 2.0 * c->sup.travel_model)

@@ -18,6 +18,8 @@ __all__ = ["PROG", "PERCENTILES", "summary_rows", "format_summary", "write_param
 
 PROG = "python -m harness sweep"
 PERCENTILES = (5, 50, 95, 99)
+#: the statuses (store.STATUSES) in the order the tables show them
+COUNTED = ("ok", "stopped", "diverged", "saturated", "invalid")
 
 
 def summary_rows(result):
@@ -84,19 +86,21 @@ def format_summary(result):
     head = (f"{PROG}: {n} runs per scenario on {result.workers}, backend {result.options['backend']}, "
             f"{sum(len(v) for v in result.runs.values())} runs in {result.elapsed:.1f} s")
     lines = [head, "spreads: " + ("; ".join(s.describe() for s in result.spreads) or "none")]
-    cols = ["runs", "ok", "div", "sat", "inv"] + [f"p{p}" for p in PERCENTILES] + ["worst"]
+    cols = ["runs", "ok", "stop", "div", "sat", "inv"] + [f"p{p}" for p in PERCENTILES] + ["worst"]
+    k = len(COUNTED) + 1
     width = max(12, *(len(s) for s in result.scenarios))
-    lines.append(f"{'':<{width}}  {'':>26}  {'e_rms [nm]':^38}  {'e_r [%]':^38}")
-    lines.append(f"{'scenario':<{width}}  " + " ".join(f"{c:>5}" for c in cols[:5]) + "  "
-                 + " ".join(f"{c:>7}" for c in cols[5:]) + "  "
-                 + " ".join(f"{c:>7}" for c in cols[5:]))
+    lines.append(f"{'':<{width}}  {'':>{6 * k - 1}}  {'e_rms [nm]':^38}  {'e_r [%]':^38}")
+    lines.append(f"{'scenario':<{width}}  " + " ".join(f"{c:>5}" for c in cols[:k]) + "  "
+                 + " ".join(f"{c:>7}" for c in cols[k:]) + "  "
+                 + " ".join(f"{c:>7}" for c in cols[k:]))
     for row in summary_rows(result):
-        counts = [row["runs"], row["ok"], row["diverged"], row["saturated"], row["invalid"]]
+        counts = [row["runs"]] + [row[s] for s in COUNTED]
         e = [row[f"e_rms_p{p}_nm"] for p in PERCENTILES] + [row["e_rms_worst_nm"]]
         r = [row[f"e_r_p{p}_%"] for p in PERCENTILES] + [row["e_r_worst_%"]]
         lines.append(f"{row['scenario']:<{width}}  " + " ".join(f"{c:>5}" for c in counts) + "  "
                      + " ".join(f"{x:>7.3g}" for x in e) + "  " + " ".join(f"{x:>7.3g}" for x in r))
-    lines.append("div: diverged or stopped (supervision, monitor, overflow or error above the reference), "
+    lines.append("stop: stopped by the controller's supervision (the reason names the signal at fault), "
+                 "div: diverged (divergence monitor, overflow or error above the reference), "
                  "sat: clipped persistently, inv: parameters refused by the FMU; percentiles over the ok runs")
     lines += _throughput_lines(result)
     return "\n".join(lines) + "\n"
@@ -143,12 +147,12 @@ def write_outputs(result, out_dir, plots=True):
         w.writeheader()
         w.writerows(rows)
     written.append(out / "sweep_summary.csv")
-    md = ["| scenario | runs | ok | diverged | saturated | invalid | "
+    md = ["| scenario | runs | " + " | ".join(COUNTED) + " | "
           + " | ".join(f"e_rms p{p} [nm]" for p in PERCENTILES) + " | e_rms worst [nm] | "
           + " | ".join(f"e_r p{p} [%]" for p in PERCENTILES) + " | e_r worst [%] |",
-          "|" + "---|" * (6 + 2 * (len(PERCENTILES) + 1))]
+          "|" + "---|" * (2 + len(COUNTED) + 2 * (len(PERCENTILES) + 1))]
     for r in rows:
-        vals = [r["scenario"], r["runs"], r["ok"], r["diverged"], r["saturated"], r["invalid"]]
+        vals = [r["scenario"], r["runs"]] + [r[s] for s in COUNTED]
         vals += [f"{r[f'e_rms_p{p}_nm']:.3g}" for p in PERCENTILES] + [f"{r['e_rms_worst_nm']:.3g}"]
         vals += [f"{r[f'e_r_p{p}_%']:.3g}" for p in PERCENTILES] + [f"{r['e_r_worst_%']:.3g}"]
         md.append("| " + " | ".join(str(v) for v in vals) + " |")
@@ -167,7 +171,7 @@ def write_outputs(result, out_dir, plots=True):
             written.append(write_parameter_file(out / f"worst_{name}.toml", name,
                                                 result.parameters[name][i], title, result.options))
         codes = result.store.status[name]
-        bad = np.flatnonzero((codes == STATUS_CODE["diverged"]) | (codes == STATUS_CODE["saturated"]))
+        bad = np.flatnonzero(np.isin(codes, [STATUS_CODE[s] for s in ("stopped", "diverged", "saturated")]))
         if bad.size:
             j = int(bad[0])
             title = f"first {STATUSES[codes[j]]} run of the sweep of {name}: run {j}"

@@ -18,8 +18,10 @@ from .spreads import apply_spreads, run_deltas
 __all__ = ["STATUSES", "JOURNAL", "RUNS", "STATUS_CODE", "RunStore", "ParameterSets",
            "RunRows", "SweepResult", "TaskRows", "csv_line", "task_rows"]
 
-#: outcomes of a run
-STATUSES = ("ok", "diverged", "saturated", "invalid")
+#: outcomes of a run (their codes are their places: a new one goes at the end); "stopped": the
+#: controller's supervision stopped a loop that cannot work (harness.fmu.LoopFaultError), apart
+#: from "diverged", a loop the divergence monitor or a non-finite value ended
+STATUSES = ("ok", "diverged", "saturated", "invalid", "stopped")
 JOURNAL = "sweep_runs.journal.csv"
 RUNS = "sweep_runs.csv"
 STATUS_CODE = {s: i for i, s in enumerate(STATUSES)}

@@ -27,7 +27,7 @@ import numpy as np
 from .. import masters
 from ..checks import (RunCheckError, RunSaturatedError, check_tracking_run, clipped_too_often,
                       error_above_reference, reference_rms)
-from ..fmu import FMUError, FMUInitializationError, LoopDivergedError, UnknownParameterError
+from ..fmu import FMUError, FMUInitializationError, LoopDivergedError, LoopFaultError, UnknownParameterError
 from ..loop import prepare_closed_loop
 from ..metrics import compute_metrics, relative_from_sums, rms_from_sum, window_mask
 from ..scenarios import Scenario
@@ -88,6 +88,8 @@ def _one_run(scenario, params, options, fmu_dir):
                                     preview=options["preview"], master=options["master"])
         data = masters.prepared_loop(options["backend"], fmu_dir)(setup)
         check_tracking_run(data, scenario)
+    except LoopFaultError as exc:
+        return "stopped", math.nan, math.nan, first_line(exc)
     except LoopDivergedError as exc:
         return "diverged", math.nan, math.nan, first_line(exc)
     except RunSaturatedError as exc:
