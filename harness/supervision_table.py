@@ -4,6 +4,7 @@ validation family (no false alarm, and how close the legitimate runs came to eac
 ::
 
     python -m harness.supervision_table faults                # the fault table, in Markdown
+    python -m harness.supervision_table fault-family          # every fault on 50 drawn stages
     python -m harness.supervision_table family --stages 50    # the legitimate family and its margins
     python -m harness.supervision_table family --stages 50 --duration 120 --scenarios 1hz 20hz
 
@@ -48,7 +49,8 @@ from .scenarios import MISMATCH_SCENARIOS, get_scenario
 from .supervision import controller_samples, margins, thresholds
 
 __all__ = ["FaultCase", "FAULTS", "FAULT_SCHEDULES", "FaultResult", "run_fault", "harness_fault",
-           "fault_results", "fault_markdown", "RunSpec", "RunResult", "family_specs", "run_spec",
+           "fault_results", "fault_markdown", "FaultSpec", "fault_family_specs", "run_fault_spec",
+           "fault_family", "fault_family_markdown", "RunSpec", "RunResult", "family_specs", "run_spec",
            "summarize", "family_markdown", "main"]
 
 H = 0.0005
@@ -216,6 +218,133 @@ def fault_markdown(results):
         if first is not None:
             said.append(f"{i}. {case.name} ({first.master}): \"{_message_gist(first.message)}\"")
     return "\n".join(lines) + "\n\n" + "\n".join(said)
+
+
+# ---------------------------------------------------------------------------
+# the fault family: every fault on stages drawn from the identification family
+# ---------------------------------------------------------------------------
+
+#: a faulty run nothing stopped must still track y_d within this rms [um] over its second half
+SILENT_ERROR = 0.1
+
+
+@dataclass(frozen=True)
+class FaultSpec:
+    """One fault of :data:`FAULTS` on one drawn stage, under one schedule of the wired master."""
+
+    case: int                   # index into FAULTS
+    stage: int
+    model: str                  # the controller's model: "own" (the stage's) or "paper"
+    schedule: object
+    plant: dict
+    controller: dict
+
+
+def fault_family_specs(stages=50, seed=2028, models=("own", "paper"), fmi_version=2):
+    """Every fault of :data:`FAULTS` in each of its schedules, on ``stages`` stages drawn from the
+    identification family (the validation family's draw: the same seed gives the same stages),
+    with the paper's sensor, the controller given the stage's own model or the paper's: a list of
+    :class:`FaultSpec`. The fault's own parameters (a plant delay, a wrong ``mv.delay``) are set
+    over the stage's."""
+    rng = np.random.default_rng(seed)
+    draws = [draw_stage(rng) for _ in range(stages)]
+    specs = []
+    for i, stage in enumerate(draws):
+        for model in models:
+            for c, case in enumerate(FAULTS):
+                for schedule in case.schedules:
+                    plant = {**stage, **SENSOR, "sensor.seed": i + 1, **case.plant}
+                    controller = {**(stage if model == "own" else {}), **case.controller}
+                    specs.append(FaultSpec(c, i, model, schedule, plant, controller))
+    return specs
+
+
+def run_fault_spec(spec, duration=2.0, fmi_version=2):
+    """Run one :class:`FaultSpec`: (spec, seconds from the fault's onset to the controller's Error
+    or None, its message or the supervision warning, whether that warning came, and for a run
+    nothing stopped the rms of y_d - y over its second half [um]: is the stage where it should
+    be?)."""
+    case = FAULTS[spec.case]
+    try:
+        res = simulate_wired(case.scenario, spec.schedule, case.faults, duration=duration,
+                             plant_params=spec.plant, controller_params=spec.controller,
+                             reference_params=case.reference, fmi_version=fmi_version)
+    except (FMUError, core.CoreDivergedError) as exc:        # refused before the loop ran
+        return spec, None, f"refused: {exc}", False, float("nan")
+    warned = _supervision_warnings(res.warnings["controller"])
+    time = None if res.error_time is None else res.error_time - _onset(case)
+    e_rms = float("nan")
+    if time is None:
+        half = res.samples[len(res.samples) // 2:]
+        e_rms = float(np.sqrt(np.mean((half["y_d"] - half["y"]) ** 2)))
+    return spec, time, res.error or (warned[0] if warned else ""), bool(warned), e_rms
+
+
+def fault_family(specs, jobs=2, progress=None):
+    """Run the fault family; per fault (index into :data:`FAULTS`): a dict with ``runs``,
+    ``caught`` (an Error, or the Warning of a degraded loop), the times of the Errors [s],
+    ``verdicts`` (how many runs each verdict's words ended) and ``missed`` (the runs nothing
+    caught: their spec, what was said and the rms tracking error of y over their second half)."""
+    out = {c: {"runs": 0, "caught": 0, "times": [], "verdicts": {}, "missed": []} for c in range(len(FAULTS))}
+    if jobs <= 1:
+        results = (run_fault_spec(s) for s in specs)
+    else:
+        ex = ProcessPoolExecutor(jobs)
+        results = ex.map(run_fault_spec, specs, chunksize=4)
+    try:
+        for i, (spec, time, text, warned, e_rms) in enumerate(results):
+            o = out[spec.case]
+            o["runs"] += 1
+            case = FAULTS[spec.case]
+            caught = warned if case.degraded else time is not None
+            if caught:
+                o["caught"] += 1
+                if time is not None:
+                    o["times"].append(time)
+                gist = _verdict(text)
+                o["verdicts"][gist] = o["verdicts"].get(gist, 0) + 1
+            else:
+                o["missed"].append((spec, text, e_rms))
+            if progress is not None and i % 500 == 0:
+                progress(f"{i} of {len(specs)} runs")
+    finally:
+        if jobs > 1:
+            ex.shutdown()
+    return out
+
+
+def _verdict(text):
+    """The verdict's name: the supervision's (in parentheses), the monitor's or the warning's."""
+    found = re.search(r"supervision stopped the loop \(([^)]*)\)", text)
+    if found:
+        return found.group(1)
+    if "the closed loop is unstable" in text:
+        return "monitor"
+    for words in ("t_meas is not connected", "t_preview is not connected", "cannot be aligned"):
+        if words in text:
+            return words
+    return "other"
+
+
+def fault_family_markdown(family):
+    """The fault family's table: per fault, the runs, how many were caught, the median and the
+    worst time from the fault's onset to the Error, the verdicts that caught them, and how far
+    the stage was from y_d in the runs nothing caught (their largest rms error of y)."""
+    lines = ["| # | fault | runs | caught | median | worst | verdicts | not caught: largest rms error of y |",
+             "|---|---|---|---|---|---|---|---|"]
+    for c, case in enumerate(FAULTS):
+        o = family[c]
+        if not o["runs"]:
+            continue
+        t = np.array(o["times"]) * 1e3
+        median = f"{np.median(t):.1f} ms" if t.size else ("Warning" if case.degraded else "-")
+        worst = f"{t.max():.1f} ms" if t.size else ("Warning" if case.degraded else "-")
+        verdicts = ", ".join(f"{k} {v}" for k, v in sorted(o["verdicts"].items(), key=lambda kv: -kv[1]))
+        caught = str(o["caught"]) if o["caught"] == o["runs"] else f"**{o['caught']}**"
+        missed = [e for _, _, e in o["missed"]]
+        left = f"{len(missed)} runs, {1e3 * max(missed):.3g} nm" if missed else "-"
+        lines.append(f"| {c + 1} | {case.name} | {o['runs']} | {caught} | {median} | {worst} | {verdicts} | {left} |")
+    return "\n".join(lines)
 
 
 # ---------------------------------------------------------------------------
@@ -434,6 +563,11 @@ def main(argv=None):
     sub = ap.add_subparsers(dest="job", required=True)
     fa = sub.add_parser("faults", help="the fault table")
     fa.add_argument("--fmi", type=int, nargs="+", default=[2, 3], choices=[2, 3])
+    ff = sub.add_parser("fault-family", help="every fault on stages drawn from the identification family")
+    ff.add_argument("--stages", type=int, default=50)
+    ff.add_argument("--seed", type=int, default=2028)
+    ff.add_argument("--models", nargs="+", default=["own", "paper"], choices=["own", "paper"])
+    ff.add_argument("--jobs", type=int, default=2)
     fm = sub.add_parser("family", help="the legitimate family: Errors, warnings, margins")
     fm.add_argument("--stages", type=int, default=50)
     fm.add_argument("--seed", type=int, default=2028)
@@ -448,6 +582,22 @@ def main(argv=None):
     if args.job == "faults":
         print(fault_markdown(fault_results(tuple(args.fmi), progress=say)))
         return 0
+    if args.job == "fault-family":
+        specs = fault_family_specs(args.stages, args.seed, tuple(args.models))
+        say(f"{len(specs)} runs")
+        family = fault_family(specs, args.jobs, progress=say)
+        print(fault_family_markdown(family))
+        missed = [(c, m) for c, o in family.items() for m in o["missed"]]
+        for c, (spec, text, e_rms) in missed[:20]:
+            print(f"MISSED ({FAULTS[c].name}): stage {spec.stage}, {spec.model} model, "
+                  f"{schedule_name(spec.schedule)}: y tracked y_d to {1e3 * e_rms:.3g} nm rms; "
+                  f"{text[:300] or 'nothing said'}", file=sys.stderr)
+        # a fault the loop tracks through is a stage to the controller; one it does not, a silent failure
+        silent = [m for _, m in missed if not m[2] <= SILENT_ERROR]
+        if silent:
+            print(f"{len(silent)} runs neither stopped nor tracking within {1e3 * SILENT_ERROR:g} nm: "
+                  "silently wrong", file=sys.stderr)
+        return 1 if silent else 0
     specs = family_specs(args.stages, args.seed, args.scenarios, tuple(args.masters), args.duration,
                          tuple(args.models), saturation=not args.no_saturation)
     say(f"{len(specs)} runs")
