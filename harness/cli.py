@@ -183,14 +183,16 @@ def _cmd_all(args, command):
     extra = [n for n in registry if n not in builtin]
     adaptation, preview, master = _loop_settings(args)
     _out_dir(args)
-    registry = apply_param_files(args, registry)
+    registry = apply_param_files(args, registry, progress=sys.stderr)
     fmi_version = _fmi_version(args)
     if args.backend != "core":
         _warn_if_linux_only(args, fmi_version)
+    # the streams as they are now, not as the library's defaults bound them at its import (a caller
+    # that imported it with redirected streams, a test's capture, may have closed those since)
     report.run_all(args.out, adaptation=adaptation, preview=preview, master=master,
                    fmu_dir=args.fmu_dir, plots=not args.no_plots, backend=args.backend,
                    registry=registry, extra_scenarios=extra, command=command,
-                   fmi_version=fmi_version)
+                   fmi_version=fmi_version, stream=sys.stdout, progress=sys.stderr)
     return EXIT_OK
 
 
@@ -230,13 +232,14 @@ def _cmd_run(args, command):
     adaptation, preview, master = _loop_settings(args)
     fmi_version = _fmi_version(args)
     _out_dir(args)
-    registry = apply_param_files(args, registry)
+    registry = apply_param_files(args, registry, progress=sys.stderr)
     if args.backend != "core":
         _warn_if_linux_only(args, fmi_version)
     report.run_scenario(sc.name, args.out, adaptation=adaptation, preview=preview, master=master,
                         fmu_dir=args.fmu_dir, plots=not args.no_plots, registry=registry,
                         backend=args.backend, fmi_version=fmi_version,
-                        timeseries=None if args.no_timeseries else args.timeseries_format)
+                        timeseries=None if args.no_timeseries else args.timeseries_format,
+                        stream=sys.stdout, progress=sys.stderr)
     return EXIT_OK
 
 
@@ -282,7 +285,7 @@ def _cmd_identify(args, command):
         raise UsageError(problem)
     if not str(args.out).endswith(".json"):
         _out_dir(args)
-    return run_identify(args)
+    return run_identify(args, stream=sys.stdout, progress=sys.stderr)
 
 
 def _add_export_parser(sub):
@@ -354,7 +357,8 @@ def build_parser(prog=MODULE_PROG):
         description="Co-simulate the PiezoStage and AdaptiveCompoundController FMUs and compare "
                     "with the paper's Tables 2-5. Without a subcommand: all.",
         epilog="Each subcommand has its own options: %(prog)s SUBCOMMAND --help. Exit codes: "
-               "0 done, 1 FMI fault, 2 user error, 3 a run diverged or saturated.")
+               "0 done, 1 FMI fault, 2 user error, 3 a run diverged, was stopped by the controller's "
+               "supervision or saturated.")
     sub = p.add_subparsers(title="subcommands", dest="command", metavar="SUBCOMMAND",
                            parser_class=_Parser)
     for add in SUBCOMMANDS:

@@ -23,7 +23,7 @@ CLOSED_LOOP_MODEL = "PiezoStageClosedLoop"
 #: the prefix of the controller's nominal model in the closed-loop FMU
 CONTROLLER_PREFIX = "controller."
 #: the controller's parameters that name its nominal model: the names the stage has too (not h)
-NOMINAL_MODEL_NAMES = frozenset(core.default_plant_params()) & frozenset(core.default_controller_params()) - {"h"}
+NOMINAL_MODEL_NAMES = frozenset(core.PLANT_PARAMETER_NAMES) & frozenset(core.CONTROLLER_PARAMETER_NAMES) - {"h"}
 #: the controller's parameters the closed-loop FMU does not have
 NOT_PARAMETERS = ("mv.hold_inputs",)
 
@@ -84,8 +84,8 @@ def component_parameters(params):
     """The inverse of :func:`closed_loop_parameters` for the stage and the controller:
     ``(plant, controller, rest)``, each by its FMU's names (``rest``: the reference's and the
     loop's own, ``use_internal_reference``, ``y_d_lead``); ``h`` goes to both."""
-    plant_names = set(core.default_plant_params())
-    controller_names = set(core.default_controller_params())
+    plant_names = set(core.PLANT_PARAMETER_NAMES)
+    controller_names = set(core.CONTROLLER_PARAMETER_NAMES)
     plant, controller, rest = {}, {}, {}
     for name, value in params.items():
         if name == "h":

@@ -230,11 +230,8 @@ def _raise_step(status: int, what: str, inputs: dict) -> None:
     if status == PIEZO_ERR_PARAM:
         desc = ", ".join(f"{k} = {v!r}" for k, v in inputs.items())
         raise ValueError(f"{what}: an input is out of its range ({desc}); state unchanged")
-    if status == PIEZO_ERR_UNSTABLE:
-        raise CoreUnstableError(f"{what}: the closed loop is unstable: |pred_error| stayed above "
-                                f"monitor.pred_error_max for monitor.divergence_samples consecutive "
-                                f"samples, or in a quarter of a window that long; step refused, state "
-                                f"unchanged")
+    # the controller's refusals (PIEZO_ERR_UNSTABLE, _FAULT) are raised before, with its own words
+    # (Controller._raise_fault)
     raise RuntimeError(f"{what} failed with piezo_status {status}")
 
 

@@ -174,7 +174,7 @@ def _longest_run(mask):
     return best
 
 
-def margins(samples, nominal, controller_params=None, h=0.0005):
+def margins(samples, nominal, controller_params=None):
     """The margins of one run (:class:`Margins`).
 
     Parameters
@@ -186,8 +186,6 @@ def margins(samples, nominal, controller_params=None, h=0.0005):
         The controller's ``tf.a1, tf.a2, tf.b1, tf.b2``.
     controller_params : dict, optional
         The controller's overrides (its ``sup.*``, ``monitor.pred_error_max``, ``mv.delay``).
-    h : float
-        The sample period [s].
     """
     p = {**core.default_controller_params(), **(controller_params or {})}
     th = thresholds(p)

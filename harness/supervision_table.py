@@ -138,15 +138,22 @@ def _supervision_warnings(warnings):
     return [w for w in warnings if any(words in w for words in _SUPERVISION_WARNINGS)]
 
 
+def _wired_fault(case, schedule, plant, controller, fmi_version=2, duration=2.0, fmu_dir=None):
+    """Run ``case`` on the wired master with these parameters: (the run, the controller's Error or
+    its first supervision warning, whether that warning came)."""
+    res = simulate_wired(case.scenario, schedule, case.faults, duration=duration, plant_params=plant,
+                         controller_params=controller, reference_params=case.reference,
+                         fmu_dir=fmu_dir, fmi_version=fmi_version)
+    warned = _supervision_warnings(res.warnings["controller"])
+    return res, res.error or (warned[0] if warned else ""), bool(warned)
+
+
 def run_fault(case, schedule, fmi_version=2, duration=2.0, fmu_dir=None):
     """Run one fault on the wired master (:class:`FaultResult`)."""
-    res = simulate_wired(case.scenario, schedule, case.faults, duration=duration, plant_params=case.plant,
-                         controller_params=case.controller, reference_params=case.reference,
-                         fmu_dir=fmu_dir, fmi_version=fmi_version)
-    master = f"FMI {fmi_version}.0, {schedule_name(schedule)}"
-    warned = _supervision_warnings(res.warnings["controller"])
-    return FaultResult(case.name, master, res.error_time, res.error or (warned[0] if warned else ""),
-                       bool(warned))
+    res, message, warned = _wired_fault(case, schedule, case.plant, case.controller, fmi_version, duration,
+                                        fmu_dir)
+    return FaultResult(case.name, f"FMI {fmi_version}.0, {schedule_name(schedule)}", res.error_time, message,
+                       warned)
 
 
 def harness_fault(case, backend, duration=2.0):
@@ -240,22 +247,18 @@ class FaultSpec:
     controller: dict
 
 
-def fault_family_specs(stages=50, seed=2028, models=("own", "paper"), fmi_version=2):
+def fault_family_specs(stages=50, seed=2028, models=("own", "paper")):
     """Every fault of :data:`FAULTS` in each of its schedules, on ``stages`` stages drawn from the
     identification family (the validation family's draw: the same seed gives the same stages),
     with the paper's sensor, the controller given the stage's own model or the paper's: a list of
     :class:`FaultSpec`. The fault's own parameters (a plant delay, a wrong ``mv.delay``) are set
     over the stage's."""
-    rng = np.random.default_rng(seed)
-    draws = [draw_stage(rng) for _ in range(stages)]
     specs = []
-    for i, stage in enumerate(draws):
-        for model in models:
-            for c, case in enumerate(FAULTS):
-                for schedule in case.schedules:
-                    plant = {**stage, **SENSOR, "sensor.seed": i + 1, **case.plant}
-                    controller = {**(stage if model == "own" else {}), **case.controller}
-                    specs.append(FaultSpec(c, i, model, schedule, plant, controller))
+    for i, model, plant, controller in _drawn_loops(stages, seed, models):
+        for c, case in enumerate(FAULTS):
+            for schedule in case.schedules:
+                specs.append(FaultSpec(c, i, model, schedule, {**plant, **case.plant},
+                                       {**controller, **case.controller}))
     return specs
 
 
@@ -266,18 +269,16 @@ def run_fault_spec(spec, duration=2.0, fmi_version=2):
     be?)."""
     case = FAULTS[spec.case]
     try:
-        res = simulate_wired(case.scenario, spec.schedule, case.faults, duration=duration,
-                             plant_params=spec.plant, controller_params=spec.controller,
-                             reference_params=case.reference, fmi_version=fmi_version)
+        res, message, warned = _wired_fault(case, spec.schedule, spec.plant, spec.controller, fmi_version,
+                                            duration)
     except (FMUError, core.CoreDivergedError) as exc:        # refused before the loop ran
         return spec, None, f"refused: {exc}", False, float("nan")
-    warned = _supervision_warnings(res.warnings["controller"])
     time = None if res.error_time is None else res.error_time - _onset(case)
     e_rms = float("nan")
     if time is None:
         half = res.samples[len(res.samples) // 2:]
         e_rms = float(np.sqrt(np.mean((half["y_d"] - half["y"]) ** 2)))
-    return spec, time, res.error or (warned[0] if warned else ""), bool(warned), e_rms
+    return spec, time, message, warned, e_rms
 
 
 def fault_family(specs, jobs=2, progress=None):
@@ -286,30 +287,19 @@ def fault_family(specs, jobs=2, progress=None):
     ``verdicts`` (how many runs each verdict's words ended) and ``missed`` (the runs nothing
     caught: their spec, what was said and the rms tracking error of y over their second half)."""
     out = {c: {"runs": 0, "caught": 0, "times": [], "verdicts": {}, "missed": []} for c in range(len(FAULTS))}
-    if jobs <= 1:
-        results = (run_fault_spec(s) for s in specs)
-    else:
-        ex = ProcessPoolExecutor(jobs)
-        results = ex.map(run_fault_spec, specs, chunksize=4)
-    try:
-        for i, (spec, time, text, warned, e_rms) in enumerate(results):
-            o = out[spec.case]
-            o["runs"] += 1
-            case = FAULTS[spec.case]
-            caught = warned if case.degraded else time is not None
-            if caught:
-                o["caught"] += 1
-                if time is not None:
-                    o["times"].append(time)
-                gist = _verdict(text)
-                o["verdicts"][gist] = o["verdicts"].get(gist, 0) + 1
-            else:
-                o["missed"].append((spec, text, e_rms))
-            if progress is not None and i % 500 == 0:
-                progress(f"{i} of {len(specs)} runs")
-    finally:
-        if jobs > 1:
-            ex.shutdown()
+    for spec, time, text, warned, e_rms in _run_all(specs, jobs, progress, run=run_fault_spec, chunksize=4,
+                                                    every=500):
+        o = out[spec.case]
+        o["runs"] += 1
+        caught = warned if FAULTS[spec.case].degraded else time is not None
+        if caught:
+            o["caught"] += 1
+            if time is not None:
+                o["times"].append(time)
+            gist = _verdict(text)
+            o["verdicts"][gist] = o["verdicts"].get(gist, 0) + 1
+        else:
+            o["missed"].append((spec, text, e_rms))
     return out
 
 
@@ -385,6 +375,18 @@ class RunResult:
     notes: tuple = ()
 
 
+def _drawn_loops(stages, seed, models):
+    """The drawn loops both families run: for each of ``stages`` stages drawn from the
+    identification family (``seed``) and each controller model, (stage index, model, the
+    stage's parameters with the paper's sensor, the controller's: the stage's own model for
+    ``"own"``, the default (the paper's) otherwise)."""
+    rng = np.random.default_rng(seed)
+    draws = [draw_stage(rng) for _ in range(stages)]
+    for i, stage in enumerate(draws):
+        for model in models:
+            yield i, model, {**stage, **SENSOR, "sensor.seed": i + 1}, (dict(stage) if model == "own" else {})
+
+
 def _tracking(names=None):
     names = names or [n.split("mismatch_", 1)[1] for n in MISMATCH_SCENARIOS]
     return [f"track_{n}" for n in names]
@@ -411,8 +413,6 @@ def family_specs(stages=50, seed=2028, scenarios=None, masters_=("wired",), dura
     saturation : bool
         Add the saturation runs (mismatch plant, limits at 90, 70, 50 % of the needed peak).
     """
-    rng = np.random.default_rng(seed)
-    draws = [draw_stage(rng) for _ in range(stages)]
     names = _tracking(scenarios)
     schedules = []
     if "wired" in masters_:
@@ -420,12 +420,10 @@ def family_specs(stages=50, seed=2028, scenarios=None, masters_=("wired",), dura
     if "real" in masters_:
         schedules += list(REAL_MASTERS)
     specs = []
-    for i, stage in enumerate(draws):
-        for model in models:
-            controller = dict(stage) if model == "own" else {}
-            for master, td, sc in itertools.product(schedules, tf_delays, names):
-                plant = {**stage, **SENSOR, "sensor.seed": i + 1, "tf.delay": td}
-                specs.append(RunSpec(f"stages, {model} model", master, sc, plant, controller, {}, duration))
+    for _, model, stage_plant, controller in _drawn_loops(stages, seed, models):
+        for master, td, sc in itertools.product(schedules, tf_delays, names):
+            plant = {**stage_plant, "tf.delay": td}
+            specs.append(RunSpec(f"stages, {model} model", master, sc, plant, controller, {}, duration))
     if saturation:
         peak = {"1hz": 18.0, "5hz": 18.0, "10hz": 18.5, "20hz": 19.0}   # |v| the mismatch runs need [V]
         for frac, master, td, sc in itertools.product((0.9, 0.7, 0.5), schedules, tf_delays,
@@ -487,14 +485,17 @@ def _run_real(spec):
         masters.closed_loop("container")(spec.scenario, sequential=sequential, order=order, **kwargs)
 
 
-def _run_all(specs, jobs, progress=None):
+def _run_all(specs, jobs, progress=None, run=None, chunksize=8, every=200):
+    """``run`` (default :func:`run_spec`) of each spec, in order, on ``jobs`` processes; the count
+    said to ``progress`` every ``every`` runs."""
+    run = run_spec if run is None else run
     if jobs <= 1:
         for spec in specs:
-            yield run_spec(spec)
+            yield run(spec)
         return
     with ProcessPoolExecutor(jobs) as ex:
-        for i, r in enumerate(ex.map(run_spec, specs, chunksize=8)):
-            if progress is not None and i % 200 == 0:
+        for i, r in enumerate(ex.map(run, specs, chunksize=chunksize)):
+            if progress is not None and i % every == 0:
                 progress(f"{i} of {len(specs)} runs")
             yield r
 
@@ -527,7 +528,7 @@ def summarize(results):
             "gain_high": (max(highs) if highs else None, th.gain_max),
             "delay_unexplained": (max(delays) if delays else None, th.delay_fraction),
             "candidate_run": (max((m.candidate_run for m in ms), default=0), th.confirm),
-            "monitor_share": (max((m.monitor_share for m in ms), default=0.0), core.lib().PIEZO_MONITOR_SHARE_PERCENT / 100),
+            "monitor_share": (max((m.monitor_share for m in ms), default=0.0), th.monitor_share),
             "clip_run": (max((m.clip_run for m in ms), default=0), round(th.clip_time / H)),
             "detection_run": (max((m.detection_run for m in ms), default=0), round(th.detect_time / H)),
             "monitor_run": (max((m.monitor_run for m in ms), default=0),
@@ -543,10 +544,14 @@ def family_markdown(summary):
             return "-"
         return f"{value:.{digits}g}" if isinstance(value, float) else str(value)
 
-    rows = ["| runs | Errors | supervision warnings | importer notes | weakest gain (>= 0.25) | strongest gain (<= 4) | "
-            "unexplained by the law's delays (< 0.25) | longest fault candidate (< 10) | share of large "
-            "errors (< 0.25) | longest clipping [samples] (< 1000) | longest detection [samples] (< 1000) | "
-            "longest large-error run (< 200) | group |",
+    # the thresholds summarize paired with each margin (the same in every group)
+    first = next(iter(summary.values()), {})
+    th = {key: f"{value[1]:g}" for key, value in first.items() if isinstance(value, tuple)}
+    rows = [f"| runs | Errors | supervision warnings | importer notes | weakest gain (>= {th['gain_low']}) | "
+            f"strongest gain (<= {th['gain_high']}) | unexplained by the law's delays (< {th['delay_unexplained']}) | "
+            f"longest fault candidate (< {th['candidate_run']}) | share of large errors (< {th['monitor_share']}) | "
+            f"longest clipping [samples] (< {th['clip_run']}) | longest detection [samples] "
+            f"(< {th['detection_run']}) | longest large-error run (< {th['monitor_run']}) | group |",
             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, s in summary.items():
         rows.append(f"| {s['runs']} | {len(s['errors'])} | {len(s['warnings'])} | {len(s['notes'])} | {fmt(s['gain_low'][0])} | "

@@ -17,7 +17,7 @@ the value references.
 
 writes ``modelDescription/PiezoStageClosedLoop.xml`` (FMI 2.0) and
 ``modelDescription/fmi3/PiezoStageClosedLoop.xml`` (FMI 3.0); both are committed, and
-tests/test_closed_loop_description.py fails when they are not what this writes.
+tests/test_fmu_closed_loop.py fails when they are not what this writes.
 """
 
 from __future__ import annotations

@@ -327,7 +327,7 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
     piezo_plant_sample ps;
     piezo_reference ref = data->ref;
     int exact = stage_exact(data);
-    double v;
+    double v, v_applied;
     piezo_status st;
     (void)outputs_current;      /* no direct feedthrough: nothing evaluated ahead */
     /* the inputs of sample k, as the three FMUs' exchange at t_k gives them */
@@ -345,7 +345,8 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
     /* the stage applies the controller's v of the sample before (with mv.feedthrough: this
      * sample's), clamped to its rated range as PiezoStage applies it */
     v = data->control.mv_feedthrough ? cs.out.v : data->ctrl.out.v;
-    st = piezo_plant_evaluate(&data->plant, piezo_plant_rated_voltage(v), exact ? history : NULL,
+    v_applied = piezo_plant_rated_voltage(v);
+    st = piezo_plant_evaluate(&data->plant, v_applied, exact ? history : NULL,
                               exact ? history_capacity : 0, &ps);
     if (st != PIEZO_OK)
         return refused(data, REFUSED_STAGE, st);
@@ -361,7 +362,7 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
     piezo_plant_commit(&data->plant, &ps);
     if (data->use_internal_reference)
         data->ref = ref;
-    if (v != piezo_plant_rated_voltage(v)) {
+    if (v != v_applied) {
         if (data->n_clamped == 0) {
             data->k_first_clamped = ps.k;
             data->v_first_clamped = v;

@@ -640,7 +640,7 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
      * so that the start-up transient of a stage far from the model (its first 30
      * samples beyond the bound, say) is a share of N, not of the samples seen so
      * far: a run of errors trips it after ln(3/4) / ln(lambda) = 58 samples of N = 200,
-     * errors in every other sample after 139. */
+     * errors in every other sample at sample 137. */
     s->mon_share = c->mon_forgetting * c->mon_share + (s->large_error ? 1.0 : 0.0);
     s->mon_weight = c->mon_forgetting * c->mon_weight + 1.0;
     s->reaches_window = c->divergence_samples > 0
@@ -763,19 +763,28 @@ piezo_status piezo_controller_evaluate(const piezo_controller *c, const piezo_co
     return controller_eval(c, in, history, capacity, sample);
 }
 
+/* Commit an evaluated sample, or refuse it: the divergence monitor's window reached
+ * (PIEZO_ERR_UNSTABLE), or a supervision verdict (PIEZO_ERR_FAULT, recorded in c->verdict);
+ * a refused sample commits nothing of the loop. */
+static piezo_status commit_or_refuse(piezo_controller *c, const piezo_controller_sample *s,
+                                     piezo_controller_output *out)
+{
+    if (s->reaches_window) return PIEZO_ERR_UNSTABLE;
+    if (s->sup.fault) {
+        piezo_supervisor_verdict(&c->sup, &s->sup_in, &s->sup, &c->verdict);
+        return PIEZO_ERR_FAULT;
+    }
+    controller_commit(c, s);
+    if (out) *out = c->out;
+    return PIEZO_OK;
+}
+
 piezo_status piezo_controller_commit(piezo_controller *c, const piezo_controller_sample *sample,
                                      piezo_controller_output *out)
 {
     if (!c || !sample) return PIEZO_ERR_NULL;
     if (sample->k != c->k) return PIEZO_ERR_PARAM;
-    if (sample->reaches_window) return PIEZO_ERR_UNSTABLE;
-    if (sample->sup.fault) {
-        piezo_supervisor_verdict(&c->sup, &sample->sup_in, &sample->sup, &c->verdict);
-        return PIEZO_ERR_FAULT;
-    }
-    controller_commit(c, sample);
-    if (out) *out = c->out;
-    return PIEZO_OK;
+    return commit_or_refuse(c, sample, out);
 }
 
 /* evaluate + commit, without the exported entry points (no PLT in the hot path) */
@@ -788,14 +797,7 @@ piezo_status piezo_controller_step_input(piezo_controller *c, const piezo_contro
     st = check_step_inputs(c, in, history, capacity);
     if (st == PIEZO_OK) st = controller_eval(c, in, history, capacity, &s);
     if (st != PIEZO_OK) return st;
-    if (s.reaches_window) return PIEZO_ERR_UNSTABLE;
-    if (s.sup.fault) {
-        piezo_supervisor_verdict(&c->sup, &s.sup_in, &s.sup, &c->verdict);
-        return PIEZO_ERR_FAULT;
-    }
-    controller_commit(c, &s);
-    if (out) *out = c->out;
-    return PIEZO_OK;
+    return commit_or_refuse(c, &s, out);
 }
 
 piezo_status piezo_controller_step(piezo_controller *c, double y_ref, double y_meas,

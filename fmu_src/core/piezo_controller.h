@@ -203,7 +203,8 @@ void piezo_controller_reset(piezo_controller *ctrl);
  * PIEZO_ERR_UNSTABLE, committing nothing, when this sample would make the
  * run of samples with |pred_error| > monitor_pred_error_max reach
  * monitor_divergence_samples, or their exponentially weighted count over a window of
- * that length reach PIEZO_MONITOR_SHARE_PERCENT % of the window (a loop that keeps restarting its
+ * that length reach PIEZO_MONITOR_SHARE_PERCENT % of the window, from sample
+ * PIEZO_MONITOR_SHARE_MIN_SAMPLES on (a loop that keeps restarting its
  * delay detection, or oscillates); while adaptation pauses on a clipped sample,
  * the larger of |pred_error| and the nominal model's prediction error counts.
  * Returns PIEZO_ERR_FAULT, committing nothing of the loop, when the supervisor

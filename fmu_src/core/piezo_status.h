@@ -20,7 +20,8 @@ typedef enum {
     PIEZO_ERR_CAPACITY = 4,  /* exact-mode history buffer too small; state unchanged */
     PIEZO_ERR_DIVERGED = 5,  /* finite inputs, non-finite result (the loop diverged); state unchanged */
     PIEZO_ERR_UNSTABLE = 6,  /* the controller's monitor found the loop unstable: |pred_error| above
-                                its bound for the whole divergence window; state unchanged */
+                                its bound for the whole divergence window in a row, or in a quarter
+                                of it (an exponentially weighted count); state unchanged */
     PIEZO_ERR_FAULT = 7      /* the controller's supervisor found a loop that cannot work (a
                                 measurement that does not answer, answers inverted, ...): the loop's
                                 state unchanged, the verdict recorded (piezo_supervisor.h) */

@@ -33,7 +33,7 @@
  *     delay is beyond the controller's
  * and otherwise the loop is verified (status 1). The response is judged every
  * PIEZO_SUP_JUDGE_EVERY samples, and every sample once a fault kind appears; a
- * fault kind held for PIEZO_SUP_CONFIRM consecutive samples is the verdict. Measured on 1,800
+ * fault kind held for PIEZO_SUP_CONFIRM consecutive samples is the verdict. Measured on 12,808
  * legitimate runs (docs/robustness.md) and on every fault of the fault table.
  *
  * A loop whose response no linear model explains (a far too high gain makes
@@ -106,7 +106,8 @@ typedef struct {
     int loop_delay;              /* the law's delay then (0: detecting) */
     int auto_delay;              /* 1: the controller detects its delay */
     double ref_gain, ref_fit;    /* the same for y_ref as if it were the measurement (d = 1..3) */
-    uint64_t window;             /* the window's samples: min(k + 1, sup.window) */
+    uint64_t window;             /* the window's samples: its weight sum_j lambda^j, rounded down
+                                    (k + 1 at first, up to sup.window - 1) */
     double travel_model;         /* the distance the model expected y_meas to travel in it [um] */
     double travel_meas;          /* the distance y_meas travelled [um] */
     double y_meas;               /* y_meas of the refused sample [um] */

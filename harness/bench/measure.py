@@ -269,13 +269,9 @@ def measure(scenario="mismatch_1_5_10hz", *, n_max=CHECKPOINTS[-1], repeat=5, fm
     short = prepare_closed_loop(scenario, registry=registry, duration=3.0)
     for name in ("native", "fmpy"):
         fn = masters.closed_loop(name)
-        fn(scenario, registry=registry, duration=3.0, fmu_dir=fmu_dir)     # warm: extraction, loading
-        times = []
-        for _ in range(max(3, repeat)):
-            t0 = time.perf_counter()
-            fn(scenario, registry=registry, duration=3.0, fmu_dir=fmu_dir)
-            times.append(time.perf_counter() - t0)
-        end_to_end[name] = statistics.median(times)
+        # the first call warms up: extraction, loading
+        end_to_end[name] = _median_time(
+            lambda: fn(scenario, registry=registry, duration=3.0, fmu_dir=fmu_dir), max(3, repeat))
 
     closed_loop = closed_loop_fmu_times(scenario, fmu_dir=fmu_dir, registry=registry,
                                         repeat=max(3, repeat), ssp_repeat=1 if fmpy_repeat else 0,

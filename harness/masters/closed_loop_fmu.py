@@ -28,15 +28,15 @@ import ctypes
 import numpy as np
 
 from ..closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters
-from ..fmu import TIMING_OUTPUTS, FMUError, check_fmi_version, fmu_path, load, loop_error_class
+from ..fmu import TIMING_OUTPUTS, FMUError, check_fmi_version, fmu_path, load
 from ..loop import (CLOSED_LOOP_DTYPE, CLOSED_LOOP_FIELDS, REFERENCE_LEAD, REFERENCE_PREVIEW,
                     as_structured, prepare_closed_loop, reference_lead, reference_parameters)
-from .fmpy import _Instance, _ScalarFunctions, _vr_array
+from .fmpy import _CTRL_OUTPUTS, _Instance, _ScalarFunctions, _step_error, _vr_array
 
 __all__ = ["simulate_closed_loop_fmu", "closed_loop_fmu_parameters"]
 
 #: the FMU's outputs of row k, in CLOSED_LOOP_FIELDS order from y (y_d is the scenario's)
-_OUTPUTS = ("y", "y_meas", "v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error")
+_OUTPUTS = ("y", "y_meas") + _CTRL_OUTPUTS
 _N_PLANT = 2        # y, y_meas: of t_k also with mv.feedthrough
 
 
@@ -172,8 +172,6 @@ def _run(inst, setup, rows, progress):
         if progress is not None and (k + 1) % second == 0:
             progress(min(k + 1, n), n)
     if failed:
-        message = inst._message(f"{stage} at t = {k * h:.6g} s (sample {k})",
-                                FMUError(f"{stage} returned an error"))
-        raise loop_error_class(inst.log)(message)
+        raise _step_error(inst, stage, k, h, FMUError(f"{stage} returned an error"))
     if progress is not None:
         progress(n, n)
