@@ -19,6 +19,7 @@ from pathlib import Path
 import re
 from xml.etree import ElementTree as ET
 
+from .platforms import PLATFORMS
 from .ssp import SSP_COMPONENTS, SSP_CONNECTIONS
 
 
@@ -253,6 +254,9 @@ def _source_section(fmi_version, model_identifier, c_files, defines):
     note = (" (FMI 2.0.4 source-code FMU; the same files are listed in the "
             "<code>&lt;SourceFiles&gt;</code> element of the model description)") if fmi2 else ""
     defs = "".join(f"<li><code>{_e(d)}</code> (MinGW only)</li>" for d in defines)
+    # the flags a platform's shipped binary is built with beyond the common ones (harness/platforms.py)
+    extra = "".join(f" For <code>binaries/{_e(p.folder(major))}</code> add <code>{_e(' '.join(p.flags))}</code>, "
+                    f"as its shipped binary is built." for p in PLATFORMS if p.flags and p.folder(major))
     optional = f"<p>Optional definitions:</p><ul>{defs}</ul>" if defs else ""
     return f"""
 <h2 id="sources">Building from the sources</h2>
@@ -266,7 +270,7 @@ folder and the definitions{note}. Only the FMI {major}.0 headers
    -lm -o binaries/{linux}/{_e(model_identifier)}.so</pre>
 <p>For Windows with MinGW-w64, add <code>-D__USE_MINGW_ANSI_STDIO=1 -static-libgcc</code>
 and write <code>binaries/{windows}/{_e(model_identifier)}.dll</code> (the shipped win64
-binary is built this way). The code is plain C99 with no dependency other than the C
+binary is built this way).{extra} The code is plain C99 with no dependency other than the C
 library and its math functions. <code>-ffp-contract=off</code> keeps every multiply and add
 as written (no fused multiply-add), as in the shipped binaries; <code>-ffast-math</code>
 would change the results.</p>
