@@ -357,8 +357,8 @@ def build_parser(prog=MODULE_PROG):
         description="Co-simulate the PiezoStage and AdaptiveCompoundController FMUs and compare "
                     "with the paper's Tables 2-5. Without a subcommand: all.",
         epilog="Each subcommand has its own options: %(prog)s SUBCOMMAND --help. Exit codes: "
-               "0 done, 1 FMI fault, 2 user error, 3 a run diverged, was stopped by the controller's "
-               "supervision or saturated.")
+               "0 done, 1 FMI fault, 2 user error, 3 a run diverged or saturated (a loop the "
+               "controller's supervision stopped counts as diverged).")
     sub = p.add_subparsers(title="subcommands", dest="command", metavar="SUBCOMMAND",
                            parser_class=_Parser)
     for add in SUBCOMMANDS:
