@@ -73,6 +73,14 @@ typedef enum {
     vr_sup_status,          /* output Integer: 0 not verified yet, 1 verified, 2 degraded */
     vr_sup_gain,            /* output: response gain, times the model's */
     vr_sup_delay,           /* output Integer: the delay y_meas answers at [samples] */
+    vr_rls_robust,          /* Boolean: the robust update (piezo_controller.h) */
+    vr_rls_excitation,
+    vr_rls_excitation_time, /* [s] */
+    vr_rls_variance_max,
+    vr_rls_p0_loop,
+    vr_mv_integral,
+    vr_est_adapting,        /* output Boolean: the estimates were updated at the last sample */
+    vr_est_noise,           /* output [um] the measured noise of y_meas */
     MODEL_N_VARIABLES
 } ValueReference;
 

@@ -107,6 +107,14 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_sup_status] = MODEL_OUTPUT_INT("sup.status", sup_status),
     [vr_sup_gain] = { "sup.gain", MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, sup_gain) },
     [vr_sup_delay] = MODEL_OUTPUT_INT("sup.delay", sup_delay),
+    [vr_rls_robust] = PARAM_BOOL("rls.robust", rls_robust),
+    [vr_rls_excitation] = PARAM_REAL("rls.excitation", rls_excitation),
+    [vr_rls_excitation_time] = PARAM_REAL("rls.excitation_time", rls_excitation_time),
+    [vr_rls_variance_max] = PARAM_REAL("rls.variance_max", rls_variance_max),
+    [vr_rls_p0_loop] = PARAM_REAL("rls.p0_loop", rls_p0_loop),
+    [vr_mv_integral] = PARAM_REAL("mv.integral", mv_integral),
+    [vr_est_adapting] = OUTPUT_BOOL("est.adapting", adapting),
+    [vr_est_noise] = OUTPUT_REAL("est.noise", noise),
 };
 
 void model_set_start_values(ModelData *data)

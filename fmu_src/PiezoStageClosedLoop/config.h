@@ -118,6 +118,15 @@ typedef enum {
     vr_phase5, vr_phase6, vr_phase7, vr_phase8,
     vr_lead,
     vr_preview,
+    /* the controller's robust adaptation and integral action (added after the reference) */
+    vr_rls_robust,
+    vr_rls_excitation,
+    vr_rls_excitation_time,
+    vr_rls_variance_max,
+    vr_rls_p0_loop,
+    vr_mv_integral,
+    vr_est_adapting,        /* output Boolean */
+    vr_est_noise,           /* output [um] */
     MODEL_N_VARIABLES
 } ValueReference;
 

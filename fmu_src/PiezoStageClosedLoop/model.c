@@ -200,6 +200,14 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_phase8] = REF_REAL("phase[8]", phase[7]),
     [vr_lead] = REF_INT("lead", lead),
     [vr_preview] = REF_INT("preview", preview),
+    [vr_rls_robust] = CTRL_BOOL("rls.robust", rls_robust),
+    [vr_rls_excitation] = CTRL_REAL("rls.excitation", rls_excitation),
+    [vr_rls_excitation_time] = CTRL_REAL("rls.excitation_time", rls_excitation_time),
+    [vr_rls_variance_max] = CTRL_REAL("rls.variance_max", rls_variance_max),
+    [vr_rls_p0_loop] = CTRL_REAL("rls.p0_loop", rls_p0_loop),
+    [vr_mv_integral] = CTRL_REAL("mv.integral", mv_integral),
+    [vr_est_adapting] = CTRL_OUT_BOOL("est.adapting", adapting),
+    [vr_est_noise] = CTRL_OUT("est.noise", noise),
 };
 
 /* ModelData.refused_by: which block refused the last refused sample (for its message), or

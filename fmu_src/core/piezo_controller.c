@@ -43,6 +43,25 @@
 #define PROBE_SNR 20.0
 #define PROBE_MIN 1e-3
 #define PROBE_MAX 1.0
+/* Robust adaptation (rls.robust; docs/model.md, adaptation). The measured noise of a signal
+ * x is the median of |x(k) - x(k-1)|, scaled to the rms of a white x: a multiplicative
+ * quantile tracker that steps up by NOISE_STEP when |x(k) - x(k-1)| NOISE_SCALE is above it
+ * and down by the same factor when below, so it settles where half the samples are above,
+ * within about 450 samples of a change by a factor 1000 (median |delta| = 0.6745 sqrt(2) rms
+ * for white Gaussian x). A difference removes a smooth signal (a 1 Hz, 10 um tone changes by
+ * 31 nm a sample; the model's error at 20 Hz is scaled by 2 sin(pi 20 h) = 0.063) but not
+ * white sensor noise, and a median ignores the few samples of a step. NOISE_FLOOR keeps it
+ * a normal number (a noise-free loop at rest has x(k) - x(k-1) = 0). */
+#define NOISE_STEP (1.0 + 1.0 / 64.0)
+#define NOISE_SCALE 1.0483        /* 1 / (0.6745 sqrt(2)) */
+#define NOISE_FLOOR 1e-9          /* [um] */
+/* While the estimates are held (no excitation), the estimator's offset c follows its
+ * prediction error: c += OFFSET_GAIN e, a time constant of 1 / OFFSET_GAIN = 100 samples.
+ * Creep and the integral action move the stage's operating point while it holds still; c
+ * keeps the regression y - c = phi^T theta consistent with it, so the first samples of the
+ * next move do not teach theta the offset the hold built up (measured: a 30 um S-curve after
+ * 600 s at 10 um, 7x the error after 0.2 s without c, 1.2x with it). */
+#define OFFSET_GAIN 0.01
 
 void piezo_controller_default_params(piezo_controller_params *p)
 {
@@ -67,13 +86,22 @@ void piezo_controller_default_params(piezo_controller_params *p)
     p->mv_feedthrough = 0;
     p->mv_lambda_u = 0.0;
     p->mv_observer = DEFAULT_OBSERVER;
-    /* RLS tuning measured on the mismatch case of docs/model.md (1.2-1.9 nm rms in all
-     * six tracking scenarios); a trace bound of 1e3 degrades its 1 Hz run to
-     * 111 nm and 1e4 makes it diverge. */
+    /* RLS tuning of the robust update (docs/model.md, adaptation): forgetting 0.99 and a
+     * trace bound of 1000 track the paper's tones and raster scans best; the noise-scaled
+     * bound rls.variance_max keeps a noisy sensor from driving the estimates. */
     p->rls_enabled = 1;
-    p->rls_forgetting = 0.995;
+    p->rls_forgetting = 0.99;
     p->rls_p0 = 1.0;
-    p->rls_trace_max = 100.0;
+    p->rls_trace_max = 1000.0;
+    /* robust adaptation and integral action, measured on the stage-use family and the
+     * paper's scenarios (docs/model.md, adaptation); the paper's law is rls.robust = false,
+     * rls.forgetting = 0.995, rls.trace_max = 100, mv.integral = 0 */
+    p->rls_robust = 1;
+    p->rls_excitation = 3.0;
+    p->rls_excitation_time = 0.05;
+    p->rls_variance_max = 0.004;
+    p->rls_p0_loop = 0.01;
+    p->mv_integral = 0.01;
     p->sat_enabled = 1;
     p->sat_v_min = -PIEZO_SAT_DEFAULT_V;
     p->sat_v_max = PIEZO_SAT_DEFAULT_V;
@@ -156,6 +184,21 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
         return piezo_refuse(diag, "rls.p0", "(0, inf)", p->rls_p0);
     if (!(isfinite(p->rls_trace_max) && p->rls_trace_max >= 4.0 * p->rls_p0))
         return piezo_refuse(diag, "rls.trace_max", "[4 rls.p0, inf) (trace of the initial covariance)", p->rls_trace_max);
+    if (p->rls_robust != 0 && p->rls_robust != 1)
+        return piezo_refuse(diag, "rls.robust", "false or true", (double)p->rls_robust);
+    if (!(isfinite(p->rls_excitation) && p->rls_excitation >= 0.0))
+        return piezo_refuse(diag, "rls.excitation", "[0, inf) (times the measured noise of y_meas)", p->rls_excitation);
+    if (!(isfinite(p->rls_excitation_time) && p->rls_excitation_time >= 0.0
+          && p->rls_excitation_time <= 3600.0 && p->rls_excitation_time / p->h <= 9007199254740992.0))
+        return piezo_refuse(diag, "rls.excitation_time", "[0, 3600] s (and at most 2^53 samples of h)",
+                            p->rls_excitation_time);
+    if (!(isfinite(p->rls_variance_max) && p->rls_variance_max > 0.0))
+        return piezo_refuse(diag, "rls.variance_max", "(0, inf) (bound on trace(P) times the measured noise squared)",
+                            p->rls_variance_max);
+    if (!(isfinite(p->rls_p0_loop) && p->rls_p0_loop > 0.0 && 4.0 * p->rls_p0_loop <= p->rls_trace_max))
+        return piezo_refuse(diag, "rls.p0_loop", "(0, rls.trace_max / 4]", p->rls_p0_loop);
+    if (!(isfinite(p->mv_integral) && p->mv_integral >= 0.0 && p->mv_integral < 1.0))
+        return piezo_refuse(diag, "mv.integral", "[0, 1) (gain of the integral action per sample)", p->mv_integral);
     if (p->sat_enabled) {
         if (!isfinite(p->sat_v_min)) return piezo_refuse(diag, "sat.v_min", "finite, < sat.v_max", p->sat_v_min);
         if (!(isfinite(p->sat_v_max) && p->sat_v_max > p->sat_v_min))
@@ -184,6 +227,12 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->inv_forgetting = 1.0 / p->rls_forgetting;
     c->p0 = p->rls_p0;
     c->trace_max = p->rls_trace_max;
+    c->robust = p->rls_robust;
+    c->excitation = p->rls_excitation;
+    c->excitation_samples = (uint64_t)floor(p->rls_excitation_time / p->h + 0.5);
+    c->variance_max = p->rls_variance_max;
+    c->p0_loop = p->rls_p0_loop;
+    c->integral_gain = p->mv_integral;
     c->sat_enabled = p->sat_enabled ? 1 : 0;
     c->sat_v_min = p->sat_v_min;
     c->sat_v_max = p->sat_v_max;
@@ -247,11 +296,14 @@ void piezo_controller_reset(piezo_controller *c)
     piezo_gl_reset(&c->inv_creep);
     memcpy(c->theta, c->theta_nominal, sizeof c->theta);
     memset(c->P, 0, sizeof c->P);
-    for (i = 0; i < 4; ++i) c->P[5 * i] = c->p0;
+    for (i = 0; i < 4; ++i) c->P[5 * i] = c->robust ? c->p0_loop : c->p0;
     c->y_prev[0] = c->y_prev[1] = 0.0;
     memset(c->q_ring, 0, sizeof c->q_ring);
     c->head = 0;
     c->r_prev = 0.0;
+    c->noise_y = c->noise_e = c->r_anchor = c->offset = c->integral = 0.0;
+    c->excite_left = 0;
+    memset(c->r_ring, 0, sizeof c->r_ring);
     memset(c->preview_value, 0, sizeof c->preview_value);
     memset(c->preview_tag, 0, sizeof c->preview_tag);
     c->k_delay = 0;
@@ -323,7 +375,7 @@ static void project(const piezo_controller *c, double *th)
  * the updated estimates and covariance go to theta, P_new (not P's storage).
  */
 static double rls_step(const piezo_controller *c, const double *theta_in, const double *P, int d, double y,
-                       int update, double *theta, double *P_new)
+                       int update, double trace_max, double *theta, double *P_new)
 {
     /* phi as four scalars, not an array: built from separate loads, an array
      * went through the stack and was read back as pairs, a store-to-load
@@ -359,20 +411,70 @@ static double rls_step(const piezo_controller *c, const double *theta_in, const 
         P_new[4 * i + 3] = n3;
     }
     trace = ((P_new[0] + P_new[5]) + P_new[10]) + P_new[15];
-    if (trace > c->trace_max) {
-        double scale = c->trace_max / trace;
+    if (trace > trace_max) {
+        double scale = trace_max / trace;
         for (i = 0; i < 16; ++i) P_new[i] *= scale;
     }
     project(c, theta);
     return e;
 }
 
-/* The chosen loop's RLS: the a-priori prediction error; the updated theta and
- * P go to *s when the update runs. */
+/*
+ * The chosen loop's RLS: the a-priori prediction error; the updated theta and
+ * P go to *s when the update runs. The robust update (rls.robust) regresses
+ * y - c on phi, updates only while the reference excites the loop
+ * (s->excited, excitation_next), and bounds trace(P) by
+ *     min(rls.trace_max, rls.variance_max / sigma_e^2),
+ * sigma_e the measured noise of its prediction error: P sigma_e^2 is the covariance
+ * of the estimates, and the bound keeps a noisy sensor from winding P up into
+ * estimates that follow the noise (measured: a 1 Hz raster scan with a 20 nm
+ * sensor burst to 59 um with rls.trace_max alone). While it holds its estimates,
+ * c follows the prediction error (OFFSET_GAIN).
+ */
 static double rls_update(const piezo_controller *c, double y, piezo_controller_sample *s)
 {
-    s->rls_updated = c->rls_enabled && !(c->sat_hold > 0);
-    return rls_step(c, c->theta, c->P, c->d, y, s->rls_updated, s->theta, s->P);
+    double e, bound = c->trace_max;
+    int may = c->rls_enabled && !(c->sat_hold > 0);
+    s->offset = c->offset;
+    if (!c->robust) {
+        s->rls_updated = may;
+        return rls_step(c, c->theta, c->P, c->d, y, may, c->trace_max, s->theta, s->P);
+    }
+    if (c->noise_e > 0.0) {
+        double b = c->variance_max / (c->noise_e * c->noise_e);
+        if (b < bound) bound = b;
+    }
+    s->rls_updated = may && s->excited;
+    e = rls_step(c, c->theta, c->P, c->d, y - c->offset, s->rls_updated, bound, s->theta, s->P);
+    if (may && !s->excited) s->offset = c->offset + OFFSET_GAIN * e;
+    return e;
+}
+
+/* The measured noise after one more difference delta (NOISE_STEP): 0 until the first
+ * nonzero difference, which starts it. */
+static double noise_next(double m, double delta)
+{
+    double x = fabs(delta) * NOISE_SCALE;
+    if (m == 0.0) return x > NOISE_FLOOR ? x : 0.0;
+    m = x > m ? m * NOISE_STEP : m * (1.0 / NOISE_STEP);
+    return m > NOISE_FLOOR ? m : NOISE_FLOOR;
+}
+
+/*
+ * Whether the reference excites the loop at sample k (robust update): an excitation is a
+ * reference r(k-1) that differs from the one of the last excitation by more than
+ * rls.excitation times the measured noise of y_meas (a move the sensor can see); the
+ * estimator updates at it and for rls.excitation_time after it. A stage that holds still
+ * (the reference constant) teaches nothing but noise, so its estimates are held.
+ */
+static void excitation_next(const piezo_controller *c, double y_meas, piezo_controller_sample *s)
+{
+    const double r1 = c->r_ring[c->head];   /* r(k-1), 0 before the first sample */
+    int event = fabs(r1 - c->r_anchor) > c->excitation * c->noise_y;
+    s->noise_y = noise_next(c->noise_y, y_meas - c->y_prev[0]);
+    s->r_anchor = event ? r1 : c->r_anchor;
+    s->excited = event || c->excite_left > 0;
+    s->excite_left = event ? c->excitation_samples : (c->excite_left > 0 ? c->excite_left - 1 : 0);
 }
 
 /*
@@ -390,7 +492,7 @@ static double detect_update(const piezo_controller *c, double y, piezo_controlle
     double err[PIEZO_DETECT_N];
     int i, best = order[0], second = -1, update = c->rls_enabled && !(c->sat_hold > 0);
     for (i = 0; i < PIEZO_DETECT_N; ++i) {
-        err[i] = rls_step(c, &c->det_theta[4 * i], &c->det_P[16 * i], i + 1, y, update,
+        err[i] = rls_step(c, &c->det_theta[4 * i], &c->det_P[16 * i], i + 1, y, update, c->trace_max,
                           &s->det_theta[4 * i], &s->det_P[16 * i]);
         if (!update) {
             memcpy(&s->det_theta[4 * i], &c->det_theta[4 * i], 4 * sizeof(double));
@@ -423,7 +525,16 @@ static double detect_update(const piezo_controller *c, double y, piezo_controlle
     s->rls_updated = !s->detecting;
     if (!s->detecting) {
         memcpy(s->theta, &s->det_theta[4 * best], sizeof s->theta);
-        memcpy(s->P, &s->det_P[16 * best], sizeof s->P);
+        if (c->robust) {
+            /* the robust update starts the loop from rls.p0_loop I: the candidates'
+             * covariance is sized to tell the delays apart within milliseconds, and the
+             * first large move of a loop that keeps it fits its estimates to that one move
+             * (measured: a 50 um S-curve, b1 driven to its floor and errors of 2-12 um) */
+            int j;
+            for (j = 0; j < 16; ++j) s->P[j] = j % 5 == 0 ? c->p0_loop : 0.0;
+        } else {
+            memcpy(s->P, &s->det_P[16 * best], sizeof s->P);
+        }
     }
     return err[best];
 }
@@ -526,12 +637,22 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
     s->preview_lead = in->preview_lead;
     s->reaches_window = 0;
     s->restarted = 0;
+    if (c->robust) {
+        excitation_next(c, y_meas, s);
+    } else {
+        s->noise_y = 0.0;
+        s->r_anchor = c->r_anchor;
+        s->excite_left = 0;
+        s->excited = 1;
+    }
     if (c->detecting) {
+        s->offset = 0.0;
         pred_error = detect_update(c, y_meas, s);
     } else {
         pred_error = rls_update(c, y_meas, s);
         detect_carry(c, s);
     }
+    s->noise_e = c->robust ? noise_next(c->noise_e, pred_error - c->out.pred_error) : 0.0;
     /* supervision of sample k: what the measurement did with the past outputs */
     s->sup_in.y_meas = y_meas;
     s->sup_in.y_ref = in->y_ref;
@@ -554,6 +675,17 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
     theta = s->detecting ? c->theta_nominal : (s->rls_updated ? s->theta : c->theta);
     t = s->detecting ? START_OBSERVER : c->observer;
     r = reference(c, in, d, &stamped);
+    /* integral action (mv.integral): z(k) = z(k-1) + gamma (y_d(k) - y_meas(k)), y_d(k) the
+     * reference the law took d samples ago; held while detecting and while a clipped sample
+     * pauses the adaptation (anti-windup) */
+    s->r_plain = r;
+    s->integral = c->integral;
+    if (c->integral_gain > 0.0 && !s->detecting && c->sat_hold == 0 && c->k >= (uint64_t)d) {
+        int at = c->head + d - 1;
+        double y_d_now = c->r_ring[at < PIEZO_MV_Q_RING ? at : at - PIEZO_MV_Q_RING];
+        s->integral = c->integral + c->integral_gain * (y_d_now - y_meas);
+    }
+    if (c->integral_gain > 0.0) r += s->integral;   /* (r + 0 would turn a -0 reference into +0) */
 
     /* Diophantine with the current estimate; F = B E: f_n = b1 e_n + b2 e_{n-1} */
     piezo_diophantine_observer(theta[0], theta[1], t, d, e, g);
@@ -627,6 +759,8 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
     memcpy(s->out.theta, theta, sizeof s->out.theta);
     s->out.pred_error = pred_error;
     s->out.saturated = saturated;
+    s->out.adapting = s->rls_updated && !s->detecting;
+    s->out.noise = s->noise_y;
     /* every output (the estimates too) and the state the sample leaves behind are finite,
      * or the sample is refused: the RLS covariance can overflow (phi P phi^T) while theta
      * stays finite, and the operators' next states are what the next sample starts from */
@@ -715,6 +849,13 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
     /* shift the pasts */
     c->head = c->head == 0 ? PIEZO_MV_Q_RING - 1 : c->head - 1;
     c->q_ring[c->head] = q;
+    c->r_ring[c->head] = s->r_plain;
+    c->integral = s->integral;
+    c->offset = s->offset;
+    c->noise_y = s->noise_y;
+    c->noise_e = s->noise_e;
+    c->r_anchor = s->r_anchor;
+    c->excite_left = s->excite_left;
     c->y_prev[1] = c->y_prev[0];
     c->y_prev[0] = y_meas;
     c->r_prev = s->r;
@@ -864,6 +1005,18 @@ const char *piezo_controller_check(const piezo_controller *c)
         return "rls.p0 or rls.trace_max out of range";
     if (!(isfinite(c->sat_v_min) && isfinite(c->sat_v_max) && (!c->sat_enabled || c->sat_v_max > c->sat_v_min)))
         return "sat.v_min or sat.v_max out of range";
+    if ((c->robust != 0 && c->robust != 1) || !(isfinite(c->excitation) && c->excitation >= 0.0)
+        || c->excitation_samples > 9007199254740992ULL
+        || !(isfinite(c->variance_max) && c->variance_max > 0.0)
+        || !(isfinite(c->p0_loop) && c->p0_loop > 0.0 && 4.0 * c->p0_loop <= c->trace_max)
+        || !(isfinite(c->integral_gain) && c->integral_gain >= 0.0 && c->integral_gain < 1.0))
+        return "rls.robust, rls.excitation*, rls.variance_max, rls.p0_loop or mv.integral out of range";
+    if (!(isfinite(c->noise_y) && c->noise_y >= 0.0 && isfinite(c->noise_e) && c->noise_e >= 0.0
+          && isfinite(c->r_anchor) && isfinite(c->offset) && isfinite(c->integral)
+          && all_finite(c->r_ring, PIEZO_MV_Q_RING)) || c->excite_left > c->excitation_samples
+        || (!c->robust && (c->noise_y != 0.0 || c->noise_e != 0.0 || c->offset != 0.0 || c->excite_left != 0))
+        || (c->integral_gain == 0.0 && c->integral != 0.0))
+        return "robust adaptation or integral action state out of range";
     if (!(isfinite(c->pred_error_max) && c->pred_error_max > 0.0)) return "monitor.pred_error_max out of range";
     if (c->divergence_samples > 2147483647u) return "monitor.divergence_samples out of range";
     if (c->mon_forgetting != monitor_forgetting((int)c->divergence_samples))
@@ -977,6 +1130,9 @@ const char *piezo_controller_check_params(const piezo_controller *c, const piezo
         || c->inv_creep.alpha != -q->creep_alpha || c->lambda_u != q->mv_lambda_u
         || c->rls_enabled != (q->rls_enabled ? 1 : 0) || c->sat_enabled != (q->sat_enabled ? 1 : 0)
         || c->forgetting != q->rls_forgetting || c->p0 != q->rls_p0 || c->trace_max != q->rls_trace_max
+        || c->robust != q->rls_robust || c->excitation != q->rls_excitation
+        || c->excitation_samples != scratch.excitation_samples || c->variance_max != q->rls_variance_max
+        || c->p0_loop != q->rls_p0_loop || c->integral_gain != q->mv_integral
         || c->pred_error_max != q->monitor_pred_error_max
         || c->divergence_samples != (uint64_t)q->monitor_divergence_samples
         || (c->sat_enabled && (c->sat_v_min != q->sat_v_min || c->sat_v_max != q->sat_v_max))

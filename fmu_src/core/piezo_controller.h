@@ -25,6 +25,15 @@
  * Preview alignment: the input may carry a stamped preview, y_d at the
  * measurement's sample + preview_lead. The controller keeps them in a ring
  * and uses y_d(k + d) from it when present, y_ref otherwise.
+ *
+ * Robust adaptation (rls.robust, docs/model.md): the loop's RLS updates only
+ * while the reference excites the loop (it moved by more than rls.excitation
+ * times the measured noise of y_meas within the last rls.excitation_time),
+ * regresses y - c on the model, c the offset it tracks while it does not
+ * update, starts from rls.p0_loop I once d is chosen, and bounds trace(P) by
+ * rls.variance_max / sigma_e^2 (sigma_e the measured noise of its prediction
+ * error) as well as rls.trace_max. Integral action (mv.integral):
+ *     z(k) = z(k-1) + gamma (y_d(k) - y_meas(k)),   the law tracks r(k) + z(k).
  */
 #ifndef PIEZO_CONTROLLER_H
 #define PIEZO_CONTROLLER_H
@@ -75,6 +84,13 @@ typedef struct {
     double rls_forgetting;       /* (0, 1] */
     double rls_p0;               /* initial covariance P = p0 I, > 0 */
     double rls_trace_max;        /* bound on trace(P), >= 4 p0 */
+    int rls_robust;              /* 1: the robust update (above); 0: the paper's, every sample */
+    double rls_excitation;       /* robust: a reference change counts beyond this many times the
+                                    measured noise of y_meas, >= 0 */
+    double rls_excitation_time;  /* robust: [s] the RLS updates for this long after one, >= 0 */
+    double rls_variance_max;     /* robust: trace(P) sigma_e^2 <= this, > 0 */
+    double rls_p0_loop;          /* robust: P = rls_p0_loop I when the loop's d is chosen, > 0 */
+    double mv_integral;          /* integral action gain gamma, [0, 1) (0: none, the paper's law) */
     int sat_enabled;
     double sat_v_min, sat_v_max; /* [V], v_min < v_max when enabled */
     double monitor_pred_error_max;   /* [um], > 0: bound on |pred_error| */
@@ -92,6 +108,8 @@ typedef struct {
     int saturated;               /* 1 if v(k) was clipped */
     int delay;                   /* loop delay d of the law; 0 while it is being detected */
     int preview;                 /* 1 if the law used a stamped preview, 0 if y_ref */
+    int adapting;                /* 1 if the estimates were updated at k */
+    double noise;                /* measured noise of y_meas after k [um] (robust update; 0 otherwise) */
 } piezo_controller_output;
 
 /* The inputs of one sample. */
@@ -127,6 +145,20 @@ typedef struct {
     int rls_enabled;
     double forgetting, p0, trace_max;
     double inv_forgetting;       /* 1 / forgetting, set at init (the RLS multiplies by it) */
+    int robust;                  /* rls.robust */
+    double excitation;           /* rls.excitation */
+    uint64_t excitation_samples; /* rls.excitation_time / h, rounded */
+    double variance_max;         /* rls.variance_max */
+    double p0_loop;              /* rls.p0_loop */
+    double integral_gain;        /* mv.integral */
+    /* robust adaptation and integral action: the states of k (reset to 0) */
+    double noise_y;              /* measured noise of y_meas [um] (0: not yet measured) */
+    double noise_e;              /* measured noise of the prediction error [um] (0: not yet) */
+    double r_anchor;             /* the reference at the last excitation */
+    uint64_t excite_left;        /* samples the RLS still updates (0: it holds its estimates) */
+    double offset;               /* the estimator's offset c [um] */
+    double integral;             /* z(k-1) of the integral action [um] */
+    double r_ring[PIEZO_MV_Q_RING];  /* past references of the law without z, r(k-1).. (q_ring's head) */
     int sat_enabled;
     double sat_v_min, sat_v_max;
     double theta_nominal[4];
@@ -172,6 +204,11 @@ typedef struct {
     piezo_controller_output out; /* its outputs */
     double theta[4], P[16];      /* RLS result (valid when rls_updated) */
     int rls_updated;
+    /* robust adaptation and integral action: the states of k+1 */
+    double noise_y, noise_e, r_anchor, offset, integral;
+    uint64_t excite_left;
+    int excited;                 /* the reference excites the loop at k */
+    double r_plain;              /* the reference of the law without z */
     double inv_z[PIEZO_PI_MAX_OPERATORS];    /* inverse PI play states of k+1 */
     double fwd_z[PIEZO_PI_MAX_OPERATORS];    /* forward PI play states of k+1 */
     int sat_hold;
