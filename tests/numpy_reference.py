@@ -20,18 +20,24 @@ DOC_DEFAULTS = {
     "h": 0.0005,
 }
 
-# The design's start values of the controller's own parameters: forgetting 0.995, trace
-# bound 100, initial covariance scale 1, mv.lambda_u 0; the drop-in timing (v published at
-# the end of the step that sampled the inputs: no direct feedthrough, loop delay d = 2, so
-# mv.delay 1); voltage limits on at +-150 V (the paper's amplifier range; every paper
-# scenario stays below 62 V); the divergence monitor at 1 um for 200 samples.
+# The design's start values of the controller's own parameters: the robust update (docs/model.md,
+# adaptation: excitation 3 x the measured noise, 0.05 s after it, variance bound 0.004, the loop's
+# initial covariance 0.01) with forgetting 0.99, trace bound 1000, the candidates' initial
+# covariance scale 1, integral action 0.01, mv.lambda_u 0; the drop-in timing (v published at
+# the end of the step that sampled the inputs: no direct feedthrough, the loop delay detected);
+# voltage limits on at +-150 V (the paper's amplifier range; every paper scenario stays below
+# 62 V); the divergence monitor at 1 um for 200 samples.
 CONTROLLER_DOC_DEFAULTS = {
     "mv.delay": -1, "mv.feedthrough": False, "mv.hold_inputs": False, "mv.lambda_u": 0.0,
-    "mv.observer": 0.4, "rls.enabled": True,
-    "rls.forgetting": 0.995, "rls.p0": 1.0, "rls.trace_max": 100.0, "sat.enabled": True,
-    "sat.v_min": -150.0, "sat.v_max": 150.0, "monitor.pred_error_max": 1.0,
+    "mv.observer": 0.4, "mv.integral": 0.01, "rls.enabled": True,
+    "rls.forgetting": 0.99, "rls.p0": 1.0, "rls.trace_max": 1000.0, "rls.robust": True,
+    "rls.excitation": 3.0, "rls.excitation_time": 0.05, "rls.variance_max": 0.004, "rls.p0_loop": 0.01,
+    "sat.enabled": True, "sat.v_min": -150.0, "sat.v_max": 150.0, "monitor.pred_error_max": 1.0,
     "monitor.divergence_samples": 200,
 }
+# The paper's law: its update on every sample with the tuning measured for it, no integral
+# action (docs/model.md, adaptation); the robust update's parameters are then unused.
+PAPER_LAW = {"rls.robust": False, "rls.forgetting": 0.995, "rls.trace_max": 100.0, "mv.integral": 0.0}
 
 # Table 1 rows (f: k_c, alpha)
 TABLE1 = {1: (1.0463, 0.0002), 10: (1.0497, -0.0085), 20: (1.0386, -0.0077),
@@ -202,24 +208,34 @@ def diophantine(a, d: int, t: float = 0.0):
     return e, g
 
 
-def mv_controller(y_ref, y_meas, theta, d: int, lambda_u: float = 0.0, observer: float = 0.0):
+def mv_controller(y_ref, y_meas, theta, d: int, lambda_u: float = 0.0, observer: float = 0.0,
+                  integral: float = 0.0):
     """Minimum-variance law with fixed model theta = (a1, a2, b1, b2) (docs/model.md, controller):
     with the observer polynomial T = 1 - observer z^-1, predictor
     T y(k+d) = Gd y(k) + F q(k), F = B E; q(k) chosen so the prediction equals
     T y_ref(k) = y_ref(k) - observer y_ref(k-1). With the control weighting lambda_u of the
     generalised MV law, q(k) minimises J(q) = (T y(k+d|k) - T y_ref(k))^2 + lambda_u q^2,
     solved here as the least-squares problem [f0; sqrt(lambda_u)] q ~ [T y_ref - rest; 0]
-    (rest: the prediction without the f0 q(k) term), not by a closed-form transcription."""
+    (rest: the prediction without the f0 q(k) term), not by a closed-form transcription.
+
+    Integral action (docs/model.md, controller): the law tracks r(k) = y_ref(k) + z(k),
+    z(k) = z(k-1) + integral (y_ref(k-d) - y_meas(k)) from k = d on (y_ref(k-d) is y_d(k),
+    the displacement wanted at the measurement's sample), z = 0 before."""
     a1, a2, b1, b2 = theta
     e, g = diophantine([1.0, a1, a2], d, observer)
     f = np.convolve([b1, b2], e)                  # F = B E, deg d
     n = len(y_ref)
     q = np.zeros(n)
+    z = 0.0
+    r = np.zeros(n)
     design = np.array([[f[0]], [np.sqrt(lambda_u)]])
     for k in range(n):
+        if integral > 0.0 and k >= d:
+            z = z + integral * (y_ref[k - d] - y_meas[k])
+        r[k] = y_ref[k] + z if integral > 0.0 else y_ref[k]
         rest = g[0] * y_meas[k] + (g[1] * y_meas[k - 1] if k >= 1 else 0.0)
         rest += sum(f[i] * q[k - i] for i in range(1, len(f)) if k - i >= 0)
-        t_ref = y_ref[k] - (observer * y_ref[k - 1] if k >= 1 else 0.0)
+        t_ref = r[k] - (observer * r[k - 1] if k >= 1 else 0.0)
         sol, *_ = np.linalg.lstsq(design, np.array([t_ref - rest, 0.0]), rcond=None)
         q[k] = sol[0]
     return q
@@ -307,4 +323,107 @@ def rls_reference(q, y, d: int, forgetting: float, p0: float, trace_max: float, 
         out["theta"][k] = theta
         out["P"][k] = P
         out["e"][k] = e
+    return out
+
+
+# ---------------------------------------------------------------- the robust update
+# docs/model.md, controller ("Adaptation", the robust update): written from the text.
+NOISE_STEP = 1.0 + 1.0 / 64.0     # the median tracker's factor per sample
+NOISE_SCALE = 1.0 / (0.6744897501960817 * np.sqrt(2.0))   # median |delta| of white noise -> its rms
+NOISE_FLOOR = 1e-9
+OFFSET_GAIN = 0.01
+
+
+def measured_noise(x) -> np.ndarray:
+    """The measured noise of a signal x(0..N-1) (x(-1) = 0): m(k+1) from m(k) and
+    |x(k) - x(k-1)| s (s the scale of white noise): 0 until the first difference above the
+    floor, which it takes; then m (1 + 1/64) when that difference is above m, m / (1 + 1/64)
+    when not, never below the floor 1e-9 um. Returns m(1..N) (the value after each sample)."""
+    x = np.asarray(x, dtype=float)
+    out = np.zeros(len(x))
+    m, prev = 0.0, 0.0
+    for k, v in enumerate(x):
+        delta = abs(v - prev) * NOISE_SCALE
+        prev = v
+        if m == 0.0:
+            m = delta if delta > NOISE_FLOOR else 0.0
+        else:
+            m = m * NOISE_STEP if delta > m else m / NOISE_STEP
+            m = max(m, NOISE_FLOOR)
+        out[k] = m
+    return out
+
+
+def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, trace_max: float,
+                         variance_max: float, excitation: float, excitation_samples: int,
+                         theta0, e_before=0.0) -> dict:
+    """The robust update over recorded data (q(k), y(k)) with the law's references r(k)
+    (r(-1) = 0), from theta0 and P = p0_loop I, offset c = 0:
+
+        excitation at k: |r(k-1) - r_a| > excitation * m_y(k), m_y the measured noise of y
+                         before sample k; then r_a = r(k-1) and the estimator adapts at k and
+                         for excitation_samples samples after
+        e(k) = y(k) - c - phi^T theta      (phi as rls_reference)
+        adapting: the exponentially weighted RLS of rls_reference with
+                  trace(P) <= min(trace_max, variance_max / m_e(k)^2), m_e the measured noise
+                  of e before sample k (no bound from it while it is 0), then the projection
+        holding:  theta, P kept; c = c + 0.01 e(k)
+
+    e_before is the prediction error of the sample before the first (0 from rest). Returns
+    theta (N, 4), P (N, 4, 4), e (N,), c (N,) after each sample and adapting (N, bool)."""
+    q = np.asarray(q, dtype=float)
+    y = np.asarray(y, dtype=float)
+    r = np.asarray(r, dtype=float)
+    n = len(y)
+    lam = float(forgetting)
+
+    def Y(i):
+        return y[i] if i >= 0 else 0.0
+
+    def Q(i):
+        return q[i] if i >= 0 else 0.0
+
+    theta = np.array(theta0, dtype=float)
+    b1_nominal = theta[2]
+    P = p0_loop * np.eye(4)
+    c = 0.0
+    m_y = m_e = 0.0
+    anchor, left = 0.0, 0
+    e_prev = e_before
+    out = {"theta": np.zeros((n, 4)), "P": np.zeros((n, 4, 4)), "e": np.zeros(n), "c": np.zeros(n),
+           "adapting": np.zeros(n, dtype=bool)}
+
+    def track(m, delta):
+        delta = abs(delta) * NOISE_SCALE
+        if m == 0.0:
+            return delta if delta > NOISE_FLOOR else 0.0
+        m = m * NOISE_STEP if delta > m else m / NOISE_STEP
+        return max(m, NOISE_FLOOR)
+
+    for k in range(n):
+        r1 = r[k - 1] if k >= 1 else 0.0
+        event = abs(r1 - anchor) > excitation * m_y
+        adapting = event or left > 0
+        if event:
+            anchor, left = r1, excitation_samples
+        else:
+            left = max(left - 1, 0)
+        m_y = track(m_y, Y(k) - Y(k - 1))
+        phi = np.array([-Y(k - 1), -Y(k - 2), Q(k - d), Q(k - d - 1)])
+        e = y[k] - c - phi @ theta
+        if adapting:
+            bound = trace_max if m_e == 0.0 else min(trace_max, variance_max / m_e ** 2)
+            K = P @ phi / (lam + phi @ P @ phi)
+            theta = theta + K * e
+            P = (P - np.outer(K, phi @ P)) / lam
+            tr = np.trace(P)
+            if tr > bound:
+                P = P * (bound / tr)
+            theta = rls_project(theta, b1_nominal)
+        else:
+            c = c + OFFSET_GAIN * e
+        m_e = track(m_e, e - e_prev)
+        e_prev = e
+        out["theta"][k], out["P"][k], out["e"][k], out["c"][k] = theta, P, e, c
+        out["adapting"][k] = adapting
     return out

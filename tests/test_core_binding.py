@@ -103,8 +103,9 @@ def test_missing_library_message(tmp_path):
 def test_defaults_match_design():
     """Reference: docs/fmus.md defaults typed in tests/numpy_reference.py
     (DOC_DEFAULTS for the model, CONTROLLER_DOC_DEFAULTS for the controller's own
-    parameters: rls.forgetting 0.995, rls.trace_max 100, rls.p0 1, mv.delay 1, mv.lambda_u 0,
-    limits +-150 V on, monitor 1 um / 200 samples),
+    parameters: the robust update, rls.forgetting 0.99, rls.trace_max 1000, rls.p0 1,
+    rls.p0_loop 0.01, mv.integral 0.01, mv.delay -1, mv.lambda_u 0, limits +-150 V on,
+    monitor 1 um / 200 samples),
     and the parameter name sets of the two modelDescription files."""
     p = core.default_plant_params()
     d = ref.DOC_DEFAULTS
@@ -145,7 +146,7 @@ def _fmu_parameters(model):
 def test_core_defaults_equal_model_description_start_values(model):
     """Reference: the start values in modelDescription/<model>.xml (what an FMI importer shows
     as defaults). Every core default equals its start value exactly, e.g. for the controller
-    rls.p0 = 1, rls.trace_max = 100, rls.forgetting = 0.995 (README: 0.995 and 100)."""
+    rls.p0 = 1, rls.trace_max = 1000, rls.forgetting = 0.99, mv.integral = 0.01."""
     want = _fmu_parameters(model)
     got = core.default_plant_params() if model == "PiezoStage" else core.default_controller_params()
     assert set(got) == set(want)
@@ -154,18 +155,21 @@ def test_core_defaults_equal_model_description_start_values(model):
 
 
 def test_controller_initial_state_uses_p0_and_nominal_model():
-    """Reference: docs/model.md, controller ('initialised from the nominal model') and the header
-    (P = p0 I). A fresh controller holds theta = nominal [a1, a2, b1, b2] and P = p0 I with
-    the default p0 = 1 (trace 4 <= trace_max = 100), read through ffi; with rls.p0 = 2.5,
-    P = 2.5 I."""
+    """Reference: docs/model.md, controller ('initialised from the nominal model') and the header.
+    A fresh controller holds theta = nominal [a1, a2, b1, b2], its delay candidates start from
+    P = rls.p0 I and the loop's estimator from rls.p0_loop I (the robust update; rls.p0 I with
+    the paper's update), read through ffi: the defaults 1 and 0.01, then rls.p0 = 2.5 and
+    rls.p0_loop = 0.5."""
     d = ref.DOC_DEFAULTS
-    for p0 in (None, 2.5):
-        c = core.Controller(None if p0 is None else {"rls.p0": p0})
-        want_p0 = ref.CONTROLLER_DOC_DEFAULTS["rls.p0"] if p0 is None else p0
+    for over in ({}, {"rls.p0": 2.5, "rls.p0_loop": 0.5}, {"rls.p0": 2.5, **ref.PAPER_LAW}):
+        c = core.Controller(over)
+        params = {**ref.CONTROLLER_DOC_DEFAULTS, **over}
+        loop_p0 = params["rls.p0_loop"] if params["rls.robust"] else params["rls.p0"]
         assert list(c.raw.theta) == [d["tf.a1"], d["tf.a2"], d["tf.b1"], d["tf.b2"]]
-        assert list(c.raw.P) == [want_p0 if i % 5 == 0 else 0.0 for i in range(16)]
-        assert c.raw.trace_max == ref.CONTROLLER_DOC_DEFAULTS["rls.trace_max"]
-        assert c.raw.forgetting == ref.CONTROLLER_DOC_DEFAULTS["rls.forgetting"]
+        assert list(c.raw.P) == [loop_p0 if i % 5 == 0 else 0.0 for i in range(16)], over
+        assert list(c.raw.det_P) == [params["rls.p0"] if i % 16 % 5 == 0 else 0.0 for i in range(48)], over
+        assert c.raw.trace_max == params["rls.trace_max"]
+        assert c.raw.forgetting == params["rls.forgetting"]
 
 
 def test_unknown_parameter_name_lists_valid_names():

@@ -137,22 +137,45 @@ class PlantRef:
         return u, x, y, reading
 
 
+NOISE_STEP = 1.0 + 1.0 / 64.0
+NOISE_SCALE = 1.0 / (0.6744897501960817 * 1.4142135623730951)
+NOISE_FLOOR = 1e-9
+
+
+def track_noise(m, delta):
+    """The measured noise after one more difference (piezo_controller.c, NOISE_STEP)."""
+    x = abs(delta) * NOISE_SCALE
+    if m == 0.0:
+        return x if x > NOISE_FLOOR else 0.0
+    m = m * NOISE_STEP if x > m else m * (1.0 / NOISE_STEP)
+    return m if m > NOISE_FLOOR else NOISE_FLOOR
+
+
 class ControllerRef:
     """piezo_controller.h/.c: RLS (sums over i = 0..3, one reciprocal of the denominator,
     1/lambda from init, the update (P phi)_i (P phi)_j / denom symmetric by itself),
     projection, delay detection (one RLS per candidate d = 1, 2, 3, sums of squared
-    a-priori errors per trial, the clear-leader rule, probes, restarts), Diophantine with
-    the observer polynomial T, MV law on T r, inverse creep, inverse PI, saturation with
+    a-priori errors per trial, the clear-leader rule, probes, restarts), the robust update
+    (the excitation by the law's past reference against the measured noise of y_meas, the
+    offset, the noise-scaled trace bound, the candidates' own forgetting and bound, the
+    loop's fresh covariance at the choice), Diophantine with the observer polynomial T, MV
+    law on T r with the integral action, inverse creep, inverse PI, saturation with
     back-calculation, monitor counts. Written from the header's and the docs' description,
     operation by operation in the C order."""
 
     START_D, START_T, N, CONFIRM, TRIAL, REDETECT, PROBES = 2, 0.9, 3, 3, 20, 10, 8
+    DETECT_LAMBDA, DETECT_TRACE, OFFSET_GAIN = 0.995, 100.0, 0.01
 
     def __init__(self, ctrl):
         c = ctrl.raw
         self.auto = bool(c.auto_delay)
         self.d, self.lam_u, self.observer = c.d, c.lambda_u, c.observer
         self.rls, self.lam, self.trace_max, self.p0 = c.rls_enabled, c.forgetting, c.trace_max, c.p0
+        self.robust, self.excitation, self.excitation_samples = bool(c.robust), c.excitation, c.excitation_samples
+        self.variance_max, self.p0_loop, self.gamma = c.variance_max, c.p0_loop, c.integral_gain
+        self.noise_y = self.noise_e = self.anchor = self.offset = self.z = 0.0
+        self.left, self.prev_pred_error = 0, 0.0
+        self.r_past = [0.0] * 11                # the law's references without z: r(k-1), r(k-2), ...
         self.sat, self.v_min, self.v_max = c.sat_enabled, c.sat_v_min, c.sat_v_max
         self.pe_max, self.window = c.pred_error_max, c.divergence_samples
         self.theta, self.nominal = list(c.theta), list(c.theta_nominal)
@@ -193,15 +216,17 @@ class ControllerRef:
         if abs(th[3]) > 0.999 * th[2]:
             th[3] = math.copysign(0.999 * th[2], th[3])
 
-    def rls_step(self, theta, P, d, y, update):
+    def rls_step(self, theta, P, d, y, update, lam=None, trace_max=None):
         """(a-priori error, theta, P) of one RLS under delay d."""
+        lam = self.lam if lam is None else lam
+        trace_max = self.trace_max if trace_max is None else trace_max
         phi = [-self.y_prev[0], -self.y_prev[1], self.q_past[d - 1], self.q_past[d]]
         e = y
         for i in range(4):
             e -= phi[i] * theta[i]
         if not update:
             return e, theta, P
-        denom, pphi = self.lam, []
+        denom, pphi = lam, []
         for i in range(4):
             acc = 0.0
             for j in range(4):
@@ -209,13 +234,13 @@ class ControllerRef:
             pphi.append(acc)
         for i in range(4):
             denom += phi[i] * pphi[i]
-        inv_denom, inv_lam = 1.0 / denom, 1.0 / self.lam
+        inv_denom, inv_lam = 1.0 / denom, 1.0 / lam
         theta = [theta[i] + pphi[i] * inv_denom * e for i in range(4)]
         new = [[(P[i][j] - pphi[i] * pphi[j] * inv_denom) * inv_lam for j in range(4)]
                for i in range(4)]
         trace = ((new[0][0] + new[1][1]) + new[2][2]) + new[3][3]
-        if trace > self.trace_max:
-            scale = self.trace_max / trace
+        if trace > trace_max:
+            scale = trace_max / trace
             new = [[v * scale for v in row] for row in new]
         self.project(theta)
         return e, theta, new
@@ -225,8 +250,9 @@ class ControllerRef:
         update = self.rls and not self.sat_hold > 0
         errs = []
         for i in range(self.N):
-            e, self.det_theta[i], self.det_P[i] = self.rls_step(self.det_theta[i], self.det_P[i], i + 1,
-                                                                y, update)
+            e, self.det_theta[i], self.det_P[i] = self.rls_step(
+                self.det_theta[i], self.det_P[i], i + 1, y, update,
+                self.DETECT_LAMBDA if self.robust else None, self.DETECT_TRACE if self.robust else None)
             errs.append(e)
             self.scores[i] = self.scores[i] + e * e
         order = [self.START_D - 1, 0, 2]
@@ -253,20 +279,51 @@ class ControllerRef:
         if not self.detecting:
             self.d, self.k_delay = best + 1, self.k
             self.theta, self.P = list(self.det_theta[best]), self.det_P[best]
+            if self.robust:
+                self.P = [[self.p0_loop if i == j else 0.0 for j in range(4)] for i in range(4)]
         return errs[best]
 
     def step(self, y_ref, y_meas):
         was_detecting = self.detecting
         self.new_trial = False
+        excited, offset = True, self.offset
+        if self.robust:
+            r1 = self.r_past[0]
+            event = abs(r1 - self.anchor) > self.excitation * self.noise_y
+            noise_y = track_noise(self.noise_y, y_meas - self.y_prev[0])
+            excited = event or self.left > 0
+            anchor = r1 if event else self.anchor
+            left = self.excitation_samples if event else (self.left - 1 if self.left > 0 else 0)
         if was_detecting:
+            offset = 0.0
             pred_error = self.detect(y_meas)
+        elif self.robust:
+            may = self.rls and not self.sat_hold > 0
+            bound = self.trace_max
+            if self.noise_e > 0.0:
+                b = self.variance_max / (self.noise_e * self.noise_e)
+                if b < bound:
+                    bound = b
+            pred_error, self.theta, self.P = self.rls_step(self.theta, self.P, self.d, y_meas - self.offset,
+                                                           may and excited, self.lam, bound)
+            if may and not excited:
+                offset = self.offset + self.OFFSET_GAIN * pred_error
         else:
             pred_error, self.theta, self.P = self.rls_step(self.theta, self.P, self.d, y_meas,
                                                            self.rls and not self.sat_hold > 0)
+        if self.robust:
+            self.noise_e = track_noise(self.noise_e, pred_error - self.prev_pred_error)
+            self.noise_y, self.anchor, self.left = noise_y, anchor, left
+        self.prev_pred_error = pred_error
+        self.offset = offset
         d = self.d
         a1, a2, b1, b2 = self.nominal if self.detecting else self.theta
         t = self.START_T if self.detecting else self.observer
-        r = y_ref
+        r_plain = y_ref
+        z = self.z
+        if self.gamma > 0.0 and not self.detecting and self.sat_hold == 0 and self.k >= d:
+            z = self.z + self.gamma * (self.r_past[d - 1] - y_meas)
+        r = r_plain + z if self.gamma > 0.0 else r_plain
         e = []
         for n in range(d):
             e1 = e[n - 1] if n >= 1 else 0.0
@@ -306,6 +363,8 @@ class ControllerRef:
                    and self.k + 1 - self.k_delay >= self.REDETECT)
         self.creep.s, self.creep.x = s_next, x_next
         self.q_past = [q] + self.q_past[:-1]
+        self.r_past = [r_plain] + self.r_past[:-1]
+        self.z = z
         self.y_prev = [y_meas, self.y_prev[0]]
         self.r_prev = r
         theta_out = list(self.nominal if self.detecting else self.theta)
@@ -368,16 +427,30 @@ def test_closed_loop_equals_scalar_transcription_bitwise(cparams, d):
     controller detects d (1, 2 and 3 here: the transcription must choose the same at the
     same sample); the saturating case must clip (and adapt around it); the third must move
     the estimates and hit the trace bound; the last sets d = 1 and another observer pole."""
-    plant, ctrl = core.Plant(MISMATCH), core.Controller(cparams)
-    pref, cref = PlantRef(plant, core_normals(plant.raw.sensor_seed)), ControllerRef(ctrl)
     k = np.arange(2000 + d)
     y_d = 4 * np.sin(2 * np.pi * k * H) + 2 * np.sin(2 * np.pi * 5 * k * H) \
         + 1.5 * np.sin(2 * np.pi * 10 * k * H) + 5
+    ctrl, cref = _run_bitwise(cparams, d, y_d, 2000)
+    if ctrl.raw.auto_delay:
+        assert ctrl.raw.d == d and not ctrl.raw.detecting     # detected the loop's own d
+    if "sat.v_max" in cparams:
+        assert cref.n_saturated > 10
+    if "rls.trace_max" in cparams:
+        assert abs(ctrl.raw.theta[0] - ctrl.raw.theta_nominal[0]) > 1e-4
+
+
+def _run_bitwise(cparams, d, y_d, n):
+    """The loop of test_closed_loop_equals_scalar_transcription_bitwise: n samples of the
+    core and the transcription side by side, asserting bit identity at every sample."""
+    plant, ctrl = core.Plant(MISMATCH), core.Controller(cparams)
+    pref, cref = PlantRef(plant, core_normals(plant.raw.sensor_seed)), ControllerRef(ctrl)
     # the loop delay d: the plant's own sample plus d - 1 samples before v is applied
     pending, pending_ref = [0.0] * (d - 1), [0.0] * (d - 1)
     y_meas = y_meas_ref = 0.0
-    for j in range(2000):
+    ctrl.held = 0
+    for j in range(n):
         out = ctrl.step(y_d[j + d], y_meas)
+        ctrl.held += not ctrl.raw.out.adapting
         want = cref.step(y_d[j + d], y_meas_ref)
         assert np.array_equal(bits(tuple(out)[:7]), bits(want[:7])), j
         assert (out.saturated, out.delay) == want[7:9], j
@@ -388,12 +461,37 @@ def test_closed_loop_equals_scalar_transcription_bitwise(cparams, d):
         assert np.array_equal(bits(tuple(p)), bits(p_ref)), j
         y_meas, y_meas_ref = p.y_meas, p_ref[3]
     assert ctrl.raw.n_saturated == cref.n_saturated
-    if ctrl.raw.auto_delay:
-        assert ctrl.raw.d == d and not ctrl.raw.detecting     # detected the loop's own d
-    if "sat.v_max" in cparams:
-        assert cref.n_saturated > 10
-    if "rls.trace_max" in cparams:
-        assert abs(ctrl.raw.theta[0] - ctrl.raw.theta_nominal[0]) > 1e-4
+    return ctrl, cref
+
+
+PAPER_LAW = {"rls.robust": False, "rls.forgetting": 0.995, "rls.trace_max": 100.0, "mv.integral": 0.0}
+
+
+@pytest.mark.parametrize("cparams, d", [({}, 2), ({}, 1), ({"mv.integral": 0.05, "rls.excitation_time": 0.01}, 2),
+                                        (PAPER_LAW, 2)],
+                         ids=["default", "default-d1", "integral0.05-excitation10", "paper-law"])
+def test_holds_and_moves_equal_scalar_transcription_bitwise(cparams, d):
+    """Reference: ControllerRef and PlantRef as above, on a stage's use instead of tones: a
+    hold at 0, a 6 um step, a hold, a 30 ms cycloid move to 10 um, a hold, 50 ms of a 20 Hz
+    triangle, a hold (4200 samples, the mismatched noisy plant). Bit identity at every sample;
+    with the robust update the estimates must hold for a third of the run or more (est.adapting
+    false) and the offset and the integral action must both be used (nonzero at the end)."""
+    segs = [np.zeros(600), np.full(600, 6.0)]
+    s = np.arange(1, 61) / 60
+    segs += [6.0 + 4.0 * (s - np.sin(2 * np.pi * s) / (2 * np.pi)), np.full(900, 10.0)]
+    tri = np.abs(((np.arange(100) * H * 20) % 1.0) * 2 - 1)
+    segs += [10.0 - 2.0 * (1 - tri), np.full(1950, 10.0)]
+    y_d = np.concatenate(segs)
+    n = len(y_d) - d
+    ctrl, cref = _run_bitwise(cparams, d, y_d, n)
+    print(f"\n{cparams}: estimates held in {ctrl.held} of {n} samples")
+    if ctrl.raw.robust:
+        assert ctrl.held >= n / 3
+        assert ctrl.raw.offset != 0.0 and ctrl.raw.integral != 0.0
+        assert ctrl.raw.offset == cref.offset and ctrl.raw.integral == cref.z
+        assert ctrl.raw.noise_y == cref.noise_y and ctrl.raw.noise_e == cref.noise_e
+    else:
+        assert ctrl.held <= 50       # the paper's update adapts on every sample (but while detecting)
 
 
 # --------------------------------------------------------------------------- refusals

@@ -23,10 +23,13 @@ H = 0.0005
 # The direct-feedthrough option (d = 1): v at t_k from the inputs set at t_k.
 FEEDTHROUGH = {"mv.feedthrough": True, "mv.delay": 0}
 # Open loop on synthetic data (y_meas_of does not answer v): the supervision, which would
-# rightly stop such a "loop" within 15 ms, is switched off as docs/model.md says for open-loop use.
-OPEN_LOOP = {"sup.enabled": False}
+# rightly stop such a "loop" within 15 ms, is switched off as docs/model.md says for open-loop use,
+# and so is the integral action, which winds up when y_meas does not answer v (here the
+# divergence monitor stops the run at sample 288 with it).
+OPEN_LOOP = {"sup.enabled": False, "mv.integral": 0.0}
 SUPERVISION = {"sup.enabled": ("Boolean", True), "sup.gain_min": ("Real", 0.25), "sup.gain_max": ("Real", 4.0),
                "sup.window": ("Integer", 200), "sup.clip_time": ("Real", 0.5), "sup.detect_time": ("Real", 0.5)}
+ADAPT_OUTPUTS = ["est.adapting", "est.noise"]
 SUP_OUTPUTS = ["sup.status", "sup.gain", "sup.delay"]
 
 
@@ -81,8 +84,11 @@ def test_model_description_matches_design(controller, piezo_stage):
     assert (float(de.startTime), float(de.stopTime), float(de.stepSize)) == (0.0, 3.0, 0.0005)
 
     assert [n for n, x in v.items() if x.causality == "input"] == INPUTS
-    assert [n for n, x in v.items() if x.causality == "output"] == OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS
+    assert [n for n, x in v.items() if x.causality == "output"] == \
+        OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS + ADAPT_OUTPUTS
     assert [v[n].type for n in SUP_OUTPUTS] == ["Integer", "Real", "Integer"]
+    assert [v[n].type for n in ADAPT_OUTPUTS] == ["Boolean", "Real"]
+    assert v["est.noise"].unit == "um"
     assert v["saturated"].type == "Boolean"
     assert [v[n].type for n in TIMING] == ["Integer", "Real", "Integer", "Integer"]
     for name in ("y_ref", "y_meas", "y_preview", "q", "pred_error"):
@@ -100,11 +106,14 @@ def test_model_description_matches_design(controller, piezo_stage):
         assert (a.causality, a.variability, a.type, a.unit, a.start) == \
             (b.causality, b.variability, b.type, b.unit, b.start), name
     # the drop-in defaults: loop delay detected, no feedthrough, one sample per step, the
-    # observer pole 0.4, limits on at +-150 V, monitor on
+    # observer pole 0.4, the robust update with integral action (docs/model.md, adaptation),
+    # limits on at +-150 V, monitor on
     own = {"mv.delay": ("Integer", -1), "mv.feedthrough": ("Boolean", False),
            "mv.hold_inputs": ("Boolean", False), "mv.observer": ("Real", 0.4),
-           "mv.lambda_u": ("Real", 0.0), "rls.enabled": ("Boolean", True),
-           "rls.forgetting": ("Real", 0.995), "sat.enabled": ("Boolean", True),
+           "mv.lambda_u": ("Real", 0.0), "mv.integral": ("Real", 0.01), "rls.enabled": ("Boolean", True),
+           "rls.forgetting": ("Real", 0.99), "rls.robust": ("Boolean", True),
+           "rls.excitation": ("Real", 3.0), "rls.excitation_time": ("Real", 0.05),
+           "rls.variance_max": ("Real", 0.004), "rls.p0_loop": ("Real", 0.01), "sat.enabled": ("Boolean", True),
            "sat.v_min": ("Real", -150.0), "sat.v_max": ("Real", 150.0),
            "monitor.pred_error_max": ("Real", 1.0), "monitor.divergence_samples": ("Integer", 200),
            **SUPERVISION}
@@ -117,7 +126,7 @@ def test_model_description_matches_design(controller, piezo_stage):
 
     # honest for the default: no output depends directly on an input
     deps = {u.variable.name: sorted(d.name for d in u.dependencies) for u in md.outputs}
-    assert deps == {name: [] for name in OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS}
+    assert deps == {name: [] for name in OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS + ADAPT_OUTPUTS}
 
 
 def test_start_values_in_the_binary_match_the_xml(controller, make_fmu):
@@ -319,7 +328,9 @@ NON_DEFAULT_PARAMETERS = {
     "creep.k_c": 1.0497, "creep.alpha": -0.0085, "creep.exact": True, "h": 0.001,
     "mv.delay": 2, "mv.feedthrough": True, "mv.lambda_u": 0.01, "mv.observer": 0.7,
     "mv.hold_inputs": True, "rls.enabled": False,
-    "rls.forgetting": 0.99, "rls.p0": 2.0, "rls.trace_max": 50.0, "sat.enabled": False,
+    "rls.forgetting": 0.98, "rls.p0": 2.0, "rls.trace_max": 50.0, "rls.robust": False,
+    "rls.excitation": 2.0, "rls.excitation_time": 0.1, "rls.variance_max": 0.01, "rls.p0_loop": 0.5,
+    "mv.integral": 0.02, "sat.enabled": False,
     "sat.v_min": -40.0, "sat.v_max": 60.0, "monitor.pred_error_max": 5.0,
     "monitor.divergence_samples": 0, "sup.enabled": False, "sup.gain_min": 0.1, "sup.gain_max": 8.0,
     "sup.window": 400, "sup.clip_time": 0.25, "sup.detect_time": 1.0,

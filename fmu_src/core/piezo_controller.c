@@ -53,7 +53,7 @@
  * white sensor noise, and a median ignores the few samples of a step. NOISE_FLOOR keeps it
  * a normal number (a noise-free loop at rest has x(k) - x(k-1) = 0). */
 #define NOISE_STEP (1.0 + 1.0 / 64.0)
-#define NOISE_SCALE 1.0483        /* 1 / (0.6745 sqrt(2)) */
+#define NOISE_SCALE (1.0 / (0.6744897501960817 * 1.4142135623730951))  /* 1 / (median |N(0,1)| sqrt 2) */
 #define NOISE_FLOOR 1e-9          /* [um] */
 /* While the estimates are held (no excitation), the estimator's offset c follows its
  * prediction error: c += OFFSET_GAIN e, a time constant of 1 / OFFSET_GAIN = 100 samples.
@@ -62,6 +62,14 @@
  * next move do not teach theta the offset the hold built up (measured: a 30 um S-curve after
  * 600 s at 10 um, 7x the error after 0.2 s without c, 1.2x with it). */
 #define OFFSET_GAIN 0.01
+/* With the robust update the delay candidates keep the tuning the detection was designed and
+ * measured with (docs/cosimulation.md): forgetting 0.995, trace bound 100 (the loop's own
+ * rls.forgetting and rls.trace_max are the robust update's; with the paper's update the
+ * candidates use them, as before). With the loop's 0.99 and 1000 the candidates learn a
+ * measurement that alternates +-10 um whatever v does so well that the divergence monitor
+ * no longer stops it (measured: not within 3000 samples; 86 with 0.995 and 100). */
+#define DETECT_FORGETTING 0.995
+#define DETECT_TRACE_MAX 100.0
 
 void piezo_controller_default_params(piezo_controller_params *p)
 {
@@ -375,7 +383,7 @@ static void project(const piezo_controller *c, double *th)
  * the updated estimates and covariance go to theta, P_new (not P's storage).
  */
 static double rls_step(const piezo_controller *c, const double *theta_in, const double *P, int d, double y,
-                       int update, double trace_max, double *theta, double *P_new)
+                       int update, double lambda, double inv_lambda, double trace_max, double *theta, double *P_new)
 {
     /* phi as four scalars, not an array: built from separate loads, an array
      * went through the stack and was read back as pairs, a store-to-load
@@ -383,7 +391,6 @@ static double rls_step(const piezo_controller *c, const double *theta_in, const 
     const double phi0 = -c->y_prev[0], phi1 = -c->y_prev[1];
     const double phi2 = q_past(c, d), phi3 = q_past(c, d + 1);
     double Pphi[4], denom, inv_denom, e, trace;
-    const double inv_lambda = c->inv_forgetting;
     int i;
     e = y;
     e -= phi0 * theta_in[0];
@@ -395,7 +402,7 @@ static double rls_step(const piezo_controller *c, const double *theta_in, const 
     /* (P phi)_i = sum_j P_ij phi_j in increasing j (from 0.0), P_ij read as P_ji (symmetric) */
     for (i = 0; i < 4; ++i)
         Pphi[i] = (((0.0 + P[i] * phi0) + P[4 + i] * phi1) + P[8 + i] * phi2) + P[12 + i] * phi3;
-    denom = (((c->forgetting + phi0 * Pphi[0]) + phi1 * Pphi[1]) + phi2 * Pphi[2]) + phi3 * Pphi[3];
+    denom = (((lambda + phi0 * Pphi[0]) + phi1 * Pphi[1]) + phi2 * Pphi[2]) + phi3 * Pphi[3];
     inv_denom = 1.0 / denom;
     for (i = 0; i < 4; ++i) theta[i] = theta_in[i] + Pphi[i] * inv_denom * e;
     for (i = 0; i < 4; ++i) {
@@ -438,14 +445,16 @@ static double rls_update(const piezo_controller *c, double y, piezo_controller_s
     s->offset = c->offset;
     if (!c->robust) {
         s->rls_updated = may;
-        return rls_step(c, c->theta, c->P, c->d, y, may, c->trace_max, s->theta, s->P);
+        return rls_step(c, c->theta, c->P, c->d, y, may, c->forgetting, c->inv_forgetting, c->trace_max,
+                        s->theta, s->P);
     }
     if (c->noise_e > 0.0) {
         double b = c->variance_max / (c->noise_e * c->noise_e);
         if (b < bound) bound = b;
     }
     s->rls_updated = may && s->excited;
-    e = rls_step(c, c->theta, c->P, c->d, y - c->offset, s->rls_updated, bound, s->theta, s->P);
+    e = rls_step(c, c->theta, c->P, c->d, y - c->offset, s->rls_updated, c->forgetting, c->inv_forgetting, bound,
+                 s->theta, s->P);
     if (may && !s->excited) s->offset = c->offset + OFFSET_GAIN * e;
     return e;
 }
@@ -492,8 +501,10 @@ static double detect_update(const piezo_controller *c, double y, piezo_controlle
     double err[PIEZO_DETECT_N];
     int i, best = order[0], second = -1, update = c->rls_enabled && !(c->sat_hold > 0);
     for (i = 0; i < PIEZO_DETECT_N; ++i) {
-        err[i] = rls_step(c, &c->det_theta[4 * i], &c->det_P[16 * i], i + 1, y, update, c->trace_max,
-                          &s->det_theta[4 * i], &s->det_P[16 * i]);
+        err[i] = rls_step(c, &c->det_theta[4 * i], &c->det_P[16 * i], i + 1, y, update,
+                          c->robust ? DETECT_FORGETTING : c->forgetting,
+                          c->robust ? 1.0 / DETECT_FORGETTING : c->inv_forgetting,
+                          c->robust ? DETECT_TRACE_MAX : c->trace_max, &s->det_theta[4 * i], &s->det_P[16 * i]);
         if (!update) {
             memcpy(&s->det_theta[4 * i], &c->det_theta[4 * i], 4 * sizeof(double));
             memcpy(&s->det_P[16 * i], &c->det_P[16 * i], 16 * sizeof(double));
