@@ -569,17 +569,19 @@ class Plant:
 # --------------------------------------------------------------------------
 # Controller
 # --------------------------------------------------------------------------
-ControllerOutput = namedtuple("ControllerOutput", "v q a1 a2 b1 b2 pred_error saturated delay preview")
+ControllerOutput = namedtuple("ControllerOutput",
+                              "v q a1 a2 b1 b2 pred_error saturated delay preview adapting noise")
 ControllerOutput.__doc__ = """Controller result of one sample: v [V], q [um], the estimates
 a1, a2, b1, b2 used for q, the RLS one-step prediction error [um], saturated (bool), the loop
 delay d of the law (int, 0 while it is being detected), preview (bool: the law used a stamped
-preview rather than y_ref)."""
+preview rather than y_ref), adapting (bool: the estimates were updated; the FMUs' est.adapting)
+and the measured noise of y_meas [um] (est.noise)."""
 
 
 def _ctrl_out(o) -> ControllerOutput:
     t = o.theta
     return ControllerOutput(o.v, o.q, t[0], t[1], t[2], t[3], o.pred_error, bool(o.saturated),
-                            int(o.delay), bool(o.preview))
+                            int(o.delay), bool(o.preview), bool(o.adapting), o.noise)
 
 
 class Controller:

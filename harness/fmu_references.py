@@ -224,7 +224,8 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
     stimuli = {"time": time, "y_ref": y_ref, "y_meas": [], "y_preview": y_preview,
                "t_preview": t_preview, "t_meas": list(time)}
     fields = (("v", "v"), ("q", "q"), ("est.a1", "a1"), ("est.a2", "a2"), ("est.b1", "b1"),
-              ("est.b2", "b2"), ("pred_error", "pred_error"), ("saturated", "saturated"))
+              ("est.b2", "b2"), ("pred_error", "pred_error"), ("saturated", "saturated"),
+              ("est.adapting", "adapting"), ("est.noise", "noise"))
     refs = {"time": time, **{name: [] for name, _ in fields},
             "loop_delay": [], "loop_delay_time": [], "preview_lead": [], "meas_offset": [],
             "sup.status": [], "sup.gain": [], "sup.delay": []}
@@ -234,7 +235,7 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
         stimuli["y_meas"].append(out.y_meas)
         for name, field in fields:
             value = getattr(published, field)
-            refs[name].append(int(value) if name == "saturated" else value)
+            refs[name].append(int(value) if name in ("saturated", "est.adapting") else value)
         # the set delay holds from t0; the stamps count once they have advanced (sample 1 on)
         refs["loop_delay"].append(d)
         refs["loop_delay_time"].append(0.0)
@@ -327,7 +328,8 @@ def piezo_stage_closed_loop(start_values=None, plant_start_values=None):
               ("u", None), ("x", None), ("q", "q"), ("est.a1", "a1"), ("est.a2", "a2"),
               ("est.b1", "b1"), ("est.b2", "b2"), ("pred_error", "pred_error"),
               ("saturated", "saturated"), ("loop_delay", None), ("loop_delay_time", None),
-              ("preview_lead", None), ("sup.status", None), ("sup.gain", None), ("sup.delay", None))
+              ("preview_lead", None), ("sup.status", None), ("sup.gain", None), ("sup.delay", None),
+              ("est.adapting", "adapting"), ("est.noise", "noise"))
     refs = {"time": time, **{name: [] for name, _ in fields}}
     published, out = ctrl.output, plant.output
     sup = ctrl.raw.sup
@@ -340,7 +342,7 @@ def piezo_stage_closed_loop(start_values=None, plant_start_values=None):
                 "sup.status": int(sup.status), "sup.gain": sup.gain, "sup.delay": int(sup.delay)}
         for name, field in fields:
             value = loop[name] if field is None else getattr(published, field)
-            refs[name].append(int(value) if name == "saturated" else value)
+            refs[name].append(int(value) if name in ("saturated", "est.adapting") else value)
         if k < n:
             lead = preview if k > 0 else 0
             c = ctrl.step_input(ref.y_ref, out.y_meas, ref.y_preview, lead)

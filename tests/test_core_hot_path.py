@@ -175,7 +175,8 @@ class ControllerRef:
         self.variance_max, self.p0_loop, self.gamma = c.variance_max, c.p0_loop, c.integral_gain
         self.noise_y = self.noise_e = self.anchor = self.offset = self.z = 0.0
         self.left, self.prev_pred_error = 0, 0.0
-        self.r_past = [0.0] * 11                # the law's references without z: r(k-1), r(k-2), ...
+        self.r_last = 0.0                       # the law's reference without z at k-1
+        self.yd = {}                            # y_d by sample: the law's r(j) is y_d(j + d)
         self.sat, self.v_min, self.v_max = c.sat_enabled, c.sat_v_min, c.sat_v_max
         self.pe_max, self.window = c.pred_error_max, c.divergence_samples
         self.theta, self.nominal = list(c.theta), list(c.theta_nominal)
@@ -288,7 +289,7 @@ class ControllerRef:
         self.new_trial = False
         excited, offset = True, self.offset
         if self.robust:
-            r1 = self.r_past[0]
+            r1 = self.r_last
             event = abs(r1 - self.anchor) > self.excitation * self.noise_y
             noise_y = track_noise(self.noise_y, y_meas - self.y_prev[0])
             excited = event or self.left > 0
@@ -321,8 +322,8 @@ class ControllerRef:
         t = self.START_T if self.detecting else self.observer
         r_plain = y_ref
         z = self.z
-        if self.gamma > 0.0 and not self.detecting and self.sat_hold == 0 and self.k >= d:
-            z = self.z + self.gamma * (self.r_past[d - 1] - y_meas)
+        if self.gamma > 0.0 and not self.detecting and self.sat_hold == 0 and self.k in self.yd:
+            z = self.z + self.gamma * (self.yd[self.k] - y_meas)
         r = r_plain + z if self.gamma > 0.0 else r_plain
         e = []
         for n in range(d):
@@ -363,7 +364,8 @@ class ControllerRef:
                    and self.k + 1 - self.k_delay >= self.REDETECT)
         self.creep.s, self.creep.x = s_next, x_next
         self.q_past = [q] + self.q_past[:-1]
-        self.r_past = [r_plain] + self.r_past[:-1]
+        self.r_last = r_plain
+        self.yd[self.k + d] = r_plain
         self.z = z
         self.y_prev = [y_meas, self.y_prev[0]]
         self.r_prev = r

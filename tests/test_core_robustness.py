@@ -177,15 +177,22 @@ def test_controller_refuses_a_sample_that_overflows_its_covariance_and_keeps_its
     sample). With the delay detected (the default) the first sample already
     overflows: its squared a-priori error, 1e400, enters the candidates' sums; it is refused
     the same way, and so is it with the supervision on. (Voltage limits off: a clipped first
-    sample would pause the adaptation over the second.)"""
+    sample would pause the adaptation over the second.) The loop's update is the paper's here
+    (rls.robust = false): the robust update adapts only while the reference moves by more
+    than rls.excitation times the measured noise of y_meas, which such a y_meas makes 1e200
+    um, so it holds its estimates and nothing overflows (checked too)."""
     assert 1e200 * 1e200 == math.inf
-    ctrl = core.Controller({"sat.enabled": False, "mv.delay": 1, "sup.enabled": False})
+    ctrl = core.Controller({"sat.enabled": False, "mv.delay": 1, "sup.enabled": False, "rls.robust": False})
     ctrl.step(0.0, 1e200)
     before = snapshot(ctrl.raw, "piezo_controller")
     with pytest.raises(core.CoreDivergedError):
         ctrl.step(0.0, 1e200)
     assert snapshot(ctrl.raw, "piezo_controller") == before
     assert ctrl.k == 1
+    robust = core.Controller({"sat.enabled": False, "mv.delay": 1, "sup.enabled": False})
+    for k in range(5):
+        robust.step(float(k), 1e200)
+        assert not robust.raw.out.adapting and list(robust.raw.P) == [0.01 if i % 5 == 0 else 0.0 for i in range(16)]
     for params in ({"sat.enabled": False}, {"sat.enabled": False, "mv.delay": 1}):
         first = core.Controller(params)
         before = snapshot(first.raw, "piezo_controller")

@@ -309,9 +309,10 @@ void piezo_controller_reset(piezo_controller *c)
     memset(c->q_ring, 0, sizeof c->q_ring);
     c->head = 0;
     c->r_prev = 0.0;
-    c->noise_y = c->noise_e = c->r_anchor = c->offset = c->integral = 0.0;
+    c->noise_y = c->noise_e = c->r_anchor = c->offset = c->integral = c->r_last = 0.0;
     c->excite_left = 0;
-    memset(c->r_ring, 0, sizeof c->r_ring);
+    memset(c->yd_value, 0, sizeof c->yd_value);
+    memset(c->yd_tag, 0, sizeof c->yd_tag);
     memset(c->preview_value, 0, sizeof c->preview_value);
     memset(c->preview_tag, 0, sizeof c->preview_tag);
     c->k_delay = 0;
@@ -478,7 +479,7 @@ static double noise_next(double m, double delta)
  */
 static void excitation_next(const piezo_controller *c, double y_meas, piezo_controller_sample *s)
 {
-    const double r1 = c->r_ring[c->head];   /* r(k-1), 0 before the first sample */
+    const double r1 = c->r_last;            /* r(k-1), 0 before the first sample */
     int event = fabs(r1 - c->r_anchor) > c->excitation * c->noise_y;
     s->noise_y = noise_next(c->noise_y, y_meas - c->y_prev[0]);
     s->r_anchor = event ? r1 : c->r_anchor;
@@ -687,15 +688,15 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
     t = s->detecting ? START_OBSERVER : c->observer;
     r = reference(c, in, d, &stamped);
     /* integral action (mv.integral): z(k) = z(k-1) + gamma (y_d(k) - y_meas(k)), y_d(k) the
-     * reference the law took d samples ago; held while detecting and while a clipped sample
-     * pauses the adaptation (anti-windup) */
+     * reference the law took for sample k (its r(j) is y_d(j + d), kept by sample, so a
+     * change of d while detecting leaves no misaligned sample); held while detecting, while a
+     * clipped sample pauses the adaptation (anti-windup) and when no reference for sample k
+     * was taken */
     s->r_plain = r;
     s->integral = c->integral;
-    if (c->integral_gain > 0.0 && !s->detecting && c->sat_hold == 0 && c->k >= (uint64_t)d) {
-        int at = c->head + d - 1;
-        double y_d_now = c->r_ring[at < PIEZO_MV_Q_RING ? at : at - PIEZO_MV_Q_RING];
-        s->integral = c->integral + c->integral_gain * (y_d_now - y_meas);
-    }
+    if (c->integral_gain > 0.0 && !s->detecting && c->sat_hold == 0
+        && c->yd_tag[c->k % PIEZO_MV_Q_RING] == c->k + 1)
+        s->integral = c->integral + c->integral_gain * (c->yd_value[c->k % PIEZO_MV_Q_RING] - y_meas);
     if (c->integral_gain > 0.0) r += s->integral;   /* (r + 0 would turn a -0 reference into +0) */
 
     /* Diophantine with the current estimate; F = B E: f_n = b1 e_n + b2 e_{n-1} */
@@ -860,7 +861,12 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
     /* shift the pasts */
     c->head = c->head == 0 ? PIEZO_MV_Q_RING - 1 : c->head - 1;
     c->q_ring[c->head] = q;
-    c->r_ring[c->head] = s->r_plain;
+    {
+        uint64_t at = c->k + (uint64_t)s->d;        /* r(k) is y_d(k + d) */
+        c->yd_value[at % PIEZO_MV_Q_RING] = s->r_plain;
+        c->yd_tag[at % PIEZO_MV_Q_RING] = at + 1;
+    }
+    c->r_last = s->r_plain;
     c->integral = s->integral;
     c->offset = s->offset;
     c->noise_y = s->noise_y;
@@ -1023,11 +1029,14 @@ const char *piezo_controller_check(const piezo_controller *c)
         || !(isfinite(c->integral_gain) && c->integral_gain >= 0.0 && c->integral_gain < 1.0))
         return "rls.robust, rls.excitation*, rls.variance_max, rls.p0_loop or mv.integral out of range";
     if (!(isfinite(c->noise_y) && c->noise_y >= 0.0 && isfinite(c->noise_e) && c->noise_e >= 0.0
-          && isfinite(c->r_anchor) && isfinite(c->offset) && isfinite(c->integral)
-          && all_finite(c->r_ring, PIEZO_MV_Q_RING)) || c->excite_left > c->excitation_samples
+          && isfinite(c->r_anchor) && isfinite(c->offset) && isfinite(c->integral) && isfinite(c->r_last)
+          && all_finite(c->yd_value, PIEZO_MV_Q_RING)) || c->excite_left > c->excitation_samples
         || (!c->robust && (c->noise_y != 0.0 || c->noise_e != 0.0 || c->offset != 0.0 || c->excite_left != 0))
         || (c->integral_gain == 0.0 && c->integral != 0.0))
         return "robust adaptation or integral action state out of range";
+    for (i = 0; i < PIEZO_MV_Q_RING; ++i)
+        if (c->yd_tag[i] != 0 && (c->yd_tag[i] > c->k + PIEZO_MV_Q_RING || (c->yd_tag[i] - 1) % PIEZO_MV_Q_RING != (uint64_t)i))
+            return "a kept reference's sample is not its slot's or too far ahead";
     if (!(isfinite(c->pred_error_max) && c->pred_error_max > 0.0)) return "monitor.pred_error_max out of range";
     if (c->divergence_samples > 2147483647u) return "monitor.divergence_samples out of range";
     if (c->mon_forgetting != monitor_forgetting((int)c->divergence_samples))

@@ -158,7 +158,9 @@ typedef struct {
     uint64_t excite_left;        /* samples the RLS still updates (0: it holds its estimates) */
     double offset;               /* the estimator's offset c [um] */
     double integral;             /* z(k-1) of the integral action [um] */
-    double r_ring[PIEZO_MV_Q_RING];  /* past references of the law without z, r(k-1).. (q_ring's head) */
+    double r_last;               /* the law's reference without z at k-1 (the excitation's) */
+    double yd_value[PIEZO_MV_Q_RING];    /* y_d by sample: the law's reference without z, r(j) = */
+    uint64_t yd_tag[PIEZO_MV_Q_RING];    /* y_d(j + d), kept at slot (j + d) mod ring with tag j + d + 1 */
     int sat_enabled;
     double sat_v_min, sat_v_max;
     double theta_nominal[4];

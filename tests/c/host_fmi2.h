@@ -128,8 +128,13 @@ static inline int host2_read_model_description(host2_fmu *f, const char *xml_pat
     for (p = strstr(xml, "<ScalarVariable "); p != NULL; p = strstr(p + 1, "<ScalarVariable ")) {
         const char *close = strstr(p, "</ScalarVariable>");
         host_var *v = &f->vars[f->n_vars];
-        if (close == NULL || f->n_vars >= HOST_MAX_VARS)
+        if (close == NULL)
             break;
+        if (f->n_vars >= HOST_MAX_VARS) {
+            printf("FAIL %s: more than HOST_MAX_VARS = %d variables\n", xml_path, HOST_MAX_VARS);
+            free(xml);
+            return 0;
+        }
         memset(v, 0, sizeof *v);
         v->type = strstr(p, "<Integer") && strstr(p, "<Integer") < close ? VAR_INTEGER
                 : strstr(p, "<Boolean") && strstr(p, "<Boolean") < close ? VAR_BOOLEAN : VAR_REAL;
