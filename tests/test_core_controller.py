@@ -1,16 +1,13 @@
 """Adaptive compound controller in the C core (piezo_controller.h) through
 harness.core.Controller, closed against the core plant or a NumPy ARX plant."""
-import sys
-from pathlib import Path
 
 import numpy as np
 from scipy.signal import lfilter
 import pytest
 from scipy import signal
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from harness import core  # noqa: E402
-import numpy_reference as ref  # noqa: E402
+from harness import core
+import numpy_reference as ref
 
 H = 0.0005
 D = ref.DOC_DEFAULTS

@@ -42,22 +42,10 @@ WIRED = {"y": "y", "y_meas": "y_meas", "v": "v", "reference": "y_d", "q": "q",
 
 
 def initialized(fmu, params=None, start_time=0.0):
-    fmu.setup(start_time)
-    _set(fmu, params or {})
+    fmu.setup(start_time, params)
     fmu.slave.exitInitializationMode()
     fmu.t = start_time
     return fmu
-
-
-def _set(fmu, params):
-    for name, value in params.items():
-        var = fmu.package.variables[name]
-        if var.type == "Real":
-            fmu.slave.setReal([var.valueReference], [float(value)])
-        elif var.type == "Integer":
-            fmu.slave.setInteger([var.valueReference], [int(value)])
-        else:
-            fmu.slave.setBoolean([var.valueReference], [bool(value)])
 
 
 def read(fmu, names=OUTPUTS):

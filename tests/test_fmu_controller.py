@@ -5,16 +5,14 @@ refusals, call sequences, closed loop with PiezoStage.
 Drives the built FMUs through fmpy's FMU2Slave (fixtures in conftest.py).
 """
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from harness import core  # noqa: E402
+from harness import core
+from conftest import assert_refused, start_value
 
 OUTPUTS = ["v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error"]   # the Real outputs of the law
 TIMING = ["loop_delay", "loop_delay_time", "preview_lead", "meas_offset"]   # what it detected
@@ -47,21 +45,6 @@ def run(fmu, n, k0=0):
         rows.append(fmu.get_reals(OUTPUTS))
         fmu.step()
     return np.array(rows)
-
-
-def assert_refused(call, fmu, *fragments):
-    fmu.clear_messages()
-    with pytest.raises(FMICallException) as info:
-        call()
-    assert info.value.status == 3        # fmi2Error
-    message = fmu.last_error()
-    for fragment in fragments:
-        assert fragment in message, (fragment, message)
-    return message
-
-
-def start_value(var):
-    return {"Real": float, "Integer": int}.get(var.type, lambda s: s in ("true", True))(var.start)
 
 
 # ---------------------------------------------------------------------------- interface

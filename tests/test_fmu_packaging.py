@@ -18,7 +18,6 @@ from __future__ import annotations
 import datetime as dt
 from html.parser import HTMLParser
 import os
-from pathlib import Path
 import re
 import shutil
 import struct
@@ -30,10 +29,9 @@ from xml.etree import ElementTree as ET
 
 import pytest
 
-from conftest import FMU_NAMES, expected_binaries
+from conftest import FMU_NAMES, REPO, expected_binaries
 from test_repository import FORBIDDEN
 
-REPO = Path(__file__).resolve().parents[1]
 NAMES = FMU_NAMES
 LS_REF = "extra/org.fmi-standard.fmi-ls-ref/"
 VERSION = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["version"]

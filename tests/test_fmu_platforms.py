@@ -61,8 +61,8 @@ from elf_versions import read_elf_needs
 from fmu_experiments import SSP_TYPE, load_experiment, start_values, unzip
 from harness.platforms import GLIBC_BASELINE, PLATFORMS
 from harness.ssp import SSP_COMPONENTS, SSP_CONNECTIONS, parameter_set_for_scenario
+from conftest import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 HOST_SOURCE = REPO / "tests" / "wine_host" / "fmu_host.c"
 FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
 WINDOWS = [p for p in CROSS_PLATFORMS if p.system == "Windows"]

@@ -4,8 +4,6 @@ Needs build/fmus/*.fmu and build/libpiezo_core.so (cmake -S . -B build && cmake 
 """
 
 import math
-from pathlib import Path
-import sys
 
 import numpy as np
 import pytest
@@ -17,8 +15,7 @@ from harness.masters.core import simulate_closed_loop_core, simulate_open_loop_c
 from harness.metrics import compute_metrics
 from harness.scenarios import MISMATCH_SCENARIOS, TRACKING_SCENARIOS, Signal, get_scenario
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import numpy_reference as ref  # noqa: E402
+import numpy_reference as ref
 
 
 _CACHE = {}

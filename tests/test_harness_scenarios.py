@@ -15,6 +15,7 @@ from harness.scenarios import (
     load_scenario_file,
     load_scenarios,
 )
+from conftest import REPO
 
 
 def test_builtin_names_and_paper_values():
@@ -250,10 +251,9 @@ def test_default_step_size_is_the_fmus_h():
     # Reference: the start value of h in both model descriptions; the sample-period check
     # above compares with DEFAULT_STEP_SIZE, so it must be the FMUs' h.
     import xml.etree.ElementTree as ET
-    from pathlib import Path
     from harness.scenarios import DEFAULT_STEP_SIZE
 
-    root = Path(__file__).resolve().parents[1] / "modelDescription"
+    root = REPO / "modelDescription"
     for model in ("PiezoStage", "AdaptiveCompoundController"):
         xml = ET.parse(root / f"{model}.xml").getroot()
         var = next(v for v in xml.iter("ScalarVariable") if v.get("name") == "h")

@@ -12,12 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-from harness import fmu, masters  # noqa: E402
-from conftest import NEAR_LIMITS, NEAR_LIMITS_NAME, error_lines  # noqa: E402
-from harness.loop import prepare_closed_loop  # noqa: E402
-from harness.masters import fmpy as fmpy_master, native  # noqa: E402
+from harness import fmu, masters
+from conftest import NEAR_LIMITS, NEAR_LIMITS_NAME, REPO, error_lines
+from harness.loop import prepare_closed_loop
+from harness.masters import fmpy as fmpy_master, native
 
 BITS = np.uint64
 
