@@ -453,15 +453,34 @@ def need_windows_binaries(path, folder="win64"):
     need_platform_binaries(path, platform, 2 if folder == platform.fmi2 else 3)
 
 
-def expected_binaries(name, fmi_version, path):
+def built_cross_platforms():
+    """The keys of the cross platforms whose binaries the build in build/ makes, by the build's
+    rule (CMakeLists.txt) read back from its cache: the platform's option ON, or AUTO with
+    ``<triple>-gcc`` found when it was configured (``PIEZO_CC_<key>`` not NOTFOUND)."""
+    import re
+    cache = (BUILD_DIR / "CMakeCache.txt").read_text()
+
+    def value(name):
+        found = re.search(rf"^{re.escape(name)}:\w+=(.*)$", cache, re.M)
+        return found.group(1) if found else ""
+
+    keys = set()
+    for platform in CROSS_PLATFORMS:
+        option, compiler = value(platform.option) or "AUTO", value(f"PIEZO_CC_{platform.key}")
+        if option == "ON" or (option == "AUTO" and compiler and not compiler.endswith("-NOTFOUND")):
+            keys.add(platform.key)
+    return keys
+
+
+def expected_binaries(name, fmi_version):
     """The binaries/ files an FMU of this build should hold: the host's, and those of every
-    cross platform whose folder it has (each must be a platform of harness/platforms.py in
-    that FMI version). Reference: the table, not the archive."""
-    present = set(fmu_platforms(path))
+    cross platform the build makes (built_cross_platforms) that has a folder in that FMI
+    version. Reference: the platform table and the build's configuration, not the archive."""
+    built = built_cross_platforms()
     files = []
     for platform in (HOST_PLATFORM, *CROSS_PLATFORMS):
         folder = platform.folder(fmi_version)
-        if folder and (platform is HOST_PLATFORM or folder in present):
+        if folder and (platform is HOST_PLATFORM or platform.key in built):
             files.append(f"binaries/{folder}/{name}{platform.suffix}")
     return sorted(files)
 
