@@ -147,24 +147,19 @@ def _fmu_packages(fmu_paths):
         shutil.rmtree(package.unzipdir, ignore_errors=True)
 
 
-@pytest.fixture(scope="session")
-def piezo_stage(_fmu_packages):
-    return _fmu_packages["PiezoStage"]
+def _package_fixture(model):
+    """A session fixture: the extracted FmuPackage of ``model``."""
+    @pytest.fixture(scope="session")
+    def package(_fmu_packages):
+        return _fmu_packages[model]
+    package.__doc__ = f"The extracted {model}.fmu (FmuPackage)."
+    return package
 
 
-@pytest.fixture(scope="session")
-def controller(_fmu_packages):
-    return _fmu_packages["AdaptiveCompoundController"]
-
-
-@pytest.fixture(scope="session")
-def reference_signal(_fmu_packages):
-    return _fmu_packages["ReferenceSignal"]
-
-
-@pytest.fixture(scope="session")
-def closed_loop(_fmu_packages):
-    return _fmu_packages["PiezoStageClosedLoop"]
+piezo_stage = _package_fixture("PiezoStage")
+controller = _package_fixture("AdaptiveCompoundController")
+reference_signal = _package_fixture("ReferenceSignal")
+closed_loop = _package_fixture("PiezoStageClosedLoop")
 
 
 # fmpy's native logger proxy (which formats the variadic message) keeps ONE
@@ -325,6 +320,21 @@ def assert_refused(call, fmu, *fragments):
     for fragment in fragments:
         assert fragment in message, (fragment, message)
     return message
+
+
+def assert_reset_to_start_values(fmu, fresh, terminate_first, outputs):
+    """fmi2Reset of ``fmu`` (after fmi2Terminate when ``terminate_first``), then it and ``fresh``
+    (a new instance of the same FMU) set up at t = 0: every parameter and input of ``fmu`` has
+    its XML start value again, and its ``outputs`` equal ``fresh``'s."""
+    if terminate_first:
+        fmu.slave.terminate()
+    fmu.slave.reset()
+    fmu.setup()
+    fresh.setup()
+    for name, var in fmu.package.variables.items():
+        if var.causality in ("parameter", "input"):
+            assert fmu.get(name) == start_value(var), name
+    assert fmu.get_reals(outputs) == fresh.get_reals(outputs)
 
 
 def start_value(var):

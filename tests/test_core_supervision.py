@@ -22,25 +22,28 @@ NOMINAL = tuple(D[k] for k in ("tf.a1", "tf.a2", "tf.b1", "tf.b2"))
 MISMATCH = get_scenario("mismatch_5hz").plant
 
 
-def loop(n=2000, meas=None, act=None, plant=None, ctrl=None, amplitude=10.0, f=5.0, record=None, refused=None):
+def loop(n=2000, meas=None, act=None, plant=None, ctrl=None, amplitude=10.0, f=5.0, record=None, keep=None):
     """Run a closed loop on the core; meas(y_meas, k) and act(v, k) change what the controller
     and the plant receive. Returns (the samples the controller saw and gave, the exception
-    that stopped it or None, the sample it stopped at). ``refused``: a dict that gets, when a
-    sample is refused, the controller's bytes before and after that sample and the controller."""
+    that stopped it or None, the sample it stopped at). ``keep``: a dict that gets the
+    controller ("controller") and, when a sample is refused, the controller's bytes before and
+    after that sample ("before", "after")."""
     p = core.Plant({**MISMATCH, **(plant or {})})
     c = core.Controller(ctrl or {})
+    if keep is not None:
+        keep["controller"] = c
     rows = {"y_meas": [], "q": [], "pred_error": [], "clipped": [], "loop_delay": []}
     v_applied = 0.0
     for k in range(n):
         y = p.output.y_meas
         y_in = meas(y, k) if meas else y
         r = amplitude * math.sin(2 * math.pi * f * (k + 2) * H)
-        before = bytes(core.ffi.buffer(c.raw)) if refused is not None else None
+        before = bytes(core.ffi.buffer(c.raw)) if keep is not None else None
         try:
             out = c.step(r, y_in)
         except (core.CoreFaultError, core.CoreUnstableError) as exc:
-            if refused is not None:
-                refused.update(before=before, after=bytes(core.ffi.buffer(c.raw)), controller=c)
+            if keep is not None:
+                keep.update(before=before, after=bytes(core.ffi.buffer(c.raw)))
             return rows, exc, k
         for name, value in (("y_meas", y_in), ("q", out.q), ("pred_error", out.pred_error),
                             ("clipped", out.saturated), ("loop_delay", out.delay)):
@@ -94,17 +97,10 @@ def test_a_sound_loop_is_verified_with_the_plant_s_gain_and_delay():
     """Reference: the mismatch plant by construction: G's numerator x1.05 and PI weights +10 %,
     creep row 10 Hz, so its response is 1.0 to 1.3 times the model's; loop delay 2. The loop
     runs 2 s without a verdict and ends verified (status 1) at delay 2 with such a gain."""
-    rows, exc, _ = loop(4000)
+    kept = {}
+    rows, exc, _ = loop(4000, keep=kept)
     assert exc is None
-    c = core.Controller()
-    # the same run again for the final state
-    p = core.Plant(MISMATCH)
-    v = 0.0
-    for k in range(4000):
-        out = c.step(10 * math.sin(2 * math.pi * 5 * (k + 2) * H), p.output.y_meas)
-        p.step(v)
-        v = out.v
-    s = c.raw.sup
+    s = kept["controller"].raw.sup
     assert (s.status, s.delay) == (1, 2)
     assert 1.0 < s.verified_gain < 1.3 and 0.8 < s.gain < 1.6
 
@@ -125,7 +121,7 @@ def test_each_fault_is_a_verdict_within_20_ms_naming_it(name, meas, act, plant, 
     refused sample commits nothing of the loop (the state's bytes are those before it) but
     records the verdict (ctrl.verdict)."""
     refused = {}
-    rows, exc, k = loop(2000, meas=meas, act=act, plant=plant, refused=refused)
+    rows, exc, k = loop(2000, meas=meas, act=act, plant=plant, keep=refused)
     assert isinstance(exc, core.CoreFaultError), (name, exc)
     assert exc.fault == fault and k < 40, (name, exc.fault, k)
     text = str(exc)
@@ -252,14 +248,10 @@ def test_the_state_check_names_a_tampered_supervisor():
     """piezo_controller_check (what a deserialized FMU state must pass) accepts a running
     supervisor and names each tampered field."""
     lib = core.lib()
-    c = core.Controller()
-    p = core.Plant(MISMATCH)
-    v = 0.0
-    for k in range(300):
-        out = c.step(10 * math.sin(2 * math.pi * 5 * (k + 2) * H), p.output.y_meas)
-        p.step(v)
-        v = out.v
-    assert lib.piezo_controller_check(c.raw) == core.ffi.NULL
+    kept = {}
+    _, exc, _ = loop(300, keep=kept)
+    c = kept["controller"]
+    assert exc is None and lib.piezo_controller_check(c.raw) == core.ffi.NULL
     s = c.raw.sup
     for field, value, fragment in [("ref_head", 10, "ring index"), ("candidate", 9, "verdict state"),
                                    ("szz", -1.0, "negative"), ("travel_model", math.nan, "not finite"),

@@ -11,7 +11,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 import numpy_reference as ref
-from conftest import assert_refused, start_value
+from conftest import assert_refused, assert_reset_to_start_values, start_value
 
 OUTPUTS = ["y", "y_meas", "u", "x"]
 H = 0.0005
@@ -245,17 +245,8 @@ def test_reset_restores_every_start_value(piezo_stage, make_fmu, terminate_first
     run(fmu, 200)
     fmu.set({"v": 7.5})
     assert {n: fmu.get(n) for n in params} == NON_DEFAULT_PARAMETERS     # the run really used them
-    if terminate_first:
-        fmu.slave.terminate()
-    fmu.slave.reset()
-
     fresh = make_fmu(piezo_stage)
-    fmu.setup()
-    fresh.setup()
-    for name, var in variables.items():
-        if var.causality in ("parameter", "input"):
-            assert fmu.get(name) == start_value(var), name
-    assert fmu.get_reals(OUTPUTS) == fresh.get_reals(OUTPUTS)
+    assert_reset_to_start_values(fmu, fresh, terminate_first, OUTPUTS)
     fmu.slave.exitInitializationMode()
     fresh.slave.exitInitializationMode()
     fmu.h, fmu.k, fresh.h, fresh.k = H, 0, H, 0

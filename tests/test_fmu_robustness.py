@@ -112,28 +112,28 @@ def test_each_defect_of_the_abuse_test_stays_fixed(hosts, fmu_args):
         assert f"defect 1 {name}" in out and f"defect 5 {name}" in out, out
 
 
-def negative_groups(out):
-    """The negative suite's groups: [(group, what, cases)], checked against each other."""
+# the cases of the state x call matrix per FMU (ReferenceSignal, without an input, has no
+# set-the-input cases)
+NEGATIVE_MATRIX = {2: {"PiezoStage": 410, "AdaptiveCompoundController": 410, "ReferenceSignal": 400,
+                       "PiezoStageClosedLoop": 410},
+                   3: {"PiezoStage": 740, "AdaptiveCompoundController": 740, "ReferenceSignal": 730,
+                       "PiezoStageClosedLoop": 740}}
+
+
+@pytest.mark.parametrize("host,edition", [("fmu_negative", 2), ("fmu3_negative", 3)])
+def test_negative_suite_under_memcheck(hosts, fmu_args, fmu3_args, host, edition):
+    """Every abuse is refused or survived with finite outputs, and valgrind's memcheck
+    reports 0 errors and 0 bytes in use at exit (hence none lost). Every group ran for every
+    FMU, the groups add up to the count, and the state x call matrix has its exact size."""
+    out, passed = run_host(host, fmu_args if edition == 2 else fmu3_args, memcheck=True)
     groups = re.findall(r"^group (\S+)\s+(.+?)\s+(\d+) cases, (\d+) failed$", out, flags=re.M)
-    # every group ran for every FMU
     for group in ("matrix", "null", "vr", "instantiate", "extreme", "free", "edges"):
         assert {what for g, what, _, _ in groups if g == group} == set(FMU_NAMES), (group, out[-3000:])
     assert sum(1 for g, *_ in groups if g == "foreign") == len(FMU_NAMES) * (len(FMU_NAMES) - 1)
     assert all(failed == "0" for *_, failed in groups), groups
-    return groups
-
-
-def test_negative_suite_under_memcheck(hosts, fmu_args):
-    """Every abuse is refused or survived with finite outputs, and valgrind's memcheck
-    reports 0 errors and 0 bytes in use at exit (hence none lost)."""
-    out, passed = run_host("fmu_negative", fmu_args, memcheck=True)
-    groups = negative_groups(out)
     assert sum(int(n) for *_, n, _ in groups) + 1 == passed   # + the final leak check
-    # state x call: 5 states x 82 calls, minus SetReal(input) where an FMU has no input
-    matrix = {what: int(n) for g, what, n, _ in groups if g == "matrix"}
-    assert matrix == {"PiezoStage": 410, "AdaptiveCompoundController": 410, "ReferenceSignal": 400,
-                      "PiezoStageClosedLoop": 410}, matrix
-    print(f"negative cases: {passed}")
+    assert {what: int(n) for g, what, n, _ in groups if g == "matrix"} == NEGATIVE_MATRIX[edition]
+    print(f"FMI {edition}.0 negative cases: {passed}")
 
 
 def test_eight_threads_equal_the_sequential_runs(hosts, fmu_args):
@@ -156,16 +156,6 @@ def test_fmi3_each_defect_stays_fixed_and_editions_refuse_each_other(hosts, fmu3
     # defect 8 (NULL logger) is fmu3_negative's: FMI 3.0 allows it; defect 6 also crosses the editions
     assert defects(out) == {1: 6, 2: 43, 3: 6, 4: 46, 5: 9, 6: 16, 7: 3}, out
     assert passed == 129
-
-
-def test_fmi3_negative_suite_under_memcheck(hosts, fmu3_args):
-    out, passed = run_host("fmu3_negative", fmu3_args, memcheck=True)
-    groups = negative_groups(out)
-    assert sum(int(n) for *_, n, _ in groups) + 1 == passed   # + the final leak check
-    matrix = {what: int(n) for g, what, n, _ in groups if g == "matrix"}
-    assert matrix == {"PiezoStage": 740, "AdaptiveCompoundController": 740, "ReferenceSignal": 730,
-                      "PiezoStageClosedLoop": 740}, matrix
-    print(f"FMI 3.0 negative cases: {passed}")
 
 
 def test_fmi3_eight_threads_equal_the_sequential_runs(hosts, fmu3_args):

@@ -233,18 +233,14 @@ def test_step_size_must_be_the_fmus_sample_period(tmp_path):
                           'step_size = 0.001\nplant = { h = 0.001 }\ncontroller = { h = 0.001 }\n')
     sc = load_scenarios([both])["slow"]
     assert (sc.step_size, sc.n_samples) == (0.001, 3000)
-    plant_only = _one(tmp_path, '[[scenario]]\nname = "slow"\nextends = "track_5hz"\n'
-                                'step_size = 0.001\nplant = { h = 0.001 }\n', "p.toml")
-    with pytest.raises(ScenarioFileError, match=r"field 'step_size': step_size 0.001 s differs "
-                                                r"from the sample period of "
-                                                r"AdaptiveCompoundController"):
-        load_scenarios([plant_only])
-    h_only = _one(tmp_path, '[[scenario]]\nname = "fast_h"\nextends = "validate_1hz"\n'
-                            'plant = { h = 0.001 }\n', "h.toml")
-    with pytest.raises(ScenarioFileError, match=r"field 'plant': step_size 0.0005 s differs "
-                                                r"from the sample period of PiezoStage \(its "
-                                                r"plant override \"h\" = 0.001\)"):
-        load_scenarios([h_only])
+    refused = [('name = "slow"\nextends = "track_5hz"\nstep_size = 0.001\nplant = { h = 0.001 }\n', "p.toml",
+                r"field 'step_size': step_size 0.001 s differs from the sample period of AdaptiveCompoundController"),
+               ('name = "fast_h"\nextends = "validate_1hz"\nplant = { h = 0.001 }\n', "h.toml",
+                r"field 'plant': step_size 0.0005 s differs from the sample period of PiezoStage \(its plant "
+                r"override \"h\" = 0.001\)")]
+    for text, file, message in refused:
+        with pytest.raises(ScenarioFileError, match=message):
+            load_scenarios([_one(tmp_path, "[[scenario]]\n" + text, file)])
 
 
 def test_default_step_size_is_the_fmus_h():
