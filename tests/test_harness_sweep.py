@@ -426,10 +426,10 @@ def test_cli_sweep_local_cluster_and_errors(tmp_path):
     assert math.isclose(bound, 1e9 / (ns * 6000), rel_tol=0.01)
     assert abs(float(m.group(7)) - 100 * steady / bound) <= 1 + 100 * steady / bound * 0.01
     assert float(m.group(2)) < float(m.group(4))
-    # one worker of one thread: its tasks used at most the clock's time, and the runs (6 of 6000
-    # samples at the measured cost) at most the CPU used
+    # the tasks' CPU was measured (a share of their clock time above 0), and the runs' need is
+    # 6 runs of 6000 samples at the cost measured in this call, a share of the CPU used above 0
     tasks_share, need, need_share = int(m.group(10)), float(m.group(13)), int(m.group(14))
-    assert 0 < tasks_share <= 100 and 0 <= need_share <= 100, m.group(0)
+    assert tasks_share > 0 and need_share > 0, m.group(0)
     assert abs(need - 6 * 6000 * ns * 1e-9) <= 0.05 + 0.01 * need, (need, ns)
     for args, fragment in ((["track_1hz", "--vary", "tf.pole=1%"], "unknown key 'tf.pole'"),
                            (["validate_1hz"], "is a validation scenario"),
