@@ -27,6 +27,10 @@ import sys
 import pytest
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
+# the checkout's harness is the one tested, however pytest was started (the test files import
+# it without putting the checkout on sys.path themselves)
+if str(REPO) not in sys.path[:1]:
+    sys.path.insert(0, str(REPO))
 BUILD_DIR = REPO / "build"
 FMU_DIR = BUILD_DIR / "fmus"
 FMU3_DIR = FMU_DIR / "fmi3"
@@ -143,24 +147,19 @@ def _fmu_packages(fmu_paths):
         shutil.rmtree(package.unzipdir, ignore_errors=True)
 
 
-@pytest.fixture(scope="session")
-def piezo_stage(_fmu_packages):
-    return _fmu_packages["PiezoStage"]
+def _package_fixture(model):
+    """A session fixture: the extracted FmuPackage of ``model``."""
+    @pytest.fixture(scope="session")
+    def package(_fmu_packages):
+        return _fmu_packages[model]
+    package.__doc__ = f"The extracted {model}.fmu (FmuPackage)."
+    return package
 
 
-@pytest.fixture(scope="session")
-def controller(_fmu_packages):
-    return _fmu_packages["AdaptiveCompoundController"]
-
-
-@pytest.fixture(scope="session")
-def reference_signal(_fmu_packages):
-    return _fmu_packages["ReferenceSignal"]
-
-
-@pytest.fixture(scope="session")
-def closed_loop(_fmu_packages):
-    return _fmu_packages["PiezoStageClosedLoop"]
+piezo_stage = _package_fixture("PiezoStage")
+controller = _package_fixture("AdaptiveCompoundController")
+reference_signal = _package_fixture("ReferenceSignal")
+closed_loop = _package_fixture("PiezoStageClosedLoop")
 
 
 # fmpy's native logger proxy (which formats the variadic message) keeps ONE
@@ -305,6 +304,43 @@ def make_fmu():
     for fmu in created:
         fmu.free()
 
+
+def assert_refused(call, fmu, *fragments):
+    """Call ``call()`` (an FMI call on ``fmu``) and require the refusal the FMUs give bad input:
+    fmpy's FMICallException with status fmi2Error, and an Error message logged by this call
+    (the messages are cleared first, so an earlier one cannot stand in) that contains every
+    fragment. Returns the message."""
+    from fmpy.fmi1 import FMICallException
+    fmu.clear_messages()
+    with pytest.raises(FMICallException) as info:
+        call()
+    assert info.value.status == 3, info.value        # fmi2Error
+    message = fmu.last_error()
+    assert message, "refused without an Error message"
+    for fragment in fragments:
+        assert fragment in message, (fragment, message)
+    return message
+
+
+def assert_reset_to_start_values(fmu, fresh, terminate_first, outputs):
+    """fmi2Reset of ``fmu`` (after fmi2Terminate when ``terminate_first``), then it and ``fresh``
+    (a new instance of the same FMU) set up at t = 0: every parameter and input of ``fmu`` has
+    its XML start value again, and its ``outputs`` equal ``fresh``'s."""
+    if terminate_first:
+        fmu.slave.terminate()
+    fmu.slave.reset()
+    fmu.setup()
+    fresh.setup()
+    for name, var in fmu.package.variables.items():
+        if var.causality in ("parameter", "input"):
+            assert fmu.get(name) == start_value(var), name
+    assert fmu.get_reals(outputs) == fresh.get_reals(outputs)
+
+
+def start_value(var):
+    """The XML start value of a model variable (as fmpy reads it), as a Python value."""
+    return {"Real": float, "Integer": int}.get(var.type, lambda s: s in ("true", True))(var.start)
+
 # ============================ end of FMU fixtures ============================
 
 
@@ -427,16 +463,95 @@ def need_windows_binaries(path, folder="win64"):
     need_platform_binaries(path, platform, 2 if folder == platform.fmi2 else 3)
 
 
-def expected_binaries(name, fmi_version, path):
+def built_cross_platforms():
+    """The keys of the cross platforms whose binaries the build in build/ makes, by the build's
+    rule (CMakeLists.txt) read back from its cache: the platform's option ON, or AUTO with
+    ``<triple>-gcc`` found when it was configured (``PIEZO_CC_<key>`` not NOTFOUND)."""
+    import re
+    cache = (BUILD_DIR / "CMakeCache.txt").read_text()
+
+    def value(name):
+        found = re.search(rf"^{re.escape(name)}:\w+=(.*)$", cache, re.M)
+        return found.group(1) if found else ""
+
+    keys = set()
+    for platform in CROSS_PLATFORMS:
+        option, compiler = value(platform.option) or "AUTO", value(f"PIEZO_CC_{platform.key}")
+        if option == "ON" or (option == "AUTO" and compiler and not compiler.endswith("-NOTFOUND")):
+            keys.add(platform.key)
+    return keys
+
+
+def expected_binaries(name, fmi_version):
     """The binaries/ files an FMU of this build should hold: the host's, and those of every
-    cross platform whose folder it has (each must be a platform of harness/platforms.py in
-    that FMI version). Reference: the table, not the archive."""
-    present = set(fmu_platforms(path))
+    cross platform the build makes (built_cross_platforms) that has a folder in that FMI
+    version. Reference: the platform table and the build's configuration, not the archive."""
+    built = built_cross_platforms()
     files = []
     for platform in (HOST_PLATFORM, *CROSS_PLATFORMS):
         folder = platform.folder(fmi_version)
-        if folder and (platform is HOST_PLATFORM or folder in present):
+        if folder and (platform is HOST_PLATFORM or platform.key in built):
             files.append(f"binaries/{folder}/{name}{platform.suffix}")
     return sorted(files)
 
 # ======================== end of optional tools =========================
+
+
+# =============================================================================
+# Helpers the test files share (tests/README.md: how to write a test here)
+# =============================================================================
+
+def mismatch_plant():
+    """The mismatch plant of docs/model.md (harness/scenarios/mismatch.toml, its one home):
+    the plant parameters of the mismatch scenarios."""
+    from harness.scenarios import get_scenario
+    return dict(get_scenario("mismatch_5hz").plant)
+
+
+def run_harness(*args, cwd=REPO, check=False, timeout=900):
+    """``python -m harness ARGS`` of this checkout in a subprocess (figures without a display);
+    the CompletedProcess (text). ``check``: the run must exit 0 (its stderr is the message)."""
+    env = dict(os.environ, MPLBACKEND="Agg")
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    proc = subprocess.run([sys.executable, "-m", "harness", *args], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=timeout)
+    if check:
+        assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+#: valgrind's memcheck as the C hosts run under it: every error, and every byte left at exit
+#: (definitely, indirectly or possibly lost, or still reachable), makes the exit code 3
+MEMCHECK_OPTIONS = ("--leak-check=full", "--show-leak-kinds=all", "--errors-for-leak-kinds=all",
+                    "--error-exitcode=3")
+
+
+def memcheck_prefix(what):
+    """The command prefix that runs a C host under valgrind's memcheck (MEMCHECK_OPTIONS); [] when
+    valgrind is missing outside CI, with a note naming ``what`` ran without it (printed and a
+    warning in pytest's summary). Under CI (the environment variable CI set, as .ci/run is run)
+    valgrind is required: the test fails."""
+    import warnings
+    valgrind = shutil.which("valgrind")
+    if valgrind:
+        return [valgrind, *MEMCHECK_OPTIONS]
+    if os.environ.get("CI"):
+        pytest.fail("valgrind is required under CI (CI is set): apt-get install valgrind (.ci/run "
+                    "does this)", pytrace=False)
+    note = (f"NOTE: valgrind is not installed: {what} ran WITHOUT memcheck, so memory errors and "
+            "leaks were NOT checked (install valgrind; it is required under CI)")
+    print(note, file=sys.stderr)
+    warnings.warn(note)
+    return []
+
+
+def memcheck_clean(stderr):
+    """valgrind's verdict in a run's stderr: no error, and no byte in use at exit (hence none
+    lost)."""
+    import re
+    errors = re.search(r"ERROR SUMMARY: (\d+) errors", stderr)
+    in_use = re.search(r"in use at exit: ([\d,]+) bytes", stderr)
+    return (errors is not None and int(errors.group(1)) == 0
+            and in_use is not None and int(in_use.group(1).replace(",", "")) == 0)
+
+# ========================= end of shared helpers ==========================

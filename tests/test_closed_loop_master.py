@@ -10,18 +10,14 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-from pathlib import Path
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
 from harness import masters
 from harness.scenarios import Signal, get_scenario
+from conftest import run_harness
 
-REPO = Path(__file__).resolve().parents[1]
 
 CASES = [
     ("mismatch_1_5_10hz", {}),
@@ -101,15 +97,6 @@ def test_a_stopped_loop_raises_the_fmpy_masters_error():
     assert at(errors["closed-loop-fmu"]) == at(errors["fmpy"])
 
 
-def _harness(*args):
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""),
-               MPLBACKEND="Agg")
-    proc = subprocess.run([sys.executable, "-m", "harness", *args], cwd=REPO, env=env,
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr
-    return proc
-
-
 def _rows(path):
     with open(path, newline="") as fh:
         return list(csv.DictReader(fh))
@@ -123,7 +110,7 @@ def test_the_report_shows_the_same_numbers(tmp_path):
     for master in ("fmpy", "closed-loop-fmu"):
         out = tmp_path / master
         option = "--backend" if master == "fmpy" else "--master"
-        proc = _harness(option, master, "--no-plots", "--out", str(out))
+        proc = run_harness(option, master, "--no-plots", "--out", str(out), check=True)
         runs[master] = (proc.stdout, _rows(out / "tracking.csv"), _rows(out / "validation.csv"),
                         json.loads((out / "provenance.json").read_text()))
     (out_a, track_a, valid_a, prov_a), (out_b, track_b, valid_b, prov_b) = runs["fmpy"], runs["closed-loop-fmu"]

@@ -5,15 +5,13 @@ import re
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import xml.etree.ElementTree as ET
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from harness import core, paths  # noqa: E402
-import numpy_reference as ref  # noqa: E402
+from harness import core, paths
+import numpy_reference as ref
 
 
 def _struct_layouts():

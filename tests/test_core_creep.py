@@ -1,17 +1,14 @@
 """Grunwald-Letnikov fractional creep operator (piezo_creep.h): weights, exact mode,
 sum-of-exponentials (SOE) mode."""
-import sys
 import time
 from fractions import Fraction
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import special
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from harness import core  # noqa: E402
-import numpy_reference as ref  # noqa: E402
+from harness import core
+import numpy_reference as ref
 
 H = 0.0005
 ALPHAS = [0.0002, -0.0085, 0.01, -0.01, 0.25, -0.25, 0.5, -0.5]

@@ -6,17 +6,14 @@ The loops are closed here on the core (harness.core): the schedule of a master i
 line between the controller's v and the plant, and a shift of the measurement it sees, so
 the true loop delay of every case is known by construction (the independent reference).
 """
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import signal
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from harness import core  # noqa: E402
-from harness.scenarios import get_scenario  # noqa: E402
-import numpy_reference as ref  # noqa: E402
+from harness import core
+from harness.scenarios import get_scenario
+import numpy_reference as ref
 
 H = 0.0005
 D = ref.DOC_DEFAULTS

@@ -1,13 +1,10 @@
 """PI hysteresis model and its inverse in the C core (piezo_hysteresis.h)."""
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from harness import core  # noqa: E402
-import numpy_reference as ref  # noqa: E402
+from harness import core
+import numpy_reference as ref
 
 DEF = ref.DOC_DEFAULTS
 W = np.array(DEF["pi.w"])

@@ -1,14 +1,11 @@
 """The coupled plant model in the C core (piezo_plant.h) through harness.core.Plant."""
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from harness import core  # noqa: E402
-import numpy_reference as ref  # noqa: E402
+from harness import core
+import numpy_reference as ref
 
 H = 0.0005
 VALIDATION = ref.validation_inputs(H, 10.0)           # 20000 samples each

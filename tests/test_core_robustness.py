@@ -9,14 +9,11 @@ floats are the same doubles, so the tests compute the overflowing quantity thems
 and the state before the refused call (compared field by field through cffi).
 """
 import math
-import sys
-from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from harness import core  # noqa: E402
-from harness.core import ffi  # noqa: E402
+from harness import core
+from harness.core import ffi
 
 SIZE_MAX = 2 ** (8 * ffi.sizeof("size_t")) - 1
 

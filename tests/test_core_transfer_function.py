@@ -1,14 +1,11 @@
 """Second-order transfer function G(z) with extra input delay (piezo_tf.h)."""
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import signal
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from harness import core  # noqa: E402
-import numpy_reference as ref  # noqa: E402
+from harness import core
+import numpy_reference as ref
 
 D = ref.DOC_DEFAULTS
 NOMINAL = (D["tf.a1"], D["tf.a2"], D["tf.b1"], D["tf.b2"])

@@ -5,16 +5,14 @@ refusals, call sequences, closed loop with PiezoStage.
 Drives the built FMUs through fmpy's FMU2Slave (fixtures in conftest.py).
 """
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from harness import core  # noqa: E402
+from harness import core
+from conftest import assert_refused, assert_reset_to_start_values, start_value
 
 OUTPUTS = ["v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error"]   # the Real outputs of the law
 TIMING = ["loop_delay", "loop_delay_time", "preview_lead", "meas_offset"]   # what it detected
@@ -52,19 +50,15 @@ def run(fmu, n, k0=0):
     return np.array(rows)
 
 
-def assert_refused(call, fmu, *fragments):
-    fmu.clear_messages()
-    with pytest.raises(FMICallException) as info:
-        call()
-    assert info.value.status == 3        # fmi2Error
-    message = fmu.last_error()
-    for fragment in fragments:
-        assert fragment in message, (fragment, message)
-    return message
-
-
-def start_value(var):
-    return {"Real": float, "Integer": int}.get(var.type, lambda s: s in ("true", True))(var.start)
+def reference_and_twin(package, make_fmu, params, n, k):
+    """The reference, an uninterrupted run of n samples with ``params``, and a twin instance
+    run with the same to sample k: (the reference, its rows, the twin, the twin's rows)."""
+    reference = make_fmu(package)
+    reference.initialize(params)
+    expected = run(reference, n)
+    twin = make_fmu(package)
+    twin.initialize(params)
+    return reference, expected, twin, run(twin, k)
 
 
 # ---------------------------------------------------------------------------- interface
@@ -353,17 +347,8 @@ def test_reset_restores_every_start_value(controller, make_fmu, terminate_first)
     run(fmu, 200)
     fmu.set({"y_ref": 1.5, "y_meas": -0.5})
     assert {n: fmu.get(n) for n in params} == NON_DEFAULT_PARAMETERS     # the run really used them
-    if terminate_first:
-        fmu.slave.terminate()
-    fmu.slave.reset()
-
     fresh = make_fmu(controller)
-    fmu.setup()
-    fresh.setup()
-    for name, var in variables.items():
-        if var.causality in ("parameter", "input"):
-            assert fmu.get(name) == start_value(var), name
-    assert fmu.get_reals(OUTPUTS) == fresh.get_reals(OUTPUTS)
+    assert_reset_to_start_values(fmu, fresh, terminate_first, OUTPUTS)
     for f in (fmu, fresh):                     # the same open-loop run on both: supervision off
         f.set(OPEN_LOOP)
     fmu.slave.exitInitializationMode()
@@ -455,12 +440,7 @@ def test_inconsistent_limits_are_fine_while_saturation_is_off(controller, make_f
 
 
 def test_non_finite_input_refused_state_unchanged(controller, make_fmu):
-    reference = make_fmu(controller)
-    reference.initialize(OPEN_LOOP)
-    expected = run(reference, 60)
-    fmu = make_fmu(controller)
-    fmu.initialize(OPEN_LOOP)
-    part = run(fmu, 30)
+    _, expected, fmu, part = reference_and_twin(controller, make_fmu, OPEN_LOOP, 60, 30)
     for name in ("y_ref", "y_meas"):
         for bad in (float("nan"), float("inf")):
             assert_refused(lambda: fmu.set({name: bad}), fmu, f"{name} = ", "valid range: finite values")
@@ -473,12 +453,7 @@ def test_step_size_not_a_multiple_of_h_is_refused(controller, make_fmu):
     Reference: an uninterrupted run with h = 1 ms, which the samples before and after the
     refusals must equal bitwise; then a 3-sample step equals three 1-sample steps."""
     params = {"h": 0.001, "mv.hold_inputs": True, **OPEN_LOOP}
-    reference = make_fmu(controller)
-    reference.initialize(params)
-    expected = run(reference, 40)
-    fmu = make_fmu(controller)
-    fmu.initialize(params)
-    part = run(fmu, 20)
+    reference, expected, fmu, part = reference_and_twin(controller, make_fmu, params, 40, 20)
     fmu.set({"y_ref": y_d(21), "y_meas": y_meas_of(20)})
     for bad in (0.0015, 0.0007, 0.001 * (1 + 1e-6), 0.3e-6, -0.001, float("nan")):
         assert_refused(lambda: fmu.slave.doStep(0.020, bad), fmu, "communicationStepSize", "h = 0.001")

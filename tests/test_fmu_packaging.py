@@ -15,10 +15,11 @@
 
 from __future__ import annotations
 
+import atexit
 import datetime as dt
+import functools
 from html.parser import HTMLParser
 import os
-from pathlib import Path
 import re
 import shutil
 import struct
@@ -29,11 +30,11 @@ import zipfile
 from xml.etree import ElementTree as ET
 
 import pytest
+from fmpy.fmi1 import FMICallException
 
-from conftest import FMU_NAMES, expected_binaries
+from conftest import FMU_NAMES, REPO, FmuPackage, expected_binaries
 from test_repository import FORBIDDEN
 
-REPO = Path(__file__).resolve().parents[1]
 NAMES = FMU_NAMES
 LS_REF = "extra/org.fmi-standard.fmi-ls-ref/"
 VERSION = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["version"]
@@ -62,7 +63,7 @@ def test_fmu_holds_binaries_sources_documentation_licence_and_references(fmu_pat
     root = _xml(fmu_paths[name])
     # the cross platforms' binaries the build had compilers for (test_fmu_platforms.py
     # requires them, or skips)
-    expected = set(expected_binaries(name, 2, fmu_paths[name])) | {
+    expected = set(expected_binaries(name, 2)) | {
         "modelDescription.xml", "model.png",
         f"binaries/linux64/{name}.so",
         "sources/buildDescription.xml",
@@ -188,29 +189,29 @@ def _closed_loop_refusal(parameter, value, others=None):
     return _reference_refusal(parameter, value)
 
 
+@functools.lru_cache(maxsize=None)
+def _package(model):
+    package = FmuPackage(REPO / "build" / "fmus" / f"{model}.fmu")
+    atexit.register(shutil.rmtree, package.unzipdir, True)
+    return package
+
+
 def _fmu_refusal(model, parameter, value):
-    """`parameter` when the FMU's initialization refuses `parameter` = `value` alone, else None."""
-    import tempfile
-    import fmpy
-    from fmpy.fmi2 import FMU2Slave
-    path = REPO / "build" / "fmus" / f"{model}.fmu"
-    md = fmpy.read_model_description(str(path))
-    var = {v.name: v for v in md.modelVariables}[parameter]
-    with tempfile.TemporaryDirectory() as unzipdir:
-        slave = FMU2Slave(guid=md.guid, unzipDirectory=fmpy.extract(str(path), unzipdir=unzipdir),
-                          modelIdentifier=model)
-        slave.instantiate(loggingOn=False)
+    """The parameter the FMU's initialization names when it refuses `parameter` = `value` alone
+    (fmi2Error and "NAME = VALUE is out of range" logged), or None when it accepts it."""
+    fmu = _package(model).instantiate()
+    try:
+        fmu.setup(0.0, {parameter: value})
         try:
-            slave.setupExperiment(startTime=0.0)
-            slave.enterInitializationMode()
-            (slave.setInteger if var.type == "Integer" else slave.setReal)([var.valueReference], [value])
-            try:
-                slave.exitInitializationMode()
-            except Exception:
-                return parameter
-            return None
-        finally:
-            slave.freeInstance()
+            fmu.slave.exitInitializationMode()
+        except FMICallException as exc:
+            assert exc.status == 3, exc                     # fmi2Error, not a crash or a Fatal
+            found = re.match(r"fmi2ExitInitializationMode: (\S+) = \S+ is out of range", fmu.last_error())
+            assert found, fmu.errors()
+            return found.group(1)
+        return None
+    finally:
+        fmu.free()
 
 
 def _reference_refusal(parameter, value):

@@ -11,6 +11,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 import numpy_reference as ref
+from conftest import assert_refused, assert_reset_to_start_values, start_value
 
 OUTPUTS = ["y", "y_meas", "u", "x"]
 H = 0.0005
@@ -29,22 +30,6 @@ def run(fmu, n_samples, v_of_k=sine_v, k0=0):
         rows.append(fmu.get_reals(OUTPUTS))
         fmu.step()
     return np.array(rows)
-
-
-def start_value(var):
-    """The XML start value of a variable (as read by fmpy), as a Python value."""
-    return {"Real": float, "Integer": int}.get(var.type, lambda s: s in ("true", True))(var.start)
-
-
-def assert_refused(call, fmu, *fragments):
-    fmu.clear_messages()
-    with pytest.raises(FMICallException) as info:
-        call()
-    assert info.value.status == 3        # fmi2Error
-    message = fmu.last_error()
-    for fragment in fragments:
-        assert fragment in message, (fragment, message)
-    return message
 
 
 # ---------------------------------------------------------------------------- interface
@@ -260,17 +245,8 @@ def test_reset_restores_every_start_value(piezo_stage, make_fmu, terminate_first
     run(fmu, 200)
     fmu.set({"v": 7.5})
     assert {n: fmu.get(n) for n in params} == NON_DEFAULT_PARAMETERS     # the run really used them
-    if terminate_first:
-        fmu.slave.terminate()
-    fmu.slave.reset()
-
     fresh = make_fmu(piezo_stage)
-    fmu.setup()
-    fresh.setup()
-    for name, var in variables.items():
-        if var.causality in ("parameter", "input"):
-            assert fmu.get(name) == start_value(var), name
-    assert fmu.get_reals(OUTPUTS) == fresh.get_reals(OUTPUTS)
+    assert_reset_to_start_values(fmu, fresh, terminate_first, OUTPUTS)
     fmu.slave.exitInitializationMode()
     fresh.slave.exitInitializationMode()
     fmu.h, fmu.k, fresh.h, fresh.k = H, 0, H, 0

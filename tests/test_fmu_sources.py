@@ -23,9 +23,8 @@ import pytest
 from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from conftest import FMU_NAMES
+from conftest import FMU_NAMES, REPO
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
 FMI_HEADERS_DIR = pathlib.Path(fmpy.__file__).parent / "c-code"
 FMI_HEADERS = {"fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"}
 NAMES = FMU_NAMES

@@ -11,17 +11,15 @@ import os
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-from harness import bench, core  # noqa: E402
-from harness.bench.measure import timing_library  # noqa: E402
-from harness.loop import prepare_closed_loop  # noqa: E402
-from harness.masters import native  # noqa: E402
-from harness.masters.core import simulate_closed_loop_core  # noqa: E402
+from harness import core
+from harness.bench.measure import timing_library
+from harness.loop import prepare_closed_loop
+from harness.masters import native
+from harness.masters.core import simulate_closed_loop_core
+from conftest import REPO
 
 
 def test_bench_command_reports_every_loop(tmp_path):

@@ -2,7 +2,6 @@
 
 import csv
 import os
-from pathlib import Path
 import subprocess
 import sys
 
@@ -12,9 +11,8 @@ import pytest
 from harness.masters import fmpy as fmpy_master
 from harness.metrics import compute_metrics
 from harness.scenarios import load_scenarios
-from conftest import CROSS_PLATFORMS, HOST_PLATFORM, need_win64
+from conftest import CROSS_PLATFORMS, HOST_PLATFORM, REPO, need_win64, run_harness
 
-REPO = Path(__file__).resolve().parents[1]
 
 SHORT = """
 [[scenario]]
@@ -26,19 +24,11 @@ metric_window = [0.25, 0.5]
 """
 
 
-def _harness(*args, cwd=REPO):
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    env["MPLBACKEND"] = "Agg"
-    return subprocess.run([sys.executable, "-m", "harness", *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=120)
-
-
 def test_run_short_user_scenario_end_to_end(tmp_path):
     scen = tmp_path / "short.toml"
     scen.write_text(SHORT)
     out = tmp_path / "out"
-    proc = _harness("run", "short_mismatch", "--scenario-file", str(scen), "--out", str(out))
+    proc = run_harness("run", "short_mismatch", "--scenario-file", str(scen), "--out", str(out))
     assert proc.returncode == 0, proc.stderr
     # progress: one line per scenario on stderr, with the elapsed time
     assert "[1/1] short_mismatch: e_rms" in proc.stderr and " s (total " in proc.stderr
@@ -83,7 +73,7 @@ def test_run_with_csv_reference_and_no_plots(tmp_path):
         'metric_window = [0.05, 0.25]\n'
         'reference = { type = "csv", file = "ref.csv" }\n')
     out = tmp_path / "o"
-    proc = _harness("run", "csv_ref", "--scenario-file", str(tmp_path / "c.toml"),
+    proc = run_harness("run", "csv_ref", "--scenario-file", str(tmp_path / "c.toml"),
                     "--out", str(out), "--no-plots", "--jacobi")
     assert proc.returncode == 0, proc.stderr
     assert (out / "csv_ref.csv").is_file() and not (out / "csv_ref.png").exists()
@@ -101,7 +91,7 @@ def _one_line_error(proc):
 
 
 def test_unknown_scenario_exits_2_with_the_known_names():
-    msg = _one_line_error(_harness("run", "track_3hz"))
+    msg = _one_line_error(run_harness("run", "track_3hz"))
     assert "unknown scenario 'track_3hz'" in msg
     assert "track_1hz" in msg and "mismatch_1_10_20hz" in msg
 
@@ -110,7 +100,7 @@ def test_malformed_scenario_file_exits_2_naming_file_and_field(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text('[[scenario]]\nname = "b"\nkind = "tracking"\n'
                    'reference = { type = "sines", amplitudes = [1.0], frequencies = ["x"] }\n')
-    msg = _one_line_error(_harness("list", "--scenario-file", str(bad)))
+    msg = _one_line_error(run_harness("list", "--scenario-file", str(bad)))
     assert str(bad) in msg and "field 'reference.frequencies'" in msg and "'x'" in msg
 
 
@@ -118,7 +108,7 @@ def test_malformed_csv_exits_2(tmp_path):
     (tmp_path / "r.csv").write_text("time,y_d\n0,0\n0.1,oops\n")
     (tmp_path / "s.toml").write_text('[[scenario]]\nname = "s"\nkind = "tracking"\n'
                                      'reference = { type = "csv", file = "r.csv" }\n')
-    msg = _one_line_error(_harness("run", "s", "--scenario-file", str(tmp_path / "s.toml")))
+    msg = _one_line_error(run_harness("run", "s", "--scenario-file", str(tmp_path / "s.toml")))
     assert "r.csv" in msg and "line 3: 'oops' is not a number" in msg
 
 
@@ -175,7 +165,7 @@ def test_fmu_dir_help_names_the_real_default(sub, monkeypatch, capsys):
 
 def test_list_shows_builtin_and_user_scenarios(tmp_path):
     (tmp_path / "u.toml").write_text(SHORT)
-    proc = _harness("list", "--scenario-file", str(tmp_path / "u.toml"))
+    proc = run_harness("list", "--scenario-file", str(tmp_path / "u.toml"))
     assert proc.returncode == 0
     names = [l.split()[0] for l in proc.stdout.splitlines() if l.startswith("  ")]
     assert names[:6] == ["track_1hz", "track_5hz", "track_10hz", "track_20hz",
@@ -231,7 +221,7 @@ def test_a_failing_run_exits_3_with_one_line(tmp_path, backend, name, fragment):
     stderr line naming the scenario and why."""
     scen = tmp_path / "failing.toml"
     scen.write_text(FAILING)
-    proc = _harness("run", name, "--scenario-file", str(scen), "--out", str(tmp_path / "out"),
+    proc = run_harness("run", name, "--scenario-file", str(scen), "--out", str(tmp_path / "out"),
                     "--no-plots", "--backend", backend)
     assert proc.returncode == 3, proc.stderr
     lines = [line for line in proc.stderr.splitlines() if "error:" in line]
@@ -248,7 +238,7 @@ def test_parameter_file_count_is_in_words(tmp_path, values, count):
 
     f = tmp_path / "p.json"
     f.write_text(json.dumps(values))
-    proc = _harness("run", "validate_1hz", "--plant-params", str(f), "--backend", "core",
+    proc = run_harness("run", "validate_1hz", "--plant-params", str(f), "--backend", "core",
                     "--no-plots", "--no-timeseries", "--out", str(tmp_path / "o"))
     assert proc.returncode == 0, proc.stderr
     assert f"--plant-params {f}: {count} applied to the PiezoStage of every scenario" \

@@ -3,16 +3,14 @@ no traceback, nothing run.  Reference: the issue's list of traps (item 3) and ha
 documented exit codes (0 ok, 1 FMI fault, 2 user error, 3 a run failed its checks)."""
 
 import os
-from pathlib import Path
 import subprocess
 import sys
 
 import pytest
 
 from harness.cli import main
-from conftest import error_lines
+from conftest import REPO, error_lines
 
-REPO = Path(__file__).resolve().parents[1]
 PROG = "python -m harness"
 
 NYQUIST = """

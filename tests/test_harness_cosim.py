@@ -4,21 +4,18 @@ Needs build/fmus/*.fmu and build/libpiezo_core.so (cmake -S . -B build && cmake 
 """
 
 import math
-from pathlib import Path
-import sys
 
 import numpy as np
 import pytest
 
 from harness import core as core_binding
 from harness import fmu
-from harness.masters import fmpy as fmpy_master
+from harness.masters import fmpy as fmpy_master, instance
 from harness.masters.core import simulate_closed_loop_core, simulate_open_loop_core
 from harness.metrics import compute_metrics
 from harness.scenarios import MISMATCH_SCENARIOS, TRACKING_SCENARIOS, Signal, get_scenario
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import numpy_reference as ref  # noqa: E402
+import numpy_reference as ref
 
 
 _CACHE = {}
@@ -196,13 +193,13 @@ def test_failed_run_releases_both_instances(monkeypatch):
     # A NaN in the reference makes the controller refuse its stamped preview mid-run; both
     # instances must still be terminated and freed (and a following run must work).
     closed = []
-    original = fmpy_master._Instance.close
+    original = instance.Instance.close
 
     def spy(self):
         closed.append((self.info.model, self.initialized))
         original(self)
 
-    monkeypatch.setattr(fmpy_master._Instance, "close", spy)
+    monkeypatch.setattr(instance.Instance, "close", spy)
     sc = get_scenario("track_1hz")
     t = np.arange(0, 3.01, 0.0005)
     y = 10 * np.sin(2 * np.pi * t)
@@ -211,7 +208,7 @@ def test_failed_run_releases_both_instances(monkeypatch):
     with pytest.raises(fmu.FMUError, match=r"sample 197.*y_preview = nan"):   # y_preview(197) = y_d(201)
         fmpy_master.simulate_closed_loop(bad)
     assert sorted(closed) == [("AdaptiveCompoundController", True), ("PiezoStage", True)]
-    assert fmpy_master._LOGS == {}
+    assert instance._LOGS == {}
     ok = fmpy_master.simulate_closed_loop("track_1hz", duration=0.05)
     assert ok.shape == (100,)
 

@@ -9,19 +9,17 @@ import csv
 import datetime as dt
 from importlib import metadata
 import json
-import os
 from pathlib import Path
 import platform
 import re
 import struct
 import subprocess
-import sys
 import xml.etree.ElementTree as ET
 import zipfile
 
 import pytest
+from conftest import REPO, run_harness
 
-REPO = Path(__file__).resolve().parents[1]
 FMU_DIR = REPO / "build" / "fmus"
 
 USER = """
@@ -37,23 +35,13 @@ FIGURES = {"headline", "tracking_error", "tracking_period", "control_voltage", "
            "hysteresis", "creep", "user_tracking_error"}
 
 
-def _harness(*args):
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    env["MPLBACKEND"] = "Agg"
-    proc = subprocess.run([sys.executable, "-m", "harness", *args], cwd=REPO, env=env,
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr
-    return proc
-
-
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     """The main job on the FMUs (fmpy, the default backend) with figures and a user scenario."""
     d = tmp_path_factory.mktemp("report")
     (d / "user.toml").write_text(USER)
     out = d / "out"
-    proc = _harness("--out", str(out), "--scenario-file", str(d / "user.toml"))
+    proc = run_harness("--out", str(out), "--scenario-file", str(d / "user.toml"), check=True)
     md = (out / "report.md").read_text(encoding="utf-8")
     html = (out / "report.html").read_text(encoding="utf-8")
     rows = list(csv.DictReader(open(out / "tracking.csv")))
@@ -191,8 +179,8 @@ def test_notes_follow_the_conditions_run(tmp_path):
     """With --no-preview --jacobi the report never claims exact tracking, names the Jacobi
     master and the lag, drops the duplicate no-preview condition, and says it has no figures."""
     out = tmp_path / "o"
-    proc = _harness("--no-preview", "--jacobi", "--no-plots", "--backend", "core",
-                    "--out", str(out))
+    proc = run_harness("--no-preview", "--jacobi", "--no-plots", "--backend", "core",
+                       "--out", str(out), check=True)
     md = (out / "report.md").read_text(encoding="utf-8")
     assert "exact tracking by construction" not in md and "tracks exactly" not in md
     assert "Master: Jacobi" in md and "follows d = 2 samples late" in md

@@ -15,6 +15,7 @@ from harness.scenarios import (
     load_scenario_file,
     load_scenarios,
 )
+from conftest import REPO
 
 
 def test_builtin_names_and_paper_values():
@@ -232,28 +233,23 @@ def test_step_size_must_be_the_fmus_sample_period(tmp_path):
                           'step_size = 0.001\nplant = { h = 0.001 }\ncontroller = { h = 0.001 }\n')
     sc = load_scenarios([both])["slow"]
     assert (sc.step_size, sc.n_samples) == (0.001, 3000)
-    plant_only = _one(tmp_path, '[[scenario]]\nname = "slow"\nextends = "track_5hz"\n'
-                                'step_size = 0.001\nplant = { h = 0.001 }\n', "p.toml")
-    with pytest.raises(ScenarioFileError, match=r"field 'step_size': step_size 0.001 s differs "
-                                                r"from the sample period of "
-                                                r"AdaptiveCompoundController"):
-        load_scenarios([plant_only])
-    h_only = _one(tmp_path, '[[scenario]]\nname = "fast_h"\nextends = "validate_1hz"\n'
-                            'plant = { h = 0.001 }\n', "h.toml")
-    with pytest.raises(ScenarioFileError, match=r"field 'plant': step_size 0.0005 s differs "
-                                                r"from the sample period of PiezoStage \(its "
-                                                r"plant override \"h\" = 0.001\)"):
-        load_scenarios([h_only])
+    refused = [('name = "slow"\nextends = "track_5hz"\nstep_size = 0.001\nplant = { h = 0.001 }\n', "p.toml",
+                r"field 'step_size': step_size 0.001 s differs from the sample period of AdaptiveCompoundController"),
+               ('name = "fast_h"\nextends = "validate_1hz"\nplant = { h = 0.001 }\n', "h.toml",
+                r"field 'plant': step_size 0.0005 s differs from the sample period of PiezoStage \(its plant "
+                r"override \"h\" = 0.001\)")]
+    for text, file, message in refused:
+        with pytest.raises(ScenarioFileError, match=message):
+            load_scenarios([_one(tmp_path, "[[scenario]]\n" + text, file)])
 
 
 def test_default_step_size_is_the_fmus_h():
     # Reference: the start value of h in both model descriptions; the sample-period check
     # above compares with DEFAULT_STEP_SIZE, so it must be the FMUs' h.
     import xml.etree.ElementTree as ET
-    from pathlib import Path
     from harness.scenarios import DEFAULT_STEP_SIZE
 
-    root = Path(__file__).resolve().parents[1] / "modelDescription"
+    root = REPO / "modelDescription"
     for model in ("PiezoStage", "AdaptiveCompoundController"):
         xml = ET.parse(root / f"{model}.xml").getroot()
         var = next(v for v in xml.iter("ScalarVariable") if v.get("name") == "h")

@@ -6,32 +6,20 @@ Records: core plant runs of the paper's inputs, 2 s, with the 2 nm / 1 nm sensor
 """
 import csv
 import json
-import os
 from pathlib import Path
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
 from harness.cli import main
-from conftest import error_lines
+from conftest import error_lines, run_harness
 from harness.masters.core import simulate_open_loop_core
 from harness.identify.data import write_record
 from harness.identify.demo import DEMO_PLANT, DEMO_SENSOR
 from harness.identify.params import read_params
 from harness.identify.run import identify_files
 
-REPO = Path(__file__).resolve().parents[1]
 H = 0.0005
-
-
-def _harness(*args, cwd=REPO):
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    env["MPLBACKEND"] = "Agg"
-    return subprocess.run([sys.executable, "-m", "harness", *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=300)
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +40,7 @@ def records(tmp_path_factory):
 
 def test_identify_export_and_run_end_to_end(records, tmp_path):
     out = tmp_path / "stage.json"
-    proc = _harness("identify", "--pi-data", str(records["low"]), "--tf-data",
+    proc = run_harness("identify", "--pi-data", str(records["low"]), "--tf-data",
                     str(records["mixed"]), "--creep-data", str(records["low"]),
                     str(records["fast"]), "--out", str(out))
     assert proc.returncode == 0, proc.stderr
@@ -73,14 +61,14 @@ def test_identify_export_and_run_end_to_end(records, tmp_path):
 
     # export: both FMUs with those start values
     fmus = tmp_path / "fmus"
-    proc = _harness("export", "--params", str(out), "--out", str(fmus))
+    proc = run_harness("export", "--params", str(out), "--out", str(fmus))
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
     assert lines[0].startswith(f"{fmus / 'PiezoStage.fmu'}: 20 start values from {out}")
     assert lines[1].startswith(f"{fmus / 'AdaptiveCompoundController.fmu'}: 19 start values")
 
     # run a validation input with the identified stage as the plant
-    proc = _harness("run", "validate_50hz", "--plant-params", str(out), "--out",
+    proc = run_harness("run", "validate_50hz", "--plant-params", str(out), "--out",
                     str(tmp_path / "run"), "--no-plots")
     assert proc.returncode == 0, proc.stderr
     assert f"--plant-params {out}: 20 parameters applied to the PiezoStage" in proc.stderr
@@ -91,7 +79,7 @@ def test_identify_export_and_run_end_to_end(records, tmp_path):
 def test_identify_demo_end_to_end(tmp_path):
     # the virtual experiment, short and noise-free, on the core backend (the FMU is the
     # default; test_identify_demo runs it): exit 0, the checks pass, records written
-    proc = _harness("identify", "--demo", "--duration", "2.5", "--noise-free", "--backend", "core",
+    proc = run_harness("identify", "--demo", "--duration", "2.5", "--noise-free", "--backend", "core",
                     "--out", str(tmp_path))
     assert proc.returncode == 0, proc.stderr
     assert "Virtual experiment: the PiezoStage model (C core) with known parameters" in proc.stdout
@@ -238,7 +226,7 @@ def test_records_that_do_not_determine_a_parameter_exit_2(capsys, tmp_path):
 
 
 def test_family_prints_the_distribution(tmp_path):
-    proc = _harness("identify", "--family", "2", "--record-set", "two", "--duration", "2",
+    proc = run_harness("identify", "--family", "2", "--record-set", "two", "--duration", "2",
                     "--noise-free", "--backend", "core", "--out", str(tmp_path))
     assert proc.returncode == 0, proc.stderr
     assert "2 stages (seed 2026), record set 'two' (1Hz, 5-40-80Hz), 2 s each, noise-free" \

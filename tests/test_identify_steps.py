@@ -63,10 +63,6 @@ def test_identification_errors():
 # step 3 (identify_creep) and the three steps together (identify_coupled_model)
 # ---------------------------------------------------------------------------
 import csv
-import os
-from pathlib import Path
-import subprocess
-import sys
 
 from harness.identify import (
     MIN_CREEP_SAMPLES,
@@ -78,8 +74,8 @@ from harness.identify import (
     transfer_function_output,
 )
 from harness.identify import generate_identification_records
+from conftest import run_harness
 
-REPO = Path(__file__).resolve().parents[1]
 
 # Table 1 rows of the paper: label -> (k_c, alpha, input v(t) of that row)
 TABLE1 = {
@@ -287,12 +283,6 @@ def test_transfer_function_output_matches_the_plant():
 # python -m harness identify, end to end
 # ---------------------------------------------------------------------------
 
-def _harness(*args):
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    return subprocess.run([sys.executable, "-m", "harness", *args], cwd=REPO, env=env,
-                          capture_output=True, text=True, timeout=120)
-
 
 def _printed_table(stdout):
     lines = stdout.splitlines()
@@ -311,7 +301,7 @@ def test_cli_identify_end_to_end(tmp_path, backend):
     args = ["identify", "--internal-channels", "--out", str(tmp_path)]
     if backend == "core":
         args += ["--backend", "core"]          # fmpy is the default
-    proc = _harness(*args)
+    proc = run_harness(*args)
     assert proc.returncode == 0, proc.stderr
     assert f"backend {backend}, noise 0 nm rms" in proc.stdout
     assert "[6/6] record 5/40/80 Hz" in proc.stderr
@@ -334,7 +324,7 @@ def test_cli_identify_end_to_end(tmp_path, backend):
 
 
 def test_cli_identify_noise_and_errors(tmp_path):
-    proc = _harness("identify", "--internal-channels", "--backend", "core", "--noise-rms", "0.001",
+    proc = run_harness("identify", "--internal-channels", "--backend", "core", "--noise-rms", "0.001",
                     "--out", str(tmp_path))
     assert proc.returncode == 0, proc.stderr
     assert "noise 1 nm rms" in proc.stdout
@@ -346,7 +336,7 @@ def test_cli_identify_noise_and_errors(tmp_path):
                       (["identify", "extra"], "'identify' does not take extra"),
                       (["identify", "--internal-channels", "--fmu-dir", str(tmp_path)],
                        "PiezoStage.fmu")]:
-        p = _harness(*args)
+        p = run_harness(*args)
         assert p.returncode == 2, (args, p.stderr)
         lines = p.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("python -m harness: error: ")

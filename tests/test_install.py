@@ -21,9 +21,8 @@ import sys
 import time
 import zipfile
 
-from conftest import FMU_NAMES
+from conftest import FMU_NAMES, REPO
 
-REPO = Path(__file__).resolve().parents[1]
 NAMES = FMU_NAMES
 
 

@@ -5,14 +5,13 @@ resolves inside the repository, and the README starts with what a newcomer needs
 
 from __future__ import annotations
 
-from pathlib import Path
 import re
 import shutil
 import subprocess
 import tomllib
 from xml.etree import ElementTree as ET
+from conftest import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 LICENSE_ID = "BSD-3-Clause"
 #: what no tracked file may name: the folder and the file of the design notes that do not
 #: ship with the repository (spelled in two pieces, so that this file does not find itself)

@@ -80,15 +80,19 @@ def test_every_fault_on_drawn_stages_is_stopped_or_tracked(fmu_paths):
     specs = st.fault_family_specs(stages=4, seed=7)
     assert len(specs) == 4 * 2 * sum(len(c.schedules) for c in st.FAULTS)
     family = st.fault_family(specs, jobs=1)
+    missed = {}
     for c, case in enumerate(st.FAULTS):
         o = family[c]
         assert o["runs"] == 8 * len(case.schedules), case.name
         assert all(t < 1.0 for t in o["times"]), (case.name, max(o["times"]))
         for spec, text, e_rms in o["missed"]:
             assert not case.degraded and e_rms <= st.SILENT_ERROR, (case.name, spec, text, e_rms)
-        assert o["caught"] >= o["runs"] - 1, (case.name, o["missed"])
-    caught = sum(o["caught"] for o in family.values())
-    assert caught >= len(specs) - 2, caught
+            missed[case.name] = missed.get(case.name, []) + [(spec.stage, spec.model, spec.schedule)]
+        assert o["caught"] + len(o["missed"]) == o["runs"], case.name
+    # seed 7 draws the same stages every time: exactly one run is not stopped, and it tracks
+    # (stage 0's own model absorbs the plant's extra delay in the sequential master)
+    assert missed == {"plant input delay of 4 samples (tf.delay = 4)": [(0, "own", ("plant", "controller", "reference"))]}
+    assert sum(o["caught"] for o in family.values()) == len(specs) - 1 == 303
 
 
 def test_docs_robustness_holds_the_fault_table_as_measured(fault_results):
@@ -113,7 +117,7 @@ def test_a_family_of_legitimate_loops_raises_no_alarm(fmu_paths):
                              "wired: controller, reference, plant")]
     results = [st.run_spec(s) for s in specs]
     th = thresholds()
-    assert len(results) >= 250
+    assert len(results) == 264         # 4 stages x 2 models x 4 masters x 2 tf.delay x 3 references + 72 saturation runs
     for r in results:
         assert r.error == "" and r.warnings == [], (r.spec, r.error, r.warnings)
         m = r.margins
@@ -126,25 +130,22 @@ def test_a_family_of_legitimate_loops_raises_no_alarm(fmu_paths):
     assert len(gains) > 0.5 * len(results) and np.ptp(gains) > 0.3
 
 
-def _same_y(a, b):
-    n = min(len(a), len(b))
-    return np.array_equal(a[:n], b[:n])
-
-
 def test_the_wired_master_is_each_real_importer_sample_for_sample(fmu_paths):
     """Reference: the real importers. The wired master's exchange equals the harness's fmpy
     master (Jacobi) and the container in parallel mode, its player schedule fmpy's SSP player
     (one row later: the player reports after each step), and its sequential orders the
     container in sequential mode in the same order: y bit for bit over the scenario."""
     sc = "mismatch_1_10_20hz"
+    n = 6000                                    # the scenario's 3 s of h = 0.5 ms
     wired = {s: simulate_wired(sc, s).samples["y"] for s in
              ["exchange", "player"] + list(itertools.permutations(("reference", "controller", "plant")))}
+    assert all(len(y) == n for y in wired.values())
     assert np.array_equal(wired["exchange"], masters.closed_loop("fmpy")(sc, master="jacobi")["y"])
-    assert _same_y(wired["exchange"], masters.closed_loop("container")(sc)["y"])
+    assert np.array_equal(wired["exchange"], masters.closed_loop("container")(sc)["y"])
     player = masters.closed_loop("ssp-player")(sc)["y"]
-    assert np.array_equal(player[:-1], wired["player"][1:len(player)])
+    assert len(player) == n and np.array_equal(player[:-1], wired["player"][1:])
     names = {"ReferenceSignal.fmu": "reference", "AdaptiveCompoundController.fmu": "controller",
              "PiezoStage.fmu": "plant"}
     for order in itertools.permutations(CONTAINER_ORDER):
         got = masters.closed_loop("container")(sc, sequential=True, order=order)["y"]
-        assert _same_y(got, wired[tuple(names[f] for f in order)]), order
+        assert np.array_equal(got, wired[tuple(names[f] for f in order)]), order

@@ -6,14 +6,14 @@ that are quick to run (ours and fmpy's SSP player, 48 runs) and for one sequenti
 the container: every cell of their rows must equal the documented one as printed (two
 decimals of nm, the stamps and the choice time exactly). tests/test_masters.py checks the
 other orders' delays and stamps against the schedules."""
-from pathlib import Path
 
 import pytest
 
 from harness import timing_table
 from harness.scenarios import MISMATCH_SCENARIOS
+from conftest import REPO
 
-DOC = Path(__file__).resolve().parents[1] / "docs" / "cosimulation.md"
+DOC = REPO / "docs" / "cosimulation.md"
 
 
 def documented_rows():

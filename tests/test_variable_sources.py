@@ -37,9 +37,8 @@ from xml.etree import ElementTree as ET
 
 import pytest
 
-from conftest import FMU_NAMES
+from conftest import FMU_NAMES, REPO
 
-REPO = Path(__file__).resolve().parents[1]
 TABLE_SOURCE = REPO / "tests" / "model_table" / "model_table.c"
 CORE_DIR = REPO / "fmu_src" / "core"
 

@@ -110,10 +110,10 @@ def _check_in_core(model, params, source, path=None):
     """Initialise the complete parameter set in the C core (the FMUs' own checks); the closed
     loop's in its FMU at ``path``, whose rules are more than its blocks'."""
     if model == CLOSED_LOOP_MODEL:
-        from ..masters.fmpy import _Instance      # the closed loop's own rules live in its FMU
+        from ..masters.instance import Instance      # the closed loop's own rules live in its FMU
         inst = None
         try:
-            inst = _Instance(load(path), "export")
+            inst = Instance(load(path), "export")
             inst.initialize(params, 0.0)
         except FMUInitializationError as exc:
             text = str(exc).split("failed: ", 1)[-1]

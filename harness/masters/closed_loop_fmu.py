@@ -31,12 +31,12 @@ from ..closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters
 from ..fmu import TIMING_OUTPUTS, FMUError, check_fmi_version, fmu_path, load
 from ..loop import (CLOSED_LOOP_DTYPE, CLOSED_LOOP_FIELDS, REFERENCE_LEAD, REFERENCE_PREVIEW,
                     as_structured, prepare_closed_loop, reference_lead, reference_parameters)
-from .fmpy import _CTRL_OUTPUTS, _Instance, _ScalarFunctions, _step_error, _vr_array
+from .instance import CTRL_OUTPUTS, Instance, ScalarFunctions, step_error, vr_array
 
 __all__ = ["simulate_closed_loop_fmu", "closed_loop_fmu_parameters"]
 
 #: the FMU's outputs of row k, in CLOSED_LOOP_FIELDS order from y (y_d is the scenario's)
-_OUTPUTS = ("y", "y_meas") + _CTRL_OUTPUTS
+_OUTPUTS = ("y", "y_meas") + CTRL_OUTPUTS
 _N_PLANT = 2        # y, y_meas: of t_k also with mv.feedthrough
 
 
@@ -99,7 +99,7 @@ def simulate_closed_loop_fmu(scenario, *, adaptation=None, preview=True, master=
     rows[:, 1] = setup.y_d
     inst = None
     try:
-        inst = _Instance(info, "closed-loop")
+        inst = Instance(info, "closed-loop")
         inst.initialize(closed_loop_fmu_parameters(setup, preview), (n + 1) * h)
         _run(inst, setup, rows, progress)
         if timing is not None:
@@ -123,14 +123,14 @@ def _read_timing(inst):
 def _run(inst, setup, rows, progress):
     """Row k: the outputs at t_k (with mv.feedthrough the controller's at t_(k+1)); one sample a step.
     The y_d input of a table reference is set before each step."""
-    fn = _ScalarFunctions(inst)
+    fn = ScalarFunctions(inst)
     info = inst.info
     GET, SET, GET_BOOL, DO_STEP = fn.names
     c, get, set_, get_bool, step = fn.c, fn.get, fn.set, fn.get_bool, fn.step
     n, h = setup.n, setup.h
-    vr_out = _vr_array([info.vr(x) for x in _OUTPUTS])
-    vr_sat = _vr_array([info.vr("saturated")])
-    vr_y_d = _vr_array([info.vr("y_d")])
+    vr_out = vr_array([info.vr(x) for x in _OUTPUTS])
+    vr_sat = vr_array([info.vr("saturated")])
+    vr_y_d = vr_array([info.vr("y_d")])
     n_out = len(_OUTPUTS)
     out = (ctypes.c_double * n_out)()
     sat = (ctypes.c_uint8 * 1)() if inst.fmi3 else (ctypes.c_int * 1)()
@@ -172,6 +172,6 @@ def _run(inst, setup, rows, progress):
         if progress is not None and (k + 1) % second == 0:
             progress(min(k + 1, n), n)
     if failed:
-        raise _step_error(inst, stage, k, h, FMUError(f"{stage} returned an error"))
+        raise step_error(inst, stage, k, h, FMUError(f"{stage} returned an error"))
     if progress is not None:
         progress(n, n)

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, REFERENCE_MODEL, check_fmi_version, fmu_path, load
 from ..ssp import SSP_CONNECTIONS, parameter_set_for_scenario
-from .fmpy import _Instance, _ScalarFunctions, _raw_function, _vr_array
+from .instance import Instance, ScalarFunctions, raw_function, vr_array
 
 __all__ = ["COMPONENTS", "SCHEDULES", "FAULT_KINDS", "WIRED_FIELDS", "Fault", "WiredRun",
            "simulate_wired", "schedule_name"]
@@ -194,7 +194,7 @@ def simulate_wired(scenario, schedule="exchange", faults=(), *, duration=None, p
     inst = {}
     try:
         for comp, info in infos.items():
-            inst[comp] = _Instance(info, comp)
+            inst[comp] = Instance(info, comp)
         for comp in COMPONENTS:
             inst[comp].initialize(params[comp], n * h)
         return _run(inst, schedule, fault_of, n, h)
@@ -204,7 +204,7 @@ def simulate_wired(scenario, schedule="exchange", faults=(), *, duration=None, p
 
 
 def _run(inst, schedule, fault_of, n, h):
-    fn = {comp: _ScalarFunctions(i) for comp, i in inst.items()}
+    fn = {comp: ScalarFunctions(i) for comp, i in inst.items()}
     keep = []
 
     def reals(values):
@@ -217,7 +217,7 @@ def _run(inst, schedule, fault_of, n, h):
     for comp, names in _REAL_OUTPUTS.items():
         info = inst[comp].info
         out_arr[comp] = reals([0.0] * len(names))
-        vr_out[comp] = _vr_array([info.vr(x) for x in names])
+        vr_out[comp] = vr_array([info.vr(x) for x in names])
         keep.append(vr_out[comp])
         for i, x in enumerate(names):
             slot[(comp, x)] = (comp, i)
@@ -226,12 +226,12 @@ def _run(inst, schedule, fault_of, n, h):
     vr_in, in_arr = {}, {}
     for comp, conns in ins.items():
         if conns:
-            vr_in[comp] = _vr_array([inst[comp].info.vr(bc) for _, _, bc in conns])
+            vr_in[comp] = vr_array([inst[comp].info.vr(bc) for _, _, bc in conns])
             in_arr[comp] = reals([0.0] * len(conns))
             keep.append(vr_in[comp])
     ctrl = inst["controller"]
-    vr_int = _vr_array([ctrl.info.vr(x) for x in _INT_OUTPUTS])
-    vr_sat = _vr_array([ctrl.info.vr("saturated")])
+    vr_int = vr_array([ctrl.info.vr(x) for x in _INT_OUTPUTS])
+    vr_sat = vr_array([ctrl.info.vr("saturated")])
     int_out = (ctypes.c_int32 * len(_INT_OUTPUTS))()
     sat_out = (ctypes.c_uint8 * 1)() if ctrl.fmi3 else (ctypes.c_int * 1)()
     vr_sat_addr, sat_addr = ctypes.addressof(vr_sat), ctypes.addressof(sat_out)
@@ -297,7 +297,7 @@ def _run(inst, schedule, fault_of, n, h):
             if i in opened:
                 continue
             one = reals([arr[i]])
-            vr = _vr_array([inst[comp].info.vr(bc)])
+            vr = vr_array([inst[comp].info.vr(bc)])
             keep.append(vr)
             st = fc.set(fc.c, ctypes.addressof(vr), 1, ctypes.addressof(one))
             if st > 1:
@@ -363,8 +363,8 @@ def _int_getter(inst):
     way: ``get(c, vr, n, address)``."""
     vp, sz = ctypes.c_void_p, ctypes.c_size_t
     if not inst.fmi3:
-        return _raw_function(inst.fmu, "fmi2GetInteger", vp, vp, sz, vp)
-    raw = _raw_function(inst.fmu, "fmi3GetInt32", vp, vp, sz, vp, sz)
+        return raw_function(inst.fmu, "fmi2GetInteger", vp, vp, sz, vp)
+    raw = raw_function(inst.fmu, "fmi3GetInt32", vp, vp, sz, vp, sz)
     return lambda c, vr, n, addr: raw(c, vr, n, addr, n)
 
 

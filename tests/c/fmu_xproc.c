@@ -191,7 +191,7 @@ int main(int argc, char **argv)
     setvbuf(stdout, NULL, _IOLBF, 0);
 #if FMI_VERSION == 3
     if (access(sibling, X_OK) != 0) {
-        printf("FAIL %s runs the FMI 2.0 side with %s, which is missing (build both: target c_test_hosts)\n",
+        host_fail("%s runs the FMI 2.0 side with %s, which is missing (build both: target c_test_hosts)",
                argv[0], sibling);
         return 2;
     }

@@ -133,6 +133,17 @@ static inline int host_mem_back_to(long before)
     return before < 0 || host_mem_in_use() == before;
 }
 
+/* host_set_named of a value the suite needs set: a refusal is a failure (host_fail: counted,
+ * with the FMU's message), so a case never runs silently on the value it had before.
+ * 1 when set. */
+static inline int host_set_required(const host_fmu *f, host_inst *in, const char *name, double value)
+{
+    host_status st = host_set_named(f, in->c, name, value);
+    if (st != HOST_OK && host_named(f, name, NULL) != NULL)
+        host_fail("%s refused %s = %.17g (status %d: %s)", f->id, name, value, (int)st, in->log.last_error);
+    return st == HOST_OK;
+}
+
 /* Configuration i (host_config_setting) on an instance in InitializationMode;
  * 0 if a setting was refused. */
 static inline int host_apply_config(const host_fmu *f, void *c, int i)

@@ -49,6 +49,20 @@ static inline int check(int condition, const char *fmt, ...)
     return condition;
 }
 
+/* A failure that is not a check of its own (a file that cannot be read, a variable or a
+ * symbol that is missing, a value the FMU refused where the suite needs it set): printed as
+ * "FAIL ..." and counted, so the summary and the exit code show it. */
+static inline void host_fail(const char *fmt, ...)
+{
+    va_list ap;
+    atomic_fetch_add(&host_failed, 1);
+    printf("FAIL ");
+    va_start(ap, fmt);
+    vprintf(fmt, ap);
+    va_end(ap);
+    printf("\n");
+}
+
 /* The last line every host prints: "N passed, M failed"; exit code 1 on failure. */
 static inline int host_summary(void)
 {

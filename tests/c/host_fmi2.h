@@ -112,14 +112,14 @@ static inline int host2_read_model_description(host2_fmu *f, const char *xml_pat
     char *xml = host_read_file(xml_path, NULL), value[128];
     const char *p, *end;
     if (xml == NULL) {
-        printf("FAIL cannot read %s\n", xml_path);
+        host_fail("cannot read %s", xml_path);
         return 0;
     }
     end = xml + strlen(xml);
     if (!xml_attribute(xml, end, "guid", f->token, sizeof f->token)
         || !xml_attribute(xml, end, "modelIdentifier", f->id, sizeof f->id)
         || !xml_attribute(xml, end, "stepSize", value, sizeof value)) {
-        printf("FAIL %s: guid, modelIdentifier or stepSize missing\n", xml_path);
+        host_fail("%s: guid, modelIdentifier or stepSize missing", xml_path);
         free(xml);
         return 0;
     }
@@ -154,13 +154,13 @@ static inline int host2_load(host2_fmu *f, const char *xml_path, const char *so_
         return 0;
     f->lib = dlopen(so_path, RTLD_NOW | RTLD_LOCAL);
     if (f->lib == NULL) {
-        printf("FAIL dlopen %s: %s\n", so_path, dlerror());
+        host_fail("dlopen %s: %s", so_path, dlerror());
         return 0;
     }
 #define FMI2_LOAD(name)                                                     \
     *(void **)(&f->api.name) = dlsym(f->lib, "fmi2" #name);                 \
     if (f->api.name == NULL) {                                              \
-        printf("FAIL %s: symbol fmi2%s missing\n", so_path, #name);          \
+        host_fail("%s: symbol fmi2%s missing", so_path, #name);          \
         return 0;                                                           \
     }
     FMI2_API(FMI2_LOAD)
@@ -356,7 +356,7 @@ static inline fmi2Status host2_set_named(const host2_fmu *f, fmi2Component c, co
 {
     const host_var *v = host_named(f, name, NULL);
     if (v == NULL) {
-        printf("FAIL %s has no variable %s\n", f->id, name);
+        host_fail("%s has no variable %s", f->id, name);
         return fmi2Fatal;
     }
     return host2_set(f, c, v, value);

@@ -87,13 +87,13 @@ static inline int host3_read_model_description(host3_fmu *f, const char *xml_pat
     char *xml = host_read_file(xml_path, NULL), value[128];
     const char *p, *vars_end;
     if (xml == NULL) {
-        printf("FAIL cannot read %s\n", xml_path);
+        host_fail("cannot read %s", xml_path);
         return 0;
     }
     if (!xml_tag_attribute(strstr(xml, "<fmiModelDescription"), "instantiationToken", f->token, sizeof f->token)
         || !xml_tag_attribute(strstr(xml, "<CoSimulation"), "modelIdentifier", f->id, sizeof f->id)
         || !xml_tag_attribute(strstr(xml, "<DefaultExperiment"), "stepSize", value, sizeof value)) {
-        printf("FAIL %s: instantiationToken, modelIdentifier or stepSize missing\n", xml_path);
+        host_fail("%s: instantiationToken, modelIdentifier or stepSize missing", xml_path);
         free(xml);
         return 0;
     }
@@ -131,7 +131,7 @@ static inline int host3_read_model_description(host3_fmu *f, const char *xml_pat
         }
         xml_attribute(next, close, "name", v->name, sizeof v->name);
         if (v->n < 1 || v->n > HOST_MAX_ELEMENTS) {
-            printf("FAIL %s: variable %s has %d elements\n", xml_path, v->name, v->n);
+            host_fail("%s: variable %s has %d elements", xml_path, v->name, v->n);
             free(xml);
             return 0;
         }
@@ -151,13 +151,13 @@ static inline int host3_load(host3_fmu *f, const char *xml_path, const char *so_
         return 0;
     f->lib = dlopen(so_path, RTLD_NOW | RTLD_LOCAL);
     if (f->lib == NULL) {
-        printf("FAIL dlopen %s: %s\n", so_path, dlerror());
+        host_fail("dlopen %s: %s", so_path, dlerror());
         return 0;
     }
 #define FMI3_LOAD(name)                                                     \
     *(void **)(&f->api.name) = dlsym(f->lib, "fmi3" #name);                 \
     if (f->api.name == NULL) {                                              \
-        printf("FAIL %s: symbol fmi3%s missing\n", so_path, #name);          \
+        host_fail("%s: symbol fmi3%s missing", so_path, #name);          \
         return 0;                                                           \
     }
     FMI3_API(FMI3_LOAD)
@@ -366,13 +366,13 @@ static inline fmi3Status host3_set_named(const host3_fmu *f, fmi3Instance c, con
     fmi3Float64 x[HOST_MAX_ELEMENTS];
     fmi3Status st;
     if (v == NULL) {
-        printf("FAIL %s has no variable %s\n", f->id, name);
+        host_fail("%s has no variable %s", f->id, name);
         return fmi3Fatal;
     }
     if (element < 0)
         return host3_set(f, c, v, value);
     if (v->type != VAR_REAL) {
-        printf("FAIL %s: host3_set_named of an element of a non-Float64 array\n", f->id);
+        host_fail("%s: host3_set_named of an element of a non-Float64 array", f->id);
         return fmi3Fatal;
     }
     st = f->api.GetFloat64(c, &v->vr, 1, x, (size_t)v->n);
