@@ -131,9 +131,11 @@ def test_ecos_runs_the_three_fmus_as_the_fmpy_master(ecos, reference):
     _applied(run["params"], flat)
 
 
-def test_ecos_runs_the_three_fmus_each_in_its_own_process(ecos, reference):
+def test_ecos_runs_the_three_fmus_each_in_its_own_process(ecos, reference, tmp_path, monkeypatch):
     """Ecos through proxyfmu:// (one proxyfmu process per FMU, FMI 2.0): the same samples bit for
-    bit, over 0.5 s (each call crosses a process)."""
+    bit, over 0.5 s (each call crosses a process). proxyfmu writes logs/ in the working folder:
+    here a temporary one."""
+    monkeypatch.chdir(tmp_path)
     why = er.ecos_proxy_ready()
     if why:
         need_engine("Ecos", why)
