@@ -1,5 +1,5 @@
-"""The closed loop as an SSP 1.0 file: written, and its bound parameter set read back (fmpy's
-SSP player runs it: :mod:`harness.masters.ssp`).
+"""The closed loop as an SSP 1.0 file that every SSP player applies: written, and its bound
+parameter set read back (fmpy's SSP player runs it: :mod:`harness.masters.ssp`).
 
 An SSP is a zip with ``SystemStructure.ssd`` (the system: components,
 connectors, connections, default experiment) and ``resources/`` (the FMUs
@@ -12,10 +12,26 @@ and parameter files, SSV).  :func:`write_closed_loop_ssp` writes::
                                       t_meas    --> controller.t_meas
     controller (AdaptiveCompoundController.fmu)  v --> plant.v
 
-with one SSV per parameter set (names ``<component>.<variable>``, bound at
-the system level; the first one is bound, the others ship beside it), a
-default experiment over the scenario's duration, and the OpenModelica
-annotation that makes OMSimulator's fixed-step master step at h.
+Parameter sets, each under one name (the scenario's):
+
+- ``resources/<set>/<component>.ssv``: the set's values of one component under its own
+  variable names. The first set is bound on each component (``ssd:ParameterBinding`` of the
+  component), the others ship beside it. Component bindings are what every player reads:
+  libcosim applies a component's first binding, Ecos groups the bindings by the name of their
+  ``ssv:ParameterSet`` (``init(parameter_set="<set>")`` applies it to every component),
+  OMSimulator applies every binding of a component. A system-level binding (which libcosim and
+  Ecos ignore) is not written, and only one set is bound: SSP 1.0 applies every binding of a
+  component, a later one winning, while libcosim applies the first, so two bound sets would
+  make players disagree.
+- ``resources/<set>.ssv``: the same values under ``<component>.<variable>``, not bound: the
+  form fmpy's player takes from its caller (``simulate_ssp(..., parameter_set=read_ssv(ssp,
+  "resources/<set>.ssv"))``); it applies no binding by itself.
+
+The step: OpenModelica's ``oms:FixedStepMaster stepSize`` on the system (OMSimulator), the
+Open Simulation Platform's ``osp:FixedStepAlgorithm baseStepSize`` in the default experiment
+(libcosim: the SSP then loads without a step given) and ``osp:StepSizeHint`` on each component
+(libcosim and Ecos step each FMU at h also when their base step is a fraction of it), and a
+default experiment over the scenario's duration.
 
 The loop needs a master with a fixed communication step h. The controller detects
 the loop delay the master's schedule makes (d = 2 where values are exchanged at
@@ -51,6 +67,7 @@ __all__ = [
     "SspParameterSet",
     "parameter_set_for_scenario",
     "write_closed_loop_ssp",
+    "component_values",
     "read_bound_parameter_set",
     "main",
 ]
@@ -96,7 +113,8 @@ _UNITS = {"um": '<ssc:BaseUnit m="1" factor="1e-06"/>',
 _NS = ('xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
        'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
        'xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" '
-       'xmlns:oms="https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"')
+       'xmlns:oms="https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd" '
+       'xmlns:osp="http://opensimulationplatform.com/SSP/OSPAnnotations"')
 #: ZIP timestamp of every entry: the same inputs give the same bytes
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 
@@ -170,16 +188,49 @@ def _ssv_value(value):
     return "Real", repr(float(value))
 
 
-def _ssv_text(pset):
+def component_values(pset):
+    """A set's values by component, under the component's own variable names.
+
+    Parameters
+    ----------
+    pset : SspParameterSet
+
+    Returns
+    -------
+    dict
+        ``{component: {variable: value}}`` for every component of :data:`SSP_COMPONENTS`
+        (empty where the set has no value of it).
+
+    Raises
+    ------
+    ValueError
+        A name is not ``<component>.<variable>`` of a component of the loop.
+    """
+    out = {comp: {} for comp in SSP_COMPONENTS}
+    for key, value in pset.values.items():
+        comp, _, var = key.partition(".")
+        if comp not in out or not var:
+            raise ValueError(f"parameter {key!r} of set {pset.name!r}: not <component>.<variable> of "
+                             f"a component of the loop ({', '.join(SSP_COMPONENTS)})")
+        out[comp][var] = value
+    return out
+
+
+def _ssv_text(name, values):
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<ssv:ParameterSet xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" '
-             f'version="1.0" name={quoteattr(pset.name)}>',
+             f'version="1.0" name={quoteattr(name)}>',
              '  <ssv:Parameters>']
-    for key in sorted(pset.values):
-        kind, text = _ssv_value(pset.values[key])
+    for key in sorted(values):
+        kind, text = _ssv_value(values[key])
         lines.append(f'    <ssv:Parameter name={quoteattr(key)}><ssv:{kind} value="{text}"/></ssv:Parameter>')
     lines += ['  </ssv:Parameters>', '</ssv:ParameterSet>', '']
     return "\n".join(lines)
+
+
+def _component_ssv(set_name, component):
+    """Where a set's values of one component are in the SSP."""
+    return f"resources/{set_name}/{component}.ssv"
 
 
 def _ssd_text(bound, step_size, stop_time):
@@ -190,9 +241,6 @@ def _ssd_text(bound, step_size, stop_time):
              + quoteattr("Piezo stage closed loop: reference with stamped preview, adaptive "
                          "compound controller, stage. Fixed communication step h; the controller "
                          "detects the loop delay (1 to 3 samples) and aligns the preview.") + '>')
-    c.append('    <ssd:ParameterBindings>')
-    c.append(f'      <ssd:ParameterBinding source="resources/{bound}.ssv"/>')
-    c.append('    </ssd:ParameterBindings>')
     c.append('    <ssd:Elements>')
     for name, (fmu, connectors) in SSP_COMPONENTS.items():
         c.append(f'      <ssd:Component name="{name}" type="application/x-fmu-sharedlibrary" '
@@ -203,6 +251,14 @@ def _ssd_text(bound, step_size, stop_time):
             c.append(f'          <ssd:Connector name="{cname}" kind="{kind}"><ssc:{typ}{unit_attr}/>'
                      f'</ssd:Connector>')
         c.append('        </ssd:Connectors>')
+        c.append('        <ssd:ParameterBindings>')
+        c.append(f'          <ssd:ParameterBinding source="{_component_ssv(bound, name)}"/>')
+        c.append('        </ssd:ParameterBindings>')
+        c.append('        <ssd:Annotations>')
+        c.append('          <ssc:Annotation type="com.opensimulationplatform">')
+        c.append(f'            <osp:StepSizeHint value="{step_size!r}"/>')
+        c.append('          </ssc:Annotation>')
+        c.append('        </ssd:Annotations>')
         c.append('      </ssd:Component>')
     c.append('    </ssd:Elements>')
     c.append('    <ssd:Connections>')
@@ -231,6 +287,11 @@ def _ssd_text(bound, step_size, stop_time):
     c.append(f'          <oms:SimulationInformation loggingInterval="{step_size!r}"/>')
     c.append('        </oms:Annotations>')
     c.append('      </ssc:Annotation>')
+    c.append('      <ssc:Annotation type="com.opensimulationplatform">')
+    c.append('        <osp:Algorithm>')
+    c.append(f'          <osp:FixedStepAlgorithm baseStepSize="{step_size!r}"/>')
+    c.append('        </osp:Algorithm>')
+    c.append('      </ssc:Annotation>')
     c.append('    </ssd:Annotations>')
     c.append('  </ssd:DefaultExperiment>')
     c.append('</ssd:SystemStructureDescription>')
@@ -254,7 +315,8 @@ def write_closed_loop_ssp(path, fmu_dir, parameter_sets=None):
     fmu_dir : str or Path
         Folder with PiezoStage.fmu, AdaptiveCompoundController.fmu and ReferenceSignal.fmu.
     parameter_sets : list of SspParameterSet, optional
-        The first is bound; default: ``[parameter_set_for_scenario(SSP_SCENARIO)]``.
+        The first is bound on every component; the others ship beside it. Default:
+        ``[parameter_set_for_scenario(SSP_SCENARIO)]``.
 
     Returns
     -------
@@ -264,9 +326,14 @@ def write_closed_loop_ssp(path, fmu_dir, parameter_sets=None):
     ------
     FileNotFoundError
         An FMU is missing (the message says how to build it).
+    ValueError
+        Two sets share a name, or a name of a set is not ``<component>.<variable>``.
     """
     path = Path(path)
     sets = list(parameter_sets or [parameter_set_for_scenario(SSP_SCENARIO)])
+    names = [pset.name for pset in sets]
+    if len(set(names)) != len(names):
+        raise ValueError(f"parameter sets {names}: each needs its own name (it names its files)")
     fmus = {fmu: fmu_path(Path(fmu).stem, fmu_dir).read_bytes() for fmu, _ in SSP_COMPONENTS.values()}
     bound = sets[0]
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -276,23 +343,52 @@ def write_closed_loop_ssp(path, fmu_dir, parameter_sets=None):
         for name in sorted(fmus):
             _add(zf, f"resources/{name}", fmus[name])
         for pset in sets:
-            _add(zf, f"resources/{pset.name}.ssv", _ssv_text(pset))
+            _add(zf, f"resources/{pset.name}.ssv", _ssv_text(pset.name, pset.values))
+            for comp, values in component_values(pset).items():
+                _add(zf, _component_ssv(pset.name, comp), _ssv_text(pset.name, values))
     tmp.replace(path)
     return path
 
 
 def read_bound_parameter_set(ssp_path):
-    """The parameter set bound at the system level of an SSP, as fmpy reads it.
+    """The parameter set bound on the SSP's components, under ``<component>.<variable>``: what an
+    SSP player applies, in the form fmpy's player takes (``simulate_ssp(...,
+    parameter_set=...)``).
+
+    The values are Python ``float``, ``int`` and ``bool``: fmpy's player sets a Boolean to
+    ``value != 0.0``, which the text ``"false"`` of an SSV read by ``read_ssv`` would pass as
+    true.
 
     Returns
     -------
     fmpy.ssp.ssd.ParameterSet or None
+        None when no component binds a set.
+
+    Raises
+    ------
+    ValueError
+        The components bind sets of different names, or a component binds more than one.
     """
+    from fmpy.ssp.ssd import Parameter, ParameterSet
+
     ssd = read_ssd(str(ssp_path))
-    for binding in ssd.system.parameterBindings:
-        for pset in binding.parameterValues:
-            return pset
-    return None
+    names, parameters = set(), []
+    for element in ssd.system.elements:
+        sets = [ps for binding in element.parameterBindings for ps in binding.parameterValues]
+        if len(sets) > 1:
+            raise ValueError(f"{ssp_path}: component {element.name!r} binds {len(sets)} parameter sets; "
+                             f"SSP players differ in which applies, bind one")
+        for ps in sets:
+            names.add(ps.name)
+            for p in ps.parameters:
+                value = {"Real": float, "Integer": int,
+                         "Boolean": lambda text: text.strip().lower() in ("true", "1")}[p.type](p.value)
+                parameters.append(Parameter(name=f"{element.name}.{p.name}", type=p.type, value=value))
+    if len(names) > 1:
+        raise ValueError(f"{ssp_path}: the components bind sets of different names {sorted(names)}")
+    if not names:
+        return None
+    return ParameterSet(name=names.pop(), parameters=parameters)
 
 
 def main(argv=None):
@@ -302,8 +398,8 @@ def main(argv=None):
     p.add_argument("--fmu-dir", required=True, help="folder with the three FMUs")
     p.add_argument("--out", required=True, help="the .ssp to write")
     p.add_argument("--scenario", action="append", metavar="NAME",
-                   help=f"tracking scenario(s) to include as SSV; the first is bound "
-                        f"(default {SSP_SCENARIO})")
+                   help=f"tracking scenario(s) to include as parameter sets; the first is bound on "
+                        f"every component (default {SSP_SCENARIO})")
     args = p.parse_args(argv)
     try:
         sets = [parameter_set_for_scenario(n) for n in (args.scenario or [SSP_SCENARIO])]

@@ -555,3 +555,29 @@ def memcheck_clean(stderr):
             and in_use is not None and int(in_use.group(1).replace(",", "")) == 0)
 
 # ========================= end of shared helpers ==========================
+
+
+# =============================================================================
+# Optional engines: libcosim (libcosimpy) and Ecos (ecospy), the extra "engines"
+#
+# Without them the tests that run the loop in them skip with the reason. .ci/run installs
+# them (and Debian's libtbb12, which Ecos's library needs) and sets PIEZO_REQUIRE_ENGINES=1:
+# there such a skip is a failure, as PIEZO_REQUIRE_PLATFORMS does for the platforms.
+# =============================================================================
+
+REQUIRE_ENGINES = os.environ.get("PIEZO_REQUIRE_ENGINES", "") == "1"
+ENGINE_HINT = {
+    "libcosim": "pip install libcosimpy (or '.[engines]', as .ci/run does)",
+    "Ecos": "pip install ecospy and apt-get install libtbb12 (or '.[engines]', as .ci/run does)",
+}
+
+
+def need_engine(engine, reason):
+    """Skip the calling test because `reason` (what running it in `engine` misses); with
+    PIEZO_REQUIRE_ENGINES=1 fail it instead, with the same reason."""
+    text = f"{engine}: {reason}: {ENGINE_HINT[engine]}"
+    if REQUIRE_ENGINES:
+        pytest.fail(f"{text} (PIEZO_REQUIRE_ENGINES=1 makes this a failure, not a skip)", pytrace=False)
+    pytest.skip(text)
+
+# ======================== end of optional engines =========================

@@ -182,10 +182,12 @@ def test_sequential_container_configured_by_hand_still_runs_the_d1_loop(name, wo
     assert e_rms(name, seq) <= E_RMS_MAX
 
 
-def test_a_master_stepping_two_samples_is_refused_at_its_first_step(monkeypatch):
-    """OMSimulator's default fixed step 1e-3 s = 2 h (docs/cosimulation.md, section 3): fmpy's
-    SSP player run with it fails at its first doStep of the controller, at t = 0 (before, the
-    loop ran and the monitor stopped it at 0.105 s)."""
+def test_a_master_stepping_two_samples_is_refused_at_its_first_connected_step(monkeypatch):
+    """OMSimulator's default fixed step 1e-3 s = 2 h (docs/cosimulation.md, section 5): fmpy's
+    SSP player run with it fails at its second doStep of the controller, at t = 0.001 (before
+    this rule, the loop ran and the monitor stopped it at 0.105 s). The player's first doStep
+    gives every input 0, its start value: nothing connected yet, so the controller holds the
+    inputs over the two samples (a standalone run); at t = 0.001 t_meas has advanced."""
     import fmpy.ssp.simulation as player
     from harness.ssp import parameter_set_for_scenario, write_closed_loop_ssp
     from harness.fmu import default_fmu_dir
@@ -206,4 +208,5 @@ def test_a_master_stepping_two_samples_is_refused_at_its_first_step(monkeypatch)
         with pytest.raises(Exception):
             player.simulate_ssp(str(path), stop_time=0.2, step_size=0.001,
                                 parameter_set=None)
-    assert calls[-1] == ("controller", 0.0)
+    assert calls[-1] == ("controller", 0.001)
+    assert [c for c in calls if c[0] == "controller"] == [("controller", 0.0), ("controller", 0.001)]

@@ -1,4 +1,5 @@
 """The closed-loop SSP written by the build (build/fmus/PiezoStageClosedLoop.ssp)."""
+import dataclasses
 import re
 import zipfile
 
@@ -21,9 +22,12 @@ def built(fmu_paths):
 
 def test_structure(built):
     """fmpy's reader validates the SSD against the SSP 1.0 schema; the file holds the three
-    FMUs, the documented connections, the mismatch 1/5/10 Hz SSV bound at the system level
-    (the nominal one beside it), a 3 s default experiment and OMSimulator's fixed-step
-    annotation with h."""
+    FMUs, the documented connections, the mismatch 1/5/10 Hz set bound on every component
+    (resources/mismatch_1_5_10hz/<component>.ssv, each an ssv:ParameterSet of that one name)
+    and nothing bound at the system level (libcosim and Ecos read component bindings only), the
+    nominal set beside it, a 3 s default experiment and the step h where each player reads it:
+    OMSimulator's oms:FixedStepMaster, libcosim's osp:FixedStepAlgorithm, and osp:StepSizeHint
+    on each component (libcosim, Ecos)."""
     from fmpy.ssp.ssd import read_ssd
 
     ssd = read_ssd(str(built), validate=True)
@@ -39,33 +43,66 @@ def test_structure(built):
                      ("plant", "y_meas", "controller", "y_meas"),
                      ("plant", "t_meas", "controller", "t_meas"),
                      ("controller", "v", "plant", "v")}
-    assert [b.source for b in ssd.system.parameterBindings] == ["resources/mismatch_1_5_10hz.ssv"]
+    assert ssd.system.parameterBindings == []
+    for element in ssd.system.elements:
+        assert [b.source for b in element.parameterBindings] == [f"resources/mismatch_1_5_10hz/{element.name}.ssv"]
+        assert [ps.name for b in element.parameterBindings for ps in b.parameterValues] == ["mismatch_1_5_10hz"]
     with zipfile.ZipFile(built) as zf:
         names = set(zf.namelist())
         text = zf.read("SystemStructure.ssd").decode()
         for fmu in comps.values():
             assert zf.read(fmu) == (built.parent / fmu.split("/")[1]).read_bytes()
-    assert {"resources/mismatch_1_5_10hz.ssv", "resources/track_1_5_10hz.ssv"} <= names
+    for pset in ("mismatch_1_5_10hz", "track_1_5_10hz"):
+        assert {f"resources/{pset}.ssv"} | {f"resources/{pset}/{c}.ssv" for c in comps} <= names
     assert re.search(r'<ssd:DefaultExperiment startTime="0" stopTime="3.0"', text)
     assert re.search(r'<oms:FixedStepMaster description="oms-ma" stepSize="0.0005"/>', text)
+    assert re.search(r'<ssc:Annotation type="com.opensimulationplatform">\s*<osp:Algorithm>\s*'
+                     r'<osp:FixedStepAlgorithm baseStepSize="0.0005"/>', text)
+    assert len(re.findall(r'<osp:StepSizeHint value="0.0005"/>', text)) == 3
+    assert 'xmlns:osp="http://opensimulationplatform.com/SSP/OSPAnnotations"' in text
 
 
 def test_bound_parameters_are_the_scenario(built):
     """Reference: the mismatch_1_5_10hz scenario (harness.scenarios): every plant override,
-    the three tones and h, read back through fmpy's SSV reader; no lead and no mv.delay (the
-    FMUs' defaults: the controller detects its delay and aligns the stamped preview)."""
+    the three tones and h, read back from the components' bindings through fmpy's SSV reader
+    (read_bound_parameter_set prefixes them); no lead and no mv.delay (the FMUs' defaults: the
+    controller detects its delay and aligns the stamped preview). The prefixed SSV for fmpy
+    holds exactly the same names and values."""
+    from fmpy.ssp.ssd import read_ssv
+
     pset = ssp.read_bound_parameter_set(built)
+    assert pset.name == "mismatch_1_5_10hz"
     values = {p.name: p.value for p in pset.parameters}
     sc = get_scenario("mismatch_1_5_10hz")
     for key, value in sc.plant.items():
-        assert float(values[f"plant.{key}"]) == float(value), key
+        assert values[f"plant.{key}"] == value, key
+        assert type(values[f"plant.{key}"]) is type(value), key
     for i, f in enumerate((1.0, 5.0, 10.0), start=1):
-        assert float(values[f"reference.amplitude[{i}]"]) == 10.0
-        assert float(values[f"reference.frequency[{i}]"]) == f
+        assert values[f"reference.amplitude[{i}]"] == 10.0
+        assert values[f"reference.frequency[{i}]"] == f
     for i in range(4, 9):       # the unused tones are set to 0, not left to the FMU's defaults
-        assert float(values[f"reference.amplitude[{i}]"]) == 0.0
+        assert values[f"reference.amplitude[{i}]"] == 0.0
     assert "reference.lead" not in values and "controller.mv.delay" not in values
-    assert float(values["plant.h"]) == float(values["controller.h"]) == 0.0005
+    assert values["plant.h"] == values["controller.h"] == values["reference.h"] == 0.0005
+    flat = read_ssv(str(built), "resources/mismatch_1_5_10hz.ssv")
+    assert {p.name: float(p.value) for p in flat.parameters} == {k: float(v) for k, v in values.items()}
+
+
+def test_a_boolean_is_read_back_as_a_bool(tmp_path, built):
+    """A set with a Boolean (sat.enabled = false on the controller): read_bound_parameter_set
+    gives Python's False, which fmpy's player sets as false (it sets value != 0.0, which the
+    SSV's text "false" would pass as true)."""
+    pset = ssp.parameter_set_for_scenario("mismatch_5hz")
+    pset = dataclasses.replace(pset, values={**pset.values, "controller.sat.enabled": False})
+    path = ssp.write_closed_loop_ssp(tmp_path / "b.ssp", built.parent, [pset])
+    values = {p.name: p.value for p in ssp.read_bound_parameter_set(path).parameters}
+    assert values["controller.sat.enabled"] is False
+
+
+def test_two_sets_of_one_name_are_refused(tmp_path, built):
+    pset = ssp.parameter_set_for_scenario("mismatch_5hz")
+    with pytest.raises(ValueError, match="each needs its own name"):
+        ssp.write_closed_loop_ssp(tmp_path / "b.ssp", built.parent, [pset, pset])
 
 
 def test_fmpy_runs_it_and_it_tracks(built):

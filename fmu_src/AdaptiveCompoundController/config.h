@@ -11,10 +11,12 @@
 
 #define MODEL_IDENTIFIER_STRING "AdaptiveCompoundController"
 /* optional hooks of fmu_model.h: it has direct feedthrough (mv.feedthrough), messages,
- * events (the loop delay it chose) and a check of the step size (one sample per step) */
+ * events (the loop delay it chose), a notice (it runs open loop) and a check of the step
+ * size (one sample per step) */
 #define MODEL_HAS_FEEDTHROUGH 1
 #define MODEL_HAS_MESSAGES 1
 #define MODEL_HAS_EVENTS 1
+#define MODEL_HAS_NOTICES 1
 #define MODEL_HAS_STEP_CHECK 1
 
 #define MODEL_GUID "{16db41db-eca1-4957-ad18-19b12743e5cb}"
@@ -112,6 +114,9 @@ typedef struct {
     int sup_status;                 /* outputs: sup.status, ... */
     double sup_gain;                /* ... sup.gain, ... */
     int sup_delay;                  /* ... sup.delay */
+    int loop_wired;                 /* y_meas or t_meas left its start value at some sample: the
+                                       loop is connected (until then it runs open loop) */
+    int said_open_loop;             /* the open-loop warning was logged */
 
     piezo_controller ctrl;          /* core state (committed samples only) */
     piezo_controller_output out;    /* outputs: the last committed sample, or with

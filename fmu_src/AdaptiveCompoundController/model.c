@@ -33,6 +33,9 @@
 #define INPUT_REAL(name, field) { name, MODEL_REAL, MODEL_INPUT, offsetof(ModelData, field) }
 #define MODEL_OUTPUT_INT(name, field) { name, MODEL_INTEGER, MODEL_OUTPUT, offsetof(ModelData, field) }
 
+/* the start value of every input (the model descriptions'): a controller whose y_meas
+ * and t_meas kept it since its start was never connected */
+#define INPUT_START 0.0
 /* a stamped measurement more than this many samples off the controller's time is ignored */
 #define MEAS_OFFSET_MAX 8
 /* the time stamps are judged once the loop delay is chosen and this many samples ran (a
@@ -120,11 +123,11 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
 void model_set_start_values(ModelData *data)
 {
     piezo_controller_default_params(&data->params);
-    data->y_ref = 0.0;
-    data->y_meas = 0.0;
-    data->y_preview = 0.0;
-    data->t_preview = 0.0;
-    data->t_meas = 0.0;
+    data->y_ref = INPUT_START;
+    data->y_meas = INPUT_START;
+    data->y_preview = INPUT_START;
+    data->t_preview = INPUT_START;
+    data->t_meas = INPUT_START;
 }
 
 /* t_k of the model's own t0 and h (fmu_sample_time, as the glue) */
@@ -141,6 +144,7 @@ piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
     data->said_stamps = 0;
     data->sup_status = data->sup_delay = 0;
     data->sup_gain = 0.0;
+    data->loop_wired = data->said_open_loop = 0;
     /* the controller is time-invariant; t0 places the time stamps on its grid */
     data->t0 = start_time;
     data->last_t_preview = data->last_t_meas = 0.0;
@@ -154,6 +158,32 @@ piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
     data->loop_delay_time = data->track.delay_time;
     data->preview_lead = data->meas_offset = 0;
     return PIEZO_OK;
+}
+
+/* Open loop: until y_meas or t_meas leaves its start value, neither is connected (a
+ * standalone run, a checker's with default inputs); a connected loop shows it within
+ * its first samples (t_meas advances, y_meas moves), long before the supervision's
+ * first verdict (PIEZO_SUP_MIN_SAMPLES). Open loop, the supervision reaches no
+ * verdict. */
+static int loop_connected(const ModelData *data)
+{
+    return data->loop_wired || data->y_meas != INPUT_START || data->t_meas != INPUT_START;
+}
+
+/* Nothing connected at all: every input still at its start value (a checker's run with
+ * default inputs). Only then may a step hold the inputs over several samples: a master that
+ * exchanged initial values has set y_ref, and is refused at its first step. */
+static int inputs_untouched(const ModelData *data)
+{
+    return !loop_connected(data) && data->y_ref == INPUT_START && data->y_preview == INPUT_START
+           && data->t_preview == INPUT_START;
+}
+
+/* Before a sample is evaluated with the held inputs: is the loop connected (once, for good)? */
+static void note_loop_inputs(ModelData *data)
+{
+    data->loop_wired = loop_connected(data);
+    data->ctrl.sup.open_loop = !data->loop_wired;
 }
 
 /* A time stamp input is connected when it advanced by one sample h since the
@@ -242,8 +272,10 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
 {
     int meas_offset;
     stamps_seen seen;
-    piezo_controller_input in = sample_input(data, &meas_offset, &seen);
+    piezo_controller_input in;
     piezo_status st;
+    note_loop_inputs(data);
+    in = sample_input(data, &meas_offset, &seen);
     /* mv.feedthrough: the sample the outputs were read from is committed as is
      * (computed once, from these inputs); the commit refuses it if it is not
      * this sample's */
@@ -265,9 +297,11 @@ piezo_status model_update_outputs(ModelData *data, double *history, size_t histo
     if (data->params.mv_feedthrough) {
         int meas_offset;
         stamps_seen seen;
-        piezo_controller_input in = sample_input(data, &meas_offset, &seen);
-        piezo_status st = piezo_controller_evaluate(&data->ctrl, &in, history, history_capacity,
-                                                    &data->pending);
+        piezo_controller_input in;
+        piezo_status st;
+        note_loop_inputs(data);
+        in = sample_input(data, &meas_offset, &seen);
+        st = piezo_controller_evaluate(&data->ctrl, &in, history, history_capacity, &data->pending);
         if (st != PIEZO_OK)
             return st;
         /* the outputs of sample k itself */
@@ -332,6 +366,23 @@ static int stamp_warning(ModelData *data, char *text, size_t size)
     return 0;
 }
 
+/* Once, a notice (logged as a Warning, the step OK: a standalone check runs on): the
+ * controller runs open loop, its loop inputs never connected (judged after
+ * STAMP_WARN_SAMPLES samples: a connected loop has shown it by then). */
+int model_step_notice(ModelData *data, char *text, size_t size)
+{
+    if (data->loop_wired || data->said_open_loop || !data->params.sup.enabled
+        || data->ctrl.k < STAMP_WARN_SAMPLES)
+        return 0;
+    data->said_open_loop = 1;
+    snprintf(text, size, "y_meas and t_meas have kept their start value %g for the first %llu samples: "
+             "neither is connected, so the controller runs open loop and its supervision does not judge the "
+             "loop. To close the loop connect PiezoStage.y_meas -> y_meas and PiezoStage.t_meas -> t_meas "
+             "(and v -> PiezoStage.v); for open-loop use set sup.enabled = false", INPUT_START,
+             (unsigned long long)data->ctrl.k);
+    return 1;
+}
+
 int model_step_warning(ModelData *data, double start_time, char *text, size_t size)
 {
     (void)start_time;   /* data->t0 is the same */
@@ -347,7 +398,7 @@ int model_step_event(ModelData *data, char *text, size_t size)
 
 int model_check_step(const ModelData *data, uint64_t n, char *text, size_t size)
 {
-    if (n <= 1 || data->params.mv_hold_inputs)
+    if (n <= 1 || data->params.mv_hold_inputs || inputs_untouched(data))
         return 0;
     snprintf(text, size, "the controller computes one control per measurement, so a closed loop needs an "
              "exchange of y_meas and v every sample: a step of %llu samples would hold y_meas over them and run "
@@ -377,7 +428,9 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         return fault;
     if ((data->have_last != 0 && data->have_last != 1) || data->said_stamps < 0 || data->said_stamps > 7
         || (data->meas_stamped != 0 && data->meas_stamped != 1)
-        || (data->preview_stamped != 0 && data->preview_stamped != 1))
+        || (data->preview_stamped != 0 && data->preview_stamped != 1)
+        || (data->loop_wired != 0 && data->loop_wired != 1)
+        || (data->said_open_loop != 0 && data->said_open_loop != 1))
         return "warning flags are not 0 or 1";
     if (abs(data->preview_offset) > 99 || data->sup_status < 0 || data->sup_status > 2
         || data->sup_delay < 0 || data->sup_delay > PIEZO_SUP_MAX_D || !isfinite(data->sup_gain))
@@ -395,6 +448,8 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         return fault;
     if (c->k != k)
         return "controller sample counter differs from the FMU's k";
+    if (k > 0 && c->sup.open_loop == data->loop_wired)
+        return "open-loop flag differs from the connection seen";
     if (data->t0 != t0 || data->have_last != (k > 0))
         return "controller time stamps differ from t0 + k h";
     /* a live core runs on parameters that passed init, and on the copies init made of them */

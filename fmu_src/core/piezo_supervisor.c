@@ -232,12 +232,18 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         e = fabs(target - in->y_meas);
         n->clip_error_sum = s->clip_error_sum + e;
     }
+    if (s->open_loop) {
+        /* no loop to judge the response or the delay of: no such verdict, and no candidate
+         * carried into a connected sample (v held at a limit still stops it) */
+        n->candidate = 0;
+        n->candidate_run = 0;
+    }
     if (n->candidate_run >= PIEZO_SUP_CONFIRM)
         n->fault = n->candidate;
     else if (in->clipped1 && in->clip_run >= s->clip_samples
              && n->clip_error_sum > in->error_bound * (double)in->clip_run)
         n->fault = PIEZO_SUP_CLIPPED;
-    else if (in->detecting_for >= s->detect_samples)
+    else if (in->detecting_for >= s->detect_samples && !s->open_loop)
         n->fault = PIEZO_SUP_UNDETECTED;
 }
 
@@ -466,7 +472,8 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
 {
     int i;
     if (!s) return "supervisor missing";
-    if ((s->enabled != 0 && s->enabled != 1) || (s->status != 0 && s->status != 1))
+    if ((s->enabled != 0 && s->enabled != 1) || (s->status != 0 && s->status != 1)
+        || (s->open_loop != 0 && s->open_loop != 1))
         return "supervisor flags are not 0 or 1";
     if (!(s->forgetting >= 1.0 - 1.0 / WINDOW_MIN && s->forgetting < 1.0)
         || !(s->gain_min > 0.0 && s->gain_min < 1.0 && s->gain_max > 1.0 && isfinite(s->gain_max))

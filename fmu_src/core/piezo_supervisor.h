@@ -140,6 +140,10 @@ typedef struct {
 typedef struct {
     /* configuration */
     int enabled;
+    int open_loop;               /* set by the caller while the loop inputs were never connected (the
+                                    FMU: y_meas and t_meas at their start values since the start):
+                                    the statistics run, but no response verdict and no delay
+                                    watchdog; v held at a limit is still stopped */
     double forgetting;           /* lambda = 1 - 1/window */
     double gain_min, gain_max;
     uint64_t clip_samples, detect_samples;

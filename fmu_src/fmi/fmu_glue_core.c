@@ -922,7 +922,8 @@ static double time_tolerance(double h, double x)
     return tol > 1e-3 * h ? 1e-3 * h : tol;
 }
 
-/* Log what the model asks to say after a step; a warning if anything. */
+/* Log what the model asks to say after a step; a warning if it warned (a notice is
+ * logged as a Warning but leaves the status OK: fmu_model.h). */
 static glue_status step_warnings(glue_instance *inst, const char *fname)
 {
     char text[512];
@@ -930,6 +931,8 @@ static glue_status step_warnings(glue_instance *inst, const char *fname)
     int i;
     for (i = 0; i < 4 && model_step_event(&inst->data, text, sizeof text); i++)
         glue_log_event(inst, "%s: %s", fname, text);
+    for (i = 0; i < 4 && model_step_notice(&inst->data, text, sizeof text); i++)
+        glue_log_warning(inst, "%s: %s", fname, text);      /* the step's status stays OK */
     for (i = 0; i < 4 && model_step_warning(&inst->data, inst->t0, text, sizeof text); i++) {
         glue_log_warning(inst, "%s: %s", fname, text);
         status = GLUE_WARNING;

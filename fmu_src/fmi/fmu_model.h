@@ -151,6 +151,21 @@ static inline int model_step_event(ModelData *data, char *text, size_t size)
 }
 #endif
 
+#ifdef MODEL_HAS_NOTICES
+/* After a successful doStep: write at most one notice into text and return 1, else 0
+ * (each once, as the warnings). Logged as a Warning (status Warning, category
+ * logStatusWarning, also with loggingOn = false), but the doStep still returns OK: a
+ * fact about how the FMU is wired, not about its results, on which an importer that
+ * stops at a Warning (fmusim, OMSimulator) must not stop. */
+int model_step_notice(ModelData *data, char *text, size_t size);
+#else
+static inline int model_step_notice(ModelData *data, char *text, size_t size)
+{
+    (void)data; (void)text; (void)size;
+    return 0;
+}
+#endif
+
 #ifdef MODEL_HAS_STEP_CHECK
 /* Before a doStep of n >= 1 samples: 1 with the reason in text when the model
  * refuses a step of n samples (the step is then refused, nothing changes). */
