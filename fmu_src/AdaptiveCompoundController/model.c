@@ -160,14 +160,16 @@ piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
     return PIEZO_OK;
 }
 
-/* Open loop: until y_meas or t_meas leaves its start value, neither is connected (a
- * standalone run, a checker's with default inputs); a connected loop shows it within
- * its first samples (t_meas advances, y_meas moves), long before the supervision's
- * first verdict (PIEZO_SUP_MIN_SAMPLES). Open loop, the supervision reaches no
- * verdict. */
+/* Open loop: until an input leaves its start value, none is connected (a standalone run,
+ * a checker's with default inputs); a connected loop shows it within its first samples
+ * (y_ref or the preview move, t_meas advances, y_meas moves), long before the supervision's
+ * first verdict (PIEZO_SUP_MIN_SAMPLES). Open loop, the supervision reaches no verdict.
+ * A reference that moves while y_meas and t_meas never do is a loop whose feedback is not
+ * connected: the supervision stops it (it would otherwise run with v pinned at a limit). */
 static int loop_connected(const ModelData *data)
 {
-    return data->loop_wired || data->y_meas != INPUT_START || data->t_meas != INPUT_START;
+    return data->loop_wired || data->y_meas != INPUT_START || data->t_meas != INPUT_START
+           || data->y_ref != INPUT_START || data->y_preview != INPUT_START || data->t_preview != INPUT_START;
 }
 
 /* Nothing connected at all: every input still at its start value (a checker's run with
@@ -175,8 +177,7 @@ static int loop_connected(const ModelData *data)
  * exchanged initial values has set y_ref, and is refused at its first step. */
 static int inputs_untouched(const ModelData *data)
 {
-    return !loop_connected(data) && data->y_ref == INPUT_START && data->y_preview == INPUT_START
-           && data->t_preview == INPUT_START;
+    return !loop_connected(data);
 }
 
 /* Before a sample is evaluated with the held inputs: is the loop connected (once, for good)? */
@@ -375,10 +376,11 @@ int model_step_notice(ModelData *data, char *text, size_t size)
         || data->ctrl.k < STAMP_WARN_SAMPLES)
         return 0;
     data->said_open_loop = 1;
-    snprintf(text, size, "y_meas and t_meas have kept their start value %g for the first %llu samples: "
-             "neither is connected, so the controller runs open loop and its supervision does not judge the "
-             "loop. To close the loop connect PiezoStage.y_meas -> y_meas and PiezoStage.t_meas -> t_meas "
-             "(and v -> PiezoStage.v); for open-loop use set sup.enabled = false", INPUT_START,
+    snprintf(text, size, "every input (y_ref, y_meas, t_meas, y_preview, t_preview) has kept its start value %g "
+             "for the first %llu samples: none is connected, so the controller runs open loop and its supervision "
+             "does not judge the loop. To close the loop connect PiezoStage.y_meas -> y_meas and PiezoStage.t_meas "
+             "-> t_meas, the reference (ReferenceSignal.y_ref -> y_ref, .y_preview, .t_preview) and v -> "
+             "PiezoStage.v; for open-loop use set sup.enabled = false", INPUT_START,
              (unsigned long long)data->ctrl.k);
     return 1;
 }
