@@ -218,9 +218,8 @@ def _frequency_response(theta, f, h=H):
 
 def test_rls_default_settings_identify_the_frequency_response():
     """Reference: the true G's frequency response (eq 10 evaluated with numpy) over
-    0.1-100 Hz. The defaults (rls.p0 = 1, rls.trace_max = 100) are sized for noisy closed
-    loops: with a bound of 1e3 the noisy mismatch case degrades to 111 nm at 1 Hz, with 1e4
-    it diverges. The price is slow convergence along the one weakly
+    0.1-100 Hz. The paper's law's tuning (ALGORITHM: rls.p0 = 1, rls.trace_max = 100), sized for
+    noisy closed loops. The price is slow convergence along the one weakly
     identifiable direction (pole 0.992037 vs zero 0.992106), which barely changes the
     response. So with the defaults the identified RESPONSE must converge: from 10 % off
     (wrong initial model) to within 1 % after 3 s (measured 0.36 %; parameters 6e-3)."""
