@@ -179,9 +179,12 @@ def describe_condition(cond, registry=None):
     else:
         out.append("Plant and controller: the overrides of each user scenario "
                    "(see Provenance).")
-    out.append("Adaptation: " + ("on, RLS updates the controller's estimate of G every sample."
+    out.append("Adaptation: " + ("on, RLS updates the controller's estimate of G while the reference "
+                                 "moves (on every sample of these tones), with integral action "
+                                 "(docs/model.md, adaptation)."
                                  if cond.adaptation_on else
-                                 "off: the controller uses the nominal G throughout."))
+                                 "off: the controller uses the nominal G throughout (the integral "
+                                 "action stays on)."))
     if cond.preview:
         out.append(f"Reference: previewed, the controller gets y_d(k+d), d = {d_text} samples "
                    f"ahead (h = {h_ms} ms).")
