@@ -358,8 +358,8 @@ class _Stopped(Exception):
 def _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures, stopped, prog, clock,
                  no_workers_timeout):
     """Run the missing runs on Dask; return (where, the runs computed at once). At most a few
-    tasks per worker are queued at a time, made as they are handed out (memory does not grow
-    with the number of runs).
+    tasks per thread of the cluster (as many threads as it has now) are queued at a time, made
+    as they are handed out (memory does not grow with the number of runs).
 
     What every task needs besides its runs (:func:`sweep_inputs`: the FMUs, the scenarios,
     the spreads, the options) is a task of its own that the tasks of runs depend on, so their
@@ -422,8 +422,9 @@ def _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures, s
         retry = deque()
         inflight = {}
         queue = as_completed()
-        limit = max(8, 4 * n_workers)
-        watch = {"next": time.monotonic() + _WATCH, "workers": None, "none_since": None}
+        # a few tasks queued per thread of the cluster, as many as it has now
+        watch = {"next": time.monotonic() + _WATCH, "workers": None, "none_since": None,
+                 "limit": max(8, 4 * max(n_workers, cores))}
 
         def submit():
             if retry:
@@ -444,14 +445,15 @@ def _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures, s
             if client.status == "closed":
                 raise _Stopped(f"the connection to the scheduler at {address} was lost")
             try:
-                n = len(client.nthreads())
+                threads = client.nthreads()
             except Exception:                   # noqa: BLE001 - reconnecting: looked at again
                 if client.status == "closed":
                     raise _Stopped(f"the connection to the scheduler at {address} was lost") from None
                 return
             now = time.monotonic()
-            before = watch["workers"]
+            n, before = len(threads), watch["workers"]
             watch["workers"] = n
+            watch["limit"] = max(8, 4 * sum(threads.values()))
             if n:
                 if watch["none_since"] is not None and prog is not None:
                     prog.say(f"sweep: {n} worker{'s' if n != 1 else ''} on the cluster again; going on")
@@ -487,8 +489,9 @@ def _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures, s
                         raise
                     look()
 
+        told = set()                            # the reasons of cancelled tasks said
         clock["start"], cpu = time.perf_counter(), time.process_time()
-        while len(inflight) < limit and submit():
+        while len(inflight) < watch["limit"] and submit():
             pass
         while inflight:
             fut = next_done()
@@ -504,9 +507,9 @@ def _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures, s
                 if exc.reason == "lost dependencies":
                     shipped.pop("inputs", None)     # the scheduler forgot them: submitted anew
                 retry.append((name, part, attempt))
-                if prog is not None:
-                    prog.say(f"sweep: a task of {len(part)} runs was cancelled ({failures[-1]}); "
-                             f"running it again")
+                if prog is not None and exc.reason not in told:
+                    told.add(exc.reason)            # once until a task completes again
+                    prog.say(f"sweep: tasks cancelled by Dask ({exc.reason}); running them again")
             except Exception as exc:                # noqa: BLE001 - any failure of a task is retried
                 failures.append(first_line(exc) or type(exc).__name__)
                 if attempt < _ATTEMPTS:
@@ -516,8 +519,9 @@ def _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures, s
                                  f"running it again (attempt {attempt + 1} of {_ATTEMPTS})")
             else:
                 collect(name, result)
+                told.clear()
             fut.release()
-            while len(inflight) < limit and submit():
+            while len(inflight) < watch["limit"] and submit():
                 pass
         clock["end"], clock["cpu"] = time.perf_counter(), time.process_time() - cpu
     except _Stopped as exc:
