@@ -225,6 +225,32 @@ def undisturbed(tmp_path_factory):
     return files
 
 
+def _sweep_killing_when_blocked(cluster, folder, name, then=None):
+    """The sweep on ``cluster``, worker ``name`` killed once it is blocked (after ``then``);
+    the result, the worker checked to have been killed there."""
+    killer = cluster.kill_when_blocked(name, then=then)
+    result = _sweep(scheduler=cluster.address, out=folder)
+    killer.join(timeout=60)
+    assert cluster.signal_of(name).exists() and cluster.workers[name].poll() is not None
+    return result
+
+
+def _kill_the_only_holder(cluster, client, future):
+    """Kill the worker that holds the only copy of ``future``'s result, once there is one
+    copy (Dask's active memory manager drops the copies a broadcast made within seconds);
+    return its name."""
+    from dask.distributed import wait
+
+    wait(future, timeout=60)
+    deadline = time.time() + 60
+    while len(holders := client.who_has(future)[future.key]) != 1:
+        assert time.time() < deadline, holders
+        time.sleep(0.1)
+    name = cluster.names(client)[holders[0]]
+    cluster.kill(name)
+    return name
+
+
 def _check_same(result, folder, undisturbed):
     assert _files(result, folder) == undisturbed
     assert all(len(result.runs[name]) == N_RUNS for name in SCENARIOS)
@@ -275,10 +301,7 @@ def test_worker_lost_while_it_prepares(cluster, tmp_path, undisturbed):
     (prepare_worker, run by the client on every worker): the same result."""
     cluster.start("a", block_in="prepare_worker")
     cluster.start("b")
-    killer = cluster.kill_when_blocked("a")
-    result = _sweep(scheduler=cluster.address, out=tmp_path / "out")
-    killer.join(timeout=60)
-    assert cluster.signal_of("a").exists() and cluster.workers["a"].poll() is not None
+    result = _sweep_killing_when_blocked(cluster, tmp_path / "out", "a")
     _check_same(result, tmp_path / "out", undisturbed)
 
 
@@ -287,40 +310,7 @@ def test_worker_lost_while_it_computes_the_inputs_and_another_joins(cluster, tmp
     runs depends on); a worker that joins then, which has not seen them, runs the sweep: the
     same result."""
     cluster.start("a", block_in="sweep_inputs")
-    killer = cluster.kill_when_blocked("a", then=lambda: cluster.start("b"))
-    result = _sweep(scheduler=cluster.address, out=tmp_path / "out")
-    killer.join(timeout=60)
-    assert cluster.signal_of("a").exists() and cluster.workers["a"].poll() is not None
-    _check_same(result, tmp_path / "out", undisturbed)
-
-
-def test_worker_holding_the_only_copy_of_the_inputs_is_lost(cluster, tmp_path, undisturbed, monkeypatch):
-    """The issue's failure: the worker that holds the only copy of what every task needs is
-    killed once the inputs are there, before any task of runs is handed out. Inputs
-    scattered with broadcast were lost with it (Dask's active memory manager keeps one copy
-    of them) and every task cancelled ("lost dependencies"); the sweep now completes on the
-    other worker, the same."""
-    from dask.distributed import wait
-
-    cluster.start("a")
-    cluster.start("b")
-    killed = []
-
-    def kill_the_holder(client, future):
-        wait(future, timeout=60)
-        deadline = time.time() + 60
-        # the only copy (copies made by broadcasting are dropped by Dask's active memory
-        # manager within seconds)
-        while len(holders := client.who_has(future)[future.key]) != 1:
-            assert time.time() < deadline, holders
-            time.sleep(0.1)
-        name = cluster.names(client)[holders[0]]
-        cluster.kill(name)
-        killed.append(name)
-
-    _hooked(monkeypatch, {"shipped": kill_the_holder})
-    result = _sweep(scheduler=cluster.address, out=tmp_path / "out")
-    assert len(killed) == 1
+    result = _sweep_killing_when_blocked(cluster, tmp_path / "out", "a", then=lambda: cluster.start("b"))
     _check_same(result, tmp_path / "out", undisturbed)
 
 
@@ -329,27 +319,23 @@ def test_worker_lost_while_it_runs_a_task(cluster, tmp_path, undisturbed):
     elsewhere and every run is recorded once, the same."""
     cluster.start("a", block_in="run_chunk", block_after=1)
     cluster.start("b")
-    killer = cluster.kill_when_blocked("a")
-    result = _sweep(scheduler=cluster.address, out=tmp_path / "out")
-    killer.join(timeout=60)
-    assert cluster.signal_of("a").exists() and cluster.workers["a"].poll() is not None
+    result = _sweep_killing_when_blocked(cluster, tmp_path / "out", "a")
     _check_same(result, tmp_path / "out", undisturbed)
 
 
-def test_worker_holding_a_result_not_yet_collected_is_lost(cluster, tmp_path, undisturbed, monkeypatch):
-    """A task done, its result not yet gathered by the client, the worker holding its only
-    copy killed: Dask computes it again, the same."""
+@pytest.mark.parametrize("moment", ["shipped", "completed"], ids=["the-inputs", "a-result"])
+def test_worker_holding_the_only_copy_is_lost(cluster, tmp_path, undisturbed, monkeypatch, moment):
+    """The worker holding the only copy of some data is killed. the-inputs: the issue's
+    failure, what every task needs, once it is there and before any task of runs is handed
+    out; scattered with broadcast, the inputs were lost with it (Dask's active memory manager
+    keeps one copy) and every task was cancelled ("lost dependencies"). a-result: a task's
+    result the client has not gathered yet, which Dask computes again. The sweep completes on
+    the other worker, the same."""
     cluster.start("a")
     cluster.start("b")
     killed = []
-
-    def kill_the_holder(client, future):
-        holders = client.who_has(future)[future.key]
-        assert len(holders) == 1, holders
-        killed.append(cluster.names(client)[holders[0]])
-        cluster.kill(killed[-1])
-
-    _hooked(monkeypatch, {"completed": kill_the_holder})
+    _hooked(monkeypatch, {moment: lambda client, future: killed.append(
+        _kill_the_only_holder(cluster, client, future))})
     result = _sweep(scheduler=cluster.address, out=tmp_path / "out")
     assert len(killed) == 1
     _check_same(result, tmp_path / "out", undisturbed)

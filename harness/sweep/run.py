@@ -383,14 +383,14 @@ def _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures, s
                                    dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
         where = f"a local Dask cluster of {n_workers} worker process{'es' if n_workers > 1 else ''}"
-        address = cluster.scheduler_address
+        address, known = cluster.scheduler_address, n_workers
         cores = min(n_workers, os.cpu_count() or n_workers)
     else:
         client = Client(scheduler, timeout=30)
         info = client.scheduler_info()
         nw = len(info.get("workers", {}))
         where = f"the Dask cluster at {scheduler} ({nw} worker{'s' if nw != 1 else ''})"
-        address = scheduler
+        address, known = scheduler, nw
         n_workers = max(nw, 1)
         cores = max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
     try:
@@ -423,7 +423,7 @@ def _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures, s
         inflight = {}
         queue = as_completed()
         # a few tasks queued per thread of the cluster, as many as it has now
-        watch = {"next": time.monotonic() + _WATCH, "workers": None, "none_since": None,
+        watch = {"next": time.monotonic() + _WATCH, "workers": known, "none_since": None,
                  "limit": max(8, 4 * max(n_workers, cores))}
 
         def submit():
@@ -471,12 +471,13 @@ def _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures, s
 
         def next_done():
             """The next task done, looking at the cluster every :data:`_WATCH` seconds."""
-            while not queue.has_ready():
+            while True:
                 if time.monotonic() >= watch["next"]:
                     look()
                     watch["next"] = time.monotonic() + _WATCH
+                if queue.has_ready():
+                    return next(queue)
                 time.sleep(0.01)
-            return next(queue)
 
         def result_of(fut):
             """A done task's result; the workers holding it may be lost meanwhile, and Dask
