@@ -402,9 +402,7 @@ def _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures, s
             result the scheduler computes again by itself)."""
             fut = shipped.get("inputs")
             if fut is None or fut.status in ("error", "cancelled"):
-                fut = client.submit(sweep_inputs, *(inputs[k] for k in ("package", "scenarios", "spreads",
-                                                                          "varied", "options")),
-                                    key=f"sweep_inputs-{uuid.uuid4().hex}", pure=False)
+                fut = client.submit(sweep_inputs, **inputs, key=f"sweep_inputs-{uuid.uuid4().hex}", pure=False)
                 shipped["inputs"] = fut
             return fut
 
