@@ -40,8 +40,11 @@ summary prints the runs/s next to the compute bound measured in the same command
 
 Scale: each task's rows are appended to ``sweep_runs.journal.csv`` (and flushed) as it
 completes; the client keeps 25 bytes per run, queues a few tasks per worker and makes each
-task as it hands it out, so its memory grows by those 25 bytes per run only. A task lost
-with its worker is run again and a run is recorded once. ``--resume`` continues an
+task as it hands it out, so its memory grows by those 25 bytes per run only. A worker may be
+lost at any moment: what every task needs is a task of its own that the scheduler computes
+again (not scattered data, which it cannot), a task lost with its worker is run again, and a
+run is recorded once; with no worker on the cluster the sweep waits ``--no-workers-timeout``
+seconds for one, then stops with its runs in the journal. ``--resume`` continues an
 interrupted sweep from its journal (``sweep_manifest.json`` says what the runs depend on; a
 different sweep is refused): only the missing runs are computed.
 

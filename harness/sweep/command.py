@@ -8,7 +8,7 @@ import sys
 from .. import masters
 from ..scenarios import load_scenarios
 from .outputs import PROG, format_summary, write_outputs
-from .run import SweepIncompleteError, run_sweep
+from .run import NO_WORKERS_TIMEOUT, SweepIncompleteError, run_sweep
 
 __all__ = ["add_sweep_arguments", "run_sweep_command"]
 
@@ -33,6 +33,10 @@ def add_sweep_arguments(parser):
                         help="worker processes of the local cluster (default: one per core; "
                              "0: run in this process without Dask)")
     parser.add_argument("--chunk", type=int, metavar="N", help="runs per Dask task (default: auto)")
+    parser.add_argument("--no-workers-timeout", type=float, default=NO_WORKERS_TIMEOUT, metavar="SECONDS",
+                        help=f"how long a sweep on Dask waits with no worker on the cluster (all "
+                             f"lost, or none yet) before it stops; the runs done stay in the "
+                             f"journal for --resume (default {NO_WORKERS_TIMEOUT:.0f})")
     parser.add_argument("--backend", choices=masters.SWEEP_BACKENDS, default="native",
                         help="master of each run: native (default) or fmpy")
     parser.add_argument("--no-adaptation", action="store_true", help="switch the controller's RLS off")
@@ -60,6 +64,9 @@ def run_sweep_command(args, stream=None):
         raise ValueError(f"--workers must be >= 0, got {args.workers}")
     if args.chunk is not None and args.chunk < 1:
         raise ValueError(f"--chunk must be at least 1, got {args.chunk}")
+    timeout = getattr(args, "no_workers_timeout", NO_WORKERS_TIMEOUT)
+    if not timeout >= 0:
+        raise ValueError(f"--no-workers-timeout must be >= 0, got {timeout}")
     registry = load_scenarios(args.scenario_file)
     try:
         result = run_sweep(args.scenarios, args.vary, args.runs, seed=args.seed, scheduler=args.scheduler,
@@ -68,7 +75,7 @@ def run_sweep_command(args, stream=None):
                            preview=not args.no_preview,
                            master="jacobi" if args.jacobi else "gauss-seidel", fmu_dir=args.fmu_dir,
                            registry=registry, progress=sys.stderr, out=args.out,
-                           resume=getattr(args, "resume", False))
+                           resume=getattr(args, "resume", False), no_workers_timeout=timeout)
     except SweepIncompleteError as exc:
         sys.stderr.write(f"{PROG}: error: {exc}\n")
         return 1

@@ -10,6 +10,7 @@ import os
 from pathlib import Path
 import tempfile
 import time
+import uuid
 
 import numpy as np
 
@@ -22,7 +23,8 @@ from ..scenarios import get_scenario
 from .manifest import prepare_folder, sweep_identity, write_manifest
 from .spreads import Spread, parse_spread, varied_keys, varies_something
 from .store import STATUS_CODE, ParameterSets, RunRows, RunStore, SweepResult
-from .worker import first_line, peak_rss, prepare_worker, remove_at_exit, run_chunk, scenario_fields
+from .worker import (first_line, peak_rss, prepare_worker, remove_at_exit, run_chunk, scenario_fields,
+                     sweep_inputs)
 
 __all__ = ["run_sweep", "SweepIncompleteError", "plant_start_values"]
 
@@ -144,9 +146,14 @@ class _Progress:
         self.stream.flush()
 
 
+#: how long a sweep on Dask waits, by default, with no worker on the cluster before it stops [s]
+NO_WORKERS_TIMEOUT = 600.0
+
+
 def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=None, chunk=None,
               backend="native", adaptation=None, preview=True, master="gauss-seidel",
-              fmu_dir=None, registry=None, progress=None, out=None, resume=False):
+              fmu_dir=None, registry=None, progress=None, out=None, resume=False,
+              no_workers_timeout=NO_WORKERS_TIMEOUT):
     """Run a Monte Carlo sweep, streaming every run to disk as its task completes.
 
     Parameters
@@ -183,6 +190,9 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
     resume : bool
         Continue the unfinished sweep in ``out`` (the same scenarios, runs, seed, spreads,
         options and FMUs): only its missing runs are computed.
+    no_workers_timeout : float
+        Seconds a sweep on Dask waits with no worker on the cluster (all lost, or none yet)
+        before it stops with :class:`SweepIncompleteError`; its runs so far are in the journal.
 
     Returns
     -------
@@ -193,11 +203,15 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
     ValueError
         Bad arguments, nothing varied, or ``out`` holding another (or an unfinished) sweep.
     SweepIncompleteError
-        Runs whose task failed on every attempt (the others are in the journal: resume).
+        Runs whose task failed on every attempt, or the sweep stopped because the cluster had
+        no worker for ``no_workers_timeout`` or the scheduler was lost (the others are in the
+        journal: resume).
     """
     t_start = time.perf_counter()
     if n_runs < 1:
         raise ValueError(f"the number of runs must be at least 1, got {n_runs}")
+    if not no_workers_timeout >= 0:
+        raise ValueError(f"the time to wait for workers must be >= 0 s, got {no_workers_timeout}")
     masters.check_sweep_backend(backend)
     master = normalize_master(master)
     base_all = plant_start_values(fmu_dir)
@@ -245,8 +259,10 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
         progress.write(f"sweep: resuming {folder}: {done_before} of {total} runs done, "
                        f"{total - done_before} to compute\n")
     prog = _Progress(total, done_before, progress) if progress is not None else None
-    fields_ = {sc.name: scenario_fields(sc) for sc in scs}
+    inputs = sweep_inputs(package, {sc.name: (scenario_fields(sc), bases[sc.name]) for sc in scs},
+                          spreads, varied, options)
     failures = []
+    stopped = []
     # the largest worker's peak RSS; the tasks' CPU and wall-clock seconds
     tally = {"worker_rss": None, "task_cpu": 0.0, "task_wall": 0.0}
 
@@ -284,14 +300,13 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
             prepare_worker(package, options)
             clock["start"], cpu = time.perf_counter(), time.process_time()
             for name, part in tasks(1):
-                rows, _, used = run_chunk(package, fields_[name], bases[name], spreads, seed, part,
-                                          varied, options)
+                rows, _, used = run_chunk(inputs, name, seed, part)
                 collect(name, (rows, None, used))
             clock["end"] = time.perf_counter()
             clock["cpu"] = time.process_time() - cpu - tally["task_cpu"]     # this process besides the tasks
         else:
-            where, cores = _run_on_dask(scheduler, n_workers, package, tasks, collect, failures,
-                                        (fields_, bases, spreads, seed, varied, options), prog, clock)
+            where, cores = _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures,
+                                        stopped, prog, clock, no_workers_timeout)
     except KeyboardInterrupt:
         store.close()
         if progress is not None:
@@ -301,6 +316,9 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
         raise
     store.close()
     missing = total - store.done()
+    if missing and stopped:
+        raise SweepIncompleteError(f"{missing} of {total} runs are missing: {stopped[-1]}; the others are "
+                                   f"in {store.path}: rerun with --resume")
     if missing:
         why = f" (last error: {failures[-1]})" if failures else ""
         raise SweepIncompleteError(f"{missing} of {total} runs are missing: their tasks failed on every "
@@ -318,20 +336,44 @@ def run_sweep(scenarios, spreads, n_runs, *, seed=1, scheduler=None, workers=Non
                                     "tasks_wall": tally["task_wall"]})
 
 
-_ATTEMPTS = 4          # a task whose worker is lost is run again; after this many failures its runs are missing
+_ATTEMPTS = 4          # a task that fails this many times (its own error, or KilledWorker) leaves its runs missing
+_WATCH = 2.0           # seconds between the client's looks at the cluster's workers
+
+#: called as ``_hook(moment, client=..., future=...)`` at the moments of a sweep on Dask:
+#: "connected", "shipped" (the inputs submitted, the workers prepared; ``future``: the
+#: inputs), "completed" (``future``: a task done, before its result is gathered). None:
+#: nothing. The tests kill workers there.
+_hook = None
 
 
-def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, prog, clock):
+def _moment(name, **details):
+    if _hook is not None:
+        _hook(name, **details)
+
+
+class _Stopped(Exception):
+    """The sweep cannot go on on this cluster (no worker for too long, the scheduler lost)."""
+
+
+def _run_on_dask(scheduler, n_workers, inputs, seed, tasks, collect, failures, stopped, prog, clock,
+                 no_workers_timeout):
     """Run the missing runs on Dask; return (where, the runs computed at once). At most a few
-    tasks per worker are queued at a time, made as they are handed out (memory does not grow
-    with the number of runs). A task lost with its worker is rescheduled by Dask; a task that
-    fails anyway is submitted again. ``clock`` gets the start (the first task handed out),
-    the end (the last one collected) and the CPU seconds of this process in between (the
-    client, and a local cluster's scheduler)."""
-    import dask                                                         # heavy: only here
-    from dask.distributed import Client, LocalCluster, as_completed
+    tasks per thread of the cluster (as many threads as it has now) are queued at a time, made
+    as they are handed out (memory does not grow with the number of runs).
 
-    fields_, bases, spreads, seed, varied, options = task
+    What every task needs besides its runs (:func:`sweep_inputs`: the FMUs, the scenarios,
+    the spreads, the options) is a task of its own that the tasks of runs depend on, so their
+    messages stay small; the scheduler computes it again when the workers holding it are
+    lost (it is submitted again if it fails). A task lost with its worker is rescheduled by
+    Dask; a task that fails anyway is submitted again (:data:`_ATTEMPTS`), a cancelled one
+    without counting an attempt. With no worker on the cluster for ``no_workers_timeout``
+    seconds, or the scheduler lost for good, the sweep stops (``stopped`` gets why). ``clock``
+    gets the start (the first task handed out), the end (the last one collected) and the
+    CPU seconds of this process in between (the client, and a local cluster's scheduler)."""
+    import dask                                                         # heavy: only here
+    from dask.distributed import Client, LocalCluster, TimeoutError as DaskTimeoutError, as_completed
+    from distributed.client import FutureCancelledError
+
     cluster = None
     if scheduler is None:
         # without Dask's statistical profiler, which samples every worker's stack 100 times a
@@ -341,33 +383,46 @@ def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, 
                                    dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
         where = f"a local Dask cluster of {n_workers} worker process{'es' if n_workers > 1 else ''}"
+        address, known = cluster.scheduler_address, n_workers
         cores = min(n_workers, os.cpu_count() or n_workers)
     else:
         client = Client(scheduler, timeout=30)
         info = client.scheduler_info()
         nw = len(info.get("workers", {}))
         where = f"the Dask cluster at {scheduler} ({nw} worker{'s' if nw != 1 else ''})"
+        address, known = scheduler, nw
         n_workers = max(nw, 1)
         cores = max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
     try:
-        # everything a task needs but its runs goes to the workers once: the scheduler's and
-        # the workers' logs of recent messages (Dask keeps the last 1000) then hold small
-        # messages, whatever the number of tasks
-        shipped = client.scatter(package, broadcast=True)
-        constant = {name: client.scatter([fields_[name], bases[name]], broadcast=True) for name in fields_}
-        common = client.scatter([spreads, varied, options], broadcast=True)
+        _moment("connected", client=client)
+        shipped = {}
+
+        def ship():
+            """The inputs' task, submitted again when it failed or was cancelled (a lost
+            result the scheduler computes again by itself)."""
+            fut = shipped.get("inputs")
+            if fut is None or fut.status in ("error", "cancelled"):
+                fut = client.submit(sweep_inputs, **inputs, key=f"sweep_inputs-{uuid.uuid4().hex}", pure=False)
+                shipped["inputs"] = fut
+            return fut
+
+        ship()
         # the workers there now load the FMUs before the clock starts (part of the start, like
         # the cluster's); a worker that joins later does it in its first task, and a worker
-        # that cannot fails its tasks, which are retried and reported as any failed task
+        # that cannot (or is lost meanwhile) fails its tasks, which are retried and reported
+        # as any failed task
         try:
-            client.run(prepare_worker, package, options)
+            client.run(prepare_worker, inputs["package"], inputs["options"])
         except Exception:                       # noqa: BLE001 - the tasks meet it again and report it
             pass
+        _moment("shipped", client=client, future=shipped["inputs"])
         source = tasks(cores)
         retry = deque()
         inflight = {}
         queue = as_completed()
-        limit = max(8, 4 * n_workers)
+        # a few tasks queued per thread of the cluster, as many as it has now
+        watch = {"next": time.monotonic() + _WATCH, "workers": known, "none_since": None,
+                 "limit": max(8, 4 * max(n_workers, cores))}
 
         def submit():
             if retry:
@@ -377,21 +432,83 @@ def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, 
                 if nxt is None:
                     return False
                 (name, part), attempt = nxt, 1
-            description, base = constant[name]
-            spreads_, varied_, options_ = common
-            fut = client.submit(run_chunk, shipped, description, base, spreads_, seed, _compact(part),
-                                varied_, options_, pure=False)
+            fut = client.submit(run_chunk, ship(), name, seed, _compact(part), pure=False)
             inflight[fut] = (name, part, attempt)
             queue.add(fut)
             return True
 
-        clock["start"], cpu = time.perf_counter(), time.process_time()
-        while len(inflight) < limit and submit():
-            pass
-        for fut in queue:
-            name, part, attempt = inflight.pop(fut)
+        def look():
+            """Check the cluster's workers; say when their number changes; raise _Stopped
+            when there has been none for too long or the scheduler is lost for good."""
+            if client.status == "closed":
+                raise _Stopped(f"the connection to the scheduler at {address} was lost")
             try:
-                result = fut.result()
+                threads = client.nthreads()
+            except Exception:                   # noqa: BLE001 - reconnecting: looked at again
+                if client.status == "closed":
+                    raise _Stopped(f"the connection to the scheduler at {address} was lost") from None
+                return
+            now = time.monotonic()
+            n, before = len(threads), watch["workers"]
+            watch["workers"] = n
+            watch["limit"] = max(8, 4 * sum(threads.values()))
+            if n:
+                if watch["none_since"] is not None and prog is not None:
+                    prog.say(f"sweep: {n} worker{'s' if n != 1 else ''} on the cluster again; going on")
+                elif before is not None and n != before and prog is not None:
+                    prog.say(f"sweep: {n} worker{'s' if n != 1 else ''} on the cluster (were {before})")
+                watch["none_since"] = None
+                return
+            if watch["none_since"] is None:
+                watch["none_since"] = now
+                if prog is not None:
+                    prog.say(f"sweep: no worker on the cluster at {address}; waiting up to "
+                             f"{no_workers_timeout:.0f} s for one (--no-workers-timeout)")
+            if now - watch["none_since"] >= no_workers_timeout:
+                raise _Stopped(f"the cluster at {address} had no worker for {no_workers_timeout:.0f} s")
+
+        def next_done():
+            """The next task done, looking at the cluster every :data:`_WATCH` seconds."""
+            while True:
+                if time.monotonic() >= watch["next"]:
+                    look()
+                    watch["next"] = time.monotonic() + _WATCH
+                if queue.has_ready():
+                    return next(queue)
+                time.sleep(0.01)
+
+        def result_of(fut):
+            """A done task's result; the workers holding it may be lost meanwhile, and Dask
+            then computes it again: looking at the cluster while it waits."""
+            while True:
+                try:
+                    return fut.result(timeout=_WATCH)
+                except DaskTimeoutError:
+                    if fut.status == "error":       # the task's own TimeoutError
+                        raise
+                    look()
+
+        told = set()                            # the reasons of cancelled tasks said
+        clock["start"], cpu = time.perf_counter(), time.process_time()
+        while len(inflight) < watch["limit"] and submit():
+            pass
+        while inflight:
+            fut = next_done()
+            name, part, attempt = inflight.pop(fut)
+            _moment("completed", client=client, future=fut)
+            try:
+                result = result_of(fut)
+            except FutureCancelledError as exc:
+                # not the task's doing (its inputs or the scheduler were lost): again, uncounted
+                if client.status == "closed":
+                    raise _Stopped(f"the connection to the scheduler at {address} was lost") from None
+                failures.append(first_line(exc) or type(exc).__name__)
+                if exc.reason == "lost dependencies":
+                    shipped.pop("inputs", None)     # the scheduler forgot them: submitted anew
+                retry.append((name, part, attempt))
+                if prog is not None and exc.reason not in told:
+                    told.add(exc.reason)            # once until a task completes again
+                    prog.say(f"sweep: tasks cancelled by Dask ({exc.reason}); running them again")
             except Exception as exc:                # noqa: BLE001 - any failure of a task is retried
                 failures.append(first_line(exc) or type(exc).__name__)
                 if attempt < _ATTEMPTS:
@@ -401,10 +518,13 @@ def _run_on_dask(scheduler, n_workers, package, tasks, collect, failures, task, 
                                  f"running it again (attempt {attempt + 1} of {_ATTEMPTS})")
             else:
                 collect(name, result)
+                told.clear()
             fut.release()
-            while len(inflight) < limit and submit():
+            while len(inflight) < watch["limit"] and submit():
                 pass
         clock["end"], clock["cpu"] = time.perf_counter(), time.process_time() - cpu
+    except _Stopped as exc:
+        stopped.append(str(exc))
     finally:
         client.close()
         if cluster is not None:

@@ -34,8 +34,8 @@ from ..scenarios import Scenario
 from .spreads import apply_spreads, draw_columns, run_deltas
 from .store import task_rows
 
-__all__ = ["run_chunk", "prepare_worker", "scenario_fields", "scenario_from_fields", "first_line",
-           "peak_rss", "remove_at_exit"]
+__all__ = ["run_chunk", "sweep_inputs", "prepare_worker", "scenario_fields", "scenario_from_fields",
+           "first_line", "peak_rss", "remove_at_exit"]
 
 _TEMP_DIRS = {}        # the folders this process made, removed at its exit
 
@@ -178,25 +178,44 @@ def prepare_worker(package, options):
     masters.prepared_loop(options["backend"], _fmu_dir_for(package))
 
 
-def run_chunk(package, description, base, spreads, seed, indices, varied, options):
-    """Worker task: some runs of one scenario, each drawing its own parameters.
+def sweep_inputs(package, scenarios, spreads, varied, options):
+    """What every task of a sweep needs besides its runs, as one value (:func:`run_chunk`'s
+    ``inputs``).
+
+    On Dask this is a task of its own, which the tasks of runs depend on: its arguments are
+    in its definition, which the scheduler keeps, so when the workers holding its result
+    are lost the scheduler computes it again (scattered data cannot be: a task whose
+    scattered input was on a lost worker is cancelled).
 
     Parameters
     ----------
     package : (str, dict)
         Content digest and ``{file name: bytes}`` of both FMUs.
-    description : dict
-        The scenario, from :func:`scenario_fields`.
-    base : dict
-        The scenario's complete plant parameter set, before the spreads.
+    scenarios : dict
+        Scenario name -> (its description from :func:`scenario_fields`, its complete plant
+        parameter set before the spreads).
     spreads : list of Spread
-    seed : int
-    indices : sequence of int
-        The runs (run i draws from the generator seeded by (seed, i)).
     varied : list of str
         Parameter names whose drawn values are returned with each run.
     options : dict
         ``backend``, ``adaptation``, ``preview``, ``master``.
+    """
+    return {"package": package, "scenarios": scenarios, "spreads": spreads, "varied": varied,
+            "options": options}
+
+
+def run_chunk(inputs, name, seed, indices):
+    """Worker task: some runs of one scenario, each drawing its own parameters.
+
+    Parameters
+    ----------
+    inputs : dict
+        What every task needs, from :func:`sweep_inputs`.
+    name : str
+        The scenario.
+    seed : int
+    indices : sequence of int
+        The runs (run i draws from the generator seeded by (seed, i)).
 
     Returns
     -------
@@ -206,7 +225,9 @@ def run_chunk(package, description, base, spreads, seed, indices, varied, option
         process spent on the task (all its threads) with the wall-clock seconds it took.
     """
     cpu, wall = time.process_time(), time.perf_counter()
-    fmu_dir = _fmu_dir_for(package)
+    description, base = inputs["scenarios"][name]
+    spreads, varied, options = inputs["spreads"], inputs["varied"], inputs["options"]
+    fmu_dir = _fmu_dir_for(inputs["package"])
     scenario = scenario_from_fields(description)
     indices = [int(i) for i in indices]
     m = len(indices)
