@@ -289,9 +289,10 @@ def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path, mo
     c, c_off = result.counts(NAME), result.counts(off)
     assert sum(c.values()) == sum(c_off.values()) == 24
     # seed 11 draws the same 24 plants every time: every kind of run, exactly so many (with the
-    # supervision on, 8 are stopped; with it off, none, and 2 diverge)
+    # supervision on, 8 are stopped; with it off, none, and 4 of those 8 diverge: the stages far
+    # off the model the supervision stops; 2 did with the paper's law)
     assert c == {"ok": 7, "diverged": 0, "saturated": 5, "invalid": 4, "stopped": 8}, c
-    assert c_off == {"ok": 10, "diverged": 2, "saturated": 8, "invalid": 4, "stopped": 0}, c_off
+    assert c_off == {"ok": 8, "diverged": 4, "saturated": 8, "invalid": 4, "stopped": 0}, c_off
     loop = native.NativeLoop()
     for name in (NAME, off):
         sc = scenarios[name]
