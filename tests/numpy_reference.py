@@ -360,9 +360,10 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
     """The robust update over recorded data (q(k), y(k)) with the law's references r(k)
     (r(-1) = 0), from theta0 and P = p0_loop I, offset c = 0:
 
-        excitation at k: |r(k-1) - r_a| > excitation * m_y(k), m_y the measured noise of y
-                         before sample k; then r_a = r(k-1) and the estimator adapts at k and
-                         for excitation_samples samples after
+        excitation at k: |r(k-1) - line| > excitation * m_y(k), m_y the measured noise of y
+                         before sample k, line the straight line through the last excitation
+                         (its r, advanced by its r(j) - r(j-1) each sample since); the estimator
+                         adapts at k and for excitation_samples samples after
         e(k) = y(k) - c - phi^T theta      (phi as rls_reference)
         adapting: the exponentially weighted RLS of rls_reference with
                   trace(P) <= min(trace_max, variance_max / m_e(k)^2), m_e the measured noise
@@ -388,7 +389,7 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
     P = p0_loop * np.eye(4)
     c = 0.0
     m_y = m_e = 0.0
-    anchor, left = 0.0, 0
+    anchor, velocity, left = 0.0, 0.0, 0
     e_prev = e_before
     out = {"theta": np.zeros((n, 4)), "P": np.zeros((n, 4, 4)), "e": np.zeros(n), "c": np.zeros(n),
            "adapting": np.zeros(n, dtype=bool)}
@@ -402,12 +403,14 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
 
     for k in range(n):
         r1 = r[k - 1] if k >= 1 else 0.0
-        event = abs(r1 - anchor) > excitation * m_y
+        r2 = r[k - 2] if k >= 2 else 0.0
+        line = anchor + velocity
+        event = abs(r1 - line) > excitation * m_y
         adapting = event or left > 0
         if event:
-            anchor, left = r1, excitation_samples
+            anchor, velocity, left = r1, r1 - r2, excitation_samples
         else:
-            left = max(left - 1, 0)
+            anchor, left = line, max(left - 1, 0)
         m_y = track(m_y, Y(k) - Y(k - 1))
         phi = np.array([-Y(k - 1), -Y(k - 2), Q(k - d), Q(k - d - 1)])
         e = y[k] - c - phi @ theta

@@ -170,7 +170,7 @@ class ControllerRef:
         self.variance_max, self.p0_loop, self.gamma = c.variance_max, c.p0_loop, c.integral_gain
         self.noise_y = self.noise_e = self.anchor = self.offset = self.z = 0.0
         self.left, self.prev_pred_error = 0, 0.0
-        self.r_last = 0.0                       # the law's reference without z at k-1
+        self.r_last = self.r_last2 = self.velocity = 0.0   # the law's reference without z at k-1, k-2
         self.yd = {}                            # y_d by sample: the law's r(j) is y_d(j + d)
         self.sat, self.v_min, self.v_max = c.sat_enabled, c.sat_v_min, c.sat_v_max
         self.pe_max, self.window = c.pred_error_max, c.divergence_samples
@@ -274,7 +274,7 @@ class ControllerRef:
             self.next_probe = 0.0 if self.probes >= self.PROBES else (1e-3 if p < 1e-3 else (1.0 if p > 1.0 else p))
         if not self.detecting:
             self.d, self.k_delay = best + 1, self.k
-            self.theta, self.P = list(self.det_theta[best]), self.det_P[best]
+            self.theta, self.P = list(self.nominal if self.robust else self.det_theta[best]), self.det_P[best]
             if self.robust:
                 self.P = [[self.p0_loop if i == j else 0.0 for j in range(4)] for i in range(4)]
         return errs[best]
@@ -285,10 +285,12 @@ class ControllerRef:
         excited, offset = True, self.offset
         if self.robust:
             r1 = self.r_last
-            event = abs(r1 - self.anchor) > self.excitation * self.noise_y
+            line = self.anchor + self.velocity
+            event = abs(r1 - line) > self.excitation * self.noise_y
             noise_y = track_noise(self.noise_y, y_meas - self.y_prev[0])
             excited = event or self.left > 0
-            anchor = r1 if event else self.anchor
+            anchor = r1 if event else line
+            velocity = r1 - self.r_last2 if event else self.velocity
             left = self.excitation_samples if event else (self.left - 1 if self.left > 0 else 0)
         if was_detecting:
             offset = 0.0
@@ -309,7 +311,7 @@ class ControllerRef:
                                                            self.rls and not self.sat_hold > 0)
         if self.robust:
             self.noise_e = track_noise(self.noise_e, pred_error - self.prev_pred_error)
-            self.noise_y, self.anchor, self.left = noise_y, anchor, left
+            self.noise_y, self.anchor, self.left, self.velocity = noise_y, anchor, left, velocity
         self.prev_pred_error = pred_error
         self.offset = offset
         d = self.d
@@ -359,7 +361,7 @@ class ControllerRef:
                    and self.k + 1 - self.k_delay >= self.REDETECT)
         self.creep.s, self.creep.x = s_next, x_next
         self.q_past = [q] + self.q_past[:-1]
-        self.r_last = r_plain
+        self.r_last2, self.r_last = self.r_last, r_plain
         self.yd[self.k + d] = r_plain
         self.z = z
         self.y_prev = [y_meas, self.y_prev[0]]

@@ -55,14 +55,15 @@ def loop(n=2000, meas=None, act=None, plant=None, ctrl=None, amplitude=10.0, f=5
     return rows, None, n
 
 
-@pytest.mark.parametrize("bound", [D["monitor.pred_error_max"], 0.01], ids=["default bound", "bound 0.01 um"])
+@pytest.mark.parametrize("bound", [D["monitor.pred_error_max"], 0.014], ids=["default bound", "bound 0.014 um"])
 def test_statistics_equal_the_numpy_transcription(bound):
     """Reference: harness.supervision.statistics, the sums of piezo_supervisor.c written again
     with scipy.signal.lfilter. After every sample of a 1 s mismatch loop, the C core's
     Szz, Szw_d (d = 1..8), Sww_d (from its ring), the travelled distances, the share of large
     errors and the window's weight equal them to 1e-12 relative; with monitor.pred_error_max at
-    its default the share stays 0, at 0.01 um the loop's own prediction errors exceed it often
-    enough for a share of more than a tenth (compared, not only zeros)."""
+    its default the share stays 0, at 0.014 um the loop's own prediction errors exceed it often
+    enough for a share of more than a tenth (compared, not only zeros; 0.63 measured). (At 0.01 um
+    the start-up transient's errors make the monitor stop the loop at sample 162.)"""
     got = {"szz": [], "szw": [], "sww": [], "travel_model": [], "travel_meas": [], "weight": [],
            "mon_share": [], "mon_weight": []}
 

@@ -27,8 +27,9 @@
  * and uses y_d(k + d) from it when present, y_ref otherwise.
  *
  * Robust adaptation (rls.robust, docs/model.md): the loop's RLS updates only
- * while the reference excites the loop (it moved by more than rls.excitation
- * times the measured noise of y_meas within the last rls.excitation_time),
+ * while the reference excites the loop (it left its straight-line extrapolation
+ * from the last excitation by more than rls.excitation times the measured noise
+ * of y_meas within the last rls.excitation_time),
  * regresses y - c on the model, c the offset it tracks while it does not
  * update, starts from rls.p0_loop I once d is chosen, and bounds trace(P) by
  * rls.variance_max / sigma_e^2 (sigma_e the measured noise of its prediction
@@ -64,6 +65,7 @@
 #define PIEZO_DETECT_REDETECT 10 /* samples beyond the monitor bound that restart detection */
 #define PIEZO_DETECT_TRIAL 20    /* samples of one detection trial (the next one starts with a probe) */
 #define PIEZO_DETECT_PROBES 8    /* probes per detection at most (then trials without probes) */
+#define PIEZO_DETECT_HELD 200   /* a chosen d that holds this long ends the search for one */
 #define PIEZO_PREVIEW_RING 16    /* stamped previews kept: leads 1..15 samples */
 
 typedef struct {
@@ -130,6 +132,7 @@ typedef struct {
     int auto_delay;              /* 1: d is detected */
     int detecting;               /* 1 until d is chosen: the start-up law runs */
     uint64_t k_delay;            /* sample at which d took its current value */
+    uint64_t k_search;           /* sample since which no chosen d held for PIEZO_DETECT_HELD samples */
     uint64_t n_detections;       /* detections started (1 at reset in auto mode, +1 per restart) */
     int det_leader;              /* candidate leading clearly (index, d - 1), -1: none */
     int det_run;                 /* consecutive samples it has led */
@@ -154,11 +157,13 @@ typedef struct {
     /* robust adaptation and integral action: the states of k (reset to 0) */
     double noise_y;              /* measured noise of y_meas [um] (0: not yet measured) */
     double noise_e;              /* measured noise of the prediction error [um] (0: not yet) */
-    double r_anchor;             /* the reference at the last excitation */
+    double r_anchor;             /* the reference extrapolated from the last excitation to k-1 */
     uint64_t excite_left;        /* samples the RLS still updates (0: it holds its estimates) */
     double offset;               /* the estimator's offset c [um] */
     double integral;             /* z(k-1) of the integral action [um] */
     double r_last;               /* the law's reference without z at k-1 (the excitation's) */
+    double r_last2;              /* ... at k-2 */
+    double r_velocity;           /* the reference's change per sample at the last excitation */
     double yd_value[PIEZO_MV_Q_RING];    /* y_d by sample: the law's reference without z, r(j) = */
     uint64_t yd_tag[PIEZO_MV_Q_RING];    /* y_d(j + d), kept at slot (j + d) mod ring with tag j + d + 1 */
     int sat_enabled;
@@ -207,7 +212,7 @@ typedef struct {
     double theta[4], P[16];      /* RLS result (valid when rls_updated) */
     int rls_updated;
     /* robust adaptation and integral action: the states of k+1 */
-    double noise_y, noise_e, r_anchor, offset, integral;
+    double noise_y, noise_e, r_anchor, offset, integral, r_velocity;
     uint64_t excite_left;
     int excited;                 /* the reference excites the loop at k */
     double r_plain;              /* the reference of the law without z */
