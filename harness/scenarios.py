@@ -86,6 +86,7 @@ __all__ = [
     "load_scenario_file",
     "load_scenarios",
     "parameter_set",
+    "profile_signal",
     "stage_use_scenarios",
     "get_scenario",
     "list_scenarios",
@@ -647,7 +648,7 @@ def _parse_profile(spec, path, scenario, fieldname):
             a = _number(seg["amplitude"], path, scenario, f"{where}.amplitude")
             secs = _number(seg["time"], path, scenario, f"{where}.time", positive=True)
             items.append((where, "scan", shape, secs, 0.0, False, f, a))
-    return _ProfileSpec(start, tuple(items), str(path))
+    return _ProfileSpec(start, tuple(items), "" if path is None else str(path))
 
 
 def _place_profile(spec, step, path, scenario):
@@ -678,6 +679,33 @@ def _place_profile(spec, step, path, scenario):
         raise ScenarioFileError(path, "the profile lasts no time (give it a hold, a timed move or a "
                                       "scan)", scenario, "reference.segments")
     return Signal("profile", offset=spec.start, source=spec.source, segments=tuple(out), step=step)
+
+
+def profile_signal(segments, start=0.0, step=DEFAULT_STEP_SIZE):
+    """A profile reference from its segments, as a scenario file writes them.
+
+    Parameters
+    ----------
+    segments : list of dict
+        ``{"hold": 0.2}``, ``{"move": 10.0, "shape": "scurve", "time": 0.05}``, ``{"to": 5.0}``,
+        ``{"scan": "triangle", "frequency": 10.0, "amplitude": 10.0, "time": 2.0}``, ...
+    start : float
+        The start position [um].
+    step : float
+        The sample period [s].
+
+    Returns
+    -------
+    Signal
+
+    Raises
+    ------
+    ScenarioFileError
+        As for a file (without a file's name).
+    """
+    spec = _parse_profile({"type": "profile", "start": start, "segments": list(segments)}, None,
+                          None, "reference")
+    return _place_profile(spec, float(step), None, None)
 
 
 def _regrid_profile(signal, step, path, scenario):
