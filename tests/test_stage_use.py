@@ -206,9 +206,12 @@ def test_communication_points_hold_only_where_the_input_holds():
     # 2000; the ramp from 3400 passes 3401 .. 3420) to 0.5 s after its last change
     for a, b in ((0, 1000), (1997, 3000), (3398, 4420)):
         assert set(range(a, b)) <= set(pts.tolist())
-    # a long step never spans two values of the input
-    for a, b in zip(pts[:-1], pts[1:]):
-        assert np.all(y_ref[a:b] == y_ref[a])
+    # a long step never spans two values of the input, even where the motion's margin does not
+    # cover it (told a lead of 0 for an input 2 samples ahead, and no settle time)
+    for lead, settle in ((2, 0.5), (0, 0.0)):
+        pts_ = communication_points(y_d[:n], y_ref, H, lead, hold_step=0.01, settle=settle)
+        for a, b in zip(pts_[:-1], pts_[1:]):
+            assert np.all(y_ref[a:b] == y_ref[a]), (lead, settle, a, b)
     # 10 ms steps in the holds: 0.5 s to 1 s, 1.5 s to 1.7 s, 2.21 s to the end
     assert np.sum((pts >= 1000) & (pts < 1997)) <= 51 and np.sum(pts >= 4420) <= 51
 
