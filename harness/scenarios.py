@@ -1,4 +1,5 @@
-"""Scenario definitions: built-in (paper Tables 1-5, docs/model.md, scenarios) and user files.
+"""Scenario definitions: built-in (paper Tables 1-5, docs/model.md, scenarios; stage use,
+docs/stage_use.md) and user files.
 
 A scenario file is TOML (read with :mod:`tomllib`).  It may define named
 parameter sets and any number of scenarios::
@@ -25,6 +26,39 @@ parameter sets and any number of scenarios::
                   phases = [0.0], offset = 0.0 }       # phases in rad
     # or
     reference = { type = "csv", file = "ref.csv" }     # path relative to the TOML file
+    # or a stage-use profile (tracking only; docs/stage_use.md)
+    reference = { type = "profile", start = 0.0, segments = [
+        { hold = 0.2 },                                   # hold the position 0.2 s
+        { move = 10.0 },                                  # a step of +10 um
+        { move = 30.0, shape = "scurve", time = 0.05 },   # +30 um along an S-curve, 50 ms
+        { to = 5.0, shape = "ramp", time = 0.1 },         # to 5 um along a ramp, 100 ms
+        { scan = "triangle", frequency = 10.0, amplitude = 10.0, time = 2.0 },
+        { scan = "sine", frequency = 1.0, amplitude = 10.0, time = 60.0 },
+        { hold = 10.0 },
+    ] }
+
+A profile starts at ``start`` [um] (default 0) at t = 0 and runs its segments
+in order, each from where the one before left the stage:
+
+* ``hold = T``: the position, for T seconds;
+* ``move = D`` (by D um) or ``to = P`` (to P um), ``shape = "step"`` (the
+  default: the position jumps at the segment's first sample, no ``time``),
+  ``"ramp"`` or ``"scurve"`` over ``time`` seconds: ``p + D c((t - t0)/time)``
+  with c(s) = s (ramp) or the cycloid s - sin(2 pi s)/(2 pi) (S-curve: zero
+  velocity and acceleration at both ends), reaching p + D at the next
+  segment's first sample;
+* ``scan = "triangle"`` or ``"sine"``, from the current position p over
+  ``time`` seconds: p + A tri(f (t - t0)), tri rising from 0 to 1 in half a
+  period and back (a raster line out and back, A < 0 scans downwards), or
+  p + A sin(2 pi f (t - t0)); the next segment starts where it ends (p after
+  whole periods).
+
+Every time is a whole number of samples of ``step_size``, so each segment
+begins on a sample; ``duration`` defaults to the profile's length (a longer
+one holds the last position). The moves, the holds and the scans, and so the
+windows of the stage-use metrics (where a move ends and a hold begins:
+:mod:`harness.profiles`), come from the profile itself. Segments are counted
+from 1 in messages (``reference.segments[2].time``).
 
 Rules a file is checked against (each broken rule is one error naming the
 file, the scenario and the field):
@@ -35,7 +69,11 @@ file, the scenario and the field):
   ``h`` (0.0005 s unless the scenario sets ``"h"`` in ``plant`` and
   ``controller``): the harness exchanges values once per sample;
 * every sine frequency must lie below the Nyquist frequency
-  ``1 / (2 step_size)``;
+  ``1 / (2 step_size)``, and so must a profile's scans;
+* a profile's segments have exactly one of ``hold``, ``move``, ``to``,
+  ``scan`` and only the keys that go with it; a step takes no ``time``, a
+  ramp, an S-curve and a scan need one; its times are whole numbers of
+  samples; a profile is a tracking reference; ``duration`` may not cut it;
 * a validation scenario runs the plant alone, so it takes no controller
   overrides;
 * paper values (``paper = {...}``: ``e_rms_um``/``e_r`` for tracking,
