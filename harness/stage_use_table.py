@@ -470,9 +470,9 @@ _TARGET_ROWS = (
 )
 
 
-def verdicts(summary, master=MASTER_EXCHANGE):
-    """``{target: (worst of the robust law, bound, passed, regression)}`` for a to e on one
-    master; a regression is a worst beyond the documented one (:data:`DOCUMENTED`)."""
+def verdicts(summary, master=None):
+    """``{target: (worst of the robust law, bound, passed, regression)}`` for a to e over every
+    master (or one); a regression is a worst beyond the documented one (:data:`DOCUMENTED`)."""
     out = {}
     for key in ("a", "b", "c", "d"):
         _, worst, n = _stats(summary[key], master)
@@ -561,6 +561,18 @@ def _breakdown(summary):
                 mo, wo, _ = _stats(o)
                 mp, wp, _ = _stats(p)
                 rows.append([move, f"{nm:g} nm", f"{hold:g} s", f"({key})", f"{_cell(mo)} / {_cell(wo)}",
+                             f"{_cell(mp)} / {_cell(wp)}"])
+    for f in TONE_FREQUENCIES:
+        for nm in SENSORS_NM:
+            name = f"{f:g} Hz tone for 60 s, then a 10 um step"
+            o = [r for r in summary["tone"] if r.profile == name and r.sensor_nm == nm
+                 and r.master == MASTER_EXCHANGE]
+            p = [r for r in summary["tone_paper"] if r.profile == name and r.sensor_nm == nm
+                 and r.master == MASTER_EXCHANGE]
+            if o or p:
+                mo, wo, _ = _stats(o)
+                mp, wp, _ = _stats(p)
+                rows.append([name, f"{nm:g} nm", "0.5 s", "(tone)", f"{_cell(mo)} / {_cell(wo)}",
                              f"{_cell(mp)} / {_cell(wp)}"])
     for f in SCAN_FREQUENCIES:
         for nm in SENSORS_NM:
