@@ -111,9 +111,10 @@ _WARNING_KINDS = (("|pred_error| exceeded", "pred_error beyond its bound"),
 
 #: the issue's bound of each target (a ratio; e: a count)
 TARGETS = {"a": 1.1, "b": 1.0, "c": 1.1, "d": 1.0, "e": 0}
-#: the robust law's worst over the 50-stage family as docs/stage_use.md documents it (measured by
-#: this command; a larger value is a regression and exits 1)
-DOCUMENTED = {"a": None, "b": None, "c": None, "d": None, "e": 0}
+#: the robust law's worst over the 50-stage family (every master) as docs/stage_use.md documents it,
+#: measured by this command at commit 8580b7d's core (7.824, 8.015, 2615, 1.328, 11 runs): a larger
+#: value is a regression and exits 1. Where the issue's bound is met, the bound is the limit.
+DOCUMENTED = {"a": 7.83, "b": 8.02, "c": 2620.0, "d": 1.33, "e": 11}
 
 
 # ---------------------------------------------------------------------------
@@ -373,13 +374,14 @@ class Ratio:
 
 def summarize(results, profile_list):
     """The ratios of every target from the runs: ``{target: [Ratio]}`` with targets ``a``, ``b``
-    (robust law; ``a_paper``, ``b_paper`` the paper's), ``b_own`` (20 nm over its own 0.2 s),
+    (robust law; ``a_paper``, ``b_paper`` the paper's), ``own`` (a move after 4 to 600 s over the
+    same after 0.2 s with the same sensor: what the hold itself does),
     ``c``, ``d``, ``tone``, and their paper's twins; ``e``: the runs with a supervision Error or
     Warning; ``errors``: every run an Error stopped; ``warnings``: counts of the controller's other
     warnings by kind; ``equal``: the checking masters' comparisons; ``absolute``: the reference
     moves' worst errors [um]."""
     by_name = {p.name: p for p in profile_list}
-    out = {k: [] for k in ("a", "b", "b_own", "c", "d", "tone", "a_paper", "b_paper", "b_own_paper",
+    out = {k: [] for k in ("a", "b", "own", "c", "d", "tone", "a_paper", "b_paper", "own_paper",
                            "c_paper", "d_paper", "tone_paper", "e", "errors", "absolute")}
     out["warnings"], out["equal"] = {}, {}
     masters_ = sorted({k[4] for k in results})
@@ -426,15 +428,18 @@ def summarize(results, profile_list):
             if nm == REFERENCE_NM and prof.hold == REFERENCE_HOLD:
                 out["absolute"].append(Ratio(e, stage, nm, law, name, master))
                 continue
+            own_text = ""
+            if own is not None and not own.error and own.moves and prof.hold != REFERENCE_HOLD:
+                e_own = _last(own.moves)
+                own_text = f"; {e / e_own:.3g}x the same after 0.2 s with {nm:g} nm ({e_own:.3g} um)"
+                out["own" + suffix].append(Ratio(e / e_own, stage, nm, law, name, master))
             if nm < 20:
                 out["a" + suffix].append(Ratio(e / e_ref, stage, nm, law, name, master,
-                                               f"{e:.3g} um / {e_ref:.3g} um"))
+                                               f"{e:.3g} um / {e_ref:.3g} um{own_text}"))
             else:
                 bound = 1.25 * e_ref + 5 * nm * 1e-3
                 out["b" + suffix].append(Ratio(e / bound, stage, nm, law, name, master,
-                                               f"{e:.3g} um / {bound:.3g} um"))
-                if own is not None and not own.error and own.moves and prof.hold != REFERENCE_HOLD:
-                    out["b_own" + suffix].append(Ratio(e / _last(own.moves), stage, nm, law, name, master))
+                                               f"{e:.3g} um / {bound:.3g} um{own_text}"))
     out["masters"] = masters_
     return out
 
@@ -444,6 +449,11 @@ def _stats(ratios, master=None):
     if values.size == 0:
         return math.nan, math.nan, 0
     return float(np.median(values)), float(np.max(values)), values.size
+
+
+def _p95(ratios, master=None):
+    values = [r.value for r in ratios if master is None or r.master == master]
+    return float(np.percentile(values, 95)) if values else math.nan
 
 
 def _worst(ratios, master=None):
@@ -463,9 +473,10 @@ _TARGET_ROWS = (
     ("a", "(a) 0, 1, 5 nm: move after a hold of 0.2 to 600 s / the same move after 0.2 s "
           "with 1 nm", "<= 1.1"),
     ("b", "(b) 20 nm: move after any hold / (1.25 x the 1 nm reference + 0.1 um)", "<= 1"),
-    ("b_own", "20 nm: move after 4 to 600 s / the same after 0.2 s with 20 nm", "(hold-independence)"),
+    ("own", "any sensor: move after a hold of 4 to 600 s / the same move after 0.2 s with the same "
+            "sensor (what the hold itself does)", "(report)"),
     ("c", "(c) scan frame after a 10 s dwell / the last second before it (1, 10, 50 Hz)", "<= 1.1"),
-    ("d", "(d) during holds: max |y - y_d| / 5 (noise rms + 2 nm)", "<= 1"),
+    ("d", "(d) during holds: max \\|y - y_d\\| / 5 (noise rms + 2 nm)", "<= 1"),
     ("tone", "move after 60 s of a 1 or 20 Hz tone / the fresh move (0.2 s, 1 nm)", "(report)"),
 )
 
@@ -491,8 +502,8 @@ def family_markdown(summary, stages, seconds=None):
     """The docs table of the family (Markdown)."""
     lines = []
     masters_ = [m for m in summary["masters"] if m != MASTER_JACOBI]
-    head = ["target", "bound", "master", "runs", "robust law: median", "worst", "paper's law: median",
-            "worst"]
+    head = ["target", "bound", "master", "runs", "robust law: median", "95 %", "worst",
+            "paper's law: median", "95 %", "worst"]
     rows = []
     for key, what, bound in _TARGET_ROWS:
         for master in masters_:
@@ -501,7 +512,8 @@ def family_markdown(summary, stages, seconds=None):
             if no == 0 and np_ == 0:
                 continue
             rows.append([what if master == masters_[0] else "", bound if master == masters_[0] else "",
-                         master, f"{no} / {np_}", _cell(mo), _cell(wo), _cell(mp), _cell(wp)])
+                         master, f"{no} / {np_}", _cell(mo), _cell(_p95(summary[key], master)), _cell(wo),
+                         _cell(mp), _cell(_p95(summary[key + "_paper"], master)), _cell(wp)])
     lines.append(markdown_table(head, rows))
     ours_err = [r for r in summary["errors"] if r.law == "ours"]
     paper_err = [r for r in summary["errors"] if r.law == "paper"]
@@ -590,19 +602,33 @@ def _breakdown(summary):
                                                  "robust law", "paper's law"], rows))
 
 
-def _diagnose(summary, tasks_by_key, worst=3, progress=None):
-    """The worst misses of a, b and c run again with the estimates fixed (rls.enabled = false):
-    lines of text."""
+def _distinct_worst(ratios, bound, worst):
+    """The ``worst`` largest ratios above ``bound`` on the native exchange, one per stage."""
+    out, seen = [], set()
+    for r in sorted((r for r in ratios if r.value > bound and r.master == MASTER_EXCHANGE),
+                    key=lambda r: -r.value):
+        if r.stage not in seen:
+            seen.add(r.stage)
+            out.append(r)
+        if len(out) == worst:
+            break
+    return out
+
+
+def _diagnose(summary, tasks_by_key, worst=4, progress=None):
+    """The worst misses of a, b and c (one per stage) run again with the estimates fixed
+    (rls.enabled = false), and the worst of d and of the tone: lines of text."""
     lines = []
     for key in ("a", "b", "c"):
-        misses = sorted((r for r in summary[key] if r.value > TARGETS[key] and r.master == MASTER_EXCHANGE),
-                        key=lambda r: -r.value)[:worst]
-        for r in misses:
+        for r in _distinct_worst(summary[key], TARGETS[key], worst):
             fixed = _fixed_ratio(key, tasks_by_key[(r.stage, r.sensor_nm, "ours", r.profile)])
             lines.append(f"({key}) stage {r.stage}, {r.sensor_nm:g} nm, {r.profile}: {r.value:.3g} "
                          f"({r.detail}); with the estimates fixed at the nominal model: {fixed}")
             if progress is not None:
                 progress(lines[-1])
+    for key, bound in (("d", TARGETS["d"]), ("tone", 1.1)):
+        for r in _distinct_worst(summary[key], bound, worst):
+            lines.append(f"({key}) stage {r.stage}, {r.sensor_nm:g} nm, {r.profile}: {r.value:.3g} ({r.detail})")
     return lines
 
 
