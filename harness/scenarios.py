@@ -1,4 +1,5 @@
-"""Scenario definitions: built-in (paper Tables 1-5, docs/model.md, scenarios) and user files.
+"""Scenario definitions: built-in (paper Tables 1-5, docs/model.md, scenarios; stage use,
+docs/stage_use.md) and user files.
 
 A scenario file is TOML (read with :mod:`tomllib`).  It may define named
 parameter sets and any number of scenarios::
@@ -25,6 +26,39 @@ parameter sets and any number of scenarios::
                   phases = [0.0], offset = 0.0 }       # phases in rad
     # or
     reference = { type = "csv", file = "ref.csv" }     # path relative to the TOML file
+    # or a stage-use profile (tracking only; docs/stage_use.md)
+    reference = { type = "profile", start = 0.0, segments = [
+        { hold = 0.2 },                                   # hold the position 0.2 s
+        { move = 10.0 },                                  # a step of +10 um
+        { move = 30.0, shape = "scurve", time = 0.05 },   # +30 um along an S-curve, 50 ms
+        { to = 5.0, shape = "ramp", time = 0.1 },         # to 5 um along a ramp, 100 ms
+        { scan = "triangle", frequency = 10.0, amplitude = 10.0, time = 2.0 },
+        { scan = "sine", frequency = 1.0, amplitude = 10.0, time = 60.0 },
+        { hold = 10.0 },
+    ] }
+
+A profile starts at ``start`` [um] (default 0) at t = 0 and runs its segments
+in order, each from where the one before left the stage:
+
+* ``hold = T``: the position, for T seconds;
+* ``move = D`` (by D um) or ``to = P`` (to P um), ``shape = "step"`` (the
+  default: the position jumps at the segment's first sample, no ``time``),
+  ``"ramp"`` or ``"scurve"`` over ``time`` seconds: ``p + D c((t - t0)/time)``
+  with c(s) = s (ramp) or the cycloid s - sin(2 pi s)/(2 pi) (S-curve: zero
+  velocity and acceleration at both ends), reaching p + D at the next
+  segment's first sample;
+* ``scan = "triangle"`` or ``"sine"``, from the current position p over
+  ``time`` seconds: p + A tri(f (t - t0)), tri rising from 0 to 1 in half a
+  period and back (a raster line out and back, A < 0 scans downwards), or
+  p + A sin(2 pi f (t - t0)); the next segment starts where it ends (p after
+  whole periods).
+
+Every time is a whole number of samples of ``step_size``, so each segment
+begins on a sample; ``duration`` defaults to the profile's length (a longer
+one holds the last position). The moves, the holds and the scans, and so the
+windows of the stage-use metrics (where a move ends and a hold begins:
+:mod:`harness.profiles`), come from the profile itself. Segments are counted
+from 1 in messages (``reference.segments[2].time``).
 
 Rules a file is checked against (each broken rule is one error naming the
 file, the scenario and the field):
@@ -35,7 +69,11 @@ file, the scenario and the field):
   ``h`` (0.0005 s unless the scenario sets ``"h"`` in ``plant`` and
   ``controller``): the harness exchanges values once per sample;
 * every sine frequency must lie below the Nyquist frequency
-  ``1 / (2 step_size)``;
+  ``1 / (2 step_size)``, and so must a profile's scans;
+* a profile's segments have exactly one of ``hold``, ``move``, ``to``,
+  ``scan`` and only the keys that go with it; a step takes no ``time``, a
+  ramp, an S-curve and a scan need one; its times are whole numbers of
+  samples; a profile is a tracking reference; ``duration`` may not cut it;
 * a validation scenario runs the plant alone, so it takes no controller
   overrides;
 * paper values (``paper = {...}``: ``e_rms_um``/``e_r`` for tracking,
@@ -78,8 +116,16 @@ __all__ = [
     "TRACKING_SCENARIOS",
     "MISMATCH_SCENARIOS",
     "VALIDATION_SCENARIOS",
+    "Segment",
+    "MOVE_SHAPES",
+    "SCAN_SHAPES",
+    "STAGE_USE_FILE",
+    "PAPER_LAW_SET",
     "load_scenario_file",
     "load_scenarios",
+    "parameter_set",
+    "profile_signal",
+    "stage_use_scenarios",
     "get_scenario",
     "list_scenarios",
     "format_scenario_list",
@@ -90,7 +136,11 @@ __all__ = [
 DEFAULT_STEP_SIZE = 0.0005
 DEFAULT_DURATION = 3.0
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
-BUILTIN_FILES = ("tracking.toml", "validation.toml", "mismatch.toml")
+BUILTIN_FILES = ("tracking.toml", "validation.toml", "mismatch.toml", "stage_use.toml")
+#: the built-in file of the stage-use scenarios (docs/stage_use.md), and its parameter set of
+#: the paper's adaptation law
+STAGE_USE_FILE = "stage_use.toml"
+PAPER_LAW_SET = "paper_law"
 
 TRACKING_SCENARIOS = (
     "track_1hz",
@@ -159,22 +209,83 @@ class UnknownScenarioError(ScenarioError, KeyError):
         return self.args[0]
 
 
+#: the shapes of a profile's moves and scans (see the module docstring)
+MOVE_SHAPES = ("step", "ramp", "scurve")
+SCAN_SHAPES = ("triangle", "sine")
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One segment of a profile reference, placed on the sample grid.
+
+    Attributes
+    ----------
+    kind : {"hold", "move", "scan"}
+    shape : str
+        A move's ``"step"``, ``"ramp"`` or ``"scurve"``, a scan's ``"triangle"`` or ``"sine"``;
+        ``""`` for a hold.
+    first : int
+        The sample at which the segment begins (``t = first h``).
+    samples : int
+        Its length in samples (0 for a step: the position jumps at ``first``).
+    start, end : float
+        The position [um] where it begins and where it leaves the next segment.
+    frequency, amplitude : float
+        A scan's [Hz] and [um] (0 otherwise).
+    """
+
+    kind: str
+    shape: str
+    first: int
+    samples: int
+    start: float
+    end: float
+    frequency: float = 0.0
+    amplitude: float = 0.0
+
+    @property
+    def stop(self):
+        """The sample after its last one (``first + samples``)."""
+        return self.first + self.samples
+
+    def values(self, x, h):
+        """The positions at sample times ``x`` (in samples, ``first <= x < stop``; ``h`` the
+        sample period [s])."""
+        u = np.asarray(x, dtype=float) - self.first
+        if self.kind == "hold":
+            return np.full(u.shape, self.start)
+        if self.kind == "move":
+            s = u / self.samples
+            c = s if self.shape == "ramp" else s - np.sin(2.0 * np.pi * s) / (2.0 * np.pi)
+            return self.start + (self.end - self.start) * c
+        # scans from their own start position, time (u h) from the segment's start
+        phase = self.frequency * u * h
+        if self.shape == "sine":
+            return self.start + self.amplitude * np.sin(2.0 * np.pi * phase)
+        return self.start + self.amplitude * (1.0 - np.abs(1.0 - 2.0 * (phase - np.floor(phase))))
+
+
 @dataclass(frozen=True)
 class Signal:
     """A scenario's signal: desired displacement ``y_d`` [um] or input voltage ``v`` [V].
 
     Attributes
     ----------
-    kind : {"sines", "table"}
-        Sum of sines plus offset, or a table interpolated linearly.
+    kind : {"sines", "table", "profile"}
+        Sum of sines plus offset, a table interpolated linearly, or a stage-use profile
+        (holds, moves and scans, on the sample grid).
     amplitudes, frequencies, phases : tuple of float
         Sine parameters (frequencies in Hz, phases in rad); empty for a table.
     offset : float
-        Constant added to the sines.
+        Constant added to the sines; a profile's start position.
     table_time, table_value : tuple of float
         Table rows (``kind == "table"``).
     source : str
         Where the signal came from (CSV path for a table).
+    segments : tuple of Segment
+        A profile's segments, in order (``kind == "profile"``).
+    step : float
+        A profile's sample period [s] (the scenario's ``step_size``).
     """
 
     kind: str
@@ -185,6 +296,13 @@ class Signal:
     table_time: tuple = ()
     table_value: tuple = ()
     source: str = ""
+    segments: tuple = ()
+    step: float = 0.0
+
+    @property
+    def samples(self):
+        """A profile's length in samples (the sum of its segments')."""
+        return self.segments[-1].stop if self.segments else 0
 
     def evaluate(self, time):
         """Evaluate the signal at the given times.
@@ -204,7 +322,22 @@ class Signal:
             for a, f, p in zip(self.amplitudes, self.frequencies, self.phases):
                 out += a * np.sin(2.0 * np.pi * f * t + p)
             return out
+        if self.kind == "profile":
+            return self._evaluate_profile(t)
         return np.interp(t, np.asarray(self.table_time), np.asarray(self.table_value))
+
+    def _evaluate_profile(self, t):
+        # in samples, a time on the grid snapped to its integer k (k h / h may miss k by an ulp)
+        x = t / self.step
+        near = np.rint(x)
+        x = np.where(np.abs(x - near) < 1e-6, near, x)
+        out = np.full(x.shape, float(self.segments[-1].end))
+        out[x < 0] = self.offset
+        for seg in self.segments:
+            inside = (x >= seg.first) & (x < seg.stop)
+            if inside.any():
+                out[inside] = seg.values(x[inside], self.step)
+        return out
 
     def describe(self):
         """Return a short human-readable description."""
@@ -214,7 +347,20 @@ class Signal:
                 for a, f, p in zip(self.amplitudes, self.frequencies, self.phases)
             )
             return terms + (f" + {self.offset:g}" if self.offset else "")
+        if self.kind == "profile":
+            return "profile: " + ", ".join(_segment_text(s, self.step) for s in self.segments)
         return f"table {self.source} ({len(self.table_time)} rows)"
+
+
+def _segment_text(seg, h):
+    """'hold 0.2 s', 'step +10 um', 'scurve +30 um in 0.05 s', 'triangle 10 Hz 10 um for 2 s'."""
+    secs = f"{seg.samples * h:g} s"
+    if seg.kind == "hold":
+        return f"hold {secs}"
+    if seg.kind == "move":
+        size = f"{seg.end - seg.start:+g} um"
+        return f"step {size}" if seg.shape == "step" else f"{seg.shape} {size} in {secs}"
+    return f"{seg.shape} {seg.frequency:g} Hz {seg.amplitude:g} um for {secs}"
 
 
 @dataclass(frozen=True)
@@ -461,8 +607,156 @@ def _parse_signal(spec, path, scenario, fieldname, value_name):
             raise ScenarioFileError(path, str(exc), scenario, f"{fieldname}.file") from None
         return Signal("table", table_time=tuple(t.tolist()), table_value=tuple(y.tolist()),
                       source=str(csv_path))
-    raise ScenarioFileError(path, f"'type' must be \"sines\" or \"csv\", got {kind!r}",
+    if kind == "profile":
+        if value_name != "y_d":
+            raise ScenarioFileError(path, "a profile is a tracking reference (y_d in um); a "
+                                          "validation input takes \"sines\" or \"csv\"",
+                                    scenario, f"{fieldname}.type")
+        return _parse_profile(spec, path, scenario, fieldname)
+    raise ScenarioFileError(path, f"'type' must be \"sines\", \"csv\" or \"profile\", got {kind!r}",
                             scenario, fieldname)
+
+
+#: what one segment of a profile may hold, by the key that names its kind
+_SEGMENT_KEYS = {"hold": {"hold"}, "move": {"move", "shape", "time"}, "to": {"to", "shape", "time"},
+                 "scan": {"scan", "frequency", "amplitude", "time"}}
+
+
+@dataclass(frozen=True)
+class _ProfileSpec:
+    """A profile as written (times in s), placed on the grid once the step is known."""
+
+    start: float
+    items: tuple        # (field, kind, shape, seconds, change or target, absolute, f, a)
+    source: str
+
+
+def _parse_profile(spec, path, scenario, fieldname):
+    """The profile's table checked key by key (times are placed on the grid later, by
+    :func:`_place_profile`, when the scenario's step is known)."""
+    _reject_unknown(spec, {"type", "start", "segments"}, path, scenario, fieldname)
+    start = _number(spec.get("start", 0.0), path, scenario, f"{fieldname}.start")
+    segs = spec.get("segments")
+    if not isinstance(segs, list) or not segs:
+        raise ScenarioFileError(path, f"must be a non-empty list of segments ({{hold = ...}}, "
+                                      f"{{move = ...}}, {{to = ...}}, {{scan = ...}}), got {segs!r}",
+                                scenario, f"{fieldname}.segments")
+    items = []
+    for i, seg in enumerate(segs, start=1):
+        where = f"{fieldname}.segments[{i}]"
+        if not isinstance(seg, dict):
+            raise ScenarioFileError(path, f"must be a table, got {seg!r}", scenario, where)
+        kinds = [k for k in _SEGMENT_KEYS if k in seg]
+        if len(kinds) != 1:
+            raise ScenarioFileError(
+                path, f"must have exactly one of 'hold', 'move', 'to', 'scan' (has "
+                      f"{', '.join(repr(k) for k in kinds) or 'none'})", scenario, where)
+        key = kinds[0]
+        _reject_unknown(seg, _SEGMENT_KEYS[key], path, scenario, where)
+        if key == "hold":
+            secs = _number(seg["hold"], path, scenario, f"{where}.hold", positive=True)
+            items.append((where, "hold", "", secs, 0.0, False, 0.0, 0.0))
+        elif key in ("move", "to"):
+            value = _number(seg[key], path, scenario, f"{where}.{key}")
+            shape = seg.get("shape", "step")
+            if shape not in MOVE_SHAPES:
+                raise ScenarioFileError(path, f"must be one of {', '.join(map(repr, MOVE_SHAPES))}, "
+                                              f"got {shape!r}", scenario, f"{where}.shape")
+            if shape == "step":
+                if "time" in seg:
+                    raise ScenarioFileError(path, "a step takes no time (it jumps at the segment's "
+                                                  "first sample); use shape = \"ramp\" or \"scurve\"",
+                                            scenario, f"{where}.time")
+                secs = 0.0
+            elif "time" not in seg:
+                raise ScenarioFileError(path, f"missing (required for shape = \"{shape}\")",
+                                        scenario, f"{where}.time")
+            else:
+                secs = _number(seg["time"], path, scenario, f"{where}.time", positive=True)
+            items.append((where, "move", shape, secs, value, key == "to", 0.0, 0.0))
+        else:
+            shape = seg["scan"]
+            if shape not in SCAN_SHAPES:
+                raise ScenarioFileError(path, f"must be one of {', '.join(map(repr, SCAN_SHAPES))}, "
+                                              f"got {shape!r}", scenario, f"{where}.scan")
+            for k in ("frequency", "amplitude", "time"):
+                if k not in seg:
+                    raise ScenarioFileError(path, "missing (required for a scan)", scenario, f"{where}.{k}")
+            f = _number(seg["frequency"], path, scenario, f"{where}.frequency", positive=True)
+            a = _number(seg["amplitude"], path, scenario, f"{where}.amplitude")
+            secs = _number(seg["time"], path, scenario, f"{where}.time", positive=True)
+            items.append((where, "scan", shape, secs, 0.0, False, f, a))
+    return _ProfileSpec(start, tuple(items), "" if path is None else str(path))
+
+
+def _place_profile(spec, step, path, scenario):
+    """The profile's segments on the grid of ``step``: every time a whole number of samples,
+    every scan below the Nyquist frequency; a Signal of kind "profile"."""
+    nyquist = 0.5 / step
+    first, position, out = 0, spec.start, []
+    for where, kind, shape, secs, value, absolute, f, a in spec.items:
+        m = int(round(secs / step))
+        if abs(m * step - secs) > 1e-9 * max(1.0, secs) or (secs > 0 and m < 1):
+            name = {"hold": "hold"}.get(kind, "time")
+            raise ScenarioFileError(path, f"{secs:g} s is not a whole number of samples of step_size "
+                                          f"{step:g} s", scenario, f"{where}.{name}")
+        if kind == "hold":
+            end = position
+        elif kind == "move":
+            end = value if absolute else position + value
+        else:
+            if f >= nyquist:
+                raise ScenarioFileError(
+                    path, f"{f:g} Hz is at or above the Nyquist frequency {nyquist:g} Hz of step_size "
+                          f"{step:g} s", scenario, f"{where}.frequency")
+            seg = Segment(kind, shape, first, m, position, position, f, a)
+            end = float(seg.values([first + m], step)[0])
+        out.append(Segment(kind, shape, first, m, position, end, f, a))
+        first, position = first + m, end
+    if first == 0:
+        raise ScenarioFileError(path, "the profile lasts no time (give it a hold, a timed move or a "
+                                      "scan)", scenario, "reference.segments")
+    return Signal("profile", offset=spec.start, source=spec.source, segments=tuple(out), step=step)
+
+
+def profile_signal(segments, start=0.0, step=DEFAULT_STEP_SIZE):
+    """A profile reference from its segments, as a scenario file writes them.
+
+    Parameters
+    ----------
+    segments : list of dict
+        ``{"hold": 0.2}``, ``{"move": 10.0, "shape": "scurve", "time": 0.05}``, ``{"to": 5.0}``,
+        ``{"scan": "triangle", "frequency": 10.0, "amplitude": 10.0, "time": 2.0}``, ...
+    start : float
+        The start position [um].
+    step : float
+        The sample period [s].
+
+    Returns
+    -------
+    Signal
+
+    Raises
+    ------
+    ScenarioFileError
+        As for a file (without a file's name).
+    """
+    spec = _parse_profile({"type": "profile", "start": start, "segments": list(segments)}, None,
+                          None, "reference")
+    return _place_profile(spec, float(step), None, None)
+
+
+def _regrid_profile(signal, step, path, scenario):
+    """An inherited profile on another step (``extends`` with a new ``step_size``)."""
+    items = []
+    for i, seg in enumerate(signal.segments, start=1):
+        where = f"reference.segments[{i}]"
+        secs = seg.samples * signal.step
+        if seg.kind == "move":
+            items.append((where, "move", seg.shape, secs, seg.end, True, 0.0, 0.0))
+        else:
+            items.append((where, seg.kind, seg.shape, secs, 0.0, False, seg.frequency, seg.amplitude))
+    return _place_profile(_ProfileSpec(signal.offset, tuple(items), signal.source), step, path, scenario)
 
 
 def _reject_unknown(table, allowed, path, scenario, fieldname):
@@ -516,10 +810,17 @@ def _parse_scenario(entry, index, path, known, sets, builtin=False):
     else:
         raise ScenarioFileError(path, "missing (the scenario's signal)", name, sig_key)
 
-    duration = _number(entry.get("duration", base.duration if base else DEFAULT_DURATION),
-                       path, name, "duration", positive=True)
     step = _number(entry.get("step_size", base.step_size if base else DEFAULT_STEP_SIZE),
                    path, name, "step_size", positive=True)
+    if isinstance(signal, _ProfileSpec):
+        signal = _place_profile(signal, step, path, name)
+    elif signal.kind == "profile" and signal.step != step:
+        signal = _regrid_profile(signal, step, path, name)
+    if signal.kind == "profile" and sig_key in entry:
+        default_duration = round(signal.samples * step, 9)      # a profile's own length
+    else:
+        default_duration = base.duration if base else DEFAULT_DURATION
+    duration = _number(entry.get("duration", default_duration), path, name, "duration", positive=True)
     n = round(duration / step)
     if n < 1 or abs(n * step - duration) > 1e-9 * max(1.0, duration):
         raise ScenarioFileError(
@@ -591,6 +892,11 @@ def _parse_scenario(entry, index, path, known, sets, builtin=False):
 
     if signal.kind == "table":
         _check_table_covers(signal, duration, step, path, name, sig_key)
+    if signal.kind == "profile" and n < signal.samples:
+        raise ScenarioFileError(
+            path, f"duration {duration:g} s would cut the profile, which lasts "
+                  f"{signal.samples * step:g} s (leave duration out: it defaults to the profile's "
+                  f"length; a longer one holds the last position)", name, "duration")
 
     return Scenario(
         name=name, kind=kind, description=description, signal=signal, duration=duration,
@@ -747,6 +1053,28 @@ def load_scenarios(files=(), include_builtin=True):
     for f in files:
         registry.update(load_scenario_file(f, registry, sets))
     return registry
+
+
+def parameter_set(name):
+    """A built-in parameter set by name (a copy), e.g. :data:`PAPER_LAW_SET`.
+
+    Raises
+    ------
+    KeyError
+        No built-in set has that name (the message lists them).
+    """
+    load_scenarios()
+    sets = _BUILTIN_CACHE["sets"]
+    if name not in sets:
+        raise KeyError(f"no built-in parameter set '{name}'; known: {', '.join(sorted(sets))}")
+    return dict(sets[name])
+
+
+def stage_use_scenarios(registry=None):
+    """Names of the built-in stage-use scenarios (:data:`STAGE_USE_FILE`), in file order."""
+    registry = load_scenarios() if registry is None else registry
+    path = SCENARIO_DIR / STAGE_USE_FILE
+    return [n for n, s in registry.items() if Path(s.source) == path]
 
 
 def list_scenarios(registry=None, kind=None):

@@ -14,6 +14,7 @@ from harness.scenarios import (
     get_scenario,
     load_scenario_file,
     load_scenarios,
+    stage_use_scenarios,
 )
 from conftest import REPO
 
@@ -21,7 +22,8 @@ from conftest import REPO
 def test_builtin_names_and_paper_values():
     # Reference: paper Tables 4/5 and docs/model.md, scenarios (e_r "0.76 %" typo -> 0.11 %).
     reg = load_scenarios()
-    assert list(TRACKING_SCENARIOS) + list(VALIDATION_SCENARIOS) + list(MISMATCH_SCENARIOS) == list(reg)
+    assert (list(TRACKING_SCENARIOS) + list(VALIDATION_SCENARIOS) + list(MISMATCH_SCENARIOS)
+            + stage_use_scenarios() == list(reg))
     e_rms = [reg[n].paper["e_rms_um"] for n in TRACKING_SCENARIOS]
     e_r = [reg[n].paper["e_r"] for n in TRACKING_SCENARIOS]
     assert e_rms == [0.0076, 0.0254, 0.056, 0.1153, 0.0600, 0.1787]

@@ -13,12 +13,21 @@ loop delay d equals that lead (the default, d = 2), and with d > lead the contro
 other masters takes y_d(k + d) from their stamped preview from the second sample on, which this
 one has not: such runs differ.
 
-The FMU steps one sample per doStep and every output is read at every sample, so the rows are
+:func:`simulate_closed_loop_fmu` steps one sample per doStep and reads every output at every
+sample, so the rows are
 those of the other masters, bit for bit (the tests compare them): ``y_d`` is the scenario's (as
 theirs), the rest are the FMU's outputs at ``t_k``. With ``mv.feedthrough`` the FMU applies v(k)
 in sample k as a Gauss-Seidel master does, and publishes it at ``t_(k+1)``: row k takes the
 controller's outputs from there. A Jacobi master with ``mv.feedthrough`` (a stale v, which the
 fmpy master shows) is no loop this FMU runs, and is refused.
+
+:func:`simulate_closed_loop_fmu_steps` runs a table or profile reference with a variable
+communication step, as a system simulation uses the FMU: one sample per doStep while y_d moves
+and for a settle time after, long steps while it holds (:func:`communication_points`). The FMU
+computes every sample inside a long step with the input y_d it was given at the step's start,
+so a step that spans only samples of one y_d gives the samples of one-sample steps; the rows
+are those of :func:`simulate_closed_loop_fmu` at the communication points, bit for bit (the
+tests compare them), with the controller's ``est.adapting`` and ``est.noise`` besides.
 """
 
 from __future__ import annotations
@@ -33,7 +42,8 @@ from ..loop import (CLOSED_LOOP_DTYPE, CLOSED_LOOP_FIELDS, REFERENCE_LEAD, REFER
                     as_structured, prepare_closed_loop, reference_lead, reference_parameters)
 from .instance import CTRL_OUTPUTS, Instance, ScalarFunctions, step_error, vr_array
 
-__all__ = ["simulate_closed_loop_fmu", "closed_loop_fmu_parameters"]
+__all__ = ["simulate_closed_loop_fmu", "simulate_closed_loop_fmu_steps", "closed_loop_fmu_parameters",
+           "communication_points", "STEPS_FIELDS"]
 
 #: the FMU's outputs of row k, in CLOSED_LOOP_FIELDS order from y (y_d is the scenario's)
 _OUTPUTS = ("y", "y_meas") + CTRL_OUTPUTS
@@ -175,3 +185,164 @@ def _run(inst, setup, rows, progress):
         raise step_error(inst, stage, k, h, FMUError(f"{stage} returned an error"))
     if progress is not None:
         progress(n, n)
+
+
+#: the fields of :func:`simulate_closed_loop_fmu_steps`: the closed loop's and the controller's
+#: robust adaptation (est.adapting as 0/1, est.noise [um])
+STEPS_FIELDS = CLOSED_LOOP_FIELDS + ("adapting", "noise")
+_STEPS_DTYPE = np.dtype([(f, "f8") for f in STEPS_FIELDS])
+_STEPS_REALS = _OUTPUTS + ("est.noise",)
+_STEPS_BOOLS = ("saturated", "est.adapting")
+
+
+def communication_points(y_d, y_ref, h, lead, hold_step=0.01, settle=0.5):
+    """The communication points of a variable-step run, as sample indices.
+
+    One sample per step from ``lead + 1`` samples before y_d moves until ``settle`` after it
+    stops (and over the first ``settle``, where the controller detects its loop delay); steps
+    of up to ``hold_step`` where it holds. A long step never spans two values of ``y_ref``,
+    the input the FMU is given at the step's start and holds over the step.
+
+    Parameters
+    ----------
+    y_d, y_ref : array_like
+        The desired displacement of each sample, and the input y_d(k + lead) given at it.
+    h : float
+        The sample period [s].
+    lead : int
+        ``y_d_lead``: how many samples ahead the input is.
+    hold_step, settle : float
+        [s].
+
+    Returns
+    -------
+    ndarray of int
+        Increasing, from 0 to ``n - 1``.
+    """
+    y_d, y_ref = np.asarray(y_d, dtype=float), np.asarray(y_ref, dtype=float)
+    n = y_d.size
+    tail, big = int(round(settle / h)), max(1, int(round(hold_step / h)))
+    busy = np.zeros(n + 1, dtype=bool)
+    busy[:min(n, tail)] = True
+    for j in np.flatnonzero(y_d[1:] != y_d[:-1]) + 1:        # y_d(j) differs from y_d(j - 1)
+        busy[max(0, j - lead - 1):min(n, j + tail)] = True
+    # the next sample where the input changes, or the loop is busy, from each sample on
+    stop_at = busy[:n] | np.concatenate([[True], y_ref[1:] != y_ref[:-1]])
+    nxt = np.full(n + 1, n - 1)
+    idx = np.flatnonzero(stop_at)
+    pos = np.searchsorted(idx, np.arange(n), side="right")
+    has = pos < idx.size
+    nxt[:n][has] = idx[pos[has]]
+    points, k = [0], 0
+    while k < n - 1:
+        k = k + 1 if busy[k] else int(min(k + big, nxt[k], n - 1))
+        points.append(k)
+    return np.asarray(points, dtype=np.int64)
+
+
+def simulate_closed_loop_fmu_steps(scenario, *, hold_step=0.01, settle=0.5, adaptation=None,
+                                   plant_params=None, controller_params=None, fmu_dir=None,
+                                   duration=None, registry=None, fmi_version=2, log=None):
+    """Run a tracking scenario with a table or profile reference through PiezoStageClosedLoop at
+    a variable communication step (see :func:`communication_points`).
+
+    Parameters
+    ----------
+    scenario, adaptation, plant_params, controller_params, fmu_dir, duration, registry, fmi_version
+        As :func:`simulate_closed_loop_fmu` (with preview; the master's order does not apply).
+    hold_step, settle : float
+        [s]: the longest step while y_d holds, and how long after a motion the steps stay one
+        sample long.
+    log : list, optional
+        Extended with the FMU's messages (``"[Warning] ..."``) at the end of the run.
+
+    Returns
+    -------
+    ndarray
+        Structured array of :data:`STEPS_FIELDS`, one row per communication point: the rows of
+        :func:`simulate_closed_loop_fmu` there, and ``adapting`` (est.adapting, 0 or 1) and
+        ``noise`` (est.noise [um]).
+
+    Raises
+    ------
+    ValueError
+        A sines reference (the FMU's own ReferenceSignal: any step gives its samples; use
+        :func:`simulate_closed_loop_fmu`), or a controller with ``mv.feedthrough``.
+    FileNotFoundError, UnknownParameterError, FMUInitializationError, LoopDivergedError, FMUError
+        As :func:`simulate_closed_loop_fmu`.
+    """
+    setup = prepare_closed_loop(scenario, adaptation=adaptation, plant_params=plant_params,
+                                controller_params=controller_params, duration=duration,
+                                registry=registry)
+    if setup.scenario.signal.kind == "sines":
+        raise ValueError(f"scenario '{setup.scenario.name}' has a sines reference: "
+                         f"simulate_closed_loop_fmu_steps runs the input y_d (a table or a profile)")
+    if setup.feedthrough:
+        raise ValueError("simulate_closed_loop_fmu_steps runs the default controller (mv.feedthrough "
+                         "= false): with feedthrough v depends on the input held over a step")
+    fmi_version = check_fmi_version(fmi_version)
+    info = load(fmu_path(CLOSED_LOOP_MODEL, fmu_dir, fmi_version), fmi_version)
+    lead = reference_lead(setup.controller_params) or REFERENCE_LEAD
+    points = communication_points(setup.y_d, setup.y_ref, setup.h, lead, hold_step, settle)
+    rows = np.zeros((points.size, len(STEPS_FIELDS)))
+    rows[:, 0] = setup.time[points]
+    rows[:, 1] = setup.y_d[points]
+    inst = None
+    try:
+        inst = Instance(info, "closed-loop-steps")
+        inst.initialize(closed_loop_fmu_parameters(setup), (setup.n + 1) * setup.h)
+        _run_steps(inst, setup, points, rows)
+        if log is not None:
+            log.extend(inst.log)
+    finally:
+        if inst is not None:
+            inst.close()
+    return as_structured(rows, _STEPS_DTYPE)
+
+
+def _run_steps(inst, setup, points, rows):
+    """Row i: the outputs at communication point ``points[i]``; the input y_d set before each step."""
+    fn = ScalarFunctions(inst)
+    info = inst.info
+    GET, SET, GET_BOOL, DO_STEP = fn.names
+    c, get, set_, get_bool, step = fn.c, fn.get, fn.set, fn.get_bool, fn.step
+    h, y_ref = setup.h, setup.y_ref
+    vr_out = vr_array([info.vr(x) for x in _STEPS_REALS])
+    vr_bool = vr_array([info.vr(x) for x in _STEPS_BOOLS])
+    vr_y_d = vr_array([info.vr("y_d")])
+    n_out, n_bool = len(_STEPS_REALS), len(_STEPS_BOOLS)
+    out = (ctypes.c_double * n_out)()
+    bools = (ctypes.c_uint8 * n_bool)() if inst.fmi3 else (ctypes.c_int * n_bool)()
+    y_d_in = (ctypes.c_double * 1)()
+    a_out, a_bool, a_y = ctypes.addressof(out), ctypes.addressof(bools), ctypes.addressof(y_d_in)
+    a_vr_out, a_vr_bool, a_vr_y = (ctypes.addressof(vr_out), ctypes.addressof(vr_bool),
+                                   ctypes.addressof(vr_y_d))
+    np_out = np.ctypeslib.as_array(out)
+    n_fields = len(CLOSED_LOOP_FIELDS)
+    last = points.size - 1
+    failed, stage, k = False, GET, 0
+    for i, k in enumerate(points.tolist()):
+        stage = GET
+        failed = get(c, a_vr_out, n_out, a_out) > 1
+        if not failed:
+            stage = GET_BOOL
+            failed = get_bool(c, a_vr_bool, n_bool, a_bool) > 1
+        if failed:
+            break
+        rows[i, 2:n_fields - 1] = np_out[:n_out - 1]
+        rows[i, n_fields - 1] = float(bools[0] != 0)
+        rows[i, n_fields] = float(bools[1] != 0)
+        rows[i, n_fields + 1] = np_out[n_out - 1]
+        if i == last:
+            break
+        y_d_in[0] = y_ref[k]
+        stage = SET
+        failed = set_(c, a_vr_y, 1, a_y) > 1
+        if failed:
+            break
+        stage = DO_STEP
+        failed = step(c, k * h, (points[i + 1] - k) * h, 1) > 1
+        if failed:
+            break
+    if failed:
+        raise _step_error(inst, stage, k, h, FMUError(f"{stage} returned an error"))

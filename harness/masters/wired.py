@@ -24,9 +24,16 @@ measurement no stage gives), from a given time on. :func:`simulate_wired` runs t
 until an FMU's doStep fails, and returns what happened: the samples, the status, the first
 Error message and every Warning (:class:`WiredRun`).
 
+A scenario with a table or profile reference has no ReferenceSignal to run: the reference
+is then played by the master itself with ReferenceSignal's outputs and timing (``y_d(k)``,
+``y_ref = y_d(k + lead)``, the stamped preview ``y_d(k + 4)`` at ``(k + 4) h``, k the steps it
+took), stepped in its place in the schedule, so a true Gauss-Seidel order runs a stage-use
+profile too (docs/stage_use.md).
+
 This master exists to show what the FMUs do when they are wired wrongly (the fault table of
-docs/robustness.md, ``tests/test_supervision_family.py``); the harness's own masters
-(:mod:`harness.masters.fmpy`, :mod:`harness.masters.native`) run the loop fast.
+docs/robustness.md, ``tests/test_supervision_family.py``) and in a true Gauss-Seidel order;
+the harness's own masters (:mod:`harness.masters.fmpy`, :mod:`harness.masters.native`) run
+the loop fast.
 """
 
 from __future__ import annotations
@@ -39,6 +46,8 @@ import math
 import numpy as np
 
 from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, REFERENCE_MODEL, check_fmi_version, fmu_path, load
+from ..loop import REFERENCE_LEAD, REFERENCE_PREVIEW, reference_lead
+from ..scenarios import get_scenario
 from ..ssp import SSP_CONNECTIONS, parameter_set_for_scenario
 from .instance import Instance, ScalarFunctions, raw_function, vr_array
 
@@ -175,25 +184,41 @@ def simulate_wired(scenario, schedule="exchange", faults=(), *, duration=None, p
             raise ValueError(f"two faults on {f.connector!r}")
         fault_of[f.connector] = f
     fmi_version = check_fmi_version(fmi_version)
-    pset = parameter_set_for_scenario(scenario, registry)
+    sc = get_scenario(scenario, registry)
+    table = sc.kind == "tracking" and sc.signal.kind != "sines"
     params = {comp: {} for comp in COMPONENTS}
-    for key, value in pset.values.items():
-        comp, name = key.split(".", 1)
-        params[comp][name] = value
+    if table:
+        if reference_params:
+            raise ValueError(f"scenario '{sc.name}' has a {sc.signal.kind} reference, which the "
+                             f"master plays itself: reference_params do not apply")
+        h = float(sc.step_size)
+        params["plant"].update(sc.plant)
+        params["controller"].update(sc.controller)
+        params["plant"]["h"] = params["controller"]["h"] = h
+        stop = float(sc.duration)
+    else:
+        pset = parameter_set_for_scenario(sc, registry)
+        for key, value in pset.values.items():
+            comp, name = key.split(".", 1)
+            params[comp][name] = value
+        h = float(pset.step_size)
+        stop = float(pset.stop_time)
     for comp, over in (("plant", plant_params), ("controller", controller_params),
                        ("reference", reference_params)):
         params[comp].update(over or {})
-    h = float(pset.step_size)
-    stop = float(pset.stop_time if duration is None else duration)
+    stop = stop if duration is None else float(duration)
     n = int(round(stop / h))
     if n < 1 or abs(n * h - stop) > 1e-9 * max(1.0, stop):
         raise ValueError(f"duration {stop!r} s is not a whole number of steps of {h:g} s")
 
-    infos = {comp: load(fmu_path(model, fmu_dir, fmi_version), fmi_version)
-             for comp, model in COMPONENTS.items()}
     inst = {}
     try:
-        for comp, info in infos.items():
+        for comp, model in COMPONENTS.items():
+            if table and comp == "reference":
+                lead = reference_lead(params["controller"]) or REFERENCE_LEAD
+                inst[comp] = _TableReference(sc.signal, n, h, lead)
+                continue
+            info = load(fmu_path(model, fmu_dir, fmi_version), fmi_version)
             inst[comp] = Instance(info, comp)
         for comp in COMPONENTS:
             inst[comp].initialize(params[comp], n * h)
@@ -203,8 +228,35 @@ def simulate_wired(scenario, schedule="exchange", faults=(), *, duration=None, p
             i.close()
 
 
+class _TableReference:
+    """ReferenceSignal played by the master for a table or profile reference: after k steps its
+    outputs are ``y_d(k)``, ``y_ref = y_d(k + lead)``, ``y_preview = y_d(k + preview)`` and
+    ``t_preview = (k + preview) h`` (the FMU's own, with its default ``preview``)."""
+
+    fmi3 = False
+
+    def __init__(self, signal, n, h, lead):
+        ahead = max(lead, REFERENCE_PREVIEW) + 2
+        self.y_d = signal.evaluate(np.arange(n + ahead, dtype=float) * h).tolist()
+        self.h, self.lead, self.k = h, lead, 0
+        self.log = []
+
+    def initialize(self, params, stop_time):
+        self.k = 0
+
+    def outputs(self, arr):
+        """Write y_d, y_ref, y_preview, t_preview (the order of _REAL_OUTPUTS) into ``arr``."""
+        k, y = self.k, self.y_d
+        arr[0], arr[1], arr[2] = y[k], y[k + self.lead], y[k + REFERENCE_PREVIEW]
+        arr[3] = (k + REFERENCE_PREVIEW) * self.h
+
+    def close(self):
+        pass
+
+
 def _run(inst, schedule, fault_of, n, h):
-    fn = {comp: ScalarFunctions(i) for comp, i in inst.items()}
+    table = isinstance(inst["reference"], _TableReference)
+    fn = {comp: ScalarFunctions(i) for comp, i in inst.items() if not isinstance(i, _TableReference)}
     keep = []
 
     def reals(values):
@@ -215,10 +267,10 @@ def _run(inst, schedule, fault_of, n, h):
     # every Real output in one slot of `val`, by (component, variable)
     slot, vr_out, out_arr = {}, {}, {}
     for comp, names in _REAL_OUTPUTS.items():
-        info = inst[comp].info
         out_arr[comp] = reals([0.0] * len(names))
-        vr_out[comp] = vr_array([info.vr(x) for x in names])
-        keep.append(vr_out[comp])
+        if comp in fn:
+            vr_out[comp] = vr_array([inst[comp].info.vr(x) for x in names])
+            keep.append(vr_out[comp])
         for i, x in enumerate(names):
             slot[(comp, x)] = (comp, i)
     # each component's inputs, in the order of SSP_CONNECTIONS
@@ -242,8 +294,11 @@ def _run(inst, schedule, fault_of, n, h):
     failed = None
 
     def read(comp):
-        f = fn[comp]
         arr = out_arr[comp]
+        if table and comp == "reference":
+            inst[comp].outputs(arr)
+            return
+        f = fn[comp]
         st = f.get(f.c, ctypes.addressof(vr_out[comp]), len(arr), ctypes.addressof(arr))
         if st > 1:
             raise _Failed(comp, f.names[0])
@@ -304,6 +359,9 @@ def _run(inst, schedule, fault_of, n, h):
                 raise _Failed(comp, fc.names[1])
 
     def step(comp, t):
+        if table and comp == "reference":
+            inst[comp].k += 1
+            return
         f = fn[comp]
         st = f.step(f.c, t, h, 1)
         if st > 1:

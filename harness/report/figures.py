@@ -16,7 +16,10 @@ Main job (:func:`draw_main_figures`):
 * ``hysteresis``: y against v over the last period of each validation input,
   both models;
 * ``creep``: what the creep block adds (coupled minus Hammerstein) over the
-  run: its per-period mean (the drift) and range.
+  run: its per-period mean (the drift) and range;
+* ``stage_use_<scenario>``: a stage-use scenario under both laws (y_d and y, the error,
+  est.a1 .. est.b2 with est.adapting shaded) on a symmetric-log time axis around its last
+  motion, so a minute's hold and a 10 ms move both read (:func:`stage_use_figure`).
 
 ``run SCENARIO`` draws one figure (:func:`draw_scenario_figure`).
 
@@ -36,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..metrics import window_mask
+from ..profiles import motions
 from ..scenarios import reference_label
 
 __all__ = [
@@ -50,6 +54,9 @@ __all__ = [
     "rls_figure",
     "hysteresis_figure",
     "creep_figure",
+    "stage_use_figure",
+    "draw_stage_use_figures",
+    "STAGE_USE_FIGURES",
 ]
 
 DPI = 150
@@ -702,6 +709,131 @@ def creep_figure(results, out_dir, name="creep"):
 
 
 # ---------------------------------------------------------------------------
+# stage use
+# ---------------------------------------------------------------------------
+
+#: the stage-use scenarios the report draws (each under both laws)
+STAGE_USE_FIGURES = ("stage_step10_hold60s", "stage_scan10hz_dwell10s", "stage_hold5um_100nm",
+                     "stage_staircase")
+_LAW_STYLE = {"ours": dict(color="tab:blue", ls="-", lw=0.9),
+              "paper": dict(color="tab:orange", ls="--", lw=0.9)}
+_LAW_LABEL = {"ours": "ours (defaults)", "paper": "paper's law"}
+
+
+def _runs(mask):
+    """``(start, stop)`` index pairs of the runs of True in a boolean array."""
+    m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
+    edges = np.flatnonzero(m[1:] != m[:-1])
+    return list(zip(edges[::2], edges[1::2]))
+
+
+def _time_symlog(ax, linthresh, lo, hi):
+    """A symmetric-log time axis over ``[lo, hi]`` around 0 (the last motion's start): linear
+    within ±linthresh, ticks at 0, ±linthresh times the decades and at both ends."""
+    import matplotlib.ticker as mticker        # matplotlib: only once a figure is drawn
+
+    ax.set_xscale("symlog", linthresh=linthresh, linscale=1.0)
+    ax.set_xlim(lo, hi)
+    ticks = {0.0, lo, hi}
+    x = linthresh
+    while x <= max(-lo, hi) * 1.0001:
+        ticks |= {v for v in (-x, x) if lo <= v <= hi}
+        x *= 10.0
+    span = max(-lo, hi)
+    ticks = sorted(v for v in ticks if v in (lo, hi, 0.0) or
+                   min(abs(v - lo), abs(v - hi)) > 0.15 * max(abs(v), linthresh))
+    ax.xaxis.set_major_locator(mticker.FixedLocator(ticks))
+    ax.xaxis.set_minor_locator(mticker.NullLocator())
+    ax.xaxis.set_major_formatter(mticker.FuncFormatter(
+        lambda v, _: "0" if v == 0 else f"{v:.3g}".replace("-", MINUS)))
+    return span
+
+
+def stage_use_figure(pair, out_dir, nominal_g, plant=None, name=None):
+    """One stage-use scenario under both laws, around its last motion (x = t − t_0 on a
+    symmetric-log axis, linear within ±linthresh: a 10 ms move and the minute before it).
+
+    Parameters
+    ----------
+    pair : dict
+        ``{"ours": StageUseRun, "paper": StageUseRun}`` with their rows.
+    out_dir : str or Path
+    nominal_g : dict
+        The controller's nominal ``tf.*``.
+    plant : dict, optional
+        The plant's parameters (its own ``tf.*`` drawn as a reference).
+    """
+    plt = _pyplot()
+    _style(plt)
+    ours = pair["ours"]
+    sc = ours.spec
+    h = sc.step_size
+    moved = motions(sc.signal)
+    last = moved[-1][1] if moved else None
+    t0 = last.first * h if last is not None else 0.0
+    scan = last is not None and last.kind == "scan"
+    # linear over the last frame of a scan, over the first 20 ms of a move
+    linthresh = last.samples * h if scan else 0.02
+    fig, axes = plt.subplots(4, 1, figsize=(8.2, 9.2), sharex=True)
+    a_y, a_e, a_a, a_b = axes
+    for law in ("ours", "paper"):
+        r = pair[law]
+        d = r.data
+        x = d["time"] - t0
+        st = _LAW_STYLE[law]
+        # every row (communication points: dense around motions, 10 ms apart in holds)
+        if law == "ours":
+            a_y.plot(x, d["y_d"], color="k", lw=1.4, label="y_d", drawstyle="steps-post")
+        a_y.plot(x, d["y"], label=f"y, {_LAW_LABEL[law]}", **st)
+        err = np.maximum(np.abs(d["y_d"] - d["y"]) * 1e3, 0.1)
+        moves = ", ".join(f"{m.worst:.3g}" for m in r.moves)
+        a_e.plot(x, err, label=f"{_LAW_LABEL[law]}" + (f" (moves: {moves} {UM})" if moves else ""), **st)
+        for field, ax in (("a1", a_a), ("a2", a_a), ("b1", a_b), ("b2", a_b)):
+            ax.plot(x, d[field], drawstyle="steps-post",
+                    label=f"est.{field}, {law}" if field in ("a1", "b1") else None,
+                    **{**st, "color": st["color"] if field in ("a1", "b1") else
+                       ("tab:cyan" if law == "ours" else "tab:red")})
+    for field, ax in (("a1", a_a), ("a2", a_a), ("b1", a_b), ("b2", a_b)):
+        nom = nominal_g.get(f"tf.{field}")
+        if nom is not None:
+            ax.axhline(nom, color="k", ls=":", lw=0.8,
+                       label="controller's model" if field in ("a1", "b1") else None)
+        if plant is not None and f"tf.{field}" in plant:
+            ax.axhline(plant[f"tf.{field}"], color="0.5", ls="-.", lw=0.8,
+                       label="plant's own G" if field in ("a1", "b1") else None)
+    d = ours.data
+    x = d["time"] - t0
+    spans = _runs(d["adapting"] > 0.5)
+    for ax in (a_a, a_b):
+        for i, (a, b) in enumerate(spans[:200]):
+            ax.axvspan(x[a], x[min(b, x.size - 1)], color="tab:green", alpha=0.15, lw=0,
+                       label="ours adapting (est.adapting)" if i == 0 and ax is a_a else None)
+    a_y.set_ylabel(f"[{UM}]")
+    a_y.set_title(f"reference and displacement: {ours.description}", loc="left")
+    a_e.set_yscale("log")
+    a_e.set_ylabel(f"|y_d {MINUS} y| [{NM}]")
+    a_e.set_title("tracking error (0.1 nm floor on a log axis)", loc="left")
+    a_a.set_title("estimates of the denominator of G: est.a1 (upper), est.a2 (lower)", loc="left")
+    a_b.set_title("estimates of the numerator of G: est.b1 (upper), est.b2 (lower)", loc="left")
+    a_a.set_ylim(-2.0, 1.2)
+    a_b.set_ylim(-1.2, 1.2)
+    lo, hi = float(d["time"][0] - t0), float(d["time"][-1] - t0)
+    for ax in axes:
+        _time_symlog(ax, linthresh, lo, hi)
+        ax.axvline(0.0, color="0.6", lw=0.6)
+        ax.legend(loc="best", fontsize=6.3, framealpha=0.85)
+    what = "the last frame's start" if scan else "the last move's start"
+    a_b.set_xlabel(f"t {MINUS} t_0 [s], t_0 = {t0:g} s ({what}); symmetric-log axis, linear "
+                   f"within ±{linthresh:g} s")
+    name = name or f"stage_use_{sc.name}"
+    caption = (f"Stage use, {sc.name}: {ours.description}. The controller's defaults (ours) and "
+               f"the paper's law on the mismatch plant: y_d and y, the tracking error, and the RLS "
+               f"estimates (ours adapt only in the shaded spans, while the reference excites the "
+               f"loop), on a time axis around {what}.")
+    return _save(plt, fig, out_dir, name, caption, f"Stage use: {sc.name}")
+
+
+# ---------------------------------------------------------------------------
 # drivers
 # ---------------------------------------------------------------------------
 
@@ -746,6 +878,31 @@ def draw_main_figures(out_dir, tracking, conditions, validation, *, nominal_g, p
         figs.append(hysteresis_figure(validation, out_dir))
         figs.append(creep_figure(validation, out_dir))
     return figs
+
+
+def draw_stage_use_figures(out_dir, runs, *, nominal_g, plants):
+    """The stage-use figures of the main job: :data:`STAGE_USE_FIGURES`, each under both laws.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+    runs : list of StageUseRun
+        With their rows.
+    nominal_g : dict
+        The controller's parameters (its nominal ``tf.*``).
+    plants : dict
+        Scenario name -> effective plant parameters.
+
+    Returns
+    -------
+    list of FigureFile
+    """
+    pairs = {}
+    for r in runs:
+        if r.data is not None:
+            pairs.setdefault(r.scenario, {})[r.law] = r
+    return [stage_use_figure(pairs[n], out_dir, nominal_g, plants.get(n))
+            for n in STAGE_USE_FIGURES if len(pairs.get(n, {})) == 2]
 
 
 def draw_scenario_figure(result, out_dir, *, nominal_g=None, plant=None, label="", name=None):

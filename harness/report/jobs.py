@@ -4,9 +4,9 @@ A job runs what :mod:`.conditions` and :mod:`.run` define, then writes what
 :mod:`.tables`, :mod:`.figures` and :mod:`.document` produce:
 
 * terminal: the headline table first (ours, paper, ratio), then every
-  condition side by side, the user's scenarios, the validation table, and
-  what each condition is;
-* files: ``tracking.csv``, ``validation.csv``, ``report.md``,
+  condition side by side, the user's scenarios, the validation table, the
+  stage-use table (:mod:`.stage_use`), and what each condition is;
+* files: ``tracking.csv``, ``validation.csv``, ``stage_use.csv``, ``report.md``,
   ``report.html``, ``provenance.json`` and, unless disabled, the figures as
   PNG (150 dpi) and SVG.
 """
@@ -22,7 +22,7 @@ import textwrap
 from .. import masters
 from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, WINDOWS_PLATFORM
 from ..progress import Progress
-from ..scenarios import VALIDATION_SCENARIOS, get_scenario, load_scenarios
+from ..scenarios import VALIDATION_SCENARIOS, get_scenario, load_scenarios, stage_use_scenarios
 from . import document as doc_
 from . import tables
 from .conditions import (
@@ -31,9 +31,11 @@ from .conditions import (
     describe_condition,
     user_condition,
 )
-from .figures import draw_main_figures, draw_scenario_figure
+from .figures import draw_main_figures, draw_scenario_figure, draw_stage_use_figures
 from .provenance import collect_provenance
 from .run import evaluate_tracking, evaluate_validation, parameter_defaults, validation_series
+from .stage_use import (HOLD_STEP, LAWS, STAGE_USE_NOTES, format_stage_use_table, run_stage_use,
+                        stage_use_table_rows, write_stage_use_csv)
 
 __all__ = ["run_all", "run_scenario", "check_out_dir", "prepare_out_dir", "VALIDATION_NOTES",
            "REPORT_WIDTH"]
@@ -156,7 +158,9 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
             fmu_dir=None, plots=True, backend="fmpy", registry=None, extra_scenarios=(),
             stream=sys.stdout, progress=sys.stderr, command=None, progress_interval=2.0,
             fmi_version=2):
-    """Run every tracking condition and the validation inputs; write the report.
+    """Run every tracking condition, the validation inputs and the stage-use scenarios (each
+    with the controller's defaults and the paper's law, through PiezoStageClosedLoop at a
+    variable communication step, whatever the backend); write the report.
 
     Parameters
     ----------
@@ -188,8 +192,8 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     -------
     dict
         ``{"tracking": {condition key: [TrackingResult]}, "validation": [ValidationResult],
-        "conditions": [Condition], "provenance": Provenance, "figures": [FigureFile],
-        "files": [Path]}``
+        "conditions": [Condition], "stage_use": [StageUseRun], "provenance": Provenance,
+        "figures": [FigureFile], "files": [Path]}``
     """
     out = prepare_out_dir(out_dir)
     registry = load_scenarios() if registry is None else registry
@@ -209,7 +213,9 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     plant_def = parameter_defaults(PLANT_MODEL, backend, fmu_dir, fmi_version)
     ctrl_def = parameter_defaults(CONTROLLER_MODEL, backend, fmu_dir, fmi_version)
 
-    total = sum(len(c.scenarios) for c in conditions) + len(validation_names)
+    stage_names = stage_use_scenarios()
+    total = (sum(len(c.scenarios) for c in conditions) + len(validation_names)
+             + len(LAWS) * len(stage_names))
     prog = Progress(total, progress, progress_interval)
     tracking = {}
     for cond in conditions:
@@ -233,11 +239,14 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
                                 progress=prog.within(f"validation / {name}", sc.step_size))
         prog.done(f"validation / {name}: C − H e_rms {r.diff_e_rms_um:.4f} µm", r.elapsed_s)
         validation.append(r)
+    stage = run_stage_use(stage_names, registry=registry, fmu_dir=fmu_dir, fmi_version=fmi_version,
+                          keep_data=plots, progress=prog)
 
     files = []
     all_tracking = [r for c in conditions for r in tracking[c.key]]
     files.append(tables.write_tracking_csv(all_tracking, out / "tracking.csv"))
     files.append(tables.write_validation_csv(validation, out / "validation.csv"))
+    files.append(write_stage_use_csv(stage, out / "stage_use.csv"))
 
     figures = []
     if plots:
@@ -250,6 +259,9 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
                       nominal_g.get("sat.v_max", float("nan")))
         figures = draw_main_figures(out, tracking, conditions, validation, nominal_g=nominal_g,
                                     plants=plants, v_limits=limits)
+        figures += draw_stage_use_figures(out, stage, nominal_g=_effective(ctrl_def, {}),
+                                          plants={r.scenario: _effective(plant_def, r.spec.plant)
+                                                  for r in stage})
         for f in figures:
             files += f.files
 
@@ -262,7 +274,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     defaults_source = ("the start value in the modelDescription of the FMUs above"
                        if backend != "core" else "the C core's default")
     report = _main_document(conditions, tracking, validation, figures, prov, unique,
-                            defaults_source, plots, registry)
+                            defaults_source, plots, registry, stage, fmi_version)
     (out / "report.md").write_text(doc_.render_markdown(report), encoding="utf-8")
     (out / "report.html").write_text(doc_.render_html(report), encoding="utf-8")
     (out / "provenance.json").write_text(json.dumps(prov.as_dict(), indent=2) + "\n",
@@ -270,12 +282,12 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     files += [out / "report.md", out / "report.html", out / "provenance.json"]
 
     if stream is not None:
-        stream.write(_terminal_text(conditions, tracking, validation, registry) + "\n")
+        stream.write(_terminal_text(conditions, tracking, validation, registry, stage) + "\n")
         stream.write(f"\nReport: {out / 'report.html'} and {out / 'report.md'} "
                      f"({len(files)} files in {out}/)\n")
         stream.flush()
     return {"tracking": tracking, "validation": validation, "conditions": conditions,
-            "provenance": prov, "figures": figures, "files": files}
+            "stage_use": stage, "provenance": prov, "figures": figures, "files": files}
 
 
 def condition_notes(conditions, registry=None):
@@ -300,7 +312,24 @@ CONDITIONS_TABLE_NOTE = ("headline: the benchmark; RLS off / no preview: the hea
                          "implementation check (round-off by construction with preview)")
 
 
-def _terminal_text(conditions, tracking, validation, registry):
+#: the terminal's stage-use notes: what its compact table leaves out, then the report's notes
+STAGE_USE_TERMINAL_NOTES = ("The terminal shows each run's worst move; report.md has every move, "
+                            "est.a1 before the last one and the controller's warnings.",
+                            *STAGE_USE_NOTES)
+
+
+def _stage_use_intro(fmi_version):
+    """What the stage-use section is, in one paragraph."""
+    return (f"What a positioning stage mostly does, on the mismatch plant: hold, move, hold "
+            f"again, scan triangle rasters and dwell between frames (harness/scenarios/"
+            f"stage_use.toml). Each scenario runs with the controller's defaults (ours) and with "
+            f"the paper's law, through PiezoStageClosedLoop (FMI {fmi_version}.0, fmpy) with its "
+            f"input y_d, one sample per communication step while y_d moves and for 0.5 s after, "
+            f"{HOLD_STEP * 1e3:g} ms steps while it holds (the rows of one-sample steps at those "
+            f"points, bit for bit). The family of 50 stages: docs/stage_use.md.")
+
+
+def _terminal_text(conditions, tracking, validation, registry, stage=()):
     head = next(c for c in conditions if c.role == "headline")
     builtin = [c for c in conditions if c.role != "user"]
     parts = [tables.format_tracking_table(tracking[head.key], _headline_title(head)),
@@ -318,6 +347,10 @@ def _terminal_text(conditions, tracking, validation, registry):
     if user_v:
         parts.append(tables.format_validation_table(
             user_v, "User validation inputs: coupled vs Hammerstein model"))
+    if stage:
+        parts.append(format_stage_use_table(stage, "Stage use: ours vs the paper's law on the "
+                                                   "mismatch plant")
+                     + "\n" + _wrap_notes("Stage-use notes:", STAGE_USE_TERMINAL_NOTES))
     described = condition_notes(conditions, registry)
     notes = [_wrap_notes(f"{c.label}:", described[c.key]) for c in conditions]
     parts.append("What each condition is\n" + "\n".join(notes))
@@ -330,7 +363,7 @@ def _figure_block(fig):
 
 
 def _main_document(conditions, tracking, validation, figures, prov, scenarios, defaults_source,
-                   plots, registry=None):
+                   plots, registry=None, stage=(), fmi_version=2):
     D = doc_
     figs = {f.name: f for f in figures}
     head = next(c for c in conditions if c.role == "headline")
@@ -392,8 +425,17 @@ def _main_document(conditions, tracking, validation, figures, prov, scenarios, d
         if name in figs:
             doc.add(_figure_block(figs[name]))
 
+    if stage:
+        s_head, s_rows = stage_use_table_rows(stage)
+        doc.add(D.Heading("Stage use"), D.Paragraph(_stage_use_intro(fmi_version)),
+                D.Table(tuple(s_head), tuple(map(tuple, s_rows))), D.Bullets(STAGE_USE_NOTES))
+        for f in figures:
+            if f.name.startswith("stage_use_"):
+                doc.add(_figure_block(f))
+
     doc.add(*_provenance_blocks(prov, scenarios, defaults_source))
-    names = ["tracking.csv", "validation.csv"] + [p.name for f in figures for p in f.files]
+    names = ["tracking.csv", "validation.csv"] + (["stage_use.csv"] if stage else [])
+    names += [p.name for f in figures for p in f.files]
     names += ["report.md", "report.html", "provenance.json"]
     doc.add(D.Heading("Files"), D.Bullets(tuple(f"`{n}`" for n in names)))
     return doc
