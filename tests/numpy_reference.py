@@ -22,22 +22,24 @@ DOC_DEFAULTS = {
 
 # The design's start values of the controller's own parameters: the robust update (docs/model.md,
 # adaptation: excitation 3 x the measured noise, 0.05 s after it, variance bound 0.004, the loop's
-# initial covariance 0.01) with forgetting 0.99, trace bound 1000, the candidates' initial
-# covariance scale 1, integral action 0.01, mv.lambda_u 0; the drop-in timing (v published at
+# initial covariance 0.01) with forgetting 0.99, trace bound 100, the candidates' initial
+# covariance scale 1, integral action 0.01, the observer pole 0.5, mv.lambda_u 0; the drop-in timing (v published at
 # the end of the step that sampled the inputs: no direct feedthrough, the loop delay detected);
 # voltage limits on at +-150 V (the paper's amplifier range; every paper scenario stays below
 # 62 V); the divergence monitor at 1 um for 200 samples.
 CONTROLLER_DOC_DEFAULTS = {
     "mv.delay": -1, "mv.feedthrough": False, "mv.hold_inputs": False, "mv.lambda_u": 0.0,
-    "mv.observer": 0.4, "mv.integral": 0.01, "rls.enabled": True,
-    "rls.forgetting": 0.99, "rls.p0": 1.0, "rls.trace_max": 1000.0, "rls.robust": True,
+    "mv.observer": 0.5, "mv.integral": 0.01, "rls.enabled": True,
+    "rls.forgetting": 0.99, "rls.p0": 1.0, "rls.trace_max": 100.0, "rls.robust": True,
     "rls.excitation": 3.0, "rls.excitation_time": 0.05, "rls.variance_max": 0.004, "rls.p0_loop": 0.01,
     "sat.enabled": True, "sat.v_min": -150.0, "sat.v_max": 150.0, "monitor.pred_error_max": 1.0,
     "monitor.divergence_samples": 200,
 }
 # The paper's law: its update on every sample with the tuning measured for it, no integral
-# action (docs/model.md, adaptation); the robust update's parameters are then unused.
-PAPER_LAW = {"rls.robust": False, "rls.forgetting": 0.995, "rls.trace_max": 100.0, "mv.integral": 0.0}
+# action, the observer pole measured for it (docs/model.md, adaptation); the robust update's
+# parameters are then unused.
+PAPER_LAW = {"rls.robust": False, "rls.forgetting": 0.995, "rls.trace_max": 100.0, "mv.integral": 0.0,
+             "mv.observer": 0.4}
 
 # Table 1 rows (f: k_c, alpha)
 TABLE1 = {1: (1.0463, 0.0002), 10: (1.0497, -0.0085), 20: (1.0386, -0.0077),
@@ -362,7 +364,8 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
 
         excitation at k: |r(k-1) - line| > excitation * m_y(k), m_y the measured noise of y
                          before sample k, line the straight line through the last excitation
-                         (its r, advanced by its r(j) - r(j-1) each sample since); the estimator
+                         (its r, advanced by its r(j) - r(j-1) each sample since; a reference
+                         with r(k-1) = r(k-2) stops the line there); the estimator
                          adapts at k and for excitation_samples samples after
         e(k) = y(k) - c - phi^T theta      (phi as rls_reference)
         adapting: the exponentially weighted RLS of rls_reference with
@@ -407,10 +410,11 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         line = anchor + velocity
         event = abs(r1 - line) > excitation * m_y
         adapting = event or left > 0
-        if event:
-            anchor, velocity, left = r1, r1 - r2, excitation_samples
+        if event or r1 == r2:           # a reference that stops stops the line
+            anchor, velocity = r1, r1 - r2
         else:
-            anchor, left = line, max(left - 1, 0)
+            anchor = line
+        left = excitation_samples if event else max(left - 1, 0)
         m_y = track(m_y, Y(k) - Y(k - 1))
         phi = np.array([-Y(k - 1), -Y(k - 2), Q(k - d), Q(k - d - 1)])
         e = y[k] - c - phi @ theta

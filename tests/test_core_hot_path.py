@@ -286,11 +286,12 @@ class ControllerRef:
         if self.robust:
             r1 = self.r_last
             line = self.anchor + self.velocity
+            still = r1 == self.r_last2
             event = abs(r1 - line) > self.excitation * self.noise_y
             noise_y = track_noise(self.noise_y, y_meas - self.y_prev[0])
             excited = event or self.left > 0
-            anchor = r1 if event else line
-            velocity = r1 - self.r_last2 if event else self.velocity
+            anchor = r1 if event or still else line
+            velocity = r1 - self.r_last2 if event or still else self.velocity
             left = self.excitation_samples if event else (self.left - 1 if self.left > 0 else 0)
         if was_detecting:
             offset = 0.0
@@ -463,7 +464,8 @@ def _run_bitwise(cparams, d, y_d, n):
     return ctrl, cref
 
 
-PAPER_LAW = {"rls.robust": False, "rls.forgetting": 0.995, "rls.trace_max": 100.0, "mv.integral": 0.0}
+PAPER_LAW = {"rls.robust": False, "rls.forgetting": 0.995, "rls.trace_max": 100.0, "mv.integral": 0.0,
+             "mv.observer": 0.4}
 
 
 @pytest.mark.parametrize("cparams, d", [({}, 2), ({}, 1), ({"mv.integral": 0.05, "rls.excitation_time": 0.01}, 2),
