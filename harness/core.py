@@ -297,6 +297,10 @@ _CONTROLLER_TABLE = {
     "sup.window": (("sup", "window"), "int"),
     "sup.clip_time": (("sup", "clip_time"), "float"),
     "sup.detect_time": (("sup", "detect_time"), "float"),
+    "sup.reaction": (("sup", "reaction"), "int"),
+    "sup.ramp_time": (("sup", "ramp_time"), "float"),
+    "sup.clip_error": (("sup", "clip_error"), "float"),
+    "mv.probe_max": (("mv_probe_max",), "float"),
 }
 
 PLANT_PARAMETER_NAMES = tuple(_PLANT_TABLE)

@@ -60,7 +60,7 @@ def thresholds(controller_params=None):
         monitor_share=lib.PIEZO_MONITOR_SHARE_PERCENT / 100.0,
         monitor_share_min=int(lib.PIEZO_MONITOR_SHARE_MIN_SAMPLES),
         travel_fraction=lib.PIEZO_SUP_TRAVEL_PERCENT / 100.0, confirm=int(lib.PIEZO_SUP_CONFIRM),
-        min_samples=int(lib.PIEZO_SUP_MIN_SAMPLES), max_delay=int(lib.PIEZO_SUP_MAX_D),
+        min_samples=int(lib.PIEZO_SUP_MIN_SAMPLES), max_delay=int(lib.PIEZO_MV_MAX_D),
         detectable=int(lib.PIEZO_SUP_DEFAULT_DETECTABLE))
 
 
@@ -92,7 +92,7 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
     Returns
     -------
     dict of ndarray
-        ``szz``, ``szw`` and ``sww`` (one row per delay 1..8), ``travel_model``,
+        ``szz``, ``szw`` and ``sww`` (one row per delay 1..9), ``travel_model``,
         ``travel_meas``, ``weight``: the supervisor's sums after each sample; ``mon_share``,
         ``mon_weight``: the divergence monitor's (samples with ``|pred_error|`` beyond the
         bound; where v was clipped the core also counts the nominal model's error, which a
@@ -108,7 +108,7 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
     dz = np.diff(z, prepend=0.0)
     dw = np.diff(w, prepend=0.0)
     sww1 = _ew(dw * dw, lam)
-    dmax = core.lib().PIEZO_SUP_MAX_D
+    dmax = core.lib().PIEZO_MV_MAX_D
     szw = np.empty((dmax, n))
     sww = np.zeros((dmax, n))
     for d in range(1, dmax + 1):

@@ -26,8 +26,10 @@ FEEDTHROUGH = {"mv.feedthrough": True, "mv.delay": 0}
 # rightly stop such a "loop" within 15 ms, is switched off as docs/model.md says for open-loop use.
 OPEN_LOOP = {"sup.enabled": False}
 SUPERVISION = {"sup.enabled": ("Boolean", True), "sup.gain_min": ("Real", 0.25), "sup.gain_max": ("Real", 4.0),
-               "sup.window": ("Integer", 200), "sup.clip_time": ("Real", 0.5), "sup.detect_time": ("Real", 0.5)}
-SUP_OUTPUTS = ["sup.status", "sup.gain", "sup.delay"]
+               "sup.window": ("Integer", 200), "sup.clip_time": ("Real", 0.5), "sup.detect_time": ("Real", 0.5),
+               "sup.reaction": ("Integer", 0), "sup.ramp_time": ("Real", 0.01), "sup.clip_error": ("Real", 1.0),
+               "mv.probe_max": ("Real", 1.0)}
+SUP_OUTPUTS = ["sup.status", "sup.gain", "sup.delay", "sup.fault", "sup.fault_time"]
 
 
 def y_d(k):
@@ -82,7 +84,7 @@ def test_model_description_matches_design(controller, piezo_stage):
 
     assert [n for n, x in v.items() if x.causality == "input"] == INPUTS
     assert [n for n, x in v.items() if x.causality == "output"] == OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS
-    assert [v[n].type for n in SUP_OUTPUTS] == ["Integer", "Real", "Integer"]
+    assert [v[n].type for n in SUP_OUTPUTS] == ["Integer", "Real", "Integer", "Integer", "Real"]
     assert v["saturated"].type == "Boolean"
     assert [v[n].type for n in TIMING] == ["Integer", "Real", "Integer", "Integer"]
     for name in ("y_ref", "y_meas", "y_preview", "q", "pred_error"):
@@ -322,7 +324,8 @@ NON_DEFAULT_PARAMETERS = {
     "rls.forgetting": 0.99, "rls.p0": 2.0, "rls.trace_max": 50.0, "sat.enabled": False,
     "sat.v_min": -40.0, "sat.v_max": 60.0, "monitor.pred_error_max": 5.0,
     "monitor.divergence_samples": 0, "sup.enabled": False, "sup.gain_min": 0.1, "sup.gain_max": 8.0,
-    "sup.window": 400, "sup.clip_time": 0.25, "sup.detect_time": 1.0,
+    "sup.window": 400, "sup.clip_time": 0.25, "sup.detect_time": 1.0, "sup.reaction": 1, "sup.ramp_time": 0.02,
+    "sup.clip_error": 2.0, "mv.probe_max": 0.5,
 }
 
 

@@ -73,6 +73,12 @@ typedef enum {
     vr_sup_status,          /* output Integer: 0 not verified yet, 1 verified, 2 degraded */
     vr_sup_gain,            /* output: response gain, times the model's */
     vr_sup_delay,           /* output Integer: the delay y_meas answers at [samples] */
+    vr_sup_reaction,        /* Integer: 0 error (a verdict fails the doStep), 1 safe (the safe state) */
+    vr_sup_ramp_time,       /* [s] the safe state's ramp of v to 0 V */
+    vr_sup_clip_error,      /* [um] the clipping watchdog's bound */
+    vr_mv_probe_max,        /* [um] largest delay probe */
+    vr_sup_fault,           /* output Integer: the fault code of the safe state (0: none) */
+    vr_sup_fault_time,      /* output [s] the time of its verdict */
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -103,7 +109,9 @@ typedef struct {
     int said_stamps;                /* supervision warnings logged: 1 t_meas, 2 t_preview, 4 alignment */
     int sup_status;                 /* outputs: sup.status, ... */
     double sup_gain;                /* ... sup.gain, ... */
-    int sup_delay;                  /* ... sup.delay */
+    int sup_delay;                  /* ... sup.delay, ... */
+    int sup_fault;                  /* ... sup.fault, ... */
+    double sup_fault_time;          /* ... sup.fault_time */
 
     piezo_controller ctrl;          /* core state (committed samples only) */
     piezo_controller_output out;    /* outputs: the last committed sample, or with
