@@ -1201,6 +1201,23 @@ int piezo_controller_explain_in(const piezo_controller *c, int st, const piezo_s
     return 0;
 }
 
+int piezo_controller_explain_safe_state(const piezo_controller *c, const piezo_sup_context *ctx,
+                                        char *text, size_t size)
+{
+    int used;
+    if (text != NULL && size > 0) text[0] = '\0';
+    if (c == NULL || ctx == NULL || !c->fault) return 0;
+    /* the words harness/fmu.py SAFE_STATE_WORDS knows this Warning by */
+    used = snprintf(text, size, "sup.reaction = safe: from t = %.9g s the loop is held in its safe state "
+                    "(sup.fault = %d): v ramps to 0 V over sup.ramp_time = %g s and stays there, adaptation "
+                    "is frozen, the simulation goes on. Why: ", ctx->t0 + (double)(int64_t)c->k_fault * ctx->h,
+                    c->fault, c->sup.ramp_time);
+    if (used < 0) return 0;
+    return used + piezo_controller_explain_in(c, piezo_controller_fault_status(c->fault), ctx,
+                                              (size_t)used < size ? text + used : NULL,
+                                              (size_t)used < size ? size - (size_t)used : 0);
+}
+
 const char *piezo_controller_check_params(const piezo_controller *c, const piezo_controller_params *q)
 {
     piezo_controller scratch;

@@ -290,6 +290,11 @@ int piezo_controller_explain(const piezo_controller *ctrl, int st, char *text, s
  * t0 + k h, a wired loop's connections or one FMU's parameters). */
 int piezo_controller_explain_in(const piezo_controller *ctrl, int st, const piezo_sup_context *context,
                                 char *text, size_t size);
+/* The safe state's message (sup.reaction = safe, ctrl->fault != 0): "sup.reaction = safe: from
+ * t = ... the loop is held in its safe state (sup.fault = N): ... Why: " and the verdict's
+ * explanation in the words of piezo_controller_explain_in. 0 when not in the safe state. */
+int piezo_controller_explain_safe_state(const piezo_controller *ctrl, const piezo_sup_context *context,
+                                        char *text, size_t size);
 /* The status a sample would have been refused with, had sup.reaction been error, for the
  * fault code of the safe state (PIEZO_ERR_FAULT, _UNSTABLE, _DIVERGED; PIEZO_OK for 0). */
 piezo_status piezo_controller_fault_status(int fault);

@@ -533,14 +533,16 @@ static void explain_undetected(char *t, size_t size, int *u, const piezo_sup_ver
     add(t, size, u, "no loop delay of 1 to 3 samples explains y_meas after %llu samples (%.3g s, "
         "sup.detect_time, since t = %.9g s): ", (unsigned long long)v->clip_samples,
         c->h * (double)v->clip_samples, time_of(c, v->k + 1 - v->clip_samples));
-    if (v->noise > 0.0 && v->probe_wanted > v->probe_max) {
-        /* the probes that would show the delay through this noise are beyond mv.probe_max */
-        add(t, size, u, "the measurement's noise buries the delay probes. The candidates' prediction errors "
-            "were %.3g um rms; a probe of p um on q moves y_meas by %.3g p um at first (tf.b1), and the "
+    if (v->noise > 0.0 && v->probe_wanted > v->probe_max && v->reversal_share * 100.0 >= PIEZO_SUP_NOISY_PERCENT) {
+        /* a noise-dominated measurement (it reverses its direction often), and the probes that
+         * would show the delay through it are beyond mv.probe_max */
+        add(t, size, u, "the measurement's noise buries the delay probes. y_meas reversed its direction in %.0f %% "
+            "of the samples (steps of %.3g um rms) and the candidates' prediction errors were %.3g um rms; a probe of p um on q moves y_meas by %.3g p um at first (tf.b1), and the "
             "delay shows once that is %.3g times the noise: p = %.3g um. mv.probe_max = %.3g um caps it (%d probe%s "
-            "made, the last of %.3g um). Raise mv.probe_max to %.3g um if the stage may move that much, set "
-            "mv.delay to the loop's delay (", v->noise, v->probe_gain, v->probe_snr, v->probe_wanted,
-            v->probe_max, v->probes, v->probes == 1 ? "" : "s", v->probe, v->probe_wanted);
+            "made). Raise mv.probe_max to %.3g um if the stage may move that much, set mv.delay to the loop's "
+            "delay (", 100.0 * v->reversal_share, v->step_rms, v->noise, v->probe_gain, v->probe_snr,
+            v->probe_wanted, v->probe_max, v->probes,
+            v->probes == 1 ? "" : "s", v->probe_wanted);
         if (c->internal)
             add(t, size, u, "mv.delay = %d here: tf.delay = %d, mv.feedthrough = %s", internal_delay(c) - 1,
                 c->stage_delay, c->feedthrough ? "true" : "false");

@@ -92,6 +92,8 @@
 #define PIEZO_SUP_DROP_PERCENT 130   /* the gain followed over the gain now: beyond it, the gain fell */
 #define PIEZO_SUP_RISE_PERCENT 200   /* the gain now over the gain followed: beyond it, the gain rose */
 #define PIEZO_SUP_FROZEN_PERCENT 20  /* share of reversals of y_meas before a frozen stretch */
+#define PIEZO_SUP_NOISY_PERCENT 33   /* y_meas reversing in this share of the samples is noise-dominated
+                                        (white noise at rest: 2/3; a moving stage: seldom) */
 #define PIEZO_SUP_REACT_ERROR 0      /* sup.reaction: a verdict fails the step (the default) */
 #define PIEZO_SUP_REACT_SAFE 1       /* sup.reaction: a verdict holds the loop in the safe state */
 

@@ -59,15 +59,8 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
     double t0 = ctx->t0, h = ctx->h;
     if (c->fault && !t->said_fault) {
         /* the safe state: said once, with the verdict in the words of an Error */
-        int used;
         t->said_fault = 1;
-        used = snprintf(text, size, "sup.reaction = safe: from t = %.9g s the loop is held in its safe state "
-                        "(sup.fault = %d): v ramps to 0 V over sup.ramp_time = %g s and stays there, adaptation "
-                        "is frozen, the simulation goes on. Why: ", fmu_sample_time(t0, c->k_fault, h), c->fault,
-                        c->sup.ramp_time);
-        if (used > 0 && (size_t)used < size)
-            piezo_controller_explain_in(c, piezo_controller_fault_status(c->fault), ctx, text + used,
-                                        size - (size_t)used);
+        piezo_controller_explain_safe_state(c, ctx, text, size);
         return 1;
     }
     if (c->n_outliers > 0 && !t->said_outlier) {

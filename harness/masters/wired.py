@@ -130,12 +130,19 @@ class WiredRun:
         The first Error message of the FMU that failed ("" if none).
     warnings : dict
         ``{component: [message, ...]}``: every Warning each FMU logged, in order.
+    fault : int
+        The controller's ``sup.fault`` where the run ended (0: none; with ``sup.reaction`` = 1,
+        the code of the verdict that holds the loop in its safe state).
+    fault_time : float
+        Its ``sup.fault_time`` [s].
     """
 
     samples: np.ndarray
     error_time: float = None
     error: str = ""
     warnings: dict = field(default_factory=dict)
+    fault: int = 0
+    fault_time: float = 0.0
 
 
 def schedule_name(schedule):
@@ -366,6 +373,13 @@ def _run(inst, schedule, fault_of, n, h):
     del keep
     samples = rows[:k].copy().view(_WIRED_DTYPE).reshape(k)
     run = WiredRun(samples)
+    if failed is None:
+        fc = fn["controller"]
+        vr = _vr_array([ctrl.info.vr("sup.fault"), ctrl.info.vr("sup.fault_time")])
+        code, when = (ctypes.c_int32 * 1)(), (ctypes.c_double * 1)()
+        if get_int_raw(fc.c, ctypes.addressof(vr), 1, ctypes.addressof(code)) <= 1 \
+                and fc.get(fc.c, ctypes.addressof(vr) + ctypes.sizeof(vr[0]), 1, ctypes.addressof(when)) <= 1:
+            run.fault, run.fault_time = int(code[0]), float(when[0])
     for comp, i in inst.items():
         run.warnings[comp] = [line[len("[Warning] "):] for line in i.log if line.startswith("[Warning]")]
     if failed is not None:
