@@ -47,6 +47,10 @@ class Thresholds:
     min_samples: int
     max_delay: int
     detectable: int
+    judge_every: int
+    gain_drop: float
+    gain_rise: float
+    frozen_share: float
 
 
 def thresholds(controller_params=None):
@@ -61,7 +65,9 @@ def thresholds(controller_params=None):
         monitor_share_min=int(lib.PIEZO_MONITOR_SHARE_MIN_SAMPLES),
         travel_fraction=lib.PIEZO_SUP_TRAVEL_PERCENT / 100.0, confirm=int(lib.PIEZO_SUP_CONFIRM),
         min_samples=int(lib.PIEZO_SUP_MIN_SAMPLES), max_delay=int(lib.PIEZO_MV_MAX_D),
-        detectable=int(lib.PIEZO_SUP_DEFAULT_DETECTABLE))
+        detectable=int(lib.PIEZO_SUP_DEFAULT_DETECTABLE), judge_every=int(lib.PIEZO_SUP_JUDGE_EVERY),
+        gain_drop=lib.PIEZO_SUP_DROP_PERCENT / 100.0, gain_rise=lib.PIEZO_SUP_RISE_PERCENT / 100.0,
+        frozen_share=lib.PIEZO_SUP_FROZEN_PERCENT / 100.0)
 
 
 def _ew(x, lam):
@@ -93,7 +99,10 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
     -------
     dict of ndarray
         ``szz``, ``szw`` and ``sww`` (one row per delay 1..9), ``travel_model``,
-        ``travel_meas``, ``weight``: the supervisor's sums after each sample; ``mon_share``,
+        ``travel_meas``, ``weight``, ``reversals`` (samples where y_meas reversed its direction,
+        the last change kept over equal samples), ``steps2`` (its squared sample-to-sample
+        changes), ``y_same`` (samples y_meas equalled the one before, in a row): the
+        supervisor's sums after each sample; ``mon_share``,
         ``mon_weight``: the divergence monitor's (samples with ``|pred_error|`` beyond the
         bound; where v was clipped the core also counts the nominal model's error, which a
         working loop keeps far below the bound).
@@ -116,12 +125,23 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
         szw[d - 1] = _ew(dz * shifted, lam)
         sww[d - 1, d - 1:] = sww1[:n - d + 1]
     yhat = lfilter([1.0], [1.0, a1, a2], w)
+    dy = np.diff(y, prepend=y[:1]) if n else y
+    last = np.zeros(n)                              # the last nonzero change before each sample
+    prev = 0.0
+    for i in range(n):
+        last[i] = prev
+        if dy[i] != 0.0:
+            prev = dy[i]
+    same = np.zeros(n, dtype=np.int64)
+    for i in range(1, n):
+        same[i] = same[i - 1] + 1 if y[i] == y[i - 1] else 0
     lam_m = 1.0 - 1.0 / monitor_window if monitor_window > 0 else 0.0
     return {
         "szz": _ew(dz * dz, lam), "szw": szw, "sww": sww,
         "travel_model": _ew(np.abs(np.diff(yhat, prepend=0.0)), lam),
         "travel_meas": _ew(np.abs(np.diff(y, prepend=0.0)), lam),
         "weight": _ew(np.ones(n), lam),
+        "reversals": _ew((dy * last < 0.0).astype(float), lam), "steps2": _ew(dy * dy, lam), "y_same": same,
         "mon_share": _ew((np.abs(np.asarray(pred_error, dtype=float)) > error_bound).astype(float), lam_m),
         "mon_weight": _ew(np.ones(n), lam_m),
     }
@@ -154,6 +174,13 @@ class Margins:
     monitor_run : int
         The longest run of samples with ``|pred_error|`` above ``monitor.pred_error_max``
         (the divergence window, 200 samples).
+    gain_drop, gain_rise : float or None
+        After the loop was verified: the largest ratio of the gain followed to a strongly
+        evidenced gain (threshold ``PIEZO_SUP_DROP_PERCENT``) and of such a gain to the gain
+        followed (``PIEZO_SUP_RISE_PERCENT``), over the judged samples.
+    frozen_run : int
+        The longest run of equal y_meas samples whose reversal share before it reached
+        ``PIEZO_SUP_FROZEN_PERCENT`` (threshold ``sup.window``).
     """
 
     gain_low: float | None
@@ -164,6 +191,9 @@ class Margins:
     clip_run: int
     detection_run: int
     monitor_run: int
+    gain_drop: float | None = None
+    gain_rise: float | None = None
+    frozen_run: int = 0
 
 
 def _longest_run(mask):
@@ -233,6 +263,29 @@ def margins(samples, nominal, controller_params=None):
     # the monitor judges its count of large errors against the whole window (piezo_controller.c)
     share = np.where(k >= th.monitor_share_min, st["mon_share"] / window, 0.0) if window > 0 \
         else np.zeros(n)
+    # the gain followed once verified, moved at each judged verified sample (piezo_supervisor.c)
+    followed, drop, rise = 0.0, None, None
+    rate = th.judge_every / th.window
+    for i in np.flatnonzero(strong & (k % th.judge_every == 0)):
+        if kind[i] != 0 or not in_range[i]:
+            continue
+        g_i = float(g[i])
+        if followed > 0.0:
+            drop = max(drop or 0.0, followed / g_i)
+            rise = max(rise or 0.0, g_i / followed)
+            if followed > th.gain_drop * g_i or g_i > th.gain_rise * followed:
+                continue                            # a candidate: the gain followed holds
+            followed += (g_i - followed) * rate
+        else:
+            followed = g_i
+    # a measurement that froze after showing noise (its reversal share before the stretch)
+    lam = 1.0 - 1.0 / th.window
+    same = st["y_same"]
+    stretch = (1.0 - lam ** same) / (1.0 - lam)
+    before = st["weight"] - stretch
+    with np.errstate(divide="ignore", invalid="ignore"):
+        noisy = (before >= 1.0) & (st["reversals"] >= th.frozen_share * before)
+    frozen_run = int(same[noisy & (same > 0)].max()) if np.any(noisy & (same > 0)) else 0
     return Margins(
         gain_low=float(np.nanmin(gs)) if np.isfinite(gs).any() else None,
         gain_high=float(np.nanmax(gs)) if np.isfinite(gs).any() else None,
@@ -242,6 +295,7 @@ def margins(samples, nominal, controller_params=None):
         clip_run=_longest_run(samples["clipped"]),
         detection_run=_longest_run(loop_delay == 0) if auto else 0,
         monitor_run=_longest_run(np.abs(np.asarray(samples["pred_error"], dtype=float)) > bound),
+        gain_drop=drop, gain_rise=rise, frozen_run=frozen_run,
     )
 
 

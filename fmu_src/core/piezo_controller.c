@@ -282,6 +282,8 @@ void piezo_controller_reset(piezo_controller *c)
     c->det_noise = 0.0;
     c->err_sum = c->err_weight = c->outlier_sum = 0.0;
     c->quiet = 0;
+    c->suspect = 0;
+    c->suspect_y = c->suspect_error = 0.0;
     c->n_outliers = c->k_first_outlier = 0;
     c->first_outlier = c->first_outlier_error = 0.0;
     c->fault = 0;
@@ -592,8 +594,9 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
         pred_error = rls_update(c, y_meas, s);
         detect_carry(c, s);
     }
-    /* supervision of sample k: what the measurement did with the past outputs */
-    s->sup_in.y_meas = y_meas;
+    /* supervision of sample k: what the measurement did with the past outputs (an outlier as it
+     * came: the first sample of a fault that goes on is evidence; a dropout only weakens it) */
+    s->sup_in.y_meas = in->y_meas;
     s->sup_in.y_ref = in->y_ref;
     s->sup_in.q1 = q_past(c, 1);
     s->sup_in.q2 = q_past(c, 2);
@@ -843,19 +846,23 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
     c->mon_share = s->mon_share;
     c->mon_weight = s->mon_weight;
     if (fabs(s->out.pred_error) > c->max_abs_pred_error) c->max_abs_pred_error = fabs(s->out.pred_error);
-    /* outliers: the sums, the count and the first */
+    /* outliers: the sums; one is counted (and said) once the sample after it is within the bound
+     * again (a reading that went back: not the first sample of a change that goes on) */
     c->err_sum = s->err_sum;
     c->err_weight = s->err_weight;
     c->outlier_sum = s->outlier_sum;
     c->quiet = s->outlier || s->large_error ? 0 : c->quiet + 1;
-    if (s->outlier) {
+    if (c->suspect && !s->large_error) {
         if (c->n_outliers == 0) {
-            c->k_first_outlier = c->k;
-            c->first_outlier = s->y_meas + s->raw_error;
-            c->first_outlier_error = s->raw_error;
+            c->k_first_outlier = c->k - 1;
+            c->first_outlier = c->suspect_y;
+            c->first_outlier_error = c->suspect_error;
         }
         c->n_outliers += 1;
     }
+    c->suspect = s->outlier;
+    c->suspect_y = s->outlier ? s->y_meas + s->raw_error : 0.0;
+    c->suspect_error = s->outlier ? s->raw_error : 0.0;
 
     /* shift the pasts (an outlier's: the prediction that stood in for it) */
     c->head = c->head == 0 ? PIEZO_MV_Q_RING - 1 : c->head - 1;
@@ -1098,7 +1105,9 @@ const char *piezo_controller_check(const piezo_controller *c)
     if (!(isfinite(c->err_sum) && isfinite(c->err_weight) && isfinite(c->outlier_sum) && c->err_sum >= 0.0
           && c->err_weight >= 0.0 && c->err_weight <= (double)c->k && c->outlier_sum >= 0.0
           && c->outlier_sum <= (double)c->k && isfinite(c->first_outlier) && isfinite(c->first_outlier_error))
-        || c->quiet > c->k || c->n_outliers > c->k
+        || c->quiet > c->k || c->n_outliers > c->k || (c->suspect != 0 && c->suspect != 1)
+        || (c->suspect && c->k == 0) || !isfinite(c->suspect_y) || !isfinite(c->suspect_error)
+        || (!c->suspect && (c->suspect_y != 0.0 || c->suspect_error != 0.0))
         || (c->n_outliers > 0 ? c->k_first_outlier >= c->k
                               : c->k_first_outlier != 0 || c->first_outlier != 0.0 || c->first_outlier_error != 0.0))
         return "outlier sums or counts out of range";

@@ -173,7 +173,9 @@ typedef struct {
     double err_sum, err_weight;  /* sums of lambda^(k-j) e(j)^2 and lambda^(k-j) over accepted samples */
     double outlier_sum;          /* sum of lambda^(k-j) [j was an outlier] */
     uint64_t quiet;              /* consecutive samples neither outliers nor beyond the monitor's bound */
-    uint64_t n_outliers;         /* outliers since reset */
+    int suspect;                 /* the last sample was taken for an outlier, not yet confirmed */
+    double suspect_y, suspect_error;    /* its y_meas and a-priori error [um] */
+    uint64_t n_outliers;         /* outliers confirmed since reset (the sample after one within the bound) */
     uint64_t k_first_outlier;    /* the first (valid when n_outliers > 0) */
     double first_outlier;        /* its y_meas [um] */
     double first_outlier_error;  /* its a-priori prediction error [um] */

@@ -65,10 +65,10 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
     }
     if (c->n_outliers > 0 && !t->said_outlier) {
         t->said_outlier = 1;
-        snprintf(text, size, "y_meas = %.6g um at t = %.9g s was %.4g um from what the model predicted, after a "
-                 "sample it predicted well: an outlier (a reading dropped or glitched), for which the model's "
-                 "prediction stood in (the law, the adaptation, the monitor and the supervision did not see it); "
-                 "further outliers are counted, not logged: the terminate call reports the count",
+        snprintf(text, size, "y_meas = %.6g um at t = %.9g s was %.4g um from what the model predicted, between "
+                 "samples it predicted well: an outlier (a reading dropped or glitched), for which the model's "
+                 "prediction stood in (the law, the adaptation and the monitor did not see it); further outliers "
+                 "are counted, not logged: the terminate call reports the count",
                  c->first_outlier, fmu_sample_time(t0, c->k_first_outlier, h), c->first_outlier_error);
         return 1;
     }

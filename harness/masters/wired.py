@@ -375,10 +375,10 @@ def _run(inst, schedule, fault_of, n, h):
     run = WiredRun(samples)
     if failed is None:
         fc = fn["controller"]
-        vr = _vr_array([ctrl.info.vr("sup.fault"), ctrl.info.vr("sup.fault_time")])
+        vr_code, vr_when = _vr_array([ctrl.info.vr("sup.fault")]), _vr_array([ctrl.info.vr("sup.fault_time")])
         code, when = (ctypes.c_int32 * 1)(), (ctypes.c_double * 1)()
-        if get_int_raw(fc.c, ctypes.addressof(vr), 1, ctypes.addressof(code)) <= 1 \
-                and fc.get(fc.c, ctypes.addressof(vr) + ctypes.sizeof(vr[0]), 1, ctypes.addressof(when)) <= 1:
+        if get_int_raw(fc.c, ctypes.addressof(vr_code), 1, ctypes.addressof(code)) <= 1 \
+                and fc.get(fc.c, ctypes.addressof(vr_when), 1, ctypes.addressof(when)) <= 1:
             run.fault, run.fault_time = int(code[0]), float(when[0])
     for comp, i in inst.items():
         run.warnings[comp] = [line[len("[Warning] "):] for line in i.log if line.startswith("[Warning]")]
