@@ -679,7 +679,7 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
         || s->window < WINDOW_MIN || s->window > WINDOW_MAX || !(isfinite(s->clip_error) && s->clip_error > 0.0)
         || (s->reaction != PIEZO_SUP_REACT_ERROR && s->reaction != PIEZO_SUP_REACT_SAFE)
         || !(isfinite(s->ramp_time) && s->ramp_time >= 0.0 && s->ramp_time <= 1e6)
-        || (s->ramp_samples == 0) != (s->ramp_time == 0.0))
+        || s->ramp_samples != (s->ramp_time > 0.0 ? samples_of(s->ramp_time, s->h) : 0))
         return "supervisor parameters out of range";
     if (s->ref_head < 0 || s->ref_head >= PIEZO_SUP_REF_RING)
         return "supervisor ring index out of range";

@@ -23,6 +23,12 @@
  * switched off for open-loop use (sup.enabled = false, with the divergence
  * monitor off: monitor.divergence_samples = 0) must let an open loop run.
  *
+ * The safe reaction (sup.reaction = 1): every case that fails the doStep runs
+ * again in the exchanging master with it. No doStep fails; the controller's
+ * Warning says "sup.reaction = safe" once with the case's phrase (the Error's
+ * words); sup.fault is the verdict's code (1..10) and sup.fault_time the time
+ * the Error came at; v is 0 V at the end.
+ *
  * usage: fmu_supervision PiezoStage.xml PiezoStage.so AdaptiveCompoundController.xml
  *            AdaptiveCompoundController.so ReferenceSignal.xml ReferenceSignal.so
  * Prints one line per check and "N passed, M failed"; exit code 1 on failure.
@@ -30,6 +36,7 @@
 #include "host.h"
 
 static host_fmu plant, ctrl, ref;
+static int safe_reaction;       /* the next start() sets sup.reaction = 1 */
 
 enum { REF, CTRL, PLANT, N_COMP };
 enum { F_NONE, F_CONSTANT, F_STUCK, F_SCALE, F_OPEN, F_SWAP, F_ALTERNATE };
@@ -207,6 +214,9 @@ static int start(loop *l, const fault_case *c)
         host_set_named(&ctrl, l->in[CTRL].c, "monitor.divergence_samples", 0.0);
     host_set_named(&ref, l->in[REF].c, "frequency[1]", c->frequency);
     host_set_named(&ref, l->in[REF].c, "amplitude[1]", c->amplitude);
+    if (safe_reaction)
+        host_set_named(&ctrl, l->in[CTRL].c, "sup.reaction", 1.0);
+    safe_reaction = 0;
     for (j = 0; j < N_COMP; j++)
         if (l->f[j]->api.ExitInitializationMode(l->in[j].c) != HOST_OK)
             return 0;
@@ -255,6 +265,31 @@ static int run(loop *l, const fault_case *c, int sequential, int n, int *said)
     return -1;
 }
 
+/* count the controller's warnings that contain words (the log keeps the last message; a step
+ * logs at most a few) */
+static int run_counting(loop *l, const fault_case *c, int n, const char *words, int *count)
+{
+    double h = ctrl.h;
+    int k, j;
+    *count = 0;
+    for (k = 0; k < n; k++) {
+        double t = k * h;
+        for (j = 0; j < N_COMP; j++)
+            write_inputs(l, j, c);
+        for (j = 0; j < N_COMP; j++) {
+            int before = l->in[j].log.n_messages;
+            if (host_step(l->f[j], l->in[j].c, t, h) > HOST_WARNING)
+                return k;
+            if (j == CTRL && l->in[j].log.n_messages > before && strstr(l->in[j].log.last, words) != NULL
+                && strstr(l->in[j].log.last, c->phrase) != NULL)
+                *count += 1;
+        }
+        for (j = 0; j < N_COMP; j++)
+            read_outputs(l, j);
+    }
+    return -1;
+}
+
 static void stop(loop *l)
 {
     int j;
@@ -262,7 +297,15 @@ static void stop(loop *l)
         host_free_instance(&l->in[j]);
 }
 
-static void check_case(const fault_case *c, int sequential)
+/* start() with sup.reaction = 1 set on the controller as well */
+static int start_safe(loop *l, const fault_case *c)
+{
+    safe_reaction = 1;
+    return start(l, c);
+}
+
+/* The case under a schedule; returns the sample its doStep failed at (-1: none). */
+static int check_case(const fault_case *c, int sequential)
 {
     const char *schedule = sequential ? "Gauss-Seidel (plant, controller, reference)" : "exchange";
     /* the reference beyond reach needs its excursion: the clipping watchdog's 0.5 s plus the ramp */
@@ -271,7 +314,7 @@ static void check_case(const fault_case *c, int sequential)
     loop l;
     if (!check(start(&l, c), "%s, %s: the three FMUs start", c->name, schedule)) {
         stop(&l);
-        return;
+        return -1;
     }
     failed = run(&l, c, sequential, n, &said);
     status = failed < 0 ? get_int(&ctrl, &l.in[CTRL], "sup.status") : -1;
@@ -303,6 +346,29 @@ static void check_case(const fault_case *c, int sequential)
         break;
     }
     stop(&l);
+    return failed;
+}
+
+/* The case with sup.reaction = 1, in the exchanging master (the Error's sample: error_at). */
+static void check_case_safe(const fault_case *c, int error_at)
+{
+    int limit = (c->frequency < 1.0 ? 4000 : 2000) + 100, failed, said, code;
+    double when, v_end;
+    loop l;
+    if (!check(start_safe(&l, c), "%s, safe: the three FMUs start with sup.reaction = 1", c->name)) {
+        stop(&l);
+        return;
+    }
+    failed = run_counting(&l, c, limit, "sup.reaction = safe", &said);
+    code = get_int(&ctrl, &l.in[CTRL], "sup.fault");
+    when = get_real(&ctrl, &l.in[CTRL], "sup.fault_time");
+    v_end = get_real(&ctrl, &l.in[CTRL], "v");
+    check(failed < 0 && said == 1 && code >= 1 && code <= 10 && when == error_at * ctrl.h && v_end == 0.0,
+          "%s, safe: runs %.3g s without an error, one Warning \"sup.reaction = safe ... %s\" (%d), sup.fault = %d, "
+          "sup.fault_time = %.9g s (the Error's %.9g s), v = %g V at the end (%s)", c->name, limit * ctrl.h,
+          c->phrase, said, code, when, error_at * ctrl.h, v_end,
+          l.in[CTRL].log.errors[0] ? l.in[CTRL].log.errors : "no error");
+    stop(&l);
 }
 
 int main(int argc, char **argv)
@@ -319,8 +385,11 @@ int main(int argc, char **argv)
     for (i = 0; i < sizeof CASES / sizeof CASES[0]; i++) {
         /* the stamps are judged where the loop needs them, in a sequential master; there
          * mv.delay = 0 is right */
-        if (CASES[i].expect != 1)
-            check_case(&CASES[i], 0);
+        if (CASES[i].expect != 1) {
+            int error_at = check_case(&CASES[i], 0);
+            if (CASES[i].expect == 0 && error_at >= 0)
+                check_case_safe(&CASES[i], error_at);
+        }
         if (CASES[i].ctrl_param == NULL || strcmp(CASES[i].ctrl_param, "mv.delay") != 0)
             check_case(&CASES[i], 1);
     }
