@@ -271,8 +271,11 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         n->delay = kind_delay;
     }
     if (kind > 0) {
+        /* a gain that changed, then fell below sup.gain_min (or rose beyond sup.gain_max, or turned
+         * over) is one fault going on: its run counts on */
         n->candidate = kind;
-        n->candidate_run = kind == s->candidate ? s->candidate_run + 1 : 1;
+        n->candidate_run = kind == s->candidate || (s->candidate == PIEZO_SUP_GAIN_CHANGED && kind <= PIEZO_SUP_GAIN_HIGH)
+                           ? s->candidate_run + 1 : 1;
     } else {
         n->candidate = 0;
         n->candidate_run = 0;
