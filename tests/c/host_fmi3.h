@@ -101,10 +101,10 @@ static inline int host3_read_model_description(host3_fmu *f, const char *xml_pat
     f->n_vars = 0;
     p = strstr(xml, "<ModelVariables>");
     vars_end = p != NULL ? strstr(p, "</ModelVariables>") : NULL;
-    while (p != NULL && vars_end != NULL && f->n_vars < HOST_MAX_VARS) {
+    while (p != NULL && vars_end != NULL) {
         const char *next = NULL, *close;
         int t, which = -1;
-        host_var *v = &f->vars[f->n_vars];
+        host_var *v = &f->vars[f->n_vars < HOST_MAX_VARS ? f->n_vars : 0];
         for (t = 0; t < 3; t++) {
             const char *q = strstr(p, tags[t]);
             if (q != NULL && q < vars_end && (next == NULL || q < next)) {
@@ -114,6 +114,11 @@ static inline int host3_read_model_description(host3_fmu *f, const char *xml_pat
         }
         if (next == NULL)
             break;
+        if (f->n_vars >= HOST_MAX_VARS) {
+            printf("FAIL %s: more than HOST_MAX_VARS = %d variables\n", xml_path, HOST_MAX_VARS);
+            free(xml);
+            return 0;
+        }
         close = strchr(next, '>');
         memset(v, 0, sizeof *v);
         v->type = which == 0 ? VAR_REAL : which == 1 ? VAR_INTEGER : VAR_BOOLEAN;
