@@ -244,7 +244,11 @@ void piezo_controller_reset(piezo_controller *ctrl);
  * the larger of |pred_error| and the nominal model's prediction error counts.
  * Returns PIEZO_ERR_FAULT, committing nothing of the loop, when the supervisor
  * finds that the loop cannot work; ctrl->verdict then says why
- * (piezo_supervisor_explain). Exact mode writes
+ * (piezo_supervisor_explain). With sup.reaction = PIEZO_SUP_REACT_SAFE none of these
+ * three verdicts (supervision, monitor, a value not finite) refuses the sample: it is
+ * the first of the safe state (ctrl->fault its code, ctrl->k_fault its sample), whose
+ * samples return PIEZO_OK with v ramping to 0 V over sup.ramp_time and nothing else of
+ * the loop evaluated or committed. Exact mode writes
  * history[2k], history[2k+1] (capacity >= piezo_controller_history_needed). Non-finite inputs refused, state unchanged.
  */
 piezo_status piezo_controller_step(piezo_controller *ctrl, double y_ref, double y_meas,
