@@ -7,6 +7,7 @@ validation family (no false alarm, and how close the legitimate runs came to eac
     python -m harness.supervision_table fault-family          # every fault on 50 drawn stages
     python -m harness.supervision_table family --stages 50    # the legitimate family and its margins
     python -m harness.supervision_table family --stages 50 --duration 120 --scenarios 1hz 20hz
+    python -m harness.supervision_table false-alarms --specs module:function   # any family of RunSpecs
 
 **Faults** (:data:`FAULTS`): each is a wiring or rig fault a user can make, run on the three
 FMUs wired by hand (:mod:`harness.masters.wired`) in both FMI editions, in a master that
@@ -25,7 +26,15 @@ the real importers (the harness's fmpy master, fmpy's SSP player, the container 
 fmu-manipulation-toolbox in parallel and in each sequential order); and the saturation runs
 (the mismatch scenarios with voltage limits at 90, 70 and 50 % of the peak they need). A
 legitimate run must end without an Error and without a supervision warning; the wired runs
-also give their margins (:func:`harness.supervision.margins`).
+also give their margins (:func:`harness.supervision.margins`). Every run of a family is run
+with each ``sup.reaction`` (0, error, and 1, safe: the safe runs in groups of their own), where
+a safe state's Warning counts as a false alarm. :func:`false_alarms` is that check for any
+family: a list of :class:`RunSpec` on the wired master (a sines scenario), a real importer
+(:data:`REAL_MASTERS`) or a harness master (:data:`HARNESS_MASTERS`, any scenario, tables
+included); ``false-alarms --specs module:function`` runs it on the RunSpecs a function returns.
+The fault table also runs each fault with ``sup.reaction`` = 1 (:func:`run_fault_safe`), and
+holds the blind spots issue 36 measured: a fault a working loop must ride through
+(``tolerated``: dropouts) and one the supervision cannot tell (``blind``: an offset drift).
 """
 
 from __future__ import annotations
@@ -50,7 +59,8 @@ from .masters.wired import SCHEDULES, Fault, schedule_name, simulate_wired
 from .scenarios import MISMATCH_SCENARIOS, get_scenario
 from .supervision import controller_samples, margins, thresholds
 
-__all__ = ["FaultCase", "FAULTS", "FAULT_SCHEDULES", "FaultResult", "run_fault", "harness_fault",
+__all__ = ["FaultCase", "FAULTS", "FAULT_SCHEDULES", "SAFE_SCHEDULES", "FaultResult", "run_fault",
+           "run_fault_safe", "harness_fault", "REACTIONS", "HARNESS_MASTERS", "with_reactions", "false_alarms",
            "fault_results", "fault_markdown", "FaultSpec", "fault_family_specs", "run_fault_spec",
            "fault_family", "fault_family_markdown", "RunSpec", "RunResult", "family_specs", "run_spec",
            "summarize", "family_markdown", "main"]
