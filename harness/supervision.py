@@ -51,6 +51,8 @@ class Thresholds:
     gain_drop: float
     gain_rise: float
     frozen_share: float
+    big_step: float
+    frozen_big: float
 
 
 def thresholds(controller_params=None):
@@ -67,7 +69,8 @@ def thresholds(controller_params=None):
         min_samples=int(lib.PIEZO_SUP_MIN_SAMPLES), max_delay=int(lib.PIEZO_MV_MAX_D),
         detectable=int(lib.PIEZO_SUP_DEFAULT_DETECTABLE), judge_every=int(lib.PIEZO_SUP_JUDGE_EVERY),
         gain_drop=lib.PIEZO_SUP_DROP_PERCENT / 100.0, gain_rise=lib.PIEZO_SUP_RISE_PERCENT / 100.0,
-        frozen_share=lib.PIEZO_SUP_FROZEN_PERCENT / 100.0)
+        frozen_share=lib.PIEZO_SUP_FROZEN_PERCENT / 100.0, big_step=lib.PIEZO_SUP_BIG_STEP_PERCENT / 100.0,
+        frozen_big=lib.PIEZO_SUP_FROZEN_BIG_PERMILLE / 1000.0)
 
 
 def _ew(x, lam):
@@ -101,7 +104,8 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
         ``szz``, ``szw`` and ``sww`` (one row per delay 1..9), ``travel_model``,
         ``travel_meas``, ``weight``, ``reversals`` (samples where y_meas reversed its direction,
         the last change kept over equal samples), ``steps2`` (its squared sample-to-sample
-        changes), ``y_same`` (samples y_meas equalled the one before, in a row): the
+        changes), ``big_steps`` (its steps beyond ``PIEZO_SUP_BIG_STEP_PERCENT`` % of the smallest
+        nonzero one before), ``y_same`` (samples y_meas equalled the one before, in a row): the
         supervisor's sums after each sample; ``mon_share``,
         ``mon_weight``: the divergence monitor's (samples with ``|pred_error|`` beyond the
         bound; where v was clipped the core also counts the nominal model's error, which a
@@ -127,11 +131,14 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
     yhat = lfilter([1.0], [1.0, a1, a2], w)
     dy = np.diff(y, prepend=y[:1]) if n else y
     last = np.zeros(n)                              # the last nonzero change before each sample
-    prev = 0.0
+    smallest = np.zeros(n)                          # the smallest nonzero |change| before each sample
+    prev, low = 0.0, 0.0
     for i in range(n):
-        last[i] = prev
+        last[i], smallest[i] = prev, low
         if dy[i] != 0.0:
             prev = dy[i]
+            low = abs(dy[i]) if low == 0.0 else min(low, abs(dy[i]))
+    big_step = core.lib().PIEZO_SUP_BIG_STEP_PERCENT
     same = np.zeros(n, dtype=np.int64)
     for i in range(1, n):
         same[i] = same[i - 1] + 1 if y[i] == y[i - 1] else 0
@@ -142,6 +149,7 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
         "travel_meas": _ew(np.abs(np.diff(y, prepend=0.0)), lam),
         "weight": _ew(np.ones(n), lam),
         "reversals": _ew((dy * last < 0.0).astype(float), lam), "steps2": _ew(dy * dy, lam), "y_same": same,
+        "big_steps": _ew(((smallest > 0.0) & (np.abs(dy) * 100.0 > big_step * smallest)).astype(float), lam),
         "mon_share": _ew((np.abs(np.asarray(pred_error, dtype=float)) > error_bound).astype(float), lam_m),
         "mon_weight": _ew(np.ones(n), lam_m),
     }
@@ -180,7 +188,9 @@ class Margins:
         followed (``PIEZO_SUP_RISE_PERCENT``), over the judged samples.
     frozen_run : int
         The longest run of equal y_meas samples whose reversal share before it reached
-        ``PIEZO_SUP_FROZEN_PERCENT`` (threshold ``sup.window``).
+        ``PIEZO_SUP_FROZEN_PERCENT`` and whose share of big steps (beyond
+        ``PIEZO_SUP_BIG_STEP_PERCENT`` % of the smallest) reached ``PIEZO_SUP_FROZEN_BIG_PERMILLE``
+        per mille (threshold ``sup.window``).
     """
 
     gain_low: float | None
@@ -284,7 +294,8 @@ def margins(samples, nominal, controller_params=None):
     stretch = (1.0 - lam ** same) / (1.0 - lam)
     before = st["weight"] - stretch
     with np.errstate(divide="ignore", invalid="ignore"):
-        noisy = (before >= 1.0) & (st["reversals"] >= th.frozen_share * before)
+        noisy = (before >= 1.0) & (st["reversals"] >= th.frozen_share * before) \
+            & (st["big_steps"] >= th.frozen_big * before)
     frozen_run = int(same[noisy & (same > 0)].max()) if np.any(noisy & (same > 0)) else 0
     return Margins(
         gain_low=float(np.nanmin(gs)) if np.isfinite(gs).any() else None,

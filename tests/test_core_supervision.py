@@ -52,27 +52,27 @@ def test_statistics_equal_the_numpy_transcription():
     """Reference: harness.supervision.statistics, the sums of piezo_supervisor.c written again
     with scipy.signal.lfilter. After every sample of a 1 s mismatch loop, the C core's
     Szz, Szw_d (d = 1..9), Sww_d (from its ring), the travelled distances, the window's weight,
-    the reversals of y_meas and its squared steps equal them to 1e-12 relative, and its count of
-    equal samples in a row exactly."""
+    the reversals of y_meas, its squared steps and its steps beyond 1.5 times its smallest equal
+    them to 1e-12 relative, and its count of equal samples in a row exactly."""
     got = {"szz": [], "szw": [], "sww": [], "travel_model": [], "travel_meas": [], "weight": [],
-           "reversals": [], "steps2": [], "y_same": []}
+           "reversals": [], "steps2": [], "y_same": [], "big_steps": []}
 
     def record(c):
         s = c.raw.sup
         got["szz"].append(s.szz)
         got["szw"].append(list(s.szw))
         got["sww"].append(list(s.sww))
-        for name in ("travel_model", "travel_meas", "weight", "reversals", "steps2", "y_same"):
+        for name in ("travel_model", "travel_meas", "weight", "reversals", "steps2", "y_same", "big_steps"):
             got[name].append(getattr(s, name))
 
     rows, exc, _ = loop(2000, record=record)
     assert exc is None
     want = supervision.statistics(rows["y_meas"], rows["q"], rows["pred_error"], NOMINAL,
                                   D["sup.window"], D["monitor.pred_error_max"])
-    for name in ("szz", "travel_model", "travel_meas", "weight", "reversals", "steps2"):
+    for name in ("szz", "travel_model", "travel_meas", "weight", "reversals", "steps2", "big_steps"):
         np.testing.assert_allclose(got[name], want[name], rtol=1e-12, atol=1e-300, err_msg=name)
     assert got["y_same"] == list(want["y_same"])
-    assert max(got["reversals"]) > 1.0        # the paper's noisy sensor reverses
+    assert max(got["reversals"]) > 1.0 and max(got["big_steps"]) > 1.0    # the paper's noisy sensor
     # Szw sums products of either sign: where it crosses zero compare with its terms' scale
     scale = np.max(np.abs(want["szw"]))
     np.testing.assert_allclose(np.array(got["szw"]).T, want["szw"], rtol=1e-12, atol=1e-12 * scale)

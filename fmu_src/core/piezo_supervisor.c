@@ -116,6 +116,7 @@ void piezo_supervisor_reset(piezo_supervisor *s)
     s->ref_head = 0;
     s->weight = s->travel_model = s->travel_meas = 0.0;
     s->followed_gain = s->reversals = s->steps2 = s->dy1 = 0.0;
+    s->min_step = s->big_steps = 0.0;
 }
 
 /* Sww_d(k) = Sww_1(k - d + 1): the new one for d = 1, the kept ones for d >= 2 */
@@ -209,7 +210,7 @@ static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, dou
         return 0;
     *share = n->reversals / before;
     *step_rms = sqrt(n->steps2 / before);
-    return *share * 100.0 >= PIEZO_SUP_FROZEN_PERCENT;
+    return *share * 100.0 >= PIEZO_SUP_FROZEN_PERCENT && n->big_steps * 1000.0 >= PIEZO_SUP_FROZEN_BIG_PERMILLE * before;
 }
 
 void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor_input *in,
@@ -252,9 +253,13 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
      * samples, so a quantised reading's up, equal, down counts) and its steps */
     {
         double dy = s->k > 0 ? in->y_meas - s->y1 : 0.0;
+        double a = fabs(dy);
         n->reversals = lam * s->reversals + (dy * s->dy1 < 0.0 ? 1.0 : 0.0);
         n->steps2 = lam * s->steps2 + dy * dy;
         n->dy1 = dy != 0.0 ? dy : s->dy1;
+        n->big_steps = lam * s->big_steps + (s->min_step > 0.0 && a * 100.0 > PIEZO_SUP_BIG_STEP_PERCENT * s->min_step
+                                              ? 1.0 : 0.0);
+        n->min_step = a > 0.0 && (s->min_step == 0.0 || a < s->min_step) ? a : s->min_step;
     }
     n->followed_gain = s->followed_gain;
 
@@ -358,6 +363,8 @@ void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *
     s->reversals = n->reversals;
     s->steps2 = n->steps2;
     s->dy1 = n->dy1;
+    s->min_step = n->min_step;
+    s->big_steps = n->big_steps;
     s->k += 1;
 }
 
@@ -702,12 +709,12 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
         double sc[] = { s->y1, s->y2, s->r1, s->r2, s->z1, s->zr1, s->w1, s->szz, s->srr, s->yhat1, s->yhat2,
                         s->gain, s->verified_gain, s->clip_error_sum, s->a1, s->a2, s->b1, s->b2,
                         s->weight, s->travel_model, s->travel_meas, s->followed_gain, s->reversals,
-                        s->steps2, s->dy1 };
+                        s->steps2, s->dy1, s->min_step, s->big_steps };
         if (!finite_all(sc, (int)(sizeof sc / sizeof sc[0]))) return "supervisor values not finite";
     }
     if (s->szz < 0.0 || s->srr < 0.0 || s->clip_error_sum < 0.0 || s->travel_model < 0.0 || s->travel_meas < 0.0
         || s->weight > (double)s->k || s->followed_gain < 0.0 || s->reversals < 0.0 || s->reversals > s->weight
-        || s->steps2 < 0.0)
+        || s->steps2 < 0.0 || s->min_step < 0.0 || s->big_steps < 0.0 || s->big_steps > s->weight)
         return "supervisor sums negative or beyond their weight";
     for (i = 0; i < PIEZO_MV_MAX_D; ++i)
         if (s->sww[i] < 0.0) return "supervisor sums negative";

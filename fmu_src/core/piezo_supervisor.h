@@ -54,9 +54,12 @@
  * |y_d - y_meas| over that time exceeds sup.clip_error; a loop delay still not
  * chosen after sup.detect_time; y_meas exactly constant for sup.window samples
  * although, over the window before, it reversed its direction from one sample
- * to the next in PIEZO_SUP_FROZEN_PERCENT % of the samples or more (a sensor
- * whose noise showed, frozen: a sensor at rest whose noise is below its
- * resolution repeats its value legitimately, and reverses seldom).
+ * to the next in PIEZO_SUP_FROZEN_PERCENT % of the samples or more and stepped
+ * by more than PIEZO_SUP_BIG_STEP_PERCENT % of the smallest step it ever made
+ * in PIEZO_SUP_FROZEN_BIG_PERMILLE per mille of them (a sensor whose noise
+ * showed, frozen: a sensor at rest whose noise is below its resolution repeats
+ * its value legitimately and reverses seldom, and a noise-free quantised one
+ * that dithers by one step and settles never steps by more than one).
  *
  * The evidence a message gives: over the window, the distance the model
  * expected y_meas to travel in answer to q (the sum of its sample-to-sample
@@ -92,6 +95,8 @@
 #define PIEZO_SUP_DROP_PERCENT 130   /* the gain followed over the gain now: beyond it, the gain fell */
 #define PIEZO_SUP_RISE_PERCENT 200   /* the gain now over the gain followed: beyond it, the gain rose */
 #define PIEZO_SUP_FROZEN_PERCENT 20  /* share of reversals of y_meas before a frozen stretch */
+#define PIEZO_SUP_BIG_STEP_PERCENT 150   /* a step of y_meas beyond this share of its smallest is noise's */
+#define PIEZO_SUP_FROZEN_BIG_PERMILLE 5  /* share of such steps before a frozen stretch [per mille] */
 #define PIEZO_SUP_NOISY_PERCENT 33   /* y_meas reversing in this share of the samples is noise-dominated
                                         (white noise at rest: 2/3; a moving stage: seldom) */
 #define PIEZO_SUP_REACT_ERROR 0      /* sup.reaction: a verdict fails the step (the default) */
@@ -237,6 +242,8 @@ typedef struct {
     double reversals;            /* sum of lambda^(k-j) [y_meas reversed its direction at j] */
     double steps2;               /* sum of lambda^(k-j) (y_meas(j) - y_meas(j-1))^2 */
     double dy1;                  /* y_meas(k-1) - y_meas(k-2) (0 when equal: the last change kept) */
+    double min_step;             /* the smallest nonzero |y_meas(j) - y_meas(j-1)| so far (0: none) */
+    double big_steps;            /* sum of lambda^(k-j) [|step| > PIEZO_SUP_BIG_STEP_PERCENT % of min_step] */
 } piezo_supervisor;
 
 /* One evaluated sample: the statistics of k+1 and the verdict. */
@@ -245,7 +252,7 @@ typedef struct {
     double szw[PIEZO_MV_MAX_D];
     double srw[PIEZO_SUP_DEFAULT_DETECTABLE];
     double weight, travel_model, travel_meas;
-    double followed_gain, reversals, steps2, dy1;
+    double followed_gain, reversals, steps2, dy1, min_step, big_steps;
     double clip_error_sum;
     uint64_t y_same;
     int candidate, candidate_run, status, delay;
