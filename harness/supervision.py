@@ -273,21 +273,21 @@ def margins(samples, nominal, controller_params=None):
     # the monitor judges its count of large errors against the whole window (piezo_controller.c)
     share = np.where(k >= th.monitor_share_min, st["mon_share"] / window, 0.0) if window > 0 \
         else np.zeros(n)
-    # the gain followed once verified, moved at each judged verified sample (piezo_supervisor.c)
-    followed, drop, rise = 0.0, None, None
+    # the gain followed once verified, moved at each judged verified sample (piezo_supervisor.c):
+    # the mean of its first ones, then an exponential mean; judged once it holds `confirm` of them
+    followed, count, drop, rise = 0.0, 0, None, None
     rate = th.judge_every / th.window
     for i in np.flatnonzero(strong & (k % th.judge_every == 0)):
         if kind[i] != 0 or not in_range[i]:
             continue
         g_i = float(g[i])
-        if followed > 0.0:
+        if count >= th.confirm:
             drop = max(drop or 0.0, followed / g_i)
             rise = max(rise or 0.0, g_i / followed)
             if followed > th.gain_drop * g_i or g_i > th.gain_rise * followed:
                 continue                            # a candidate: the gain followed holds
-            followed += (g_i - followed) * rate
-        else:
-            followed = g_i
+        count += 1
+        followed += (g_i - followed) * max(rate, 1.0 / count)
     # a measurement that froze after showing noise (its reversal share before the stretch)
     lam = 1.0 - 1.0 / th.window
     same = st["y_same"]

@@ -116,6 +116,7 @@ void piezo_supervisor_reset(piezo_supervisor *s)
     s->ref_head = 0;
     s->weight = s->travel_model = s->travel_meas = 0.0;
     s->followed_gain = s->reversals = s->steps2 = s->dy1 = 0.0;
+    s->followed_n = 0;
     s->min_step = s->big_steps = 0.0;
 }
 
@@ -188,8 +189,8 @@ static int response_kind(const piezo_supervisor *s, const piezo_supervisor_input
         if (e_law * 100.0 >= PIEZO_SUP_DELAY_PERCENT * explained) return PIEZO_SUP_DELAY;
     }
     /* a gain that changed from the one followed since the loop was verified */
-    if (s->followed_gain > 0.0 && (s->followed_gain * 100.0 > PIEZO_SUP_DROP_PERCENT * g
-                                   || g * 100.0 > PIEZO_SUP_RISE_PERCENT * s->followed_gain))
+    if (s->followed_n >= PIEZO_SUP_CONFIRM && (s->followed_gain * 100.0 > PIEZO_SUP_DROP_PERCENT * g
+                                               || g * 100.0 > PIEZO_SUP_RISE_PERCENT * s->followed_gain))
         return PIEZO_SUP_GAIN_CHANGED;
     return 0;
 }
@@ -262,6 +263,7 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         n->min_step = a > 0.0 && (s->min_step == 0.0 || a < s->min_step) ? a : s->min_step;
     }
     n->followed_gain = s->followed_gain;
+    n->followed_n = s->followed_n;
 
     /* the response verdict, confirmed over PIEZO_SUP_CONFIRM samples */
     n->status = s->status;
@@ -285,11 +287,14 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         n->candidate = 0;
         n->candidate_run = 0;
         if (kind == 0) {
-            /* verified: the gain followed moves toward it, weight JUDGE_EVERY / window per judgement */
+            /* verified: the gain followed moves toward it, weight 1/n for its n-th judgement while
+             * that is above JUDGE_EVERY / window, that from then on */
+            double w = (double)PIEZO_SUP_JUDGE_EVERY / (double)s->window;
             n->status = 1;
-            n->followed_gain = s->followed_gain > 0.0
-                ? s->followed_gain + (kind_gain - s->followed_gain) * ((double)PIEZO_SUP_JUDGE_EVERY / (double)s->window)
-                : kind_gain;
+            n->followed_n = s->followed_n + 1;
+            if (1.0 / (double)n->followed_n > w)
+                w = 1.0 / (double)n->followed_n;
+            n->followed_gain = s->followed_gain + (kind_gain - s->followed_gain) * w;
         }
     }
     /* the clipping watchdog: mean |y_d - y_meas| over the clipped run */
@@ -360,6 +365,7 @@ void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *
     s->travel_model = n->travel_model;
     s->travel_meas = n->travel_meas;
     s->followed_gain = n->followed_gain;
+    s->followed_n = n->followed_n;
     s->reversals = n->reversals;
     s->steps2 = n->steps2;
     s->dy1 = n->dy1;
@@ -699,7 +705,8 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
         || s->candidate_run >= PIEZO_SUP_CONFIRM || (s->candidate == 0 && s->candidate_run != 0)
         || s->delay < 0 || s->delay > PIEZO_MV_MAX_D)
         return "supervisor verdict state out of range";
-    if (s->y_same > s->k || (s->status && s->k_verified >= s->k))
+    if (s->y_same > s->k || (s->status && s->k_verified >= s->k) || s->followed_n > s->k
+        || (s->followed_n == 0) != (s->followed_gain == 0.0))
         return "supervisor counters exceed the sample count";
     if (!finite_all(s->dw, PIEZO_MV_MAX_D) || !finite_all(s->sww, PIEZO_MV_MAX_D)
         || !finite_all(s->szw, PIEZO_MV_MAX_D) || !finite_all(s->srw, PIEZO_SUP_DEFAULT_DETECTABLE)

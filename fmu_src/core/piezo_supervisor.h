@@ -42,9 +42,12 @@
  * window's prediction errors above their bound), and the supervisor's travel
  * sums give its message the evidence.
  *
- * A gain that changes. The gain verified is followed (an exponentially weighted
- * mean of the strongly evidenced gains, weight PIEZO_SUP_JUDGE_EVERY / sup.window
- * per judged sample); a strongly evidenced gain below it by the factor
+ * A gain that changes. The gain verified is followed: the mean of the strongly
+ * evidenced gains of the judged samples that verified the loop, the n-th weighing
+ * 1/n until 1/n reaches PIEZO_SUP_JUDGE_EVERY / sup.window, that weight from then on
+ * (an exponentially weighted mean of about the last window). Once it holds
+ * PIEZO_SUP_CONFIRM of them (the start-up's first gains averaged, not taken for
+ * the loop's), a strongly evidenced gain below it by the factor
  * PIEZO_SUP_DROP_PERCENT / 100 or above it by PIEZO_SUP_RISE_PERCENT / 100 is a
  * fault kind (confirmed as the others): a sensor or an amplifier whose gain
  * changed during the run, which the adaptive law would follow, the stage then
@@ -239,6 +242,7 @@ typedef struct {
     double travel_meas;          /* sum of lambda^(k-j) |y_meas(j) - y_meas(j-1)| */
     /* a gain that changes, a measurement that freezes */
     double followed_gain;        /* the strongly evidenced gains followed since verified (0: none yet) */
+    uint64_t followed_n;         /* judged samples it holds (the weights 1/n while they are larger) */
     double reversals;            /* sum of lambda^(k-j) [y_meas reversed its direction at j] */
     double steps2;               /* sum of lambda^(k-j) (y_meas(j) - y_meas(j-1))^2 */
     double dy1;                  /* y_meas(k-1) - y_meas(k-2) (0 when equal: the last change kept) */
@@ -257,6 +261,7 @@ typedef struct {
     uint64_t y_same;
     int candidate, candidate_run, status, delay;
     double gain;
+    uint64_t followed_n;
     int fault;                   /* piezo_sup_fault: the verdict of this sample */
 } piezo_supervisor_next;
 
