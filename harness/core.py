@@ -303,6 +303,10 @@ _CONTROLLER_TABLE = {
     "sup.window": (("sup", "window"), "int"),
     "sup.clip_time": (("sup", "clip_time"), "float"),
     "sup.detect_time": (("sup", "detect_time"), "float"),
+    "sup.reaction": (("sup", "reaction"), "int"),
+    "sup.ramp_time": (("sup", "ramp_time"), "float"),
+    "sup.clip_error": (("sup", "clip_error"), "float"),
+    "mv.probe_max": (("mv_probe_max",), "float"),
 }
 
 PLANT_PARAMETER_NAMES = tuple(_PLANT_TABLE)
@@ -649,9 +653,30 @@ class Controller:
         """Why the controller refused a sample with ``status``, in its own words
         (``piezo_controller_explain``, the FMU's message): the supervision's verdict and
         evidence, the monitor's counts, or the divergence; "" for another status."""
-        size = 1024
+        size = 2048
         buf = ffi.new("char[]", size)
         self._lib.piezo_controller_explain(self._c, int(status), buf, size)
+        return ffi.string(buf).decode()
+
+    @property
+    def fault(self) -> int:
+        """The fault code the loop is held in its safe state for (``sup.reaction`` = 1), 0 while
+        it runs (docs/robustness.md, the fault codes)."""
+        return int(self._c.fault)
+
+    @property
+    def fault_sample(self) -> int | None:
+        """The sample whose verdict put the loop in its safe state (None while it runs)."""
+        return int(self._c.k_fault) if self._c.fault else None
+
+    def safe_state_message(self, t0: float = 0.0) -> str:
+        """The safe state's Warning, as the FMUs log it (``piezo_controller_explain_safe_state``),
+        times counted from ``t0``; "" while the loop runs."""
+        size = 2048
+        buf = ffi.new("char[]", size)
+        ctx = ffi.new("piezo_sup_context *")
+        ctx.t0, ctx.h = float(t0), float(self._c.sup.h)
+        self._lib.piezo_controller_explain_safe_state(self._c, ctx, buf, size)
         return ffi.string(buf).decode()
 
     def _raise_fault(self, status, name):

@@ -32,7 +32,7 @@ __all__ = [
     "PLANT_MODEL", "CONTROLLER_MODEL", "REFERENCE_MODEL", "FMI_VERSIONS", "TIMING_OUTPUTS",
     "WINDOWS_PLATFORM", "REAL_TYPES", "INTEGER_TYPES",
     "FMUError", "FMUInitializationError", "FMUFileError", "LoopDivergedError", "LoopFaultError",
-    "LOOP_FAILURES", "loop_error_class",
+    "LOOP_FAILURES", "loop_error_class", "LoopFaultWarning", "SAFE_STATE_WORDS", "warn_safe_state",
     "UnknownParameterError",
     "default_fmu_dir", "check_fmi_version", "fmu_path", "LoadedFMU", "load", "array_size",
     "sort_parameters", "typed_parameters", "model_description", "starts_of", "parameter_starts",
@@ -73,6 +73,29 @@ class LoopFaultError(LoopDivergedError):
 LOOP_FAILURES = (("supervision stopped the loop", LoopFaultError),
                  ("the closed loop is unstable", LoopDivergedError),
                  ("diverged", LoopDivergedError))
+
+
+#: how the controller's Warning begins when a verdict put the loop in its safe state (sup.reaction = 1,
+#: fmu_src/fmi/fmu_controller.c, fmu_controller_warning); the verdict's message follows "Why: "
+SAFE_STATE_WORDS = "sup.reaction = safe:"
+
+
+class LoopFaultWarning(UserWarning):
+    """A run with ``sup.reaction`` = 1 (safe) went on after a supervision verdict: the controller
+    ramped v to 0 V and held the loop in its safe state (``sup.fault``, ``sup.fault_time``); the
+    message is the controller's Warning, the verdict's words included."""
+
+
+def warn_safe_state(log_lines, where=""):
+    """Issue a :class:`LoopFaultWarning` for the controller's safe-state Warning among an FMU's log
+    lines (``"[Warning] ..."``), if there is one; return its text ("" if none)."""
+    import warnings
+    said = [line for line in log_lines if line.startswith("[Warning]") and SAFE_STATE_WORDS in line]
+    if not said:
+        return ""
+    text = said[0][len("[Warning] "):]
+    warnings.warn(LoopFaultWarning(f"{where}: {text}" if where else text), stacklevel=3)
+    return text
 
 
 def loop_error_class(log_lines):

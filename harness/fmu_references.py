@@ -228,7 +228,7 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
               ("est.adapting", "adapting"), ("est.noise", "noise"))
     refs = {"time": time, **{name: [] for name, _ in fields},
             "loop_delay": [], "loop_delay_time": [], "preview_lead": [], "meas_offset": [],
-            "sup.status": [], "sup.gain": [], "sup.delay": []}
+            "sup.status": [], "sup.gain": [], "sup.delay": [], "sup.fault": [], "sup.fault_time": []}
     published, out, lead_used = ctrl.output, plant.output, 0
     sup = ctrl.raw.sup
     for k in range(n + 1):
@@ -245,6 +245,9 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
         refs["sup.status"].append(int(sup.status))
         refs["sup.gain"].append(float(sup.gain))
         refs["sup.delay"].append(int(sup.delay))
+        # the safe state (sup.reaction = 1 only; the experiment runs no fault): 0 throughout
+        refs["sup.fault"].append(ctrl.fault)
+        refs["sup.fault_time"].append(0.0 if not ctrl.fault else ctrl.fault_sample * STEP)
         if k < n:
             lead = preview if k > 0 else 0
             published = ctrl.step_input(y_ref[k], out.y_meas, y_preview[k], lead)  # published at t_(k+1) ...
@@ -329,7 +332,8 @@ def piezo_stage_closed_loop(start_values=None, plant_start_values=None):
               ("est.b1", "b1"), ("est.b2", "b2"), ("pred_error", "pred_error"),
               ("saturated", "saturated"), ("loop_delay", None), ("loop_delay_time", None),
               ("preview_lead", None), ("sup.status", None), ("sup.gain", None), ("sup.delay", None),
-              ("est.adapting", "adapting"), ("est.noise", "noise"))
+              ("est.adapting", "adapting"), ("est.noise", "noise"),
+              ("sup.fault", None), ("sup.fault_time", None))
     refs = {"time": time, **{name: [] for name, _ in fields}}
     published, out = ctrl.output, plant.output
     sup = ctrl.raw.sup
@@ -339,7 +343,8 @@ def piezo_stage_closed_loop(start_values=None, plant_start_values=None):
         loop = {"y": out.y, "y_meas": out.y_meas, "u": out.u, "x": out.x,
                 "reference": ref.y_d, "error": ref.y_d - out.y, "loop_delay": delay,
                 "loop_delay_time": delay_time, "preview_lead": lead_used,
-                "sup.status": int(sup.status), "sup.gain": sup.gain, "sup.delay": int(sup.delay)}
+                "sup.status": int(sup.status), "sup.gain": sup.gain, "sup.delay": int(sup.delay),
+                "sup.fault": ctrl.fault, "sup.fault_time": 0.0 if not ctrl.fault else ctrl.fault_sample * STEP}
         for name, field in fields:
             value = loop[name] if field is None else getattr(published, field)
             refs[name].append(int(value) if name in ("saturated", "est.adapting") else value)

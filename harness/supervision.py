@@ -47,6 +47,12 @@ class Thresholds:
     min_samples: int
     max_delay: int
     detectable: int
+    judge_every: int
+    gain_drop: float
+    gain_rise: float
+    frozen_share: float
+    big_step: float
+    frozen_big: float
 
 
 def thresholds(controller_params=None):
@@ -60,8 +66,11 @@ def thresholds(controller_params=None):
         monitor_share=lib.PIEZO_MONITOR_SHARE_PERCENT / 100.0,
         monitor_share_min=int(lib.PIEZO_MONITOR_SHARE_MIN_SAMPLES),
         travel_fraction=lib.PIEZO_SUP_TRAVEL_PERCENT / 100.0, confirm=int(lib.PIEZO_SUP_CONFIRM),
-        min_samples=int(lib.PIEZO_SUP_MIN_SAMPLES), max_delay=int(lib.PIEZO_SUP_MAX_D),
-        detectable=int(lib.PIEZO_SUP_DEFAULT_DETECTABLE))
+        min_samples=int(lib.PIEZO_SUP_MIN_SAMPLES), max_delay=int(lib.PIEZO_MV_MAX_D),
+        detectable=int(lib.PIEZO_SUP_DEFAULT_DETECTABLE), judge_every=int(lib.PIEZO_SUP_JUDGE_EVERY),
+        gain_drop=lib.PIEZO_SUP_DROP_PERCENT / 100.0, gain_rise=lib.PIEZO_SUP_RISE_PERCENT / 100.0,
+        frozen_share=lib.PIEZO_SUP_FROZEN_PERCENT / 100.0, big_step=lib.PIEZO_SUP_BIG_STEP_PERCENT / 100.0,
+        frozen_big=lib.PIEZO_SUP_FROZEN_BIG_PERMILLE / 1000.0)
 
 
 def _ew(x, lam):
@@ -92,8 +101,12 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
     Returns
     -------
     dict of ndarray
-        ``szz``, ``szw`` and ``sww`` (one row per delay 1..8), ``travel_model``,
-        ``travel_meas``, ``weight``: the supervisor's sums after each sample; ``mon_share``,
+        ``szz``, ``szw`` and ``sww`` (one row per delay 1..9), ``travel_model``,
+        ``travel_meas``, ``weight``, ``reversals`` (samples where y_meas reversed its direction,
+        the last change kept over equal samples), ``steps2`` (its squared sample-to-sample
+        changes), ``big_steps`` (its steps beyond ``PIEZO_SUP_BIG_STEP_PERCENT`` % of the smallest
+        nonzero one before), ``y_same`` (samples y_meas equalled the one before, in a row): the
+        supervisor's sums after each sample; ``mon_share``,
         ``mon_weight``: the divergence monitor's (samples with ``|pred_error|`` beyond the
         bound; where v was clipped the core also counts the nominal model's error, which a
         working loop keeps far below the bound).
@@ -108,7 +121,7 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
     dz = np.diff(z, prepend=0.0)
     dw = np.diff(w, prepend=0.0)
     sww1 = _ew(dw * dw, lam)
-    dmax = core.lib().PIEZO_SUP_MAX_D
+    dmax = core.lib().PIEZO_MV_MAX_D
     szw = np.empty((dmax, n))
     sww = np.zeros((dmax, n))
     for d in range(1, dmax + 1):
@@ -116,12 +129,27 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
         szw[d - 1] = _ew(dz * shifted, lam)
         sww[d - 1, d - 1:] = sww1[:n - d + 1]
     yhat = lfilter([1.0], [1.0, a1, a2], w)
+    dy = np.diff(y, prepend=y[:1]) if n else y
+    last = np.zeros(n)                              # the last nonzero change before each sample
+    smallest = np.zeros(n)                          # the smallest nonzero |change| before each sample
+    prev, low = 0.0, 0.0
+    for i in range(n):
+        last[i], smallest[i] = prev, low
+        if dy[i] != 0.0:
+            prev = dy[i]
+            low = abs(dy[i]) if low == 0.0 else min(low, abs(dy[i]))
+    big_step = core.lib().PIEZO_SUP_BIG_STEP_PERCENT
+    same = np.zeros(n, dtype=np.int64)
+    for i in range(1, n):
+        same[i] = same[i - 1] + 1 if y[i] == y[i - 1] else 0
     lam_m = 1.0 - 1.0 / monitor_window if monitor_window > 0 else 0.0
     return {
         "szz": _ew(dz * dz, lam), "szw": szw, "sww": sww,
         "travel_model": _ew(np.abs(np.diff(yhat, prepend=0.0)), lam),
         "travel_meas": _ew(np.abs(np.diff(y, prepend=0.0)), lam),
         "weight": _ew(np.ones(n), lam),
+        "reversals": _ew((dy * last < 0.0).astype(float), lam), "steps2": _ew(dy * dy, lam), "y_same": same,
+        "big_steps": _ew(((smallest > 0.0) & (np.abs(dy) * 100.0 > big_step * smallest)).astype(float), lam),
         "mon_share": _ew((np.abs(np.asarray(pred_error, dtype=float)) > error_bound).astype(float), lam_m),
         "mon_weight": _ew(np.ones(n), lam_m),
     }
@@ -154,6 +182,15 @@ class Margins:
     monitor_run : int
         The longest run of samples with ``|pred_error|`` above ``monitor.pred_error_max``
         (the divergence window, 200 samples).
+    gain_drop, gain_rise : float or None
+        After the loop was verified: the largest ratio of the gain followed to a strongly
+        evidenced gain (threshold ``PIEZO_SUP_DROP_PERCENT``) and of such a gain to the gain
+        followed (``PIEZO_SUP_RISE_PERCENT``), over the judged samples.
+    frozen_run : int
+        The longest run of equal y_meas samples whose reversal share before it reached
+        ``PIEZO_SUP_FROZEN_PERCENT`` and whose share of big steps (beyond
+        ``PIEZO_SUP_BIG_STEP_PERCENT`` % of the smallest) reached ``PIEZO_SUP_FROZEN_BIG_PERMILLE``
+        per mille (threshold ``sup.window``).
     """
 
     gain_low: float | None
@@ -164,6 +201,9 @@ class Margins:
     clip_run: int
     detection_run: int
     monitor_run: int
+    gain_drop: float | None = None
+    gain_rise: float | None = None
+    frozen_run: int = 0
 
 
 def _longest_run(mask):
@@ -233,6 +273,30 @@ def margins(samples, nominal, controller_params=None):
     # the monitor judges its count of large errors against the whole window (piezo_controller.c)
     share = np.where(k >= th.monitor_share_min, st["mon_share"] / window, 0.0) if window > 0 \
         else np.zeros(n)
+    # the gain followed once verified, moved at each judged verified sample (piezo_supervisor.c):
+    # the mean of its first ones, then an exponential mean; judged once it holds `confirm` of them
+    followed, count, drop, rise = 0.0, 0, None, None
+    rate = th.judge_every / th.window
+    for i in np.flatnonzero(strong & (k % th.judge_every == 0)):
+        if kind[i] != 0 or not in_range[i]:
+            continue
+        g_i = float(g[i])
+        if count >= th.confirm:
+            drop = max(drop or 0.0, followed / g_i)
+            rise = max(rise or 0.0, g_i / followed)
+            if followed > th.gain_drop * g_i or g_i > th.gain_rise * followed:
+                continue                            # a candidate: the gain followed holds
+        count += 1
+        followed += (g_i - followed) * max(rate, 1.0 / count)
+    # a measurement that froze after showing noise (its reversal share before the stretch)
+    lam = 1.0 - 1.0 / th.window
+    same = st["y_same"]
+    stretch = (1.0 - lam ** same) / (1.0 - lam)
+    before = st["weight"] - stretch
+    with np.errstate(divide="ignore", invalid="ignore"):
+        noisy = (before >= 1.0) & (st["reversals"] >= th.frozen_share * before) \
+            & (st["big_steps"] >= th.frozen_big * before)
+    frozen_run = int(same[noisy & (same > 0)].max()) if np.any(noisy & (same > 0)) else 0
     return Margins(
         gain_low=float(np.nanmin(gs)) if np.isfinite(gs).any() else None,
         gain_high=float(np.nanmax(gs)) if np.isfinite(gs).any() else None,
@@ -242,6 +306,7 @@ def margins(samples, nominal, controller_params=None):
         clip_run=_longest_run(samples["clipped"]),
         detection_run=_longest_run(loop_delay == 0) if auto else 0,
         monitor_run=_longest_run(np.abs(np.asarray(samples["pred_error"], dtype=float)) > bound),
+        gain_drop=drop, gain_rise=rise, frozen_run=frozen_run,
     )
 
 

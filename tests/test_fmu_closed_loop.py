@@ -18,6 +18,7 @@ from __future__ import annotations
 import ctypes
 import math
 import random
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -314,10 +315,14 @@ def test_without_lead_the_stage_follows_y_d_d_samples_late(closed_loop, make_fmu
                                           ({"tf.b1": 0.05954, "tf.b2": -0.05907}, None)])
 def test_the_supervisions_error_surfaces_from_the_doStep(closed_loop, make_fmu, stage, fault):
     """Reference: the three FMUs wired by hand (exchange schedule) with the same stage: the
-    controller's Error at the same sample, word for word. A stage whose response is inverted
-    (tf.b1, tf.b2 negated: the fault table of docs/robustness.md) and one with a tenth of the
-    model's gain; harness.fmu classifies the Error as a LoopFaultError by its first words
-    (LOOP_FAILURES). The FMU is then in state Error."""
+    controller's Error at the same sample, with the same verdict and evidence word for word (up
+    to "it moved ... um"); then each says what to check where it is: the wired controller names
+    the connections, this FMU its own parameters, the stage's against the controller's model
+    (pi.w* and controller.pi.w*, tf.* and controller.tf.*), and no connection it does not have.
+    A stage whose response is inverted (tf.b1, tf.b2 negated: the fault table of
+    docs/robustness.md) and one with a tenth of the model's gain; harness.fmu classifies the
+    Error as a LoopFaultError by its first words (LOOP_FAILURES). The FMU is then in state
+    Error."""
     wired = simulate_wired("track_1hz", "exchange", duration=2.0, plant_params=stage)
     assert wired.error.startswith("fmi2DoStep: supervision stopped the loop ("), wired.error
     if fault is not None:
@@ -328,8 +333,13 @@ def test_the_supervisions_error_surfaces_from_the_doStep(closed_loop, make_fmu, 
         for k in range(4000):
             fmu.slave.doStep(k * H, H)
     assert k * H == pytest.approx(wired.error_time, abs=1e-12)
-    assert fmu.errors()[0] == wired.error
-    assert LOOP_FAILURES[0][0] in fmu.errors()[0]
+    evidence = re.compile(r"^(.*?it moved \S+ um)")
+    own = fmu.errors()[0]
+    assert evidence.match(own).group(1) == evidence.match(wired.error).group(1)
+    assert "Check the connections" in wired.error or "Check the sign" in wired.error, wired.error
+    assert "controller.pi.w0" in own and "controller.tf.b1" in own, own
+    assert not re.search(r"connection|PiezoStage\.|AdaptiveCompoundController\.|amplifier", own), own
+    assert LOOP_FAILURES[0][0] in own
     assert loop_error_class([f"[Error] {e}" for e in fmu.errors()]) is LoopFaultError
     assert "enters state Error" in fmu.errors()[-1]
 

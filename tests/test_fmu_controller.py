@@ -26,12 +26,14 @@ FEEDTHROUGH = {"mv.feedthrough": True, "mv.delay": 0}
 # divergence monitor stops the run at sample 288 with it).
 OPEN_LOOP = {"sup.enabled": False, "mv.integral": 0.0}
 SUPERVISION = {"sup.enabled": ("Boolean", True), "sup.gain_min": ("Real", 0.25), "sup.gain_max": ("Real", 4.0),
-               "sup.window": ("Integer", 200), "sup.clip_time": ("Real", 0.5), "sup.detect_time": ("Real", 0.5)}
+               "sup.window": ("Integer", 200), "sup.clip_time": ("Real", 0.5), "sup.detect_time": ("Real", 0.5),
+               "sup.reaction": ("Integer", 0), "sup.ramp_time": ("Real", 0.01), "sup.clip_error": ("Real", 1.0),
+               "mv.probe_max": ("Real", 1.0)}
 ADAPT_OUTPUTS = ["est.adapting", "est.noise"]
 # the paper's law (tests/numpy_reference.py PAPER_LAW, docs/model.md, adaptation)
 PAPER_LAW = {"rls.robust": False, "rls.forgetting": 0.995, "rls.trace_max": 100.0, "mv.integral": 0.0,
              "mv.observer": 0.4}
-SUP_OUTPUTS = ["sup.status", "sup.gain", "sup.delay"]
+SUP_OUTPUTS = ["sup.status", "sup.gain", "sup.delay", "sup.fault", "sup.fault_time"]
 
 
 def y_d(k):
@@ -82,8 +84,8 @@ def test_model_description_matches_design(controller, piezo_stage):
 
     assert [n for n, x in v.items() if x.causality == "input"] == INPUTS
     assert [n for n, x in v.items() if x.causality == "output"] == \
-        OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS + ADAPT_OUTPUTS
-    assert [v[n].type for n in SUP_OUTPUTS] == ["Integer", "Real", "Integer"]
+        OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS[:3] + ADAPT_OUTPUTS + SUP_OUTPUTS[3:]
+    assert [v[n].type for n in SUP_OUTPUTS] == ["Integer", "Real", "Integer", "Integer", "Real"]
     assert [v[n].type for n in ADAPT_OUTPUTS] == ["Boolean", "Real"]
     assert v["est.noise"].unit == "um"
     assert v["saturated"].type == "Boolean"
@@ -330,7 +332,8 @@ NON_DEFAULT_PARAMETERS = {
     "mv.integral": 0.02, "sat.enabled": False,
     "sat.v_min": -40.0, "sat.v_max": 60.0, "monitor.pred_error_max": 5.0,
     "monitor.divergence_samples": 0, "sup.enabled": False, "sup.gain_min": 0.1, "sup.gain_max": 8.0,
-    "sup.window": 400, "sup.clip_time": 0.25, "sup.detect_time": 1.0,
+    "sup.window": 400, "sup.clip_time": 0.25, "sup.detect_time": 1.0, "sup.reaction": 1, "sup.ramp_time": 0.02,
+    "sup.clip_error": 2.0, "mv.probe_max": 0.5,
 }
 
 

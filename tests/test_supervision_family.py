@@ -32,13 +32,25 @@ def test_every_fault_stops_the_loop_within_a_second_naming_it(fault_results):
     doStep returns an Error within 1 s of the fault's onset, from the supervision (or the
     divergence monitor, for the loops no model explains: alternating, amplifier gain 10),
     naming y_meas, v, the reference or the loop delay; a degraded loop (a time stamp not
-    connected) runs on with its Warning instead."""
+    connected) runs on with its Warning instead. Dropouts (a tolerated fault) stop nothing: the
+    loop tracks within SILENT_ERROR and says it replaced an outlier. The offset drift (a blind
+    spot of docs/robustness.md) is not stopped, and leaves y off by more than SILENT_ERROR: if it
+    ever is, the docs must say so. Every message fits a log line of 1024 bytes."""
     by_case = {c.name: c for c in st.FAULTS}
     assert {r.case for r in fault_results} == set(by_case)
     for r in fault_results:
         case = by_case[r.case]
+        assert len(r.message) < 1000, (r.case, r.master, len(r.message))
+        if r.safe:
+            continue                    # test_the_safe_reaction_runs_on_from_the_same_sample
         if case.degraded:
             assert r.warned and r.time is None and "is not connected" in r.message, (r.case, r.master)
+            continue
+        if case.tolerated:
+            assert r.time is None and r.e_rms <= st.SILENT_ERROR and "an outlier" in r.message, r
+            continue
+        if case.blind:
+            assert r.time is None and r.e_rms > st.SILENT_ERROR, r
             continue
         assert r.time is not None, (r.case, r.master, "not stopped")
         assert r.time - st._onset(case) < 1.0, (r.case, r.master, r.time)
@@ -46,7 +58,29 @@ def test_every_fault_stops_the_loop_within_a_second_naming_it(fault_results):
         assert re.search(r"y_meas|\bv\b|reference|mv\.delay", r.message), r.message
     columns = {r.master for r in fault_results}
     assert {"FMI 2.0, exchange", "FMI 3.0, exchange", "FMI 2.0, plant, controller, reference",
-            "FMI 3.0, plant, controller, reference", "fmpy", "native", "core"} <= columns
+            "FMI 3.0, plant, controller, reference", "fmpy", "native", "core", "safe, FMI 2.0, exchange",
+            "safe, FMI 3.0, exchange"} <= columns
+
+
+def test_the_safe_reaction_runs_on_from_the_same_sample(fault_results):
+    """Reference: each fault's row with sup.reaction = 0 (the same FMI edition, exchange). With
+    sup.reaction = 1 the run reaches its end with no Error; the controller's sup.fault_time is
+    the time its Error came at, its sup.fault a code of the table, one Warning says
+    "sup.reaction = safe" with the Error's own words, and v ends at 0 V. A tolerated or blind
+    fault reaches no verdict in either."""
+    by = {(r.case, r.master): r for r in fault_results}
+    safe = [r for r in fault_results if r.safe]
+    assert len(safe) == 2 * sum(not c.degraded and "exchange" in c.schedules for c in st.FAULTS)
+    for r in safe:
+        case = next(c for c in st.FAULTS if c.name == r.case)
+        error = by[(r.case, r.master.replace("safe, ", ""))]
+        assert r.completed, r
+        if case.tolerated or case.blind:
+            assert r.time is None and error.time is None and r.fault == 0, r
+            continue
+        assert r.time == pytest.approx(error.time, abs=1e-12) and 1 <= r.fault <= 10, (r, error.time)
+        assert r.warned and r.v_end == 0.0, r
+        assert r.message.split("Why: ", 1)[1] == error.message.split(": ", 1)[1], (r.message, error.message)
 
 
 def test_the_message_says_which_signal_and_what_to_check(fault_results):
@@ -64,6 +98,10 @@ def test_the_message_says_which_signal_and_what_to_check(fault_results):
         "plant input delay of 4 samples (tf.delay = 4)": "Set mv.delay = 5 (d = 6)",
         "mv.delay = 0 set for a loop of d = 2": "Set mv.delay = 1 (d = 2)",
         "reference beyond reach (500 um at 0.25 Hz)": "the reference asks for more than the stage reaches",
+        "sensor gain 1 -> 0.5 from t = 1 s": "A sensor or an amplifier whose gain changed",
+        "y_meas frozen during a hold at 5 um, from t = 1 s": "y_meas has frozen",
+        "y_meas = 0 once every 100 samples (dropouts)": "an outlier (a reading dropped or glitched)",
+        "mv.delay = 8 set for a loop of d = 2": "Set mv.delay = 1 (d = 2)",
     }
     for case, words in expect.items():
         assert words in said[case], (case, said[case])
@@ -85,6 +123,9 @@ def test_every_fault_on_drawn_stages_is_stopped_or_tracked(fmu_paths):
         o = family[c]
         assert o["runs"] == 8 * len(case.schedules), case.name
         assert all(t < 1.0 for t in o["times"]), (case.name, max(o["times"]))
+        if case.blind:              # documented: nothing stops it, and y is off
+            assert o["caught"] == 0 and all(e > st.SILENT_ERROR for _, _, e in o["missed"]), case.name
+            continue
         for spec, text, e_rms in o["missed"]:
             assert not case.degraded and e_rms <= st.SILENT_ERROR, (case.name, spec, text, e_rms)
             missed[case.name] = missed.get(case.name, []) + [(spec.stage, spec.model, spec.schedule)]
@@ -112,7 +153,9 @@ def test_a_family_of_legitimate_loops_raises_no_alarm(fmu_paths):
     fmpy's player and two sequential orders, 1 s each; and the saturation runs. Not one Error
     nor supervision warning, and every margin short of its threshold: the gains seen with
     strong evidence within [sup.gain_min, sup.gain_max], no fault candidate confirmed, the
-    share of large errors below a quarter, clipping and detection far below their times."""
+    share of large errors below a quarter, clipping and detection far below their times, the gain
+    followed never fell or rose beyond PIEZO_SUP_DROP_PERCENT / PIEZO_SUP_RISE_PERCENT, and no
+    still measurement after noise came near sup.window."""
     specs = [s for s in st.family_specs(stages=4, seed=7, scenarios=["1hz", "20hz", "1_10_20hz"], duration=1.0)
              if s.master in ("wired: exchange", "wired: player", "wired: plant, controller, reference",
                              "wired: controller, reference, plant")]
@@ -126,6 +169,8 @@ def test_a_family_of_legitimate_loops_raises_no_alarm(fmu_paths):
         assert m.gain_high is None or m.gain_high < th.gain_max, (r.spec, m)
         assert m.candidate_run < th.confirm and m.monitor_share < 0.25, (r.spec, m)
         assert m.clip_run < th.clip_time / 0.0005 and m.detection_run < th.detect_time / 0.0005, (r.spec, m)
+        assert (m.gain_drop or 1.0) < th.gain_drop and (m.gain_rise or 1.0) < th.gain_rise, (r.spec, m)
+        assert m.frozen_run < th.window, (r.spec, m)
     # the family is no demo: most runs were verified with strong evidence, at several gains
     gains = [r.margins.gain_high for r in results if r.margins.gain_high is not None]
     assert len(gains) > 0.5 * len(results) and np.ptp(gains) > 0.3
@@ -150,3 +195,22 @@ def test_the_wired_master_is_each_real_importer_sample_for_sample(fmu_paths):
     for order in itertools.permutations(CONTAINER_ORDER):
         got = masters.closed_loop("container")(sc, sequential=True, order=order)["y"]
         assert np.array_equal(got, wired[tuple(names[f] for f in order)]), order
+
+
+def test_the_no_false_alarm_check_takes_any_family_and_both_reactions(fmu_paths):
+    """harness.supervision_table.false_alarms, the check a family of any origin is pointed at
+    (RunSpecs on the wired master, a real importer or a harness master; tables included). Two
+    sound loops give no alarm with either reaction, each run in its group (the safe runs in
+    "<group>, sup.reaction = safe"); a loop with a plant delay of 4 samples given as legitimate
+    gives one alarm per reaction: the Error, and the safe state's Warning (a LoopFaultWarning
+    from the harness's core master)."""
+    sound = st.RunSpec("sound", "wired: exchange", "mismatch_5hz", {}, {}, {}, 0.5)
+    core_master = st.RunSpec("sound, core", "harness core", "mismatch_1hz", {}, {}, {}, 0.5)
+    summary, alarms = st.false_alarms([sound, core_master], jobs=1)
+    assert alarms == [] and set(summary) == {"sound", "sound, core", "sound, sup.reaction = safe",
+                                             "sound, core, sup.reaction = safe"}
+    assert all(s["runs"] == 1 for s in summary.values())
+    bad = st.RunSpec("not sound", "harness core", "mismatch_5hz", {"tf.delay": 4}, {}, {}, 0.5)
+    summary, alarms = st.false_alarms([bad], jobs=1)
+    assert [g for g, _, _ in alarms] == ["not sound", "not sound, sup.reaction = safe"]
+    assert "loop delay beyond the controller's" in alarms[0][2] and "sup.reaction = safe" in alarms[1][2]

@@ -83,6 +83,12 @@ typedef enum {
     vr_mv_integral,
     vr_est_adapting,        /* output Boolean: the estimates were updated at the last sample */
     vr_est_noise,           /* output [um] the measured noise of y_meas */
+    vr_sup_reaction,        /* Integer: 0 error (a verdict fails the doStep), 1 safe (the safe state) */
+    vr_sup_ramp_time,       /* [s] the safe state's ramp of v to 0 V */
+    vr_sup_clip_error,      /* [um] the clipping watchdog's bound */
+    vr_mv_probe_max,        /* [um] largest delay probe */
+    vr_sup_fault,           /* output Integer: the fault code of the safe state (0: none) */
+    vr_sup_fault_time,      /* output [s] the time of its verdict */
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -113,9 +119,11 @@ typedef struct {
     int said_stamps;                /* supervision warnings logged: 1 t_meas, 2 t_preview, 4 alignment */
     int sup_status;                 /* outputs: sup.status, ... */
     double sup_gain;                /* ... sup.gain, ... */
-    int sup_delay;                  /* ... sup.delay */
-    int loop_wired;                 /* y_meas or t_meas left its start value at some sample: the
-                                       loop is connected (until then it runs open loop) */
+    int sup_delay;                  /* ... sup.delay, ... */
+    int sup_fault;                  /* ... sup.fault, ... */
+    double sup_fault_time;          /* ... sup.fault_time */
+    int loop_wired;                 /* an input left its start value at some sample: the loop is
+                                       connected (until then it runs open loop) */
     int said_open_loop;             /* the open-loop warning was logged */
 
     piezo_controller ctrl;          /* core state (committed samples only) */

@@ -22,6 +22,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <stddef.h>
 #include "fmu_model.h"
 
@@ -118,6 +119,12 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_mv_integral] = PARAM_REAL("mv.integral", mv_integral),
     [vr_est_adapting] = OUTPUT_BOOL("est.adapting", adapting),
     [vr_est_noise] = OUTPUT_REAL("est.noise", noise),
+    [vr_sup_reaction] = PARAM_INT("sup.reaction", sup.reaction),
+    [vr_sup_ramp_time] = PARAM_REAL("sup.ramp_time", sup.ramp_time),
+    [vr_sup_clip_error] = PARAM_REAL("sup.clip_error", sup.clip_error),
+    [vr_mv_probe_max] = PARAM_REAL("mv.probe_max", mv_probe_max),
+    [vr_sup_fault] = MODEL_OUTPUT_INT("sup.fault", sup_fault),
+    [vr_sup_fault_time] = { "sup.fault_time", MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, sup_fault_time) },
 };
 
 void model_set_start_values(ModelData *data)
@@ -142,8 +149,8 @@ piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
     data->meas_stamped = data->preview_stamped = 0;
     data->preview_offset = 0;
     data->said_stamps = 0;
-    data->sup_status = data->sup_delay = 0;
-    data->sup_gain = 0.0;
+    data->sup_status = data->sup_delay = data->sup_fault = 0;
+    data->sup_gain = data->sup_fault_time = 0.0;
     data->loop_wired = data->said_open_loop = 0;
     /* the controller is time-invariant; t0 places the time stamps on its grid */
     data->t0 = start_time;
@@ -295,6 +302,7 @@ piezo_status model_update_outputs(ModelData *data, double *history, size_t histo
     data->sup_status = data->said_stamps ? 2 : data->ctrl.sup.status;
     data->sup_gain = data->ctrl.sup.gain;
     data->sup_delay = data->ctrl.sup.delay;
+    fmu_controller_fault_outputs(&data->ctrl, data->t0, data->params.h, &data->sup_fault, &data->sup_fault_time);
     if (data->params.mv_feedthrough) {
         int meas_offset;
         stamps_seen seen;
@@ -385,12 +393,23 @@ int model_step_notice(ModelData *data, char *text, size_t size)
     return 1;
 }
 
+/* Where this controller's loop is, for its messages: wired to a stage by hand, from t0. */
+static piezo_sup_context context(const ModelData *data)
+{
+    piezo_sup_context ctx;
+    memset(&ctx, 0, sizeof ctx);
+    ctx.t0 = data->t0;
+    ctx.h = data->params.h;
+    return ctx;
+}
+
 int model_step_warning(ModelData *data, double start_time, char *text, size_t size)
 {
+    piezo_sup_context ctx = context(data);
     (void)start_time;   /* data->t0 is the same */
     if (stamp_warning(data, text, size))
         return 1;
-    return fmu_controller_warning(&data->track, &data->ctrl, data->t0, data->params.h, text, size);
+    return fmu_controller_warning(&data->track, &data->ctrl, &ctx, text, size);
 }
 
 int model_step_event(ModelData *data, char *text, size_t size)
@@ -417,7 +436,8 @@ int model_terminate_warning(const ModelData *data, char *text, size_t size)
 
 int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size)
 {
-    return fmu_controller_failure(&data->ctrl, st, text, size);
+    piezo_sup_context ctx = context(data);
+    return fmu_controller_failure(&data->ctrl, &ctx, st, text, size);
 }
 
 const char *model_check_data(const ModelData *data, int core_initialized, double t0, uint64_t k,
@@ -435,7 +455,8 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         || (data->said_open_loop != 0 && data->said_open_loop != 1))
         return "warning flags are not 0 or 1";
     if (abs(data->preview_offset) > 99 || data->sup_status < 0 || data->sup_status > 2
-        || data->sup_delay < 0 || data->sup_delay > PIEZO_SUP_MAX_D || !isfinite(data->sup_gain))
+        || data->sup_delay < 0 || data->sup_delay > PIEZO_MV_MAX_D || !isfinite(data->sup_gain)
+        || data->sup_fault < 0 || data->sup_fault > PIEZO_SUP_FAULT_MAX || !isfinite(data->sup_fault_time))
         return "supervision outputs out of range";
     if (!(isfinite(data->t0) && isfinite(data->last_t_preview) && isfinite(data->last_t_meas)))
         return "time stamps not finite";
@@ -448,6 +469,8 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         return NULL;    /* parameters are validated by model_init later */
     if ((fault = piezo_controller_check(c)) != NULL)
         return fault;
+    if (data->track.said_fault && !c->fault)
+        return "the safe state's warning said without a safe state";
     if (c->k != k)
         return "controller sample counter differs from the FMU's k";
     if (k > 0 && c->sup.open_loop == data->loop_wired)

@@ -127,6 +127,13 @@ typedef enum {
     vr_mv_integral,
     vr_est_adapting,        /* output Boolean */
     vr_est_noise,           /* output [um] */
+    /* added with the safe state (issue 36): the controller's, appended to keep the references */
+    vr_sup_reaction,
+    vr_sup_ramp_time,
+    vr_sup_clip_error,
+    vr_mv_probe_max,
+    vr_sup_fault,           /* output Integer */
+    vr_sup_fault_time,      /* output [s] */
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -163,6 +170,8 @@ typedef struct {
     int sup_status;
     double sup_gain;
     int sup_delay;
+    int sup_fault;
+    double sup_fault_time;
     /* what the stage and the preview said */
     uint64_t n_clamped;                 /* samples whose v was outside the rated range (applied clamped) */
     uint64_t k_first_clamped;           /* the first of them (valid when n_clamped > 0) */

@@ -208,6 +208,12 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_mv_integral] = CTRL_REAL("mv.integral", mv_integral),
     [vr_est_adapting] = CTRL_OUT_BOOL("est.adapting", adapting),
     [vr_est_noise] = CTRL_OUT("est.noise", noise),
+    [vr_sup_reaction] = CTRL_INT("sup.reaction", sup.reaction),
+    [vr_sup_ramp_time] = CTRL_REAL("sup.ramp_time", sup.ramp_time),
+    [vr_sup_clip_error] = CTRL_REAL("sup.clip_error", sup.clip_error),
+    [vr_mv_probe_max] = CTRL_REAL("mv.probe_max", mv_probe_max),
+    [vr_sup_fault] = CTRL_OUT_INT("sup.fault", sup_fault),
+    [vr_sup_fault_time] = CTRL_OUT_REAL("sup.fault_time", sup_fault_time),
 };
 
 /* ModelData.refused_by: which block refused the last refused sample (for its message), or
@@ -403,6 +409,7 @@ piezo_status model_update_outputs(ModelData *data, double *history, size_t histo
     data->sup_status = data->said_preview ? 2 : data->ctrl.sup.status;
     data->sup_gain = data->ctrl.sup.gain;
     data->sup_delay = data->ctrl.sup.delay;
+    fmu_controller_fault_outputs(&data->ctrl, data->t0, data->stage.h, &data->sup_fault, &data->sup_fault_time);
     return PIEZO_OK;
 }
 
@@ -439,10 +446,25 @@ static int preview_warning(ModelData *data, char *text, size_t size)
     return 1;
 }
 
+/* Where this controller's loop is, for its messages: inside this FMU (its parameters are
+ * named, the stage's against the controller's model's), from t0. */
+static piezo_sup_context context(const ModelData *data)
+{
+    piezo_sup_context ctx;
+    memset(&ctx, 0, sizeof ctx);
+    ctx.t0 = data->t0;
+    ctx.h = data->stage.h;
+    ctx.internal = 1;
+    ctx.stage_delay = data->stage.tf.delay;
+    ctx.feedthrough = data->control.mv_feedthrough;
+    return ctx;
+}
+
 int model_step_warning(ModelData *data, double start_time, char *text, size_t size)
 {
+    piezo_sup_context ctx = context(data);
     (void)start_time;   /* data->t0 is the same */
-    if (fmu_controller_warning(&data->track, &data->ctrl, data->t0, data->stage.h, text, size))
+    if (fmu_controller_warning(&data->track, &data->ctrl, &ctx, text, size))
         return 1;
     if (data->n_clamped > 0 && !data->said_clamped) {
         double applied = piezo_plant_rated_voltage(data->v_first_clamped);
@@ -485,8 +507,10 @@ int model_terminate_warning(const ModelData *data, char *text, size_t size)
 
 int model_failure_text(const ModelData *data, piezo_status st, char *text, size_t size)
 {
-    if (data->refused_by == REFUSED_CONTROLLER)
-        return fmu_controller_failure(&data->ctrl, st, text, size);
+    if (data->refused_by == REFUSED_CONTROLLER) {
+        piezo_sup_context ctx = context(data);
+        return fmu_controller_failure(&data->ctrl, &ctx, st, text, size);
+    }
     if (data->refused_by == REFUSED_STAGE && st == PIEZO_ERR_DIVERGED) {
         snprintf(text, size, "the stage diverged: a value its model computed is not finite although v is "
                  "(v within [%d, %d] V: the stage's parameters, e.g. pi.w0 or tf.b1, make it overflow)",
@@ -522,8 +546,9 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         return "refusing block out of range";
     if (data->lead_used < 0 || data->lead_used >= PIEZO_PREVIEW_RING || data->preview_lead < 0
         || data->preview_lead >= PIEZO_PREVIEW_RING || data->loop_delay < 0 || data->loop_delay > PIEZO_MV_MAX_D
-        || data->sup_status < 0 || data->sup_status > 2 || data->sup_delay < 0 || data->sup_delay > PIEZO_SUP_MAX_D
-        || !isfinite(data->sup_gain))
+        || data->sup_status < 0 || data->sup_status > 2 || data->sup_delay < 0 || data->sup_delay > PIEZO_MV_MAX_D
+        || !isfinite(data->sup_gain) || data->sup_fault < 0 || data->sup_fault > PIEZO_SUP_FAULT_MAX
+        || !isfinite(data->sup_fault_time))
         return "outputs out of range";
     if (data->control.mv_hold_inputs != 0)
         return "mv.hold_inputs set (this FMU has no such parameter)";
@@ -545,6 +570,8 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         return fault;
     if (data->plant.k != k || data->ctrl.k != k)
         return "sample counters differ from the FMU's k";
+    if (data->track.said_fault && !data->ctrl.fault)
+        return "the safe state's warning said without a safe state";
     if ((fault = piezo_plant_check_params(&data->plant, &data->stage)) != NULL
         || (fault = piezo_controller_check_params(&data->ctrl, &data->control)) != NULL
         || (fault = piezo_reference_check_params(&data->ref, &data->ref_params, t0,

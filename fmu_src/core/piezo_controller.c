@@ -38,13 +38,12 @@
  * one that starts with a probe: the doublet +p, -p added to q on its first two
  * samples. Its first response, b1 p, is PROBE_SNR times the rms a-priori
  * error of the best candidate in the trial before (noise and model error),
- * p within [PROBE_MIN, PROBE_MAX] um; each further trial doubles it. After
- * PIEZO_DETECT_PROBES probes a detection probes no more (a measurement that
- * never answers, e.g. a controller driven open loop): its trials go on, and a
- * kink of the reference can still decide. */
+ * p within [PROBE_MIN, mv.probe_max] um (default 1 um; 0: no probe); each
+ * further trial doubles it. After PIEZO_DETECT_PROBES probes a detection
+ * probes no more (a measurement that never answers, e.g. a controller driven
+ * open loop): its trials go on, and a kink of the reference can still decide. */
 #define PROBE_SNR 20.0
 #define PROBE_MIN 1e-3
-#define PROBE_MAX 1.0
 /* Robust adaptation (rls.robust; docs/model.md, adaptation). The measured noise of a signal
  * x is the median of |x(k) - x(k-1)|, scaled to the rms of a white x: a multiplicative
  * quantile tracker that steps up by NOISE_STEP when |x(k) - x(k-1)| NOISE_SCALE is above it
@@ -72,6 +71,12 @@
  * no longer stops it (measured: not within 3000 samples; 86 with 0.995 and 100). */
 #define DETECT_FORGETTING 0.995
 #define DETECT_TRACE_MAX 100.0
+
+/* The loop delay's one home is PIEZO_MV_MAX_D (piezo_supervisor.h); the literals the
+ * binding reads beside it follow from it. */
+typedef char assert_max_delay[(PIEZO_MV_MAX_EXTRA_DELAY == PIEZO_MV_MAX_D - 1
+                               && PIEZO_MV_Q_RING == PIEZO_MV_MAX_D + 1
+                               && PIEZO_SUP_REF_RING >= PIEZO_MV_MAX_D) ? 1 : -1];
 
 void piezo_controller_default_params(piezo_controller_params *p)
 {
@@ -119,6 +124,7 @@ void piezo_controller_default_params(piezo_controller_params *p)
     p->monitor_pred_error_max = PIEZO_MONITOR_DEFAULT_ERROR;
     p->monitor_divergence_samples = PIEZO_MONITOR_DEFAULT_SAMPLES;
     piezo_supervisor_default_params(&p->sup);
+    p->mv_probe_max = PIEZO_DETECT_PROBE_MAX;
 }
 
 piezo_status piezo_diophantine(double a1, double a2, int d, double *e, double *g)
@@ -220,6 +226,8 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     if (p->monitor_divergence_samples < 0)
         return piezo_refuse(diag, "monitor.divergence_samples", "0..2147483647 samples (0: never)",
                             (double)p->monitor_divergence_samples);
+    if (!(isfinite(p->mv_probe_max) && p->mv_probe_max >= 0.0))
+        return piezo_refuse(diag, "mv.probe_max", "[0, inf) um (0: no delay probe)", p->mv_probe_max);
 
     memset(c, 0, sizeof *c);
     pi_params = p->pi;
@@ -254,6 +262,7 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->theta_nominal[1] = p->tf_a2;
     c->theta_nominal[2] = p->tf_b1;
     c->theta_nominal[3] = p->tf_b2;
+    c->probe_max = p->mv_probe_max;
     /* the supervisor judges the loop by the nominal model */
     st = piezo_supervisor_init(&c->sup, &p->sup, p->tf_a1, p->tf_a2, p->tf_b1, p->tf_b2, p->h, diag);
     if (st != PIEZO_OK) return st;
@@ -335,6 +344,16 @@ void piezo_controller_reset(piezo_controller *c)
     memcpy(c->out.theta, c->theta, sizeof c->theta);
     piezo_supervisor_reset(&c->sup);
     memset(&c->verdict, 0, sizeof c->verdict);
+    c->det_noise = 0.0;
+    c->err_sum = c->err_weight = c->outlier_sum = 0.0;
+    c->quiet = 0;
+    c->suspect = 0;
+    c->suspect_y = c->suspect_error = 0.0;
+    c->n_outliers = c->k_first_outlier = 0;
+    c->first_outlier = c->first_outlier_error = 0.0;
+    c->fault = 0;
+    c->k_fault = 0;
+    c->v_fault = 0.0;
 }
 
 size_t piezo_controller_history_needed(const piezo_controller *c)
@@ -446,7 +465,7 @@ static double rls_step(const piezo_controller *c, const double *theta_in, const 
 static double rls_update(const piezo_controller *c, double y, piezo_controller_sample *s)
 {
     double e, bound = c->trace_max;
-    int may = c->rls_enabled && !(c->sat_hold > 0);
+    int may = c->rls_enabled && !(c->sat_hold > 0) && !s->outlier;
     s->offset = c->offset;
     if (!c->robust) {
         s->rls_updated = may;
@@ -513,7 +532,7 @@ static double detect_update(const piezo_controller *c, double y, piezo_controlle
 {
     static const int order[PIEZO_DETECT_N] = { PIEZO_DETECT_START_D - 1, 0, 2 };
     double err[PIEZO_DETECT_N];
-    int i, best = order[0], second = -1, update = c->rls_enabled && !(c->sat_hold > 0);
+    int i, best = order[0], second = -1, update = c->rls_enabled && !(c->sat_hold > 0) && !s->outlier;
     for (i = 0; i < PIEZO_DETECT_N; ++i) {
         err[i] = rls_step(c, &c->det_theta[4 * i], &c->det_P[16 * i], i + 1, y, update,
                           c->robust ? DETECT_FORGETTING : c->forgetting,
@@ -539,11 +558,14 @@ static double detect_update(const piezo_controller *c, double y, piezo_controlle
     s->detecting = s->det_run < PIEZO_DETECT_CONFIRM;
     /* a trial that chose nothing: the next starts with a probe */
     s->new_trial = s->detecting && c->k + 1 - c->det_trial >= PIEZO_DETECT_TRIAL;
+    s->next_noise = c->det_noise;
     if (s->new_trial) {
-        double p = PROBE_SNR * sqrt(s->det_score[best] / PIEZO_DETECT_TRIAL) / c->theta_nominal[2];
+        double p, lo = PROBE_MIN < c->probe_max ? PROBE_MIN : c->probe_max;
+        s->next_noise = sqrt(s->det_score[best] / PIEZO_DETECT_TRIAL);
+        p = PROBE_SNR * s->next_noise / c->theta_nominal[2];
         if (p < 2.0 * c->det_probe) p = 2.0 * c->det_probe;
         s->next_probe = c->det_probes >= PIEZO_DETECT_PROBES ? 0.0
-                        : p < PROBE_MIN ? PROBE_MIN : (p > PROBE_MAX ? PROBE_MAX : p);
+                        : p < lo ? lo : (p > c->probe_max ? c->probe_max : p);
     }
     s->d = s->detecting ? PIEZO_DETECT_START_D : best + 1;
     s->k_delay = s->detecting ? c->k_delay : c->k;
@@ -581,6 +603,7 @@ static void detect_carry(const piezo_controller *c, piezo_controller_sample *s)
     s->k_delay = c->k_delay;
     s->new_trial = 0;
     s->next_probe = 0.0;
+    s->next_noise = c->det_noise;
 }
 
 /* The reference r(k) = y_d(k + d): the stamped preview for sample k + d when
@@ -644,14 +667,47 @@ static int sample_state_finite(const piezo_controller *c, const piezo_controller
                                  && all_finite(s->det_P, PIEZO_DETECT_P) && all_finite(s->det_score, PIEZO_DETECT_N)));
 }
 
+/* lambda of the outlier sums' window */
+#define OUTLIER_FORGETTING (1.0 - 1.0 / PIEZO_OUTLIER_WINDOW)
+
+/*
+ * An outlier (a dropped or glitched reading): the a-priori error e of the law's model
+ * (the loop's estimates, or the start-up law's nominal model while detecting) is beyond
+ * PIEZO_OUTLIER_RATIO times the rms error of the accepted samples of the last
+ * PIEZO_OUTLIER_WINDOW (E = sum lambda^(k-j) e(j)^2 over weight W = sum lambda^(k-j)),
+ * |e| > R sqrt(E / W), and beyond PIEZO_OUTLIER_FLOOR_PERCENT % of monitor.pred_error_max,
+ * while the PIEZO_OUTLIER_QUIET samples before were neither outliers nor beyond the monitor's bound and
+ * outliers were fewer than PIEZO_OUTLIER_MAX_PERCENT % of that window. Only isolated
+ * samples qualify: a fault goes on, and its second sample is judged as it comes. Not
+ * while the delay is detected: the start-up law's errors (a probe's answer) are the
+ * detection's evidence.
+ */
+static int is_outlier(const piezo_controller *c, double e)
+{
+    double a = fabs(e);
+    return c->k >= PIEZO_OUTLIER_MIN_SAMPLES && !c->detecting && c->quiet >= PIEZO_OUTLIER_QUIET
+           && c->outlier_sum * 100.0 < PIEZO_OUTLIER_MAX_PERCENT * (double)PIEZO_OUTLIER_WINDOW
+           && a * 100.0 > PIEZO_OUTLIER_FLOOR_PERCENT * c->pred_error_max
+           && a * a * c->err_weight > (double)(PIEZO_OUTLIER_RATIO * PIEZO_OUTLIER_RATIO) * c->err_sum;
+}
+
+/* The outlier sums of k+1: an accepted sample adds its error, an outlier counts */
+static void outlier_sums(const piezo_controller *c, piezo_controller_sample *s)
+{
+    const double lam = OUTLIER_FORGETTING;
+    s->outlier_sum = lam * c->outlier_sum + (s->outlier ? 1.0 : 0.0);
+    s->err_sum = s->outlier ? c->err_sum : lam * c->err_sum + s->raw_error * s->raw_error;
+    s->err_weight = s->outlier ? c->err_weight : lam * c->err_weight + 1.0;
+}
+
 /* Evaluate sample k into *s without changing *c (the caller guarantees
  * finite inputs and enough history). Exact mode writes history[2k],
  * history[2k+1]. The inputs are finite, so a non-finite value computed on
  * the way means divergence. A run of large prediction errors that reaches
  * the divergence window is only marked (s->reaches_window): the commit
  * refuses it, a peek reports the values. */
-static piezo_status controller_eval(const piezo_controller *c, const piezo_controller_input *in,
-                                    double *history, size_t capacity, piezo_controller_sample *s)
+static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_input *in,
+                              double *history, size_t capacity, piezo_controller_sample *s)
 {
     double e[PIEZO_MV_MAX_D] = {0.0}, g[2] = {0.0, 0.0}, f[PIEZO_MV_MAX_D + 1];
     double pred_error, numerator, q, r, v, t, y_meas = in->y_meas;
@@ -662,11 +718,19 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
     memset(&s->out, 0, sizeof s->out);   /* defined padding: FMU states are hashed bytewise */
     s->k = c->k;
     s->y_ref = in->y_ref;
-    s->y_meas = y_meas;
     s->y_preview = in->y_preview;
     s->preview_lead = in->preview_lead;
     s->reaches_window = 0;
     s->restarted = 0;
+    s->fault = 0;
+    /* an outlier: the model's prediction stands in for the measurement in this sample */
+    s->raw_error = rls_step(c, c->detecting ? c->theta_nominal : c->theta, c->P, c->d,
+                            y_meas - (c->robust && !c->detecting ? c->offset : 0.0), 0, c->forgetting,
+                            c->inv_forgetting, c->trace_max, NULL, NULL);
+    s->outlier = is_outlier(c, s->raw_error);
+    if (s->outlier)
+        y_meas -= s->raw_error;
+    s->y_meas = y_meas;
     if (c->robust) {
         excitation_next(c, y_meas, s);
     } else {
@@ -684,8 +748,9 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
         detect_carry(c, s);
     }
     s->noise_e = c->robust ? noise_next(c->noise_e, pred_error - c->out.pred_error) : 0.0;
-    /* supervision of sample k: what the measurement did with the past outputs */
-    s->sup_in.y_meas = y_meas;
+    /* supervision of sample k: what the measurement did with the past outputs (an outlier as it
+     * came: the first sample of a fault that goes on is evidence; a dropout only weakens it) */
+    s->sup_in.y_meas = in->y_meas;
     s->sup_in.y_ref = in->y_ref;
     s->sup_in.q1 = q_past(c, 1);
     s->sup_in.q2 = q_past(c, 2);
@@ -792,10 +857,11 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
     s->out.v = v;
     s->out.q = q;
     memcpy(s->out.theta, theta, sizeof s->out.theta);
-    s->out.pred_error = pred_error;
+    s->out.pred_error = s->outlier ? s->raw_error : pred_error;   /* an outlier's as it came */
     s->out.saturated = saturated;
     s->out.adapting = s->rls_updated && !s->detecting;
     s->out.noise = s->noise_y;
+    outlier_sums(c, s);
     /* every output (the estimates too) and the state the sample leaves behind are finite,
      * or the sample is refused: the RLS covariance can overflow (phi P phi^T) while theta
      * stays finite, and the operators' next states are what the next sample starts from */
@@ -818,6 +884,76 @@ static piezo_status controller_eval(const piezo_controller *c, const piezo_contr
                                 && s->mon_share * 100.0
                                    >= PIEZO_MONITOR_SHARE_PERCENT * (double)c->divergence_samples));
     return PIEZO_OK;
+}
+
+/* v of the safe state j samples after the verdict: the ramp from v0 to 0 V over the
+ * sup.ramp_time samples n, v(k_f + j) = v0 (n - 1 - j) / n, then 0 V. */
+static double safe_v(const piezo_controller *c, double v0, uint64_t j)
+{
+    uint64_t n = c->sup.ramp_samples;
+    return j + 1 >= n ? 0.0 : v0 * ((double)(n - 1 - j) / (double)n);
+}
+
+/* A sample of the safe state: nothing of the loop is evaluated (its state stays that of the
+ * verdict's sample: no law, no adaptation, no supervision); v ramps to 0 V and stays. */
+static void safe_sample(const piezo_controller *c, const piezo_controller_input *in, int fault,
+                        piezo_controller_sample *s)
+{
+    double v0 = c->fault ? c->v_fault : c->out.v;
+    uint64_t j = c->fault ? c->k - c->k_fault : 0;
+    /* the verdict's sample keeps the supervision's evidence for the commit (its message) */
+    piezo_supervisor_input sup_in;
+    piezo_supervisor_next sup;
+    if (!c->fault) {
+        sup_in = s->sup_in;
+        sup = s->sup;
+    }
+    memset(s, 0, sizeof *s);
+    if (!c->fault) {
+        s->sup_in = sup_in;
+        s->sup = sup;
+    }
+    s->k = c->k;
+    s->y_ref = in->y_ref;
+    s->y_meas = in->y_meas;
+    s->y_preview = in->y_preview;
+    s->preview_lead = in->preview_lead;
+    s->reaches_window = 0;
+    s->restarted = 0;
+    s->fault = fault;
+    s->out.v = safe_v(c, v0, j);
+    memcpy(s->out.theta, c->theta, sizeof s->out.theta);
+    s->out.delay = c->out.delay;
+}
+
+/* The code of the verdict an evaluated sample (status st) reaches, 0 for none: the monitor's,
+ * the supervision's, or a value not finite. */
+static int verdict_code(const piezo_controller_sample *s, piezo_status st)
+{
+    if (st == PIEZO_ERR_DIVERGED) return PIEZO_SUP_DIVERGED;
+    if (st != PIEZO_OK) return 0;
+    if (s->reaches_window) return PIEZO_SUP_UNSTABLE;
+    return s->sup.fault;
+}
+
+/* Evaluate sample k: in the safe state, its ramp; else the loop, and with sup.reaction = safe
+ * a verdict turns the sample into the safe state's first (the commit enters it). */
+static piezo_status controller_eval(const piezo_controller *c, const piezo_controller_input *in,
+                                    double *history, size_t capacity, piezo_controller_sample *s)
+{
+    piezo_status st;
+    int code;
+    if (c->fault) {
+        safe_sample(c, in, c->fault, s);
+        return PIEZO_OK;
+    }
+    st = loop_eval(c, in, history, capacity, s);
+    if (c->sup.reaction == PIEZO_SUP_REACT_SAFE && (code = verdict_code(s, st)) != 0) {
+        /* the supervision's evidence stays in s (sup_in, sup) for the commit's verdict */
+        safe_sample(c, in, code, s);
+        return PIEZO_OK;
+    }
+    return st;
 }
 
 /* The delay detection's and the preview ring's part of a commit (c->k is
@@ -843,6 +979,7 @@ static void commit_timing(piezo_controller *c, const piezo_controller_sample *s)
     if (s->new_trial) {
         int i;
         c->det_trial = c->k + 1;
+        c->det_noise = s->next_noise;
         c->det_probe = s->next_probe;
         c->det_probes += s->next_probe > 0.0;
         c->det_leader = -1;
@@ -880,8 +1017,25 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
     c->mon_share = s->mon_share;
     c->mon_weight = s->mon_weight;
     if (fabs(s->out.pred_error) > c->max_abs_pred_error) c->max_abs_pred_error = fabs(s->out.pred_error);
+    /* outliers: the sums; one is counted (and said) once the sample after it is within the bound
+     * again (a reading that went back: not the first sample of a change that goes on) */
+    c->err_sum = s->err_sum;
+    c->err_weight = s->err_weight;
+    c->outlier_sum = s->outlier_sum;
+    c->quiet = s->outlier || s->large_error ? 0 : c->quiet + 1;
+    if (c->suspect && !s->large_error) {
+        if (c->n_outliers == 0) {
+            c->k_first_outlier = c->k - 1;
+            c->first_outlier = c->suspect_y;
+            c->first_outlier_error = c->suspect_error;
+        }
+        c->n_outliers += 1;
+    }
+    c->suspect = s->outlier;
+    c->suspect_y = s->outlier ? s->y_meas + s->raw_error : 0.0;
+    c->suspect_error = s->outlier ? s->raw_error : 0.0;
 
-    /* shift the pasts */
+    /* shift the pasts (an outlier's: the prediction that stood in for it) */
     c->head = c->head == 0 ? PIEZO_MV_Q_RING - 1 : c->head - 1;
     c->q_ring[c->head] = q;
     {
@@ -948,15 +1102,54 @@ piezo_status piezo_controller_evaluate(const piezo_controller *c, const piezo_co
     return controller_eval(c, in, history, capacity, sample);
 }
 
+/* The supervision's verdict on an evaluated sample into c->verdict, with what the delay
+ * detection knows of the noise when no delay was found. */
+static void record_verdict(piezo_controller *c, const piezo_controller_sample *s)
+{
+    piezo_sup_verdict *v = &c->verdict;
+    piezo_supervisor_verdict(&c->sup, &s->sup_in, &s->sup, v);
+    if (v->fault == PIEZO_SUP_UNDETECTED) {
+        v->noise = c->det_noise;
+        v->probe = c->det_probe;
+        v->probe_gain = c->theta_nominal[2];
+        v->probe_snr = PROBE_SNR;
+        v->probe_wanted = PROBE_SNR * c->det_noise / c->theta_nominal[2];
+        v->probe_max = c->probe_max;
+        v->probes = c->det_probes;
+        v->reversal_share = s->sup.weight > 0.0 ? s->sup.reversals / s->sup.weight : 0.0;
+        v->step_rms = s->sup.weight > 0.0 ? sqrt(s->sup.steps2 / s->sup.weight) : 0.0;
+    }
+}
+
+/* Enter the safe state with the evaluated verdict's sample (sup.reaction = safe), or take
+ * one more of its samples: the loop's state stays that of the verdict's sample. */
+static void safe_commit(piezo_controller *c, const piezo_controller_sample *s)
+{
+    if (!c->fault) {
+        if (s->fault <= PIEZO_SUP_FROZEN)
+            record_verdict(c, s);
+        c->fault = s->fault;
+        c->k_fault = c->k;
+        c->v_fault = c->out.v;
+    }
+    c->k += 1;
+    c->out = s->out;
+}
+
 /* Commit an evaluated sample, or refuse it: the divergence monitor's window reached
  * (PIEZO_ERR_UNSTABLE), or a supervision verdict (PIEZO_ERR_FAULT, recorded in c->verdict);
- * a refused sample commits nothing of the loop. */
+ * a refused sample commits nothing of the loop. A sample of the safe state commits. */
 static piezo_status commit_or_refuse(piezo_controller *c, const piezo_controller_sample *s,
                                      piezo_controller_output *out)
 {
+    if (s->fault) {
+        safe_commit(c, s);
+        if (out) *out = c->out;
+        return PIEZO_OK;
+    }
     if (s->reaches_window) return PIEZO_ERR_UNSTABLE;
     if (s->sup.fault) {
-        piezo_supervisor_verdict(&c->sup, &s->sup_in, &s->sup, &c->verdict);
+        record_verdict(c, s);
         return PIEZO_ERR_FAULT;
     }
     controller_commit(c, s);
@@ -1010,12 +1203,21 @@ const char *piezo_controller_check(const piezo_controller *c)
     const char *fault;
     const piezo_controller_output *o;
     int i, j, m;
+    uint64_t k_loop;
     if (!c) return "controller missing";
+    /* the safe state: its fault, the verdict's sample (the loop's state is of then), the ramp */
+    if (c->fault < 0 || c->fault > PIEZO_SUP_FAULT_MAX) return "safe state's fault code out of range";
+    if (c->fault ? (c->sup.reaction != PIEZO_SUP_REACT_SAFE || c->k_fault >= c->k || !isfinite(c->v_fault)
+                    || (c->fault <= PIEZO_SUP_FROZEN && c->verdict.fault != c->fault)
+                    || (c->sat_enabled && (c->v_fault > c->sat_v_max || c->v_fault < c->sat_v_min)))
+                 : c->k_fault != 0 || c->v_fault != 0.0)
+        return "safe state inconsistent (reaction, sample, start of the ramp or verdict)";
+    k_loop = c->fault ? c->k_fault : c->k;
     if ((fault = piezo_pi_check(&c->fwd_pi)) != NULL) return fault;
     if ((fault = piezo_pi_inverse_check(&c->inv_pi)) != NULL) return fault;
     if (c->inv_pi.m != c->fwd_pi.m) return "inverse PI and forward PI differ in m";
     if ((fault = piezo_gl_check(&c->inv_creep)) != NULL) return fault;
-    if (c->inv_creep.k != c->k) return "inverse creep sample counter differs from the controller's";
+    if (c->inv_creep.k != k_loop) return "inverse creep sample counter differs from the controller's";
     if (c->d < 1 || c->d > PIEZO_MV_MAX_D) return "loop delay d outside 1..9";
     if (c->head < 0 || c->head >= PIEZO_MV_Q_RING) return "q ring index out of range";
     if (c->sat_hold < 0 || c->sat_hold > (c->d > PIEZO_DETECT_N ? c->d : PIEZO_DETECT_N) + 1)
@@ -1029,7 +1231,9 @@ const char *piezo_controller_check(const piezo_controller *c)
         || c->det_run > PIEZO_DETECT_CONFIRM || (c->detecting && c->det_run == PIEZO_DETECT_CONFIRM)
         || (c->det_leader < 0 && c->det_run != 0))
         return "delay detection leader out of range";
-    if (c->det_trial > c->k || !(isfinite(c->det_probe) && c->det_probe >= 0.0 && c->det_probe <= PROBE_MAX)
+    if (!(isfinite(c->probe_max) && c->probe_max >= 0.0) || !(isfinite(c->det_noise) && c->det_noise >= 0.0))
+        return "mv.probe_max or the detection's noise out of range";
+    if (c->det_trial > c->k || !(isfinite(c->det_probe) && c->det_probe >= 0.0 && c->det_probe <= c->probe_max)
         || c->det_probes < 0 || c->det_probes > PIEZO_DETECT_PROBES)
         return "delay detection trial out of range";
     if (c->k_delay > c->k || c->k_search > c->k_delay || (c->auto_delay && (c->n_detections < 1 || c->n_detections > c->k + 1))
@@ -1098,15 +1302,28 @@ const char *piezo_controller_check(const piezo_controller *c)
         && c->mon_share * 100.0 >= PIEZO_MONITOR_SHARE_PERCENT * (double)c->divergence_samples)
         return "monitor share at or beyond its bound";
     if ((fault = piezo_supervisor_check(&c->sup)) != NULL) return fault;
-    if (c->sup.k != c->k) return "supervisor sample counter differs from the controller's";
-    if (c->verdict.fault < PIEZO_SUP_NONE || c->verdict.fault > PIEZO_SUP_UNDETECTED)
+    if (c->sup.k != k_loop) return "supervisor sample counter differs from the controller's";
+    if (c->verdict.fault < PIEZO_SUP_NONE || c->verdict.fault > PIEZO_SUP_FROZEN)
         return "supervision verdict out of range";
+    /* outliers: sums within their weights, counts within the samples */
+    if (!(isfinite(c->err_sum) && isfinite(c->err_weight) && isfinite(c->outlier_sum) && c->err_sum >= 0.0
+          && c->err_weight >= 0.0 && c->err_weight <= (double)c->k && c->outlier_sum >= 0.0
+          && c->outlier_sum <= (double)c->k && isfinite(c->first_outlier) && isfinite(c->first_outlier_error))
+        || c->quiet > c->k || c->n_outliers > c->k || (c->suspect != 0 && c->suspect != 1)
+        || (c->suspect && c->k == 0) || !isfinite(c->suspect_y) || !isfinite(c->suspect_error)
+        || (!c->suspect && (c->suspect_y != 0.0 || c->suspect_error != 0.0))
+        || (c->n_outliers > 0 ? c->k_first_outlier >= c->k
+                              : c->k_first_outlier != 0 || c->first_outlier != 0.0 || c->first_outlier_error != 0.0))
+        return "outlier sums or counts out of range";
     o = &c->out;
     if (!(isfinite(o->v) && isfinite(o->q) && isfinite(o->pred_error) && all_finite(o->theta, 4)))
         return "controller outputs not finite";
     if (o->saturated != 0 && o->saturated != 1) return "saturated output is not 0 or 1";
     if (o->delay < 0 || o->delay > PIEZO_MV_MAX_D || (o->preview != 0 && o->preview != 1))
         return "delay or preview output out of range";
+    if (c->fault && (o->v != safe_v(c, c->v_fault, c->k - 1 - c->k_fault) || o->q != 0.0 || o->pred_error != 0.0
+                     || o->saturated || o->preview || memcmp(o->theta, c->theta, sizeof o->theta) != 0))
+        return "safe state's outputs differ from its ramp";
     return NULL;
 }
 
@@ -1116,18 +1333,34 @@ static void said(int *used, int w)
     if (w > 0) *used += w;
 }
 
+piezo_status piezo_controller_fault_status(int fault)
+{
+    if (fault == PIEZO_SUP_UNSTABLE) return PIEZO_ERR_UNSTABLE;
+    if (fault == PIEZO_SUP_DIVERGED) return PIEZO_ERR_DIVERGED;
+    return fault > 0 && fault <= PIEZO_SUP_FAULT_MAX ? PIEZO_ERR_FAULT : PIEZO_OK;
+}
+
 int piezo_controller_explain(const piezo_controller *c, int st, char *text, size_t size)
+{
+    piezo_sup_context ctx;
+    memset(&ctx, 0, sizeof ctx);
+    ctx.h = c != NULL ? c->sup.h : 0.0;
+    return piezo_controller_explain_in(c, st, &ctx, text, size);
+}
+
+int piezo_controller_explain_in(const piezo_controller *c, int st, const piezo_sup_context *ctx,
+                                char *text, size_t size)
 {
     int used = 0;
 #define AT (used >= 0 && (size_t)used < size ? text + used : NULL)
 #define LEFT (used >= 0 && (size_t)used < size ? size - (size_t)used : 0)
     if (text != NULL && size > 0) text[0] = '\0';
-    if (c == NULL) return 0;
+    if (c == NULL || ctx == NULL) return 0;
     if (st == PIEZO_ERR_FAULT) {
         /* the words harness/fmu.py LOOP_FAILURES knows this Error by */
         said(&used, snprintf(AT, LEFT, "supervision stopped the loop (%s): ",
                                          piezo_supervisor_fault_name(c->verdict.fault)));
-        said(&used, piezo_supervisor_explain(&c->verdict, c->sup.h, AT, LEFT));
+        said(&used, piezo_supervisor_explain_in(&c->verdict, ctx, AT, LEFT));
         return used;
     }
     if (st == PIEZO_ERR_UNSTABLE) {
@@ -1145,10 +1378,21 @@ int piezo_controller_explain(const piezo_controller *c, int st, char *text, size
         if (c->sup.enabled && c->sup.travel_model > 0.0 && c->sup.travel_meas > 2.0 * c->sup.travel_model)
             said(&used, snprintf(AT, LEFT, "y_meas travelled %.3g times as far as the model "
                  "expects (%.4g um against %.4g um over about the last %llu samples): the loop's gain is far "
-                 "above the model's. Check the amplifier's gain, the units of v (V) and y_meas (um), and that "
-                 "the controller's model (pi.*, tf.*, creep.*) is this stage's",
-                 c->sup.travel_meas / c->sup.travel_model, c->sup.travel_meas, c->sup.travel_model,
-                 (unsigned long long)c->sup.weight));
+                 "above the model's. %s", c->sup.travel_meas / c->sup.travel_model, c->sup.travel_meas,
+                 c->sup.travel_model, (unsigned long long)c->sup.weight,
+                 ctx->internal ? "Compare the stage's parameters (pi.w0, pi.w[j], tf.*, creep.*) with the "
+                 "controller's model (controller.pi.w0, controller.pi.w[j], controller.tf.*, controller.creep.*)"
+                 : "Check the amplifier's gain, the units of v (V) and y_meas (um), and that the controller's "
+                 "model (pi.*, tf.*, creep.*) is this stage's"));
+        else if (ctx->internal)
+            said(&used, snprintf(AT, LEFT, "Usual causes: the controller's loop delay d = %d %s does not match "
+                 "this loop's, tf.delay + %d = %d (the stage's input delay tf.delay = %d, mv.feedthrough = %s), or "
+                 "the stage's parameters (pi.w0, pi.w[j], tf.*, creep.*) far from the controller's model "
+                 "(controller.pi.w0, controller.pi.w[j], controller.tf.*, controller.creep.*)", c->d,
+                 !c->auto_delay ? "(1 + mv.delay, set)"
+                 : c->detecting ? "(the start-up law's, still detecting)" : "(detected)",
+                 ctx->feedthrough ? 1 : 2, ctx->stage_delay + (ctx->feedthrough ? 1 : 2), ctx->stage_delay,
+                 ctx->feedthrough ? "true" : "false"));
         else
             said(&used, snprintf(AT, LEFT, "Usual causes: the controller's loop delay d = %d %s "
                  "does not match the loop (a master that hands the plant the controller's post-step output "
@@ -1160,13 +1404,31 @@ int piezo_controller_explain(const piezo_controller *c, int st, char *text, size
     }
     if (st == PIEZO_ERR_DIVERGED) {
         said(&used, snprintf(AT, LEFT, "the closed loop diverged: a value computed by the controller "
-             "is not finite although its inputs are (loop delay d = %d%s; check it against the master and the "
-             "plant)", c->d, c->auto_delay ? ", mv.delay = -1: detected" : " = 1 + mv.delay"));
+             "is not finite although its inputs are (loop delay d = %d%s; check it against %s)", c->d,
+             c->auto_delay ? ", mv.delay = -1: detected" : " = 1 + mv.delay",
+             ctx->internal ? "the stage's tf.delay and its parameters" : "the master and the plant"));
         return used;
     }
 #undef AT
 #undef LEFT
     return 0;
+}
+
+int piezo_controller_explain_safe_state(const piezo_controller *c, const piezo_sup_context *ctx,
+                                        char *text, size_t size)
+{
+    int used;
+    if (text != NULL && size > 0) text[0] = '\0';
+    if (c == NULL || ctx == NULL || !c->fault) return 0;
+    /* the words harness/fmu.py SAFE_STATE_WORDS knows this Warning by */
+    used = snprintf(text, size, "sup.reaction = safe: from t = %.9g s the loop is held in its safe state "
+                    "(sup.fault = %d): v ramps to 0 V over sup.ramp_time = %g s and stays there, adaptation "
+                    "is frozen, the simulation goes on. Why: ", ctx->t0 + (double)(int64_t)c->k_fault * ctx->h,
+                    c->fault, c->sup.ramp_time);
+    if (used < 0) return 0;
+    return used + piezo_controller_explain_in(c, piezo_controller_fault_status(c->fault), ctx,
+                                              (size_t)used < size ? text + used : NULL,
+                                              (size_t)used < size ? size - (size_t)used : 0);
 }
 
 const char *piezo_controller_check_params(const piezo_controller *c, const piezo_controller_params *q)
@@ -1187,7 +1449,10 @@ const char *piezo_controller_check_params(const piezo_controller *c, const piezo
         || (c->sat_enabled && (c->sat_v_min != q->sat_v_min || c->sat_v_max != q->sat_v_max))
         || c->sup.enabled != q->sup.enabled || c->sup.gain_min != q->sup.gain_min
         || c->sup.gain_max != q->sup.gain_max || c->sup.forgetting != scratch.sup.forgetting
-        || c->sup.clip_samples != scratch.sup.clip_samples || c->sup.detect_samples != scratch.sup.detect_samples)
+        || c->sup.clip_samples != scratch.sup.clip_samples || c->sup.detect_samples != scratch.sup.detect_samples
+        || c->sup.window != scratch.sup.window || c->sup.clip_error != q->sup.clip_error
+        || c->sup.reaction != q->sup.reaction || c->sup.ramp_time != q->sup.ramp_time
+        || c->sup.ramp_samples != scratch.sup.ramp_samples || c->probe_max != q->mv_probe_max)
         return "controller state does not match its parameters";
     return NULL;
 }

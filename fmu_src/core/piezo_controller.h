@@ -47,8 +47,7 @@
 #include "piezo_creep.h"
 #include "piezo_supervisor.h"
 
-#define PIEZO_MV_MAX_EXTRA_DELAY 8
-#define PIEZO_MV_MAX_D 9          /* 1 + PIEZO_MV_MAX_EXTRA_DELAY */
+#define PIEZO_MV_MAX_EXTRA_DELAY 8   /* PIEZO_MV_MAX_D - 1 (PIEZO_MV_MAX_D: piezo_supervisor.h) */
 #define PIEZO_MV_Q_RING 10        /* PIEZO_MV_MAX_D + 1 */
 #define PIEZO_SAT_DEFAULT_V 150   /* default voltage limits +-150 V */
 #define PIEZO_MONITOR_DEFAULT_ERROR 1   /* default bound on |pred_error| [um] */
@@ -67,6 +66,18 @@
 #define PIEZO_DETECT_PROBES 8    /* probes per detection at most (then trials without probes) */
 #define PIEZO_DETECT_HELD 200   /* a chosen d that holds this long ends the search for one */
 #define PIEZO_PREVIEW_RING 16    /* stamped previews kept: leads 1..15 samples */
+#define PIEZO_DETECT_PROBE_MAX 1 /* mv.probe_max's default [um] */
+/* Outliers (docs/model.md, controller): a sample whose a-priori prediction error is beyond
+ * PIEZO_OUTLIER_RATIO times the recent rms error and beyond PIEZO_OUTLIER_FLOOR_PERCENT % of
+ * monitor.pred_error_max, after PIEZO_OUTLIER_QUIET samples within them, while outliers were fewer than
+ * PIEZO_OUTLIER_MAX_PERCENT % of the last PIEZO_OUTLIER_WINDOW samples: the model's prediction
+ * stands in for y_meas (law, adaptation, monitor, supervision) in that sample. */
+#define PIEZO_OUTLIER_RATIO 10
+#define PIEZO_OUTLIER_FLOOR_PERCENT 100
+#define PIEZO_OUTLIER_MAX_PERCENT 5
+#define PIEZO_OUTLIER_WINDOW 200
+#define PIEZO_OUTLIER_MIN_SAMPLES 20
+#define PIEZO_OUTLIER_QUIET 10   /* samples within the bound, no outlier among them, before one */
 
 typedef struct {
     piezo_pi_params pi;          /* nominal hysteresis model */
@@ -100,6 +111,7 @@ typedef struct {
                                         is unstable (PIEZO_ERR_UNSTABLE), or the window over which
                                         PIEZO_MONITOR_SHARE_PERCENT % beyond it do; 0 = never */
     piezo_supervisor_params sup;     /* supervision (piezo_supervisor.h): sup.* */
+    double mv_probe_max;         /* [um] >= 0: largest delay probe on q (0: no probes) */
 } piezo_controller_params;
 
 typedef struct {
@@ -191,7 +203,25 @@ typedef struct {
     piezo_controller_output out; /* result of the last committed sample */
     piezo_supervisor sup;        /* supervision of the loop (piezo_supervisor.h) */
     piezo_sup_verdict verdict;   /* why the last sample was refused with PIEZO_ERR_FAULT: the one
-                                    field a refused step writes (fault 0 when none was) */
+                                    field a refused step writes (fault 0 when none was); in the
+                                    safe state, the supervision's verdict that put it there */
+    double probe_max;            /* mv.probe_max [um] */
+    double det_noise;            /* rms a-priori error of the best candidate in the last trial that
+                                    chose nothing (the noise the next probe was sized for) [um] */
+    /* outliers: samples whose measurement the model's prediction replaced */
+    double err_sum, err_weight;  /* sums of lambda^(k-j) e(j)^2 and lambda^(k-j) over accepted samples */
+    double outlier_sum;          /* sum of lambda^(k-j) [j was an outlier] */
+    uint64_t quiet;              /* consecutive samples neither outliers nor beyond the monitor's bound */
+    int suspect;                 /* the last sample was taken for an outlier, not yet confirmed */
+    double suspect_y, suspect_error;    /* its y_meas and a-priori error [um] */
+    uint64_t n_outliers;         /* outliers confirmed since reset (the sample after one within the bound) */
+    uint64_t k_first_outlier;    /* the first (valid when n_outliers > 0) */
+    double first_outlier;        /* its y_meas [um] */
+    double first_outlier_error;  /* its a-priori prediction error [um] */
+    /* the safe state (sup.reaction = safe): a verdict holds the loop, v ramps to 0 V */
+    int fault;                   /* 0: running; else the fault code (piezo_sup_fault) */
+    uint64_t k_fault;            /* the sample whose verdict it was (the loop's state is of then) */
+    double v_fault;              /* v when it came (the ramp's start) [V] */
 } piezo_controller;
 
 /*
@@ -234,6 +264,11 @@ typedef struct {
     /* supervision: what it was given and what it found */
     piezo_supervisor_input sup_in;
     piezo_supervisor_next sup;
+    double next_noise;           /* det_noise of k+1 (new_trial) */
+    int outlier;                 /* y_meas was replaced by the model's prediction */
+    double raw_error;            /* the a-priori error of y_meas as received [um] */
+    double err_sum, err_weight, outlier_sum;    /* the outlier sums of k+1 */
+    int fault;                   /* the safe state's fault code after this sample (0: none) */
 } piezo_controller_sample;
 
 /* Defaults of docs/fmus.md (nominal plant model). */
@@ -253,7 +288,11 @@ void piezo_controller_reset(piezo_controller *ctrl);
  * the larger of |pred_error| and the nominal model's prediction error counts.
  * Returns PIEZO_ERR_FAULT, committing nothing of the loop, when the supervisor
  * finds that the loop cannot work; ctrl->verdict then says why
- * (piezo_supervisor_explain). Exact mode writes
+ * (piezo_supervisor_explain). With sup.reaction = PIEZO_SUP_REACT_SAFE none of these
+ * three verdicts (supervision, monitor, a value not finite) refuses the sample: it is
+ * the first of the safe state (ctrl->fault its code, ctrl->k_fault its sample), whose
+ * samples return PIEZO_OK with v ramping to 0 V over sup.ramp_time and nothing else of
+ * the loop evaluated or committed. Exact mode writes
  * history[2k], history[2k+1] (capacity >= piezo_controller_history_needed). Non-finite inputs refused, state unchanged.
  */
 piezo_status piezo_controller_step(piezo_controller *ctrl, double y_ref, double y_meas,
@@ -297,6 +336,18 @@ int piezo_controller_preview(const piezo_controller *ctrl, uint64_t sample, doub
  * length it wanted, 0 for another status (nothing written).
  */
 int piezo_controller_explain(const piezo_controller *ctrl, int st, char *text, size_t size);
+/* piezo_controller_explain in the words of where the loop is (piezo_sup_context: the times
+ * t0 + k h, a wired loop's connections or one FMU's parameters). */
+int piezo_controller_explain_in(const piezo_controller *ctrl, int st, const piezo_sup_context *context,
+                                char *text, size_t size);
+/* The safe state's message (sup.reaction = safe, ctrl->fault != 0): "sup.reaction = safe: from
+ * t = ... the loop is held in its safe state (sup.fault = N): ... Why: " and the verdict's
+ * explanation in the words of piezo_controller_explain_in. 0 when not in the safe state. */
+int piezo_controller_explain_safe_state(const piezo_controller *ctrl, const piezo_sup_context *context,
+                                        char *text, size_t size);
+/* The status a sample would have been refused with, had sup.reaction been error, for the
+ * fault code of the safe state (PIEZO_ERR_FAULT, _UNSTABLE, _DIVERGED; PIEZO_OK for 0). */
+piezo_status piezo_controller_fault_status(int fault);
 /*
  * Invariants of a restored controller (e.g. from a deserialized FMU state):
  * NULL when every index, count and flag is in range, the sample counters agree,

@@ -16,6 +16,14 @@
 #define DEFAULT_DETECT_TIME 0.5
 #define WINDOW_MIN 20
 #define WINDOW_MAX 1000000
+/* The safe state (sup.reaction = safe) ramps v to 0 V over 10 ms, 20 samples at the paper's
+ * h: a step of v would excite the stage's mechanical resonance (a kHz and above for a
+ * piezo stage), a ramp of 10 ms stays far below it and still drops v within a few of the
+ * stage's own time constants. */
+#define DEFAULT_RAMP_TIME 0.01
+/* The clipping watchdog's bound on the mean |y_d - y_meas| over a clipped run: 1 um, as
+ * the defaults of the fault table were measured with (it borrowed monitor.pred_error_max). */
+#define DEFAULT_CLIP_ERROR 1.0
 
 void piezo_supervisor_default_params(piezo_supervisor_params *p)
 {
@@ -26,6 +34,9 @@ void piezo_supervisor_default_params(piezo_supervisor_params *p)
     p->window = PIEZO_SUP_DEFAULT_WINDOW;
     p->clip_time = DEFAULT_CLIP_TIME;
     p->detect_time = DEFAULT_DETECT_TIME;
+    p->reaction = PIEZO_SUP_REACT_ERROR;
+    p->ramp_time = DEFAULT_RAMP_TIME;
+    p->clip_error = DEFAULT_CLIP_ERROR;
 }
 
 /* samples of a duration t at h, at least 1, saturated far below 2^63 */
@@ -53,6 +64,13 @@ piezo_status piezo_supervisor_init(piezo_supervisor *s, const piezo_supervisor_p
         return piezo_refuse(diag, "sup.clip_time", "(0, inf) s", p->clip_time);
     if (!(isfinite(p->detect_time) && p->detect_time > 0.0))
         return piezo_refuse(diag, "sup.detect_time", "(0, inf) s", p->detect_time);
+    if (p->reaction != PIEZO_SUP_REACT_ERROR && p->reaction != PIEZO_SUP_REACT_SAFE)
+        return piezo_refuse(diag, "sup.reaction", "0 (error: a verdict fails the step) or 1 (safe: v ramps "
+                            "to 0 V and the simulation goes on)", (double)p->reaction);
+    if (!(isfinite(p->ramp_time) && p->ramp_time >= 0.0 && p->ramp_time <= 1e6))
+        return piezo_refuse(diag, "sup.ramp_time", "[0, 1e6] s", p->ramp_time);
+    if (!(isfinite(p->clip_error) && p->clip_error > 0.0))
+        return piezo_refuse(diag, "sup.clip_error", "(0, inf) um", p->clip_error);
     memset(s, 0, sizeof *s);
     s->enabled = p->enabled;
     s->forgetting = 1.0 - 1.0 / (double)p->window;
@@ -60,6 +78,11 @@ piezo_status piezo_supervisor_init(piezo_supervisor *s, const piezo_supervisor_p
     s->gain_max = p->gain_max;
     s->clip_samples = samples_of(p->clip_time, h);
     s->detect_samples = samples_of(p->detect_time, h);
+    s->window = (uint64_t)p->window;
+    s->clip_error = p->clip_error;
+    s->reaction = p->reaction;
+    s->ramp_time = p->ramp_time;
+    s->ramp_samples = p->ramp_time > 0.0 ? samples_of(p->ramp_time, h) : 0;
     s->a1 = a1;
     s->a2 = a2;
     s->b1 = b1;
@@ -92,6 +115,9 @@ void piezo_supervisor_reset(piezo_supervisor *s)
     memset(s->ref, 0, sizeof s->ref);
     s->ref_head = 0;
     s->weight = s->travel_model = s->travel_meas = 0.0;
+    s->followed_gain = s->reversals = s->steps2 = s->dy1 = 0.0;
+    s->followed_n = 0;
+    s->min_step = s->big_steps = 0.0;
 }
 
 /* Sww_d(k) = Sww_1(k - d + 1): the new one for d = 1, the kept ones for d >= 2 */
@@ -113,7 +139,7 @@ static int best_delay(const piezo_supervisor *s, const piezo_supervisor_next *n)
 {
     int d, best = 0;
     double num = 0.0, den = 1.0;
-    for (d = 1; d <= PIEZO_SUP_MAX_D; ++d) {
+    for (d = 1; d <= PIEZO_MV_MAX_D; ++d) {
         double sww = d == 1 ? n->sww1 : s->sww[d - 2], szw2 = n->szw[d - 1] * n->szw[d - 1];
         if (sww > 0.0 && (best == 0 || szw2 * den > num * sww)) {
             best = d;
@@ -155,14 +181,37 @@ static int response_kind(const piezo_supervisor *s, const piezo_supervisor_input
                 double e = unexplained(s, n, d);
                 if (e < e_law) e_law = e;
             }
-        } else if (in->law_delay >= 1 && in->law_delay <= PIEZO_SUP_MAX_D) {
+        } else if (in->law_delay >= 1 && in->law_delay <= PIEZO_MV_MAX_D) {
             e_law = unexplained(s, n, in->law_delay);
         } else {
             e_law = 0.0;        /* a delay beyond the tested ones: no verdict on it */
         }
         if (e_law * 100.0 >= PIEZO_SUP_DELAY_PERCENT * explained) return PIEZO_SUP_DELAY;
     }
+    /* a gain that changed from the one followed since the loop was verified */
+    if (s->followed_n >= PIEZO_SUP_CONFIRM && (s->followed_gain * 100.0 > PIEZO_SUP_DROP_PERCENT * g
+                                               || g * 100.0 > PIEZO_SUP_RISE_PERCENT * s->followed_gain))
+        return PIEZO_SUP_GAIN_CHANGED;
     return 0;
+}
+
+/* y_meas frozen: constant for sup.window samples (y_same of them equal to the one before),
+ * although before it reversed its direction in PIEZO_SUP_FROZEN_PERCENT % of the samples.
+ * Over the constant stretch of m samples the window's weight grew by S_m = sum_{j<m} lambda^j
+ * and its reversals by none, so the share before it is reversals / (weight - S_m) (the sums
+ * at the stretch's start, both scaled by lambda^m). *share, *step_rms: the evidence. */
+static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, double *share, double *step_rms)
+{
+    double lam = s->forgetting, stretch, before;
+    if (n->y_same < s->window)
+        return 0;
+    stretch = (1.0 - pow(lam, (double)n->y_same)) / (1.0 - lam);
+    before = n->weight - stretch;
+    if (!(before >= 1.0))
+        return 0;
+    *share = n->reversals / before;
+    *step_rms = sqrt(n->steps2 / before);
+    return *share * 100.0 >= PIEZO_SUP_FROZEN_PERCENT && n->big_steps * 1000.0 >= PIEZO_SUP_FROZEN_BIG_PERMILLE * before;
 }
 
 void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor_input *in,
@@ -189,7 +238,7 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     /* Szw_d uses dw(k - d + 1): the new dw for d = 1, the kept ones (a shift register:
      * contiguous, so the loop vectorises) for d >= 2 */
     n->szw[0] = lam * s->szw[0] + dz * n->dw;
-    for (d = 2; d <= PIEZO_SUP_MAX_D; ++d)
+    for (d = 2; d <= PIEZO_MV_MAX_D; ++d)
         n->szw[d - 1] = lam * s->szw[d - 1] + dz * s->dw[d - 2];
     n->srw[0] = lam * s->srw[0] + dzr * n->dw;
     for (d = 2; d <= PIEZO_SUP_DEFAULT_DETECTABLE; ++d)
@@ -201,6 +250,20 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     n->weight = lam * s->weight + 1.0;
     n->travel_model = lam * s->travel_model + fabs(n->yhat - s->yhat1);
     n->travel_meas = lam * s->travel_meas + fabs(in->y_meas - s->y1);
+    /* a live measurement's noise: its reversals of direction (the last change kept over equal
+     * samples, so a quantised reading's up, equal, down counts) and its steps */
+    {
+        double dy = s->k > 0 ? in->y_meas - s->y1 : 0.0;
+        double a = fabs(dy);
+        n->reversals = lam * s->reversals + (dy * s->dy1 < 0.0 ? 1.0 : 0.0);
+        n->steps2 = lam * s->steps2 + dy * dy;
+        n->dy1 = dy != 0.0 ? dy : s->dy1;
+        n->big_steps = lam * s->big_steps + (s->min_step > 0.0 && a * 100.0 > PIEZO_SUP_BIG_STEP_PERCENT * s->min_step
+                                              ? 1.0 : 0.0);
+        n->min_step = a > 0.0 && (s->min_step == 0.0 || a < s->min_step) ? a : s->min_step;
+    }
+    n->followed_gain = s->followed_gain;
+    n->followed_n = s->followed_n;
 
     /* the response verdict, confirmed over PIEZO_SUP_CONFIRM samples */
     n->status = s->status;
@@ -215,12 +278,24 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         n->delay = kind_delay;
     }
     if (kind > 0) {
+        /* a gain that changed, then fell below sup.gain_min (or rose beyond sup.gain_max, or turned
+         * over) is one fault going on: its run counts on */
         n->candidate = kind;
-        n->candidate_run = kind == s->candidate ? s->candidate_run + 1 : 1;
+        n->candidate_run = kind == s->candidate || (s->candidate == PIEZO_SUP_GAIN_CHANGED && kind <= PIEZO_SUP_GAIN_HIGH)
+                           ? s->candidate_run + 1 : 1;
     } else {
         n->candidate = 0;
         n->candidate_run = 0;
-        if (kind == 0) n->status = 1;
+        if (kind == 0) {
+            /* verified: the gain followed moves toward it, weight 1/n for its n-th judgement while
+             * that is above JUDGE_EVERY / window, that from then on */
+            double w = (double)PIEZO_SUP_JUDGE_EVERY / (double)s->window;
+            n->status = 1;
+            n->followed_n = s->followed_n + 1;
+            if (1.0 / (double)n->followed_n > w)
+                w = 1.0 / (double)n->followed_n;
+            n->followed_gain = s->followed_gain + (kind_gain - s->followed_gain) * w;
+        }
     }
     /* the clipping watchdog: mean |y_d - y_meas| over the clipped run */
     n->clip_error_sum = 0.0;
@@ -241,10 +316,15 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     if (n->candidate_run >= PIEZO_SUP_CONFIRM)
         n->fault = n->candidate;
     else if (in->clipped1 && in->clip_run >= s->clip_samples
-             && n->clip_error_sum > in->error_bound * (double)in->clip_run)
+             && n->clip_error_sum > s->clip_error * (double)in->clip_run)
         n->fault = PIEZO_SUP_CLIPPED;
     else if (in->detecting_for >= s->detect_samples && !s->open_loop)
         n->fault = PIEZO_SUP_UNDETECTED;
+    else {
+        double share, step_rms;
+        if (frozen(s, n, &share, &step_rms))
+            n->fault = PIEZO_SUP_FROZEN;
+    }
 }
 
 void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *in,
@@ -262,7 +342,7 @@ void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *
     s->z1 = n->z;
     s->zr1 = n->zr;
     s->w1 = n->w;
-    for (i = PIEZO_SUP_MAX_D - 1; i > 0; --i) {     /* the shift registers: no call */
+    for (i = PIEZO_MV_MAX_D - 1; i > 0; --i) {     /* the shift registers: no call */
         s->dw[i] = s->dw[i - 1];
         s->sww[i] = s->sww[i - 1];
     }
@@ -290,6 +370,13 @@ void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *
     s->weight = n->weight;
     s->travel_model = n->travel_model;
     s->travel_meas = n->travel_meas;
+    s->followed_gain = n->followed_gain;
+    s->followed_n = n->followed_n;
+    s->reversals = n->reversals;
+    s->steps2 = n->steps2;
+    s->dy1 = n->dy1;
+    s->min_step = n->min_step;
+    s->big_steps = n->big_steps;
     s->k += 1;
 }
 
@@ -336,8 +423,11 @@ void piezo_supervisor_verdict(const piezo_supervisor *s, const piezo_supervisor_
     v->clip_v = in->clip_v;
     v->clip_samples = n->fault == PIEZO_SUP_UNDETECTED ? in->detecting_for : in->clip_run;
     v->error = in->clip_run > 0 ? n->clip_error_sum / (double)in->clip_run : 0.0;
-    v->error_bound = in->error_bound;
+    v->error_bound = s->clip_error;
     v->verified_gain = s->status ? s->verified_gain : 0.0;
+    v->followed_gain = s->followed_gain;
+    if (n->fault == PIEZO_SUP_FROZEN)
+        frozen(s, n, &v->reversal_share, &v->step_rms);
 }
 
 const char *piezo_supervisor_fault_name(int fault)
@@ -350,6 +440,10 @@ const char *piezo_supervisor_fault_name(int fault)
     case PIEZO_SUP_DELAY: return "loop delay beyond the controller's";
     case PIEZO_SUP_CLIPPED: return "v held at a limit";
     case PIEZO_SUP_UNDETECTED: return "no loop delay found";
+    case PIEZO_SUP_GAIN_CHANGED: return "response gain changed";
+    case PIEZO_SUP_FROZEN: return "y_meas frozen";
+    case PIEZO_SUP_UNSTABLE: return "loop unstable";
+    case PIEZO_SUP_DIVERGED: return "value not finite";
     default: return "unknown";
     }
 }
@@ -369,95 +463,222 @@ static void add(char *text, size_t size, int *used, const char *fmt, ...)
     if (w > 0) *used += w;
 }
 
-/* "over the last N samples (t = a .. b s), what v did should have moved y_meas by c um in all
- * (the sum of its sample-to-sample moves, by the controller's model); it moved e um" */
-static void add_evidence(char *t, size_t size, int *u, const piezo_sup_verdict *v, double h)
+/* t0 + k h: the time of sample k, as the FMUs stamp it */
+static double time_of(const piezo_sup_context *c, uint64_t k)
 {
-    double from = (double)(v->k + 1 - v->window) * h;
-    add(t, size, u, "over the last %llu samples (t = %.6g to %.6g s), what v did should have moved y_meas "
-        "by %.4g um in all (the sum of its sample-to-sample moves, by the controller's model); it moved "
-        "%.4g um", (unsigned long long)v->window, from, (double)v->k * h, v->travel_model, v->travel_meas);
+    return c->t0 + (double)(int64_t)k * c->h;
 }
 
-int piezo_supervisor_explain(const piezo_sup_verdict *v, double h, char *t, size_t size)
+/* "over the last N samples (t = a to b s), what v did should have moved y_meas by c um in all
+ * (the sum of its sample-to-sample moves, by the controller's model); it moved e um" */
+static void add_evidence(char *t, size_t size, int *u, const piezo_sup_verdict *v, const piezo_sup_context *c)
+{
+    add(t, size, u, "over the last %llu samples (t = %.9g to %.9g s), what v did should have moved y_meas "
+        "by %.4g um in all (the sum of its sample-to-sample moves, by the controller's model); it moved "
+        "%.4g um", (unsigned long long)v->window, time_of(c, v->k + 1 - v->window), time_of(c, v->k),
+        v->travel_model, v->travel_meas);
+}
+
+/* PiezoStageClosedLoop: what to compare when its stage does not answer as the controller's model */
+#define COMPARE_MODEL "Compare the stage's parameters with the controller's model: pi.w0 and pi.w[j] with " \
+    "controller.pi.w0 and controller.pi.w[j], tf.a1, tf.a2, tf.b1, tf.b2 with controller.tf.a1, " \
+    "controller.tf.a2, controller.tf.b1, controller.tf.b2, creep.k_c and creep.alpha with controller.creep.k_c " \
+    "and controller.creep.alpha"
+
+/* the loop delay of PiezoStageClosedLoop's loop: the stage's input delay plus the controller's */
+static int internal_delay(const piezo_sup_context *c)
+{
+    return c->stage_delay + (c->feedthrough ? 1 : 2);
+}
+
+static void explain_no_response(char *t, size_t size, int *u, const piezo_sup_verdict *v,
+                                const piezo_sup_context *c)
+{
+    add(t, size, u, "y_meas does not follow v: ");
+    add_evidence(t, size, u, v, c);
+    if (v->y_constant) {
+        add(t, size, u, ". y_meas has not changed at all for the last %llu samples (it stays at %.6g um): ",
+            (unsigned long long)(v->y_same + 1), v->y_meas);
+        if (c->internal)
+            add(t, size, u, "the stage does not move in answer to v, or moves less than its sensor's step "
+                "(sensor.resolution). " COMPARE_MODEL ", and check sensor.resolution");
+        else
+            add(t, size, u, "it is not connected or the sensor is stuck, or v does not reach the stage. Check "
+                "the connections PiezoStage.y_meas -> y_meas and AdaptiveCompoundController.v -> PiezoStage.v");
+    } else if (!c->internal && v->ref_fit >= 0.5 && v->ref_gain >= 0.25 && v->ref_gain <= 4.0) {
+        add(t, size, u, ", not in answer to v; y_ref moves as y_meas should (%.3g times the model's "
+            "response): y_meas and y_ref are swapped. Connect PiezoStage.y_meas -> y_meas and "
+            "ReferenceSignal.y_ref -> y_ref", v->ref_gain);
+    } else if (!c->internal && v->fit >= 0.5 && fabs(v->gain) >= 3e-4 && fabs(v->gain) <= 3e-3) {
+        add(t, size, u, ", and its moves are %.3g times the model's: y_meas is in mm instead of um? "
+            "Check the unit of y_meas (um)", v->gain);
+    } else if (c->internal) {
+        add(t, size, u, ", and its moves are %.3g times the model's (explaining %.0f %% of them): the stage "
+            "answers v far less than the controller's model says. " COMPARE_MODEL " (or widen sup.gain_min)",
+            v->gain, 100.0 * v->fit);
+    } else {
+        add(t, size, u, ", and its moves are %.3g times the model's (explaining %.0f %% of them): "
+            "v does not reach the stage, or y_meas is not the stage's measurement. Check the "
+            "connections AdaptiveCompoundController.v -> PiezoStage.v and PiezoStage.y_meas -> "
+            "y_meas, their units (V, um) and the amplifier", v->gain, 100.0 * v->fit);
+    }
+}
+
+static void explain_delay(char *t, size_t size, int *u, const piezo_sup_verdict *v, const piezo_sup_context *c)
+{
+    add(t, size, u, "y_meas answers v %d samples later (%.3g ms, %.0f %% of its changes explained), "
+        "but the controller ", v->delay, 1e3 * c->h * (double)v->delay, 100.0 * v->fit);
+    if (c->internal) {
+        if (v->auto_delay)
+            add(t, size, u, "detects loop delays of 1 to 3 samples (mv.delay = -1), and this loop's is "
+                "tf.delay + %d = %d (the stage's input delay tf.delay = %d, mv.feedthrough = %s). Set "
+                "mv.delay = %d (d = %d), or reduce tf.delay", c->feedthrough ? 1 : 2, internal_delay(c),
+                c->stage_delay, c->feedthrough ? "true" : "false", v->delay - 1, v->delay);
+        else
+            add(t, size, u, "runs d = %d (mv.delay = %d), and this loop's delay is tf.delay + %d = %d (the "
+                "stage's input delay tf.delay = %d, mv.feedthrough = %s). Set mv.delay = %d (d = %d), or -1 "
+                "to detect delays of 1 to 3 samples", v->loop_delay, v->loop_delay - 1, c->feedthrough ? 1 : 2,
+                internal_delay(c), c->stage_delay, c->feedthrough ? "true" : "false", v->delay - 1, v->delay);
+    } else if (v->auto_delay) {
+        add(t, size, u, "detects loop delays of 1 to 3 samples (mv.delay = -1): the loop has more delay "
+            "than a master and the stage add (a plant input delay, or an extra one in the master). "
+            "Set mv.delay = %d (d = %d) for this loop, or remove the extra delay", v->delay - 1, v->delay);
+    } else {
+        add(t, size, u, "runs d = %d (mv.delay = %d). Set mv.delay = %d (d = %d), or -1 to detect "
+            "delays of 1 to 3 samples", v->loop_delay, v->loop_delay - 1, v->delay - 1, v->delay);
+    }
+}
+
+static void explain_undetected(char *t, size_t size, int *u, const piezo_sup_verdict *v,
+                               const piezo_sup_context *c)
+{
+    add(t, size, u, "no loop delay of 1 to 3 samples explains y_meas after %llu samples (%.3g s, "
+        "sup.detect_time, since t = %.9g s): ", (unsigned long long)v->clip_samples,
+        c->h * (double)v->clip_samples, time_of(c, v->k + 1 - v->clip_samples));
+    if (v->noise > 0.0 && v->probe_wanted > v->probe_max && v->reversal_share * 100.0 >= PIEZO_SUP_NOISY_PERCENT) {
+        /* a noise-dominated measurement (it reverses its direction often), and the probes that
+         * would show the delay through it are beyond mv.probe_max */
+        add(t, size, u, "the measurement's noise buries the delay probes. y_meas reversed its direction in %.0f %% "
+            "of the samples (steps of %.3g um rms) and the candidates' prediction errors were %.3g um rms; a probe of p um on q moves y_meas by %.3g p um at first (tf.b1), and the "
+            "delay shows once that is %.3g times the noise: p = %.3g um. mv.probe_max = %.3g um caps it (%d probe%s "
+            "made). Raise mv.probe_max to %.3g um if the stage may move that much, set mv.delay to the loop's "
+            "delay (", 100.0 * v->reversal_share, v->step_rms, v->noise, v->probe_gain, v->probe_snr,
+            v->probe_wanted, v->probe_max, v->probes,
+            v->probes == 1 ? "" : "s", v->probe_wanted);
+        if (c->internal)
+            add(t, size, u, "mv.delay = %d here: tf.delay = %d, mv.feedthrough = %s", internal_delay(c) - 1,
+                c->stage_delay, c->feedthrough ? "true" : "false");
+        else
+            add(t, size, u, "mv.delay = 1 for a master that exchanges values at communication points, 0 for "
+                "true Gauss-Seidel, plus a plant input delay");
+        add(t, size, u, "), or lower the sensor's noise");
+    } else if (c->internal) {
+        add(t, size, u, "y_meas does not answer v as the controller's model says, or the loop's delay is "
+            "beyond 3 samples (tf.delay = %d, mv.feedthrough = %s: set mv.delay = %d). " COMPARE_MODEL,
+            c->stage_delay, c->feedthrough ? "true" : "false", internal_delay(c) - 1);
+    } else {
+        add(t, size, u, "y_meas does not answer v as a closed loop would. Check the connections of y_meas "
+            "and v, or set mv.delay if the loop has a known longer delay");
+    }
+}
+
+int piezo_supervisor_explain_in(const piezo_sup_verdict *v, const piezo_sup_context *c, char *t, size_t size)
 {
     int u = 0;
     if (t != NULL && size > 0) t[0] = '\0';
-    if (v == NULL) return 0;
+    if (v == NULL || c == NULL) return 0;
     switch (v->fault) {
     case PIEZO_SUP_NO_RESPONSE:
-        add(t, size, &u, "y_meas does not follow v: ");
-        add_evidence(t, size, &u, v, h);
-        if (v->y_constant) {
-            add(t, size, &u, ". y_meas has not changed at all for the last %llu samples (it stays at %.6g um): "
-                "it is not connected or the sensor is stuck, or v does not reach the stage. Check the connections "
-                "PiezoStage.y_meas -> y_meas and AdaptiveCompoundController.v -> PiezoStage.v",
-                (unsigned long long)(v->y_same + 1), v->y_meas);
-        } else if (v->ref_fit >= 0.5 && v->ref_gain >= 0.25 && v->ref_gain <= 4.0) {
-            add(t, size, &u, ", not in answer to v; y_ref moves as y_meas should (%.3g times the model's "
-                "response): y_meas and y_ref are swapped. Connect PiezoStage.y_meas -> y_meas and "
-                "ReferenceSignal.y_ref -> y_ref", v->ref_gain);
-        } else if (v->fit >= 0.5 && fabs(v->gain) >= 3e-4 && fabs(v->gain) <= 3e-3) {
-            add(t, size, &u, ", and its moves are %.3g times the model's: y_meas is in mm instead of um? "
-                "Check the unit of y_meas (um)", v->gain);
-        } else {
-            add(t, size, &u, ", and its moves are %.3g times the model's (explaining %.0f %% of them): "
-                "v does not reach the stage, or y_meas is not the stage's measurement. Check the "
-                "connections AdaptiveCompoundController.v -> PiezoStage.v and PiezoStage.y_meas -> "
-                "y_meas, their units (V, um) and the amplifier", v->gain, 100.0 * v->fit);
-        }
+        explain_no_response(t, size, &u, v, c);
         break;
     case PIEZO_SUP_INVERTED:
         add(t, size, &u, "y_meas moves against v: ");
-        add_evidence(t, size, &u, v, h);
-        add(t, size, &u, ", and its moves are %.3g times the model's (explaining %.0f %% of them): y_meas or "
-            "v is inverted. Check the sign of the sensor, of the amplifier and of the connections y_meas and v",
-            v->gain, 100.0 * v->fit);
+        add_evidence(t, size, &u, v, c);
+        add(t, size, &u, ", and its moves are %.3g times the model's (explaining %.0f %% of them): ", v->gain,
+            100.0 * v->fit);
+        if (c->internal)
+            add(t, size, &u, "the stage answers v with the opposite sign of the controller's model. Compare the "
+                "signs of pi.w0, pi.w[j], tf.b1 and tf.b2 with controller.pi.w0, controller.pi.w[j], "
+                "controller.tf.b1 and controller.tf.b2");
+        else
+            add(t, size, &u, "y_meas or v is inverted. Check the sign of the sensor, of the amplifier and of "
+                "the connections y_meas and v");
         break;
     case PIEZO_SUP_GAIN_HIGH:
         add(t, size, &u, "y_meas moves %.3g times as much as the model expects: ", v->gain);
-        add_evidence(t, size, &u, v, h);
-        if (v->gain >= 300.0 && v->gain <= 3000.0)
+        add_evidence(t, size, &u, v, c);
+        if (c->internal)
+            add(t, size, &u, ". The stage answers v far more than the controller's model says. " COMPARE_MODEL
+                " (or widen sup.gain_max)");
+        else if (v->gain >= 300.0 && v->gain <= 3000.0)
             add(t, size, &u, ". y_meas is in nm instead of um? Check the unit of y_meas (um)");
         else
             add(t, size, &u, ". Check the units of y_meas (um) and v (V), the amplifier's gain, and that the "
                 "controller's model (pi.*, tf.*, creep.*) is this stage's");
         break;
     case PIEZO_SUP_DELAY:
-        add(t, size, &u, "y_meas answers v %d samples later (%.3g ms, %.0f %% of its changes explained), "
-            "but the controller ", v->delay, 1e3 * h * (double)v->delay, 100.0 * v->fit);
-        if (v->auto_delay)
-            add(t, size, &u, "detects loop delays of 1 to 3 samples (mv.delay = -1): the loop has more delay "
-                "than a master and the stage add (a plant input delay, or an extra one in the master). "
-                "Set mv.delay = %d (d = %d) for this loop, or remove the extra delay", v->delay - 1, v->delay);
-        else
-            add(t, size, &u, "runs d = %d (mv.delay = %d). Set mv.delay = %d (d = %d), or -1 to detect "
-                "delays of 1 to 3 samples", v->loop_delay, v->loop_delay - 1, v->delay - 1, v->delay);
+        explain_delay(t, size, &u, v, c);
         break;
     case PIEZO_SUP_CLIPPED:
         add(t, size, &u, "v has been held at %.4g V (a limit of sat.v_min .. sat.v_max) for %llu samples "
-            "(%.3g s, sup.clip_time) while |y_d - y_meas| averaged %.4g um (above monitor.pred_error_max = "
-            "%.4g um): the loop cannot reach the reference. ", v->clip_v, (unsigned long long)v->clip_samples,
-            h * (double)v->clip_samples, v->error, v->error_bound);
+            "(%.3g s, sup.clip_time, since t = %.9g s) while |y_d - y_meas| averaged %.4g um (above "
+            "sup.clip_error = %.4g um): the loop cannot reach the reference. ", v->clip_v,
+            (unsigned long long)v->clip_samples, c->h * (double)v->clip_samples,
+            time_of(c, v->k - v->clip_samples), v->error, v->error_bound);
         if (v->verified_gain > 0.0)
             add(t, size, &u, "y_meas answered v as the model expects (%.3g times its response), so the "
-                "reference asks for more than the stage reaches within the limits: reduce the reference "
-                "or widen sat.v_min .. sat.v_max", v->verified_gain);
+                "reference asks for more than the stage reaches within the limits: reduce the reference%s "
+                "or widen sat.v_min .. sat.v_max", v->verified_gain,
+                c->internal ? " (offset, amplitude[i], or the input y_d)" : "");
+        else if (c->internal)
+            add(t, size, &u, "y_meas never answered v as the model expects. " COMPARE_MODEL ", and check the "
+                "limits sat.v_min .. sat.v_max");
         else
             add(t, size, &u, "y_meas never answered v as the model expects: check y_meas and v (connections, "
                 "units, sign) and the limits sat.v_min .. sat.v_max");
         break;
     case PIEZO_SUP_UNDETECTED:
-        add(t, size, &u, "no loop delay of 1 to 3 samples explains y_meas after %llu samples (%.3g s, "
-            "sup.detect_time): y_meas does not answer v as a closed loop would. Check the connections of "
-            "y_meas and v, or set mv.delay if the loop has a known longer delay",
-            (unsigned long long)v->clip_samples, h * (double)v->clip_samples);
+        explain_undetected(t, size, &u, v, c);
+        break;
+    case PIEZO_SUP_GAIN_CHANGED:
+        add(t, size, &u, "y_meas answers v %.3g times as much as before: its response is %.3g times the "
+            "model's now, and was %.3g times since the loop was verified: ", v->followed_gain > 0.0
+            ? v->gain / v->followed_gain : 0.0, v->gain, v->followed_gain);
+        add_evidence(t, size, &u, v, c);
+        if (c->internal)
+            add(t, size, &u, ". The stage's response changed: its model differs from the controller's where the "
+                "loop went since. " COMPARE_MODEL);
+        else
+            add(t, size, &u, ". A sensor or an amplifier whose gain changed: the controller would adapt to it, "
+                "and the stage would then follow y_d times %.3g. Check the sensor's and the amplifier's gains "
+                "(PiezoStage.y_meas -> y_meas, AdaptiveCompoundController.v -> PiezoStage.v)",
+                v->gain != 0.0 ? v->followed_gain / v->gain : 0.0);
+        break;
+    case PIEZO_SUP_FROZEN:
+        add(t, size, &u, "y_meas has frozen: it has not changed at all for the last %llu samples (t = %.9g to "
+            "%.9g s; it stays at %.6g um), although before it reversed its direction from one sample to the "
+            "next in %.0f %% of the samples (its sample-to-sample changes were %.3g um rms: the sensor's noise). "
+            "A live sensor does not stop its noise: ", (unsigned long long)(v->y_same + 1),
+            time_of(c, v->k - v->y_same), time_of(c, v->k), v->y_meas, 100.0 * v->reversal_share, v->step_rms);
+        if (c->internal)
+            add(t, size, &u, "the stage's sensor model stopped (sensor.noise_rms, sensor.resolution)");
+        else
+            add(t, size, &u, "the sensor or its connection is stuck (the stage may drift unseen). Check the "
+                "sensor and the connection PiezoStage.y_meas -> y_meas");
         break;
     default:
         add(t, size, &u, "no fault");
         break;
     }
     return u;
+}
+
+int piezo_supervisor_explain(const piezo_sup_verdict *v, double h, char *t, size_t size)
+{
+    piezo_sup_context c;
+    memset(&c, 0, sizeof c);
+    c.h = h;
+    return piezo_supervisor_explain_in(v, &c, t, size);
 }
 
 static int finite_all(const double *x, int n)
@@ -477,30 +698,39 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
         return "supervisor flags are not 0 or 1";
     if (!(s->forgetting >= 1.0 - 1.0 / WINDOW_MIN && s->forgetting < 1.0)
         || !(s->gain_min > 0.0 && s->gain_min < 1.0 && s->gain_max > 1.0 && isfinite(s->gain_max))
-        || s->clip_samples < 1 || s->detect_samples < 1 || !(isfinite(s->h) && s->h > 0.0))
+        || s->clip_samples < 1 || s->detect_samples < 1 || !(isfinite(s->h) && s->h > 0.0)
+        || s->window < WINDOW_MIN || s->window > WINDOW_MAX || !(isfinite(s->clip_error) && s->clip_error > 0.0)
+        || (s->reaction != PIEZO_SUP_REACT_ERROR && s->reaction != PIEZO_SUP_REACT_SAFE)
+        || !(isfinite(s->ramp_time) && s->ramp_time >= 0.0 && s->ramp_time <= 1e6)
+        || s->ramp_samples != (s->ramp_time > 0.0 ? samples_of(s->ramp_time, s->h) : 0))
         return "supervisor parameters out of range";
     if (s->ref_head < 0 || s->ref_head >= PIEZO_SUP_REF_RING)
         return "supervisor ring index out of range";
-    if (s->candidate < 0 || s->candidate > PIEZO_SUP_UNDETECTED || s->candidate_run < 0
+    /* a candidate is a response kind: 1..4, or a changed gain */
+    if (s->candidate < 0 || (s->candidate > PIEZO_SUP_DELAY && s->candidate != PIEZO_SUP_GAIN_CHANGED)
+        || s->candidate_run < 0
         || s->candidate_run >= PIEZO_SUP_CONFIRM || (s->candidate == 0 && s->candidate_run != 0)
-        || s->delay < 0 || s->delay > PIEZO_SUP_MAX_D)
+        || s->delay < 0 || s->delay > PIEZO_MV_MAX_D)
         return "supervisor verdict state out of range";
-    if (s->y_same > s->k || (s->status && s->k_verified >= s->k))
+    if (s->y_same > s->k || (s->status && s->k_verified >= s->k) || s->followed_n > s->k
+        || (s->followed_n == 0) != (s->followed_gain == 0.0))
         return "supervisor counters exceed the sample count";
-    if (!finite_all(s->dw, PIEZO_SUP_MAX_D) || !finite_all(s->sww, PIEZO_SUP_MAX_D)
-        || !finite_all(s->szw, PIEZO_SUP_MAX_D) || !finite_all(s->srw, PIEZO_SUP_DEFAULT_DETECTABLE)
+    if (!finite_all(s->dw, PIEZO_MV_MAX_D) || !finite_all(s->sww, PIEZO_MV_MAX_D)
+        || !finite_all(s->szw, PIEZO_MV_MAX_D) || !finite_all(s->srw, PIEZO_SUP_DEFAULT_DETECTABLE)
         || !finite_all(s->ref, PIEZO_SUP_REF_RING))
         return "supervisor values not finite";
     {
         double sc[] = { s->y1, s->y2, s->r1, s->r2, s->z1, s->zr1, s->w1, s->szz, s->srr, s->yhat1, s->yhat2,
                         s->gain, s->verified_gain, s->clip_error_sum, s->a1, s->a2, s->b1, s->b2,
-                        s->weight, s->travel_model, s->travel_meas };
+                        s->weight, s->travel_model, s->travel_meas, s->followed_gain, s->reversals,
+                        s->steps2, s->dy1, s->min_step, s->big_steps };
         if (!finite_all(sc, (int)(sizeof sc / sizeof sc[0]))) return "supervisor values not finite";
     }
     if (s->szz < 0.0 || s->srr < 0.0 || s->clip_error_sum < 0.0 || s->travel_model < 0.0 || s->travel_meas < 0.0
-        || s->weight > (double)s->k)
+        || s->weight > (double)s->k || s->followed_gain < 0.0 || s->reversals < 0.0 || s->reversals > s->weight
+        || s->steps2 < 0.0 || s->min_step < 0.0 || s->big_steps < 0.0 || s->big_steps > s->weight)
         return "supervisor sums negative or beyond their weight";
-    for (i = 0; i < PIEZO_SUP_MAX_D; ++i)
+    for (i = 0; i < PIEZO_MV_MAX_D; ++i)
         if (s->sww[i] < 0.0) return "supervisor sums negative";
     return NULL;
 }

@@ -13,7 +13,7 @@
  * (which removes offsets and what a held signal adds),
  *     dz(k) = Delta[A y_meas](k),   dw(k) = Delta[B q](k - 1),
  * satisfy dz(k) = g dw(k - d + 1) + noise on a loop with delay d whose stage
- * has g times the model's gain. For every d = 1..PIEZO_SUP_MAX_D the block
+ * has g times the model's gain. For every d = 1..PIEZO_MV_MAX_D the block
  * keeps exponentially weighted sums (forgetting lambda = 1 - 1/sup.window):
  *     Szz = sum lambda^(k-j) dz(j)^2,  Sww_d(k) = Sww_1(k - d + 1),
  *     Szw_d = sum lambda^(k-j) dz(j) dw(j - d + 1).
@@ -42,9 +42,27 @@
  * window's prediction errors above their bound), and the supervisor's travel
  * sums give its message the evidence.
  *
+ * A gain that changes. The gain verified is followed: the mean of the strongly
+ * evidenced gains of the judged samples that verified the loop, the n-th weighing
+ * 1/n until 1/n reaches PIEZO_SUP_JUDGE_EVERY / sup.window, that weight from then on
+ * (an exponentially weighted mean of about the last window). Once it holds
+ * PIEZO_SUP_CONFIRM of them (the start-up's first gains averaged, not taken for
+ * the loop's), a strongly evidenced gain below it by the factor
+ * PIEZO_SUP_DROP_PERCENT / 100 or above it by PIEZO_SUP_RISE_PERCENT / 100 is a
+ * fault kind (confirmed as the others): a sensor or an amplifier whose gain
+ * changed during the run, which the adaptive law would follow, the stage then
+ * tracking y_d scaled by the change.
+ *
  * Watchdogs: v clipped for sup.clip_time without a pause while the mean
- * |y_d - y_meas| over that time exceeds the error bound; a loop delay still not
- * chosen after sup.detect_time.
+ * |y_d - y_meas| over that time exceeds sup.clip_error; a loop delay still not
+ * chosen after sup.detect_time; y_meas exactly constant for sup.window samples
+ * although, over the window before, it reversed its direction from one sample
+ * to the next in PIEZO_SUP_FROZEN_PERCENT % of the samples or more and stepped
+ * by more than PIEZO_SUP_BIG_STEP_PERCENT % of the smallest step it ever made
+ * in PIEZO_SUP_FROZEN_BIG_PERMILLE per mille of them (a sensor whose noise
+ * showed, frozen: a sensor at rest whose noise is below its resolution repeats
+ * its value legitimately and reverses seldom, and a noise-free quantised one
+ * that dithers by one step and settles never steps by more than one).
  *
  * The evidence a message gives: over the window, the distance the model
  * expected y_meas to travel in answer to q (the sum of its sample-to-sample
@@ -62,8 +80,10 @@
 #include <stdint.h>
 #include "piezo_status.h"
 
-#define PIEZO_SUP_MAX_D 8            /* loop delays tested: 1..8 samples */
-#define PIEZO_SUP_REF_RING 10        /* references kept: r(k-1)..r(k-10) */
+/* The longest loop delay, d = 1 + mv.delay <= 9 samples: the one home of the delays the MV
+ * law runs (piezo_controller.h) and the supervisor tests (1..9). */
+#define PIEZO_MV_MAX_D 9
+#define PIEZO_SUP_REF_RING 10        /* references kept: r(k-1)..r(k-10) (>= PIEZO_MV_MAX_D) */
 #define PIEZO_SUP_MIN_SAMPLES 20     /* no verdict before this many samples */
 #define PIEZO_SUP_CONFIRM 10         /* consecutive samples of one fault kind make the verdict */
 #define PIEZO_SUP_JUDGE_EVERY 4      /* the response is judged every 4th sample (every sample while
@@ -75,6 +95,15 @@
                                         quantised sensor's step proves nothing) */
 #define PIEZO_SUP_DEFAULT_WINDOW 200 /* sup.window [samples] */
 #define PIEZO_SUP_DEFAULT_DETECTABLE 3   /* delays the controller detects: 1..3 */
+#define PIEZO_SUP_DROP_PERCENT 130   /* the gain followed over the gain now: beyond it, the gain fell */
+#define PIEZO_SUP_RISE_PERCENT 200   /* the gain now over the gain followed: beyond it, the gain rose */
+#define PIEZO_SUP_FROZEN_PERCENT 20  /* share of reversals of y_meas before a frozen stretch */
+#define PIEZO_SUP_BIG_STEP_PERCENT 150   /* a step of y_meas beyond this share of its smallest is noise's */
+#define PIEZO_SUP_FROZEN_BIG_PERMILLE 5  /* share of such steps before a frozen stretch [per mille] */
+#define PIEZO_SUP_NOISY_PERCENT 33   /* y_meas reversing in this share of the samples is noise-dominated
+                                        (white noise at rest: 2/3; a moving stage: seldom) */
+#define PIEZO_SUP_REACT_ERROR 0      /* sup.reaction: a verdict fails the step (the default) */
+#define PIEZO_SUP_REACT_SAFE 1       /* sup.reaction: a verdict holds the loop in the safe state */
 
 /* What the supervisor found (the verdict of a refused sample). */
 typedef enum {
@@ -84,8 +113,14 @@ typedef enum {
     PIEZO_SUP_GAIN_HIGH = 3,     /* y_meas answers v far more than the model (gain > sup.gain_max) */
     PIEZO_SUP_DELAY = 4,         /* y_meas answers v later than the law's delays */
     PIEZO_SUP_CLIPPED = 5,       /* v held at a limit for sup.clip_time, the error not small */
-    PIEZO_SUP_UNDETECTED = 6     /* no loop delay chosen within sup.detect_time */
+    PIEZO_SUP_UNDETECTED = 6,    /* no loop delay chosen within sup.detect_time */
+    PIEZO_SUP_GAIN_CHANGED = 7,  /* the response gain changed from the one verified */
+    PIEZO_SUP_FROZEN = 8,        /* y_meas frozen: constant for sup.window samples after noise */
+    /* the controller's own verdicts (the codes of sup.fault, which also counts these) */
+    PIEZO_SUP_UNSTABLE = 9,      /* the divergence monitor: |pred_error| beyond its bound too long */
+    PIEZO_SUP_DIVERGED = 10      /* a value the controller computed is not finite */
 } piezo_sup_fault;
+#define PIEZO_SUP_FAULT_MAX 10       /* the largest fault code */
 
 typedef struct {
     int enabled;                 /* 0: off (open-loop use): no statistics, no verdicts */
@@ -94,6 +129,9 @@ typedef struct {
     int window;                  /* [20, 1e6] samples: time constant of the statistics */
     double clip_time;            /* [s] > 0: v clipped this long (error not small) is a fault */
     double detect_time;          /* [s] > 0: delay detection running this long is a fault */
+    int reaction;                /* PIEZO_SUP_REACT_ERROR (0, default) or PIEZO_SUP_REACT_SAFE (1) */
+    double ramp_time;            /* [s] >= 0: the safe state ramps v to 0 V over this time */
+    double clip_error;           /* [um] > 0: the mean |y_d - y_meas| a clipped run must exceed */
 } piezo_supervisor_params;
 
 /* Evidence of the verdict, for its message. */
@@ -117,9 +155,32 @@ typedef struct {
     uint64_t clip_samples;       /* CLIPPED: samples held; UNDETECTED: samples detecting */
     uint64_t y_same;             /* samples y_meas had not changed */
     double error;                /* CLIPPED: mean |y_d - y_meas| over them [um] */
-    double error_bound;          /* CLIPPED: the bound it exceeded [um] */
+    double error_bound;          /* CLIPPED: the bound it exceeded, sup.clip_error [um] */
     double verified_gain;        /* the last verified gain (0: the loop was never verified) */
+    double followed_gain;        /* GAIN_CHANGED: the gain followed until the change */
+    double reversal_share;       /* FROZEN: share of samples y_meas reversed in before it froze */
+    double step_rms;             /* FROZEN: rms of its sample-to-sample changes then [um] */
+    /* UNDETECTED, filled by the controller: the delay probes against the noise */
+    double noise;                /* rms a-priori error of the best candidate in the last trial [um] */
+    double probe;                /* the last probe's amplitude on q [um] (0: none yet) */
+    double probe_wanted;         /* the amplitude the noise asked for [um] */
+    double probe_max;            /* mv.probe_max [um] */
+    double probe_gain;           /* the model's first response to a probe, tf.b1 */
+    double probe_snr;            /* the response a probe needs, in times the noise */
+    int probes;                  /* probes made in the detection */
 } piezo_sup_verdict;
+
+/* What a message says besides the verdict: where the loop is and when it started. */
+typedef struct {
+    double t0;                   /* the time of sample 0 [s]: a message's times are t0 + k h */
+    double h;                    /* the sample period [s] */
+    int internal;                /* 0: the controller wired to a stage by hand (the connections of
+                                    AdaptiveCompoundController and PiezoStage are named); 1: the stage
+                                    inside the same FMU (PiezoStageClosedLoop: its parameters are
+                                    named, the stage's against the controller's model's) */
+    int stage_delay;             /* internal: the stage's tf.delay [samples] */
+    int feedthrough;             /* internal: mv.feedthrough */
+} piezo_sup_context;
 
 /* The controller's part of one sample, as the supervisor needs it. */
 typedef struct {
@@ -147,6 +208,11 @@ typedef struct {
     double forgetting;           /* lambda = 1 - 1/window */
     double gain_min, gain_max;
     uint64_t clip_samples, detect_samples;
+    uint64_t window;             /* sup.window [samples] */
+    double clip_error;           /* sup.clip_error [um] */
+    int reaction;                /* sup.reaction */
+    double ramp_time;            /* sup.ramp_time [s] */
+    uint64_t ramp_samples;       /* samples the safe state ramps v over (0: at once) */
     double a1, a2, b1, b2;       /* the model the response is judged by */
     double h;
     /* statistics */
@@ -155,10 +221,10 @@ typedef struct {
     double r1, r2;               /* y_ref(k-1), y_ref(k-2) */
     double z1, zr1;              /* A y_meas and A y_ref at k-1 */
     double w1;                   /* B q at k-1: b1 q(k-2) + b2 q(k-3) */
-    double dw[PIEZO_SUP_MAX_D];  /* dw(k-1) .. dw(k-8): dw[i] = dw(k-1-i) */
-    double sww[PIEZO_SUP_MAX_D]; /* Sww_1(k-1) .. Sww_1(k-8), the same way */
+    double dw[PIEZO_MV_MAX_D];   /* dw(k-1) .. dw(k-9): dw[i] = dw(k-1-i) */
+    double sww[PIEZO_MV_MAX_D];  /* Sww_1(k-1) .. Sww_1(k-9), the same way */
     double szz, srr;             /* Szz, and the same for y_ref */
-    double szw[PIEZO_SUP_MAX_D]; /* Szw_d, d = 1..8 */
+    double szw[PIEZO_MV_MAX_D];  /* Szw_d, d = 1..9 */
     double srw[PIEZO_SUP_DEFAULT_DETECTABLE];    /* y_ref against d = 1..3 */
     /* the model's prediction of y_meas from q (delay 1), for the messages */
     double yhat1, yhat2;         /* at k-1 and k-2 */
@@ -178,18 +244,28 @@ typedef struct {
     double weight;               /* sum of lambda^(k-j): the window's weight */
     double travel_model;         /* sum of lambda^(k-j) |yhat(j) - yhat(j-1)| */
     double travel_meas;          /* sum of lambda^(k-j) |y_meas(j) - y_meas(j-1)| */
+    /* a gain that changes, a measurement that freezes */
+    double followed_gain;        /* the strongly evidenced gains followed since verified (0: none yet) */
+    uint64_t followed_n;         /* judged samples it holds (the weights 1/n while they are larger) */
+    double reversals;            /* sum of lambda^(k-j) [y_meas reversed its direction at j] */
+    double steps2;               /* sum of lambda^(k-j) (y_meas(j) - y_meas(j-1))^2 */
+    double dy1;                  /* y_meas(k-1) - y_meas(k-2) (0 when equal: the last change kept) */
+    double min_step;             /* the smallest nonzero |y_meas(j) - y_meas(j-1)| so far (0: none) */
+    double big_steps;            /* sum of lambda^(k-j) [|step| > PIEZO_SUP_BIG_STEP_PERCENT % of min_step] */
 } piezo_supervisor;
 
 /* One evaluated sample: the statistics of k+1 and the verdict. */
 typedef struct {
     double z, zr, w, dw, szz, srr, sww1, yhat;
-    double szw[PIEZO_SUP_MAX_D];
+    double szw[PIEZO_MV_MAX_D];
     double srw[PIEZO_SUP_DEFAULT_DETECTABLE];
     double weight, travel_model, travel_meas;
+    double followed_gain, reversals, steps2, dy1, min_step, big_steps;
     double clip_error_sum;
     uint64_t y_same;
     int candidate, candidate_run, status, delay;
     double gain;
+    uint64_t followed_n;
     int fault;                   /* piezo_sup_fault: the verdict of this sample */
 } piezo_supervisor_next;
 
@@ -210,8 +286,13 @@ void piezo_supervisor_commit(piezo_supervisor *sup, const piezo_supervisor_input
 /* The evidence of a verdict reached by the evaluation of the sample of in (next->fault != 0). */
 void piezo_supervisor_verdict(const piezo_supervisor *sup, const piezo_supervisor_input *in,
                               const piezo_supervisor_next *next, piezo_sup_verdict *verdict);
-/* The message of a verdict: the signal at fault, the evidence, what to check.
- * Writes at most size bytes (NUL-terminated); returns the length it wanted. */
+/* The message of a verdict: the signal at fault, the evidence, what to check, in the
+ * words of where the loop is (context: the times t0 + k h, the connections of a wired
+ * loop or the parameters of one FMU). Writes at most size bytes (NUL-terminated);
+ * returns the length it wanted. */
+int piezo_supervisor_explain_in(const piezo_sup_verdict *verdict, const piezo_sup_context *context,
+                                char *text, size_t size);
+/* piezo_supervisor_explain_in for a wired loop started at t0 = 0. */
 int piezo_supervisor_explain(const piezo_sup_verdict *verdict, double h, char *text, size_t size);
 /* The verdict's fault as a short name ("no response", "inverted", ...). */
 const char *piezo_supervisor_fault_name(int fault);

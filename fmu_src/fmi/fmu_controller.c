@@ -16,6 +16,8 @@ void fmu_controller_track_init(fmu_controller_track *t, const piezo_controller *
     t->said_redetect = 0;
     t->said_saturated = 0;
     t->said_large_error = 0;
+    t->said_outlier = 0;
+    t->said_fault = 0;
 }
 
 void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller *c, double t0, double h)
@@ -51,9 +53,25 @@ int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, dou
     return 1;
 }
 
-int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
+int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, const piezo_sup_context *ctx,
                            char *text, size_t size)
 {
+    double t0 = ctx->t0, h = ctx->h;
+    if (c->fault && !t->said_fault) {
+        /* the safe state: said once, with the verdict in the words of an Error */
+        t->said_fault = 1;
+        piezo_controller_explain_safe_state(c, ctx, text, size);
+        return 1;
+    }
+    if (c->n_outliers > 0 && !t->said_outlier) {
+        t->said_outlier = 1;
+        snprintf(text, size, "y_meas = %.6g um at t = %.9g s was %.4g um from what the model predicted, between "
+                 "samples it predicted well: an outlier (a reading dropped or glitched), for which the model's "
+                 "prediction stood in (the law, the adaptation and the monitor did not see it); further outliers "
+                 "are counted, not logged: the terminate call reports the count",
+                 c->first_outlier, fmu_sample_time(t0, c->k_first_outlier, h), c->first_outlier_error);
+        return 1;
+    }
     if (c->n_detections > 1 && !t->said_redetect) {
         t->said_redetect = 1;
         snprintf(text, size, "the chosen loop delay no longer predicts the measurement (|pred_error| above "
@@ -93,20 +111,35 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, d
 
 int fmu_controller_summary(const piezo_controller *c, char *text, size_t size)
 {
-    if (c->n_saturated == 0 && c->n_large_error == 0 && c->n_detections <= 1)
+    int used;
+    if (c->n_saturated == 0 && c->n_large_error == 0 && c->n_detections <= 1 && c->n_outliers == 0 && !c->fault)
         return 0;
-    snprintf(text, size, "of %llu samples, v was clipped in %llu; |pred_error| exceeded "
-             "monitor.pred_error_max = %g um in %llu (largest %.6g um); delay detection ran %llu times",
-             (unsigned long long)c->k, (unsigned long long)c->n_saturated, c->pred_error_max,
-             (unsigned long long)c->n_large_error, c->max_abs_pred_error,
-             (unsigned long long)c->n_detections);
+    used = snprintf(text, size, "of %llu samples, v was clipped in %llu; |pred_error| exceeded "
+                    "monitor.pred_error_max = %g um in %llu (largest %.6g um); delay detection ran %llu times",
+                    (unsigned long long)c->k, (unsigned long long)c->n_saturated, c->pred_error_max,
+                    (unsigned long long)c->n_large_error, c->max_abs_pred_error,
+                    (unsigned long long)c->n_detections);
+    if (c->n_outliers > 0 && used > 0 && (size_t)used < size)
+        used += snprintf(text + used, size - (size_t)used, "; %llu outliers of y_meas were replaced by the "
+                         "model's prediction", (unsigned long long)c->n_outliers);
+    if (c->fault && used > 0 && (size_t)used < size)
+        snprintf(text + used, size - (size_t)used, "; the loop was held in its safe state for the last %llu "
+                 "(sup.fault = %d, %s)", (unsigned long long)(c->k - c->k_fault), c->fault,
+                 piezo_supervisor_fault_name(c->fault));
     return 1;
 }
 
-int fmu_controller_failure(const piezo_controller *c, piezo_status st, char *text, size_t size)
+int fmu_controller_failure(const piezo_controller *c, const piezo_sup_context *ctx, piezo_status st,
+                           char *text, size_t size)
 {
     /* the core's words (one home: the Python binding and every FMU that runs the controller) */
-    return piezo_controller_explain(c, st, text, size) > 0;
+    return piezo_controller_explain_in(c, st, ctx, text, size) > 0;
+}
+
+void fmu_controller_fault_outputs(const piezo_controller *c, double t0, double h, int *fault, double *fault_time)
+{
+    *fault = c->fault;
+    *fault_time = c->fault ? fmu_sample_time(t0, c->k_fault, h) : 0.0;
 }
 
 const char *fmu_controller_track_check(const fmu_controller_track *t, int core_initialized, double t0,
@@ -114,7 +147,8 @@ const char *fmu_controller_track_check(const fmu_controller_track *t, int core_i
 {
     if ((t->said_verified != 0 && t->said_verified != 1) || (t->said_redetect != 0 && t->said_redetect != 1)
         || (t->said_saturated != 0 && t->said_saturated != 1)
-        || (t->said_large_error != 0 && t->said_large_error != 1))
+        || (t->said_large_error != 0 && t->said_large_error != 1)
+        || (t->said_outlier != 0 && t->said_outlier != 1) || (t->said_fault != 0 && t->said_fault != 1))
         return "warning flags are not 0 or 1";
     if (!isfinite(t->delay_time))
         return "time stamps not finite";

@@ -27,6 +27,8 @@ typedef struct {
     int said_redetect;          /* the restarted-detection warning was logged */
     int said_saturated;         /* the first-clipping warning was logged */
     int said_large_error;       /* the first large-pred_error warning was logged */
+    int said_outlier;           /* the first-outlier warning was logged */
+    int said_fault;             /* the safe state's warning was logged */
 } fmu_controller_track;
 
 /* At initialization (the controller just initialized, sample 0 at t0). */
@@ -34,16 +36,20 @@ void fmu_controller_track_init(fmu_controller_track *t, const piezo_controller *
 /* After a sample was committed (c->k is the next one). */
 void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller *c, double t0, double h);
 
-/* At most one event / one warning per call, each thing once: 1 with the text written, else 0. */
+/* At most one event / one warning per call, each thing once: 1 with the text written, else 0.
+ * ctx: where the loop is (its t0 and h, wired or inside one FMU: piezo_sup_context). */
 int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
                          char *text, size_t size);
-int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
+int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, const piezo_sup_context *ctx,
                            char *text, size_t size);
 /* The counts worth a warning at terminate, 1 if written. */
 int fmu_controller_summary(const piezo_controller *c, char *text, size_t size);
 /* Why the controller refused a sample with st (PIEZO_ERR_FAULT: "supervision stopped the loop (...)",
  * PIEZO_ERR_UNSTABLE, PIEZO_ERR_DIVERGED), 1 if written; 0 for the glue's generic text. */
-int fmu_controller_failure(const piezo_controller *c, piezo_status st, char *text, size_t size);
+int fmu_controller_failure(const piezo_controller *c, const piezo_sup_context *ctx, piezo_status st,
+                           char *text, size_t size);
+/* The outputs sup.fault (0: none) and sup.fault_time (t0 + k h of the verdict's sample; 0 while none). */
+void fmu_controller_fault_outputs(const piezo_controller *c, double t0, double h, int *fault, double *fault_time);
 
 /* A restored struct against the controller it belongs to: NULL, or what is wrong.
  * core_initialized: the state was saved after initialization (k samples since t0). */

@@ -82,7 +82,7 @@ static void vlog_to(const glue_host *host, const char *name, glue_status status,
 static void vlog_to(const glue_host *host, const char *name, glue_status status, const char *category,
                     const char *fmt, va_list ap)
 {
-    char text[1024];
+    char text[2048];
     if (host == NULL || host->logger == NULL || host->deliver == NULL)
         return;
     vsnprintf(text, sizeof text, fmt, ap);
@@ -162,7 +162,7 @@ static void mask_names(const glue_instance *inst, int mask, char *buf, size_t si
 static GLUE_NOINLINE void log_core_failure(const glue_instance *inst, const char *fname, piezo_status st,
                                            const piezo_diag *diag)
 {
-    char text[960];     /* the log line holds 1024 with the function's name */
+    char text[1984];    /* the log line holds 2048 with the function's name */
     if (st != PIEZO_ERR_PARAM && model_failure_text(&inst->data, st, text, sizeof text)) {
         glue_log_error(inst, "%s: %s", fname, text);
         return;
@@ -926,7 +926,7 @@ static double time_tolerance(double h, double x)
  * logged as a Warning but leaves the status OK: fmu_model.h). */
 static glue_status step_warnings(glue_instance *inst, const char *fname)
 {
-    char text[512];
+    char text[1984];    /* the safe state's warning holds a verdict's message */
     glue_status status = GLUE_OK;
     int i;
     for (i = 0; i < 4 && model_step_event(&inst->data, text, sizeof text); i++)

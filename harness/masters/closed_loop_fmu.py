@@ -37,7 +37,7 @@ import ctypes
 import numpy as np
 
 from ..closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters
-from ..fmu import TIMING_OUTPUTS, FMUError, check_fmi_version, fmu_path, load
+from ..fmu import TIMING_OUTPUTS, FMUError, check_fmi_version, fmu_path, load, warn_safe_state
 from ..loop import (CLOSED_LOOP_DTYPE, CLOSED_LOOP_FIELDS, REFERENCE_LEAD, REFERENCE_PREVIEW,
                     as_structured, prepare_closed_loop, reference_lead, reference_parameters)
 from .instance import CTRL_OUTPUTS, Instance, ScalarFunctions, step_error, vr_array
@@ -112,6 +112,7 @@ def simulate_closed_loop_fmu(scenario, *, adaptation=None, preview=True, master=
         inst = Instance(info, "closed-loop")
         inst.initialize(closed_loop_fmu_parameters(setup, preview), (n + 1) * h)
         _run(inst, setup, rows, progress)
+        warn_safe_state(inst.log, CLOSED_LOOP_MODEL)     # sup.reaction = 1: the run went on, say why
         if timing is not None:
             timing.update(_read_timing(inst))
     finally:
@@ -345,4 +346,4 @@ def _run_steps(inst, setup, points, rows):
         if failed:
             break
     if failed:
-        raise _step_error(inst, stage, k, h, FMUError(f"{stage} returned an error"))
+        raise step_error(inst, stage, k, h, FMUError(f"{stage} returned an error"))

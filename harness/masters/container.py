@@ -27,7 +27,7 @@ import warnings
 from fmpy import simulate_fmu
 import numpy as np
 
-from ..fmu import TIMING_OUTPUTS, default_fmu_dir
+from ..fmu import TIMING_OUTPUTS, default_fmu_dir, warn_safe_state
 from ..loop import IMPORTER_DTYPE, IMPORTER_FIELDS
 from ..scenarios import get_scenario
 from ..ssp import SSP_CONNECTIONS, parameter_set_for_scenario
@@ -199,6 +199,8 @@ def _simulate_keeping_results(container_path, stop_time, step_size):
             res = simulate_fmu(unzipdir, model_description=md, fmu_instance=fmu, stop_time=stop_time,
                                step_size=step_size, output_interval=step_size,
                                output=list(IMPORTER_FIELDS[1:]), terminate=False)
+            warn_safe_state([f"[Warning] {text}" for status, text in log if status == 1],
+                            str(container_path))          # sup.reaction = 1: the run went on, say why
             try:
                 fmu.terminate()
             except FMICallException as exc:

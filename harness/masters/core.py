@@ -8,9 +8,12 @@ Comparing both runs sample by sample checks the FMI layer and the master.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from .. import core
+from ..fmu import LoopFaultWarning
 from ..loop import (
     CLOSED_LOOP_DTYPE,
     CLOSED_LOOP_FIELDS,
@@ -112,6 +115,8 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
         # say where, as the FMU masters do (the class and its attributes stay)
         exc.args = (f"{exc.args[0]} (at t = {k * setup.h:.6g} s, sample {k})",) + exc.args[1:]
         raise
+    if ctrl.fault:          # sup.reaction = 1: the run went on in the safe state; say so as the FMUs do
+        warnings.warn(LoopFaultWarning(f"core controller: {ctrl.safe_state_message()}"), stacklevel=2)
     return as_structured(rows, CLOSED_LOOP_DTYPE)
 
 

@@ -55,6 +55,7 @@ from ..fmu import (
     PLANT_MODEL,
     TIMING_OUTPUTS,
     FMUError,
+    warn_safe_state,
     check_fmi_version,
     fmu_path,
     load,
@@ -181,6 +182,7 @@ def simulate_setup(setup, fmu_dir=None, block=0, block_ns=None, progress=None, f
         plant.initialize(setup.plant_params, stop)
         ctrl.initialize(setup.controller_params, stop)
         _run_closed_loop(plant, ctrl, setup, rows, block, block_ns, progress)
+        warn_safe_state(ctrl.log, CONTROLLER_MODEL)      # sup.reaction = 1: the run went on, say why
         if timing is not None:
             timing.update(_read_timing(ctrl))
     finally:

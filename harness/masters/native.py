@@ -34,7 +34,7 @@ import numpy as np
 
 from ..core import header_cdef
 from ..fmu import (CONTROLLER_MODEL, PLANT_MODEL, FMUError, FMUInitializationError,
-                   fmu_path, load, loop_error_class, typed_parameters)
+                   fmu_path, load, loop_error_class, typed_parameters, warn_safe_state)
 from ..loop import CLOSED_LOOP_DTYPE, CLOSED_LOOP_FIELDS, as_structured, prepare_closed_loop
 from ..paths import runner_include_dir, runner_library, where_to_get_it
 
@@ -233,6 +233,7 @@ class NativeLoop:
             what = f"{_CALLS.get(res.failed_call, 'fmi2 call')} at t = {k * h:.6g} s (sample {k})"
             message = self._message(role, what, st)
             raise loop_error_class(self.log(role))(message)
+        warn_safe_state(self.log(CONTROLLER), self.controller_info.model)   # sup.reaction = 1: say why
         lib.piezo_runner_terminate(r)
 
     def run(self, setup, *, block=0):

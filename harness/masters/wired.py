@@ -19,8 +19,12 @@ A :class:`Fault` changes what one input receives: nothing (``"open"``: the input
 start value, as an unconnected input does), a constant, the first value it received
 (``"stuck"``), the value times a factor (``"scale"``: -1 for an inverted sign, 1e-3 for mm
 fed to a µm input), another output (``"source"``: ``y_meas`` fed from the reference's
-``y_ref``), or +value and -value in turn whatever the loop does (``"alternate"``: a
-measurement no stage gives), from a given time on. :func:`simulate_wired` runs the loop until the end or
+``y_ref``), +value and -value in turn whatever the loop does (``"alternate"``: a
+measurement no stage gives), the value it received at the fault's start from then on
+(``"freeze"``: a sensor that freezes where it is), the value once every ``every`` samples and the connection's
+otherwise (``"dropout"``: a sensor that drops a reading now and then), or the connection's
+value plus ``value`` times the time since the fault began (``"drift"``: an offset that
+creeps, ``value`` per second), from a given time on. :func:`simulate_wired` runs the loop until the end or
 until an FMU's doStep fails, and returns what happened: the samples, the status, the first
 Error message and every Warning (:class:`WiredRun`).
 
@@ -58,7 +62,7 @@ __all__ = ["COMPONENTS", "SCHEDULES", "FAULT_KINDS", "WIRED_FIELDS", "Fault", "W
 COMPONENTS = {"reference": REFERENCE_MODEL, "controller": CONTROLLER_MODEL, "plant": PLANT_MODEL}
 #: every schedule: the two exchanging ones, then the six sequential orders
 SCHEDULES = ("exchange", "player") + tuple(itertools.permutations(("reference", "controller", "plant")))
-FAULT_KINDS = ("open", "constant", "stuck", "scale", "source", "alternate")
+FAULT_KINDS = ("open", "constant", "stuck", "scale", "source", "alternate", "freeze", "dropout", "drift")
 
 # the Real outputs read from each component after each step (what the connections and the
 # record need); the controller's Integer and Boolean outputs are read separately
@@ -88,15 +92,19 @@ class Fault:
         One of :data:`FAULT_KINDS`.
     value : float or str
         The constant (``"constant"``), the factor (``"scale"``), the amplitude
-        (``"alternate"``) or the output ``"component.variable"`` it is fed from (``"source"``).
+        (``"alternate"``), the value of a dropped reading (``"dropout"``), the rate per second
+        (``"drift"``) or the output ``"component.variable"`` it is fed from (``"source"``).
     start : float
         The time [s] from which the fault acts (before it the connection is sound).
+    every : int
+        ``"dropout"``: one sample in ``every`` (from the first at ``start``) gets ``value``.
     """
 
     connector: str
     kind: str
     value: object = 0.0
     start: float = 0.0
+    every: int = 100
 
     def __post_init__(self):
         ends = [end for _, _, _, end in SSP_CONNECTIONS]
@@ -110,8 +118,11 @@ class Fault:
             if comp not in _REAL_OUTPUTS or var not in _REAL_OUTPUTS[comp]:
                 raise ValueError(f"fault source {self.value!r}: one of "
                                  + ", ".join(f"{c}.{v}" for c, vs in _REAL_OUTPUTS.items() for v in vs))
-        elif self.kind in ("constant", "scale", "alternate") and not math.isfinite(float(self.value)):
+        elif self.kind in ("constant", "scale", "alternate", "dropout", "drift") \
+                and not math.isfinite(float(self.value)):
             raise ValueError(f"fault value {self.value!r}: a finite number")
+        if self.kind == "dropout" and not (isinstance(self.every, int) and self.every >= 1):
+            raise ValueError(f"fault every {self.every!r}: a whole number of samples >= 1")
 
 
 @dataclass
@@ -128,12 +139,19 @@ class WiredRun:
         The first Error message of the FMU that failed ("" if none).
     warnings : dict
         ``{component: [message, ...]}``: every Warning each FMU logged, in order.
+    fault : int
+        The controller's ``sup.fault`` where the run ended (0: none; with ``sup.reaction`` = 1,
+        the code of the verdict that holds the loop in its safe state).
+    fault_time : float
+        Its ``sup.fault_time`` [s].
     """
 
     samples: np.ndarray
     error_time: float = None
     error: str = ""
     warnings: dict = field(default_factory=dict)
+    fault: int = 0
+    fault_time: float = 0.0
 
 
 def schedule_name(schedule):
@@ -289,7 +307,7 @@ def _run(inst, schedule, fault_of, n, h):
     vr_sat_addr, sat_addr = ctypes.addressof(vr_sat), ctypes.addressof(sat_out)
     vr_int_addr, int_addr = ctypes.addressof(vr_int), ctypes.addressof(int_out)
     get_int_raw = _int_getter(ctrl)
-    first, turns = {}, {}
+    first, turns, frozen = {}, {}, {}
     rows = np.zeros((n, len(WIRED_FIELDS)))
     failed = None
 
@@ -336,6 +354,13 @@ def _run(inst, schedule, fault_of, n, h):
                 elif f.kind == "alternate":
                     turns[bc] = turns.get(bc, 0) + 1
                     x = float(f.value) if turns[bc] % 2 else -float(f.value)
+                elif f.kind == "freeze":
+                    x = frozen.setdefault(bc, x)
+                elif f.kind == "dropout":
+                    turns[bc] = turns.get(bc, 0) + 1
+                    x = float(f.value) if turns[bc] % f.every == 1 % f.every else x
+                elif f.kind == "drift":
+                    x = x + float(f.value) * (t - f.start)
                 else:
                     x = value(*str(f.value).split(".", 1))
             else:
@@ -406,6 +431,13 @@ def _run(inst, schedule, fault_of, n, h):
     del keep
     samples = rows[:k].copy().view(_WIRED_DTYPE).reshape(k)
     run = WiredRun(samples)
+    if failed is None:
+        fc = fn["controller"]
+        vr_code, vr_when = vr_array([ctrl.info.vr("sup.fault")]), vr_array([ctrl.info.vr("sup.fault_time")])
+        code, when = (ctypes.c_int32 * 1)(), (ctypes.c_double * 1)()
+        if get_int_raw(fc.c, ctypes.addressof(vr_code), 1, ctypes.addressof(code)) <= 1 \
+                and fc.get(fc.c, ctypes.addressof(vr_when), 1, ctypes.addressof(when)) <= 1:
+            run.fault, run.fault_time = int(code[0]), float(when[0])
     for comp, i in inst.items():
         run.warnings[comp] = [line[len("[Warning] "):] for line in i.log if line.startswith("[Warning]")]
     if failed is not None:

@@ -173,7 +173,7 @@ static inline int host_write_file(const char *path, const void *data, size_t siz
 enum { VAR_REAL = 0, VAR_INTEGER = 1, VAR_BOOLEAN = 2 };    /* FMI 3.0: Float64, Int32, Boolean */
 enum { VAR_PARAMETER = 0, VAR_INPUT = 1, VAR_OUTPUT = 2, VAR_INDEPENDENT = 3 };  /* independent: FMI 3.0's time */
 
-#define HOST_MAX_VARS 256   /* the closed-loop FMU has 135 (a model description with more is refused: FAIL) */
+#define HOST_MAX_VARS 256   /* PiezoStageClosedLoop has 141 (FMI 2.0); more is refused, loudly */
 #define HOST_MAX_ELEMENTS 32
 
 typedef struct {

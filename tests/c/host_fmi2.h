@@ -127,14 +127,15 @@ static inline int host2_read_model_description(host2_fmu *f, const char *xml_pat
     f->n_vars = 0;
     for (p = strstr(xml, "<ScalarVariable "); p != NULL; p = strstr(p + 1, "<ScalarVariable ")) {
         const char *close = strstr(p, "</ScalarVariable>");
-        host_var *v = &f->vars[f->n_vars];
-        if (close == NULL)
-            break;
+        host_var *v;
         if (f->n_vars >= HOST_MAX_VARS) {
             printf("FAIL %s: more than HOST_MAX_VARS = %d variables\n", xml_path, HOST_MAX_VARS);
             free(xml);
             return 0;
         }
+        v = &f->vars[f->n_vars];
+        if (close == NULL)
+            break;
         memset(v, 0, sizeof *v);
         v->type = strstr(p, "<Integer") && strstr(p, "<Integer") < close ? VAR_INTEGER
                 : strstr(p, "<Boolean") && strstr(p, "<Boolean") < close ? VAR_BOOLEAN : VAR_REAL;
