@@ -104,8 +104,8 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
         ``szz``, ``szw`` and ``sww`` (one row per delay 1..9), ``travel_model``,
         ``travel_meas``, ``weight``, ``reversals`` (samples where y_meas reversed its direction,
         the last change kept over equal samples), ``steps2`` (its squared sample-to-sample
-        changes), ``big_steps`` (its steps beyond ``PIEZO_SUP_BIG_STEP_PERCENT`` % of the smallest
-        nonzero one before), ``y_same`` (samples y_meas equalled the one before, in a row): the
+        changes), ``big_steps`` (its reversals by more than ``PIEZO_SUP_BIG_STEP_PERCENT`` % of the
+        smallest nonzero step before), ``min_step`` (that smallest step, 0 before the first), ``y_same`` (samples y_meas equalled the one before, in a row): the
         supervisor's sums after each sample; ``mon_share``,
         ``mon_weight``: the divergence monitor's (samples with ``|pred_error|`` beyond the
         bound; where v was clipped the core also counts the nominal model's error, which a
@@ -149,7 +149,9 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
         "travel_meas": _ew(np.abs(np.diff(y, prepend=0.0)), lam),
         "weight": _ew(np.ones(n), lam),
         "reversals": _ew((dy * last < 0.0).astype(float), lam), "steps2": _ew(dy * dy, lam), "y_same": same,
-        "big_steps": _ew(((smallest > 0.0) & (np.abs(dy) * 100.0 > big_step * smallest)).astype(float), lam),
+        "big_steps": _ew(((smallest > 0.0) & (dy * last < 0.0)
+                          & (np.abs(dy) * 100.0 > big_step * smallest)).astype(float), lam),
+        "min_step": smallest,
         "mon_share": _ew((np.abs(np.asarray(pred_error, dtype=float)) > error_bound).astype(float), lam_m),
         "mon_weight": _ew(np.ones(n), lam_m),
     }
@@ -243,6 +245,10 @@ def margins(samples, nominal, controller_params=None):
     with np.errstate(divide="ignore", invalid="ignore"):
         g = np.where(sww_b > 0, szw_b / sww_b, np.nan)
         e_best = np.maximum(szz - szw_b * np.nan_to_num(g), 0.0)
+        # the quantisation floor (piezo_supervisor.c): the grid hides q^2/12 sum c^2 a sample
+        a1, a2 = nominal[0], nominal[1]
+        c2 = 1.0 + (a1 - 1.0) ** 2 + (a2 - a1) ** 2 + a2 ** 2
+        e_best = np.maximum(e_best, st["weight"] * st["min_step"] ** 2 / 12.0 * c2)
         explained = sww_b * np.maximum(1.0, np.nan_to_num(g) ** 2)
     strong = ((sww_b > 0) & (k >= th.min_samples) & (explained >= th.evidence * e_best)
               & (st["travel_model"] >= th.travel_fraction * bound))

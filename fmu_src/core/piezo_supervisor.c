@@ -163,7 +163,14 @@ static int response_kind(const piezo_supervisor *s, const piezo_supervisor_input
     sww = sww_of(s, n, b);
     g = n->szw[b - 1] / sww;
     e_best = n->szz - n->szw[b - 1] * g;
-    if (e_best < 0.0) e_best = 0.0;
+    /* the quantisation floor: a reading on a grid of step q (its smallest step seen) hides up to
+     * q^2/12 of dz's energy a sample, times sum c_i^2 of Delta A = (1, a1 - 1, a2 - a1, -a2):
+     * a response smaller than the grid is not evidence of none (0 before y_meas ever stepped) */
+    {
+        double c1 = s->a1 - 1.0, c2 = s->a2 - s->a1;
+        double floor_q = n->weight * s->min_step * s->min_step / 12.0 * (1.0 + c1 * c1 + c2 * c2 + s->a2 * s->a2);
+        if (e_best < floor_q) e_best = floor_q;
+    }
     /* the response the fit explains, or the one the model expects when that is larger */
     explained = sww * (g * g > 1.0 ? g * g : 1.0);
     if (!(explained >= PIEZO_SUP_EVIDENCE * e_best)) return -1;
@@ -258,8 +265,9 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         n->reversals = lam * s->reversals + (dy * s->dy1 < 0.0 ? 1.0 : 0.0);
         n->steps2 = lam * s->steps2 + dy * dy;
         n->dy1 = dy != 0.0 ? dy : s->dy1;
-        n->big_steps = lam * s->big_steps + (s->min_step > 0.0 && a * 100.0 > PIEZO_SUP_BIG_STEP_PERCENT * s->min_step
-                                              ? 1.0 : 0.0);
+        /* a big step that reverses the direction: noise's (a move's steps keep theirs) */
+        n->big_steps = lam * s->big_steps + (s->min_step > 0.0 && dy * s->dy1 < 0.0
+                                              && a * 100.0 > PIEZO_SUP_BIG_STEP_PERCENT * s->min_step ? 1.0 : 0.0);
         n->min_step = a > 0.0 && (s->min_step == 0.0 || a < s->min_step) ? a : s->min_step;
     }
     n->followed_gain = s->followed_gain;

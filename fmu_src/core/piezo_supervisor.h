@@ -21,7 +21,10 @@
  * energy E_d = Szz - Szw_d^2 / Sww_d. The best delay b has the least E_d.
  * Evidence is strong when the response the fit explains (or, for a gain below
  * 1, the response the model expects) is PIEZO_SUP_EVIDENCE times what it leaves
- * unexplained: Sww_b max(1, g_b^2) >= PIEZO_SUP_EVIDENCE E_b, at least
+ * unexplained: Sww_b max(1, g_b^2) >= PIEZO_SUP_EVIDENCE E_b (E_b at least the
+ * energy a quantised reading hides: weight q^2/12 sum c_i^2, q the smallest step
+ * y_meas made, c the coefficients of Delta A; a response below the grid is no
+ * evidence of none), at least
  * PIEZO_SUP_MIN_SAMPLES samples were seen, and the model expected y_meas to
  * travel at least PIEZO_SUP_TRAVEL_PERCENT % of monitor.pred_error_max over the
  * window (the sum of its sample-to-sample moves). With strong evidence:
@@ -59,10 +62,11 @@
  * although, over the window before, it reversed its direction from one sample
  * to the next in PIEZO_SUP_FROZEN_PERCENT % of the samples or more and stepped
  * by more than PIEZO_SUP_BIG_STEP_PERCENT % of the smallest step it ever made
- * in PIEZO_SUP_FROZEN_BIG_PERMILLE per mille of them (a sensor whose noise
+ * in PIEZO_SUP_FROZEN_BIG_PERMILLE per mille of them while reversing (a sensor whose noise
  * showed, frozen: a sensor at rest whose noise is below its resolution repeats
  * its value legitimately and reverses seldom, and a noise-free quantised one
- * that dithers by one step and settles never steps by more than one).
+ * that dithers by one step and settles never reverses by more than one: a move's
+ * big steps keep their direction).
  *
  * The evidence a message gives: over the window, the distance the model
  * expected y_meas to travel in answer to q (the sum of its sample-to-sample
@@ -95,11 +99,11 @@
                                         quantised sensor's step proves nothing) */
 #define PIEZO_SUP_DEFAULT_WINDOW 200 /* sup.window [samples] */
 #define PIEZO_SUP_DEFAULT_DETECTABLE 3   /* delays the controller detects: 1..3 */
-#define PIEZO_SUP_DROP_PERCENT 130   /* the gain followed over the gain now: beyond it, the gain fell */
+#define PIEZO_SUP_DROP_PERCENT 175   /* the gain followed over the gain now: beyond it, the gain fell */
 #define PIEZO_SUP_RISE_PERCENT 200   /* the gain now over the gain followed: beyond it, the gain rose */
-#define PIEZO_SUP_FROZEN_PERCENT 20  /* share of reversals of y_meas before a frozen stretch */
+#define PIEZO_SUP_FROZEN_PERCENT 30  /* share of reversals of y_meas before a frozen stretch */
 #define PIEZO_SUP_BIG_STEP_PERCENT 150   /* a step of y_meas beyond this share of its smallest is noise's */
-#define PIEZO_SUP_FROZEN_BIG_PERMILLE 5  /* share of such steps before a frozen stretch [per mille] */
+#define PIEZO_SUP_FROZEN_BIG_PERMILLE 330 /* share of such steps before a frozen stretch [per mille] */
 #define PIEZO_SUP_NOISY_PERCENT 33   /* y_meas reversing in this share of the samples is noise-dominated
                                         (white noise at rest: 2/3; a moving stage: seldom) */
 #define PIEZO_SUP_REACT_ERROR 0      /* sup.reaction: a verdict fails the step (the default) */
