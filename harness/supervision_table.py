@@ -145,8 +145,8 @@ FAULTS = (
     FaultCase("t_preview not connected", (Fault("t_preview", "open"),), degraded=True, schedules=_SEQ),
     # the blind spots of issue 36, measured
     FaultCase("sensor gain 1 -> 0.5 from t = 1 s", (Fault("y_meas", "scale", 0.5, start=1.0),)),
-    FaultCase("y_meas frozen during a hold at 5 um, from t = 1 s (5 nm rms sensor)",
-              (Fault("y_meas", "freeze", start=1.0),), plant={"sensor.noise_rms": 0.005},
+    FaultCase("y_meas frozen during a hold at 5 um, from t = 1 s (20 nm rms sensor)",
+              (Fault("y_meas", "freeze", start=1.0),), plant={"sensor.noise_rms": 0.02},
               reference={"amplitude[1]": 0.0, "offset": 5.0}),
     FaultCase("y_meas = 0 once every 100 samples (dropouts)", (Fault("y_meas", "dropout", 0.0, every=100),),
               tolerated=True),

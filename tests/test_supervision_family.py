@@ -99,7 +99,7 @@ def test_the_message_says_which_signal_and_what_to_check(fault_results):
         "mv.delay = 0 set for a loop of d = 2": "Set mv.delay = 1 (d = 2)",
         "reference beyond reach (500 um at 0.25 Hz)": "the reference asks for more than the stage reaches",
         "sensor gain 1 -> 0.5 from t = 1 s": "A sensor or an amplifier whose gain changed",
-        "y_meas frozen during a hold at 5 um, from t = 1 s (5 nm rms sensor)": "y_meas has frozen",
+        "y_meas frozen during a hold at 5 um, from t = 1 s (20 nm rms sensor)": "y_meas has frozen",
         "y_meas = 0 once every 100 samples (dropouts)": "an outlier (a reading dropped or glitched)",
         "mv.delay = 8 set for a loop of d = 2": "Set mv.delay = 1 (d = 2)",
     }

@@ -103,7 +103,7 @@
 #define PIEZO_SUP_RISE_PERCENT 200   /* the gain now over the gain followed: beyond it, the gain rose */
 #define PIEZO_SUP_FROZEN_PERCENT 30  /* share of reversals of y_meas before a frozen stretch */
 #define PIEZO_SUP_BIG_STEP_PERCENT 150   /* a step of y_meas beyond this share of its smallest is noise's */
-#define PIEZO_SUP_FROZEN_BIG_PERMILLE 330 /* share of such steps before a frozen stretch [per mille] */
+#define PIEZO_SUP_FROZEN_BIG_PERMILLE 400 /* share of such steps before a frozen stretch [per mille] */
 #define PIEZO_SUP_NOISY_PERCENT 33   /* y_meas reversing in this share of the samples is noise-dominated
                                         (white noise at rest: 2/3; a moving stage: seldom) */
 #define PIEZO_SUP_REACT_ERROR 0      /* sup.reaction: a verdict fails the step (the default) */
