@@ -244,7 +244,7 @@ def test_a_fault_that_goes_on_is_no_outlier_and_a_flood_is_not_hidden():
 
 @pytest.mark.parametrize("factor, stopped", [(0.5, True), (2.5, True), (0.85, False), (1.15, False)])
 def test_a_sensor_gain_that_changes_during_the_run_is_a_verdict(factor, stopped):
-    """Reference: the fault's factor against the thresholds PIEZO_SUP_DROP_PERCENT (175) and
+    """Reference: the fault's factor against the thresholds PIEZO_SUP_DROP_PERCENT (130) and
     PIEZO_SUP_RISE_PERCENT (200). y_meas scaled by the factor from t = 1 s on (the stage's own
     model; a 5 Hz tone, whose adaptation after the change is the evidence): halved or 2.5 times,
     the loop is stopped within 0.2 s with "response gain changed", the message giving the change

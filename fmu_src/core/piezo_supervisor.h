@@ -99,7 +99,7 @@
                                         quantised sensor's step proves nothing) */
 #define PIEZO_SUP_DEFAULT_WINDOW 200 /* sup.window [samples] */
 #define PIEZO_SUP_DEFAULT_DETECTABLE 3   /* delays the controller detects: 1..3 */
-#define PIEZO_SUP_DROP_PERCENT 175   /* the gain followed over the gain now: beyond it, the gain fell */
+#define PIEZO_SUP_DROP_PERCENT 130   /* the gain followed over the gain now: beyond it, the gain fell */
 #define PIEZO_SUP_RISE_PERCENT 200   /* the gain now over the gain followed: beyond it, the gain rose */
 #define PIEZO_SUP_FROZEN_PERCENT 30  /* share of reversals of y_meas before a frozen stretch */
 #define PIEZO_SUP_BIG_STEP_PERCENT 150   /* a step of y_meas beyond this share of its smallest is noise's */
