@@ -301,6 +301,30 @@ def test_a_measurement_that_freezes_after_its_noise_showed_is_a_verdict_after_th
     assert exc is None and max(still) >= 5990
 
 
+def test_a_quantised_sensor_that_sticks_is_still_no_response_above_the_grid_floor():
+    """Reference: the fault by construction and the floor's formula (piezo_supervisor.h). The
+    response test's unexplained energy is at least weight q^2/12 sum c_i^2 (q the smallest step
+    y_meas made, c = (1, a1 - 1, a2 - a1, -a2)): a noise-free sensor on the 2 nm grid stuck from
+    t = 1 s during the 5 Hz tone is still stopped as "no response" within 30 ms (the tone's
+    response is far above the floor), and a sensor stuck from the start (it never stepped: q = 0,
+    no floor) at 14.5 ms as in the fault table (sample 29). The floor, from the state at the
+    verdict, is below a hundredth of the evidence the verdict needs."""
+    quiet = {"sensor.noise_rms": 0.0}
+    stuck = {}
+    c, _, exc, k = loop(4000, plant=quiet, meas=lambda y, k: stuck.setdefault("y", y) if k >= 2000 else y)
+    assert isinstance(exc, core.CoreFaultError) and exc.fault == "no response", exc
+    assert 2000 <= k <= 2060
+    sup = c.raw.sup
+    q = float(sup.min_step)
+    assert q == pytest.approx(0.002, rel=1e-9)          # the grid: its smallest step
+    a1, a2 = float(sup.a1), float(sup.a2)
+    floor = float(sup.weight) * q * q / 12.0 * (1 + (a1 - 1) ** 2 + (a2 - a1) ** 2 + a2 ** 2)
+    # the tone's expected response is far above the grid's floor: the evidence stays strong
+    assert floor * LIB.PIEZO_SUP_EVIDENCE < 0.01 * float(sup.sww[0])
+    c, _, exc, k = loop(200, plant=quiet, meas=lambda y, k: 0.0)
+    assert isinstance(exc, core.CoreFaultError) and exc.fault == "no response" and k == 29
+
+
 # ---------------------------------------------------------------------------------------------
 # the longest loop delay, the probe's cap
 

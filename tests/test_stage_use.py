@@ -358,3 +358,24 @@ def test_family_slice_scan_after_a_dwell_is_a_restart_of_the_adaptation(family_s
     assert abs(ratio - 1.0) < 0.05
     scan = results[(worst.stage, worst.sensor_nm, "ours", worst.profile, sut.MASTER_EXCHANGE)].scans[0]
     assert worst_nm > 3 * scan[1] * 1e3
+
+
+@pytest.mark.parametrize("stage", [1, 7])
+def test_a_noise_free_quantised_sensor_in_a_dwell_is_not_taken_for_no_response(stage):
+    """Reference: the fault table's verdicts and the supervisor's quantisation floor. Stages 1
+    and 7 of the family with the 0 nm sensor (the 2 nm grid only), the robust law, a 10 Hz raster
+    frame, a 10 s dwell, a frame: during the dwell the loop's v moves by amounts whose expected
+    response (0.11 to 0.17 um over the window) stays within one grid step, so y_meas does not
+    change. Without the floor on the response test's unexplained energy both were stopped as
+    "no response" (at 3.88 s and 4.09 s, measured); with it they run to the end without an
+    Error or a supervision warning, and the frame after the dwell tracks within 15 nm."""
+    from harness import stage_use_table as sut
+    prof = next(p for p in sut.profiles_of() if p.name == "triangle scan 10 Hz, 10 s dwell")
+    task = next(t for t in sut.family_tasks(stages=stage + 1, sensors=(0,), laws=("ours",),
+                                            profile_list=[prof], jacobi_stages=0, fmu_stages=0,
+                                            gs_stages=0) if t.stage == stage)
+    (run,) = sut.run_task(task)
+    assert run.error == ""
+    assert not [w for w in run.warnings if any(x in w for x in sut._SUPERVISION_WARNINGS)]
+    assert len(run.scans) == 1 and run.scans[0][0] < 0.015
+
