@@ -54,7 +54,6 @@ from dataclasses import asdict, dataclass, field
 import json
 import math
 from pathlib import Path
-import re
 import sys
 import time as _time
 from types import MappingProxyType
@@ -559,44 +558,30 @@ def _breakdown(summary):
     """(a)/(b) per move and sensor over the holds, and (c) per frequency and sensor: the robust
     law's median / worst, then the paper's (native exchange)."""
     rows = []
+
+    def add(key, name, nm, label, hold, target):
+        """One row: the robust law's runs of ``summary[key]`` and the paper's, native exchange."""
+        o, p = ([r for r in summary[k] if r.profile == name and r.sensor_nm == nm and r.master == MASTER_EXCHANGE]
+                for k in (key, key + "_paper"))
+        if o or p:
+            mo, wo, _ = _stats(o)
+            mp, wp, _ = _stats(p)
+            rows.append([label, f"{nm:g} nm", hold, target, f"{_cell(mo)} / {_cell(wo)}",
+                         f"{_cell(mp)} / {_cell(wp)}"])
+
     for move in MOVES:
         for nm in SENSORS_NM:
             key = "b" if nm >= 20 else "a"
             for hold in HOLDS:
-                name = _move_profile(move, hold).name
-                o = [r for r in summary[key] if r.profile == name and r.sensor_nm == nm
-                     and r.master == MASTER_EXCHANGE]
-                p = [r for r in summary[key + "_paper"] if r.profile == name and r.sensor_nm == nm
-                     and r.master == MASTER_EXCHANGE]
-                if not o and not p:
-                    continue
-                mo, wo, _ = _stats(o)
-                mp, wp, _ = _stats(p)
-                rows.append([move, f"{nm:g} nm", f"{hold:g} s", f"({key})", f"{_cell(mo)} / {_cell(wo)}",
-                             f"{_cell(mp)} / {_cell(wp)}"])
+                add(key, _move_profile(move, hold).name, nm, move, f"{hold:g} s", f"({key})")
     for f in TONE_FREQUENCIES:
+        name = f"{f:g} Hz tone for 60 s, then a 10 um step"
         for nm in SENSORS_NM:
-            name = f"{f:g} Hz tone for 60 s, then a 10 um step"
-            o = [r for r in summary["tone"] if r.profile == name and r.sensor_nm == nm
-                 and r.master == MASTER_EXCHANGE]
-            p = [r for r in summary["tone_paper"] if r.profile == name and r.sensor_nm == nm
-                 and r.master == MASTER_EXCHANGE]
-            if o or p:
-                mo, wo, _ = _stats(o)
-                mp, wp, _ = _stats(p)
-                rows.append([name, f"{nm:g} nm", "0.5 s", "(tone)", f"{_cell(mo)} / {_cell(wo)}",
-                             f"{_cell(mp)} / {_cell(wp)}"])
+            add("tone", name, nm, name, "0.5 s", "(tone)")
     for f in SCAN_FREQUENCIES:
+        name = f"triangle scan {f:g} Hz, 10 s dwell"
         for nm in SENSORS_NM:
-            name = f"triangle scan {f:g} Hz, 10 s dwell"
-            o = [r for r in summary["c"] if r.profile == name and r.sensor_nm == nm and r.master == MASTER_EXCHANGE]
-            p = [r for r in summary["c_paper"] if r.profile == name and r.sensor_nm == nm
-                 and r.master == MASTER_EXCHANGE]
-            if o or p:
-                mo, wo, _ = _stats(o)
-                mp, wp, _ = _stats(p)
-                rows.append([name, f"{nm:g} nm", "10 s dwell", "(c)", f"{_cell(mo)} / {_cell(wo)}",
-                             f"{_cell(mp)} / {_cell(wp)}"])
+            add("c", name, nm, name, "10 s dwell", "(c)")
     return ("Per move, sensor and hold (native exchange): the target's ratio, median / worst over "
             "the stages.\n\n" + markdown_table(["profile", "sensor", "hold", "target",
                                                  "robust law", "paper's law"], rows))

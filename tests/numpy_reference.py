@@ -47,6 +47,11 @@ TABLE1 = {1: (1.0463, 0.0002), 10: (1.0497, -0.0085), 20: (1.0386, -0.0077),
 
 
 # ---------------------------------------------------------------- PI model
+
+def _past(x):
+    """x[i] of a sample sequence, 0.0 before its first sample (the loop starts from rest)."""
+    return lambda i: x[i] if i >= 0 else 0.0
+
 def pi_thresholds(m: int, v_max: float) -> np.ndarray:
     """r_j = (j-1)/m * v_max, j = 1..m (eq 5)."""
     return np.arange(m, dtype=float) / m * v_max
@@ -299,11 +304,7 @@ def rls_reference(q, y, d: int, forgetting: float, p0: float, trace_max: float, 
     n = len(y)
     lam = float(forgetting)
 
-    def Y(i):
-        return y[i] if i >= 0 else 0.0
-
-    def Q(i):
-        return q[i] if i >= 0 else 0.0
+    Y, Q = _past(y), _past(q)
 
     theta = np.array(theta0, dtype=float)
     b1_nominal = theta[2]
@@ -381,11 +382,7 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
     n = len(y)
     lam = float(forgetting)
 
-    def Y(i):
-        return y[i] if i >= 0 else 0.0
-
-    def Q(i):
-        return q[i] if i >= 0 else 0.0
+    Y, Q = _past(y), _past(q)
 
     theta = np.array(theta0, dtype=float)
     b1_nominal = theta[2]

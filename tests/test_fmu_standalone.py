@@ -28,7 +28,6 @@ import re
 import subprocess
 
 import fmpy
-import numpy as np
 import pytest
 
 from harness.masters.wired import Fault, simulate_wired
