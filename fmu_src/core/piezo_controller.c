@@ -322,7 +322,7 @@ void piezo_controller_reset(piezo_controller *c)
     c->head = 0;
     c->r_prev = 0.0;
     c->noise_y = c->noise_e = c->r_anchor = c->offset = c->integral = c->r_last = c->r_last2 = c->r_velocity = 0.0;
-    c->excite_left = 0;
+    c->excite_left = c->jump_left = 0;
     memset(c->yd_value, 0, sizeof c->yd_value);
     memset(c->yd_tag, 0, sizeof c->yd_tag);
     memset(c->preview_value, 0, sizeof c->preview_value);
@@ -727,7 +727,12 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     s->raw_error = rls_step(c, c->detecting ? c->theta_nominal : c->theta, c->P, c->d,
                             y_meas - (c->robust && !c->detecting ? c->offset : 0.0), 0, c->forgetting,
                             c->inv_forgetting, c->trace_max, NULL, NULL);
-    s->outlier = is_outlier(c, s->raw_error);
+    /* a jump of the law's reference by more than the monitor's bound (a step y_d) is answered
+     * within d + 1 samples: the large error it may bring then is the loop's, not a glitch (a
+     * model drifted by a long tone fits itself back on it) */
+    s->jump_left = fabs(c->r_last - c->r_last2) > c->pred_error_max ? (uint64_t)c->d + 2
+                   : (c->jump_left > 0 ? c->jump_left - 1 : 0);
+    s->outlier = s->jump_left == 0 && is_outlier(c, s->raw_error);
     if (s->outlier)
         y_meas -= s->raw_error;
     s->y_meas = y_meas;
@@ -1052,6 +1057,7 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
     c->noise_e = s->noise_e;
     c->r_anchor = s->r_anchor;
     c->excite_left = s->excite_left;
+    c->jump_left = s->jump_left;
     c->y_prev[1] = c->y_prev[0];
     c->y_prev[0] = y_meas;
     c->r_prev = s->r;
@@ -1262,7 +1268,7 @@ const char *piezo_controller_check(const piezo_controller *c)
     if (!(isfinite(c->noise_y) && c->noise_y >= 0.0 && isfinite(c->noise_e) && c->noise_e >= 0.0
           && isfinite(c->r_anchor) && isfinite(c->offset) && isfinite(c->integral) && isfinite(c->r_last)
           && isfinite(c->r_last2) && isfinite(c->r_velocity)
-          && all_finite(c->yd_value, PIEZO_MV_Q_RING)) || c->excite_left > c->excitation_samples
+          && all_finite(c->yd_value, PIEZO_MV_Q_RING)) || c->excite_left > c->excitation_samples || c->jump_left > PIEZO_MV_MAX_D + 2
         || (!c->robust && (c->noise_y != 0.0 || c->noise_e != 0.0 || c->offset != 0.0 || c->excite_left != 0
                            || c->r_anchor != 0.0 || c->r_velocity != 0.0))
         || (c->integral_gain == 0.0 && c->integral != 0.0))

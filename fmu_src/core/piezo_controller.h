@@ -171,6 +171,7 @@ typedef struct {
     double noise_e;              /* measured noise of the prediction error [um] (0: not yet) */
     double r_anchor;             /* the reference extrapolated from the last excitation to k-1 */
     uint64_t excite_left;        /* samples the RLS still updates (0: it holds its estimates) */
+    uint64_t jump_left;          /* samples no reading is taken for an outlier after a jump of r */
     double offset;               /* the estimator's offset c [um] */
     double integral;             /* z(k-1) of the integral action [um] */
     double r_last;               /* the law's reference without z at k-1 (the excitation's) */
@@ -244,6 +245,7 @@ typedef struct {
     /* robust adaptation and integral action: the states of k+1 */
     double noise_y, noise_e, r_anchor, offset, integral, r_velocity;
     uint64_t excite_left;
+    uint64_t jump_left;
     int excited;                 /* the reference excites the loop at k */
     double r_plain;              /* the reference of the law without z */
     double inv_z[PIEZO_PI_MAX_OPERATORS];    /* inverse PI play states of k+1 */
