@@ -313,42 +313,42 @@ def family_slice():
     return sut, plist, results, sut.summarize(results, plist)
 
 
-def test_family_slice_meets_targets_a_d_e_and_misses_b_by_5_percent(family_slice):
+def test_family_slice_meets_targets_a_b_d_e(family_slice):
     sut, plist, results, summary = family_slice
     # exchange: 2 stages x 2 sensors x 2 laws; Jacobi, the closed-loop FMU, one GS order: stage 0
     assert len(results) == 2 * 2 * 2 * len(plist) + 3 * (2 * 2 * len(plist))
     ours = lambda key: [r for r in summary[key] if r.law == "ours"]      # noqa: E731
-    # (a) the move after 4 s, as after 0.2 s: measured 0.896 .. 1.004 on every master here
+    # (a) the move after 4 s, as after 0.2 s: measured 0.918 .. 1.0013 on every master here
     a = ours("a")
     assert len(a) == 2 * 2 + 2 * 2 and max(r.value for r in a) <= 1.1
-    assert min(r.value for r in a) >= 0.85
-    # (d) holds within 5 (noise + grid) everywhere, and (e) no supervision verdict, no Error
+    assert min(r.value for r in a) >= 0.9
+    # (d) holds within 5 (noise + grid) everywhere (0.55 at worst), and (e) no supervision
+    # verdict, no Error
     assert max(r.value for r in ours("d")) <= 1.0
     assert summary["e"] == [] and summary["errors"] == []
     # the checking masters give the exchange's rows, bit for bit
     assert summary["equal"] and all(all(flags) for flags in summary["equal"].values())
-    # (b) 20 nm: stage 1 well within 1.25x the 1 nm reference + 0.1 um (0.33 .. 0.43); stage 0 at
-    # 1.046 (the S-curve after 4 s, exchange) and 1.055 (the step after 0.2 s, Gauss-Seidel: so
-    # not the hold's doing); the paper's law up to 574 (its S-curve after 4 s)
+    # (b) 20 nm: within 1.25x the 1 nm reference + 0.1 um everywhere (0.44 .. 0.78 measured; at
+    # 8580b7d's core stage 0 missed it by 5 %); the paper's law up to 671 (stage 1's S-curve
+    # after 4 s: 84.9 um)
     b = ours("b")
     assert len(b) == 2 * 2 * 2 + 2 * 2 * 2
-    assert max(r.value for r in b if r.stage == 1) <= 0.5
-    assert max(r.value for r in b if r.master == sut.MASTER_EXCHANGE) <= 1.05
-    assert max(r.value for r in b) <= 1.06
-    assert max(r.value for r in summary["b_paper"]) > 100
+    assert max(r.value for r in b if r.stage == 1) <= 0.8
+    assert 0.7 <= max(r.value for r in b) <= 0.8
+    assert max(r.value for r in summary["b_paper"]) > 600
     # the paper's law misses (a): the flaw of issue 35 (its step after 4 s 2.3 .. 4.8x)
     assert min(r.value for r in summary["a_paper"] if r.profile.startswith("step +10")) > 2.0
     v = sut.verdicts(summary)
-    assert v["a"][2] and not v["b"][2] and v["d"][2] and v["e"] == (0, 0, True, False)
+    assert v["a"][2] and v["b"][2] and v["d"][2] and v["e"] == (0, 0, True, False)
 
 
 def test_family_slice_scan_after_a_dwell_is_a_restart_of_the_adaptation(family_slice):
-    # target (c) is missed: the 10 Hz frame after a 10 s dwell is 1.09 .. 1.59x the steady one
-    # (docs/stage_use.md); the estimates fixed at the nominal model make it 1.0 at a tenfold
+    # target (c) is missed: the 10 Hz frame after a 10 s dwell is 0.97 .. 2.14x the steady one
+    # (docs/stage_use.md); the estimates fixed at the nominal model make it 1.0 at a larger
     # steady error: the miss is the restart of the adaptation, not of the loop
     sut, plist, results, summary = family_slice
     c = [r for r in summary["c"] if r.law == "ours" and r.master == sut.MASTER_EXCHANGE]
-    assert len(c) == 4 and max(r.value for r in c) < 1.7
+    assert len(c) == 4 and 2.0 < max(r.value for r in c) < 2.2
     worst = max(c, key=lambda r: r.value)
     task = next(t for t in sut.family_tasks(stages=2, sensors=(worst.sensor_nm,), laws=("ours",),
                                             profile_list=plist)
