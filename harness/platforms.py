@@ -118,7 +118,7 @@ PLATFORMS = (
                 "later): only KERNEL32 and msvcrt are imported")),
     Platform(
         key="aarch64-linux", fmi2=None, system="Linux", triple="aarch64-linux-gnu",
-        option="PIEZO_AARCH64", toolchain_packages=("gcc-aarch64-linux-gnu",),
+        option="PIEZO_AARCH64", toolchain_packages=("gcc-aarch64-linux-gnu", "libc6-dev-arm64-cross"),
         runner="qemu-aarch64", runner_packages=("qemu-user",),
         oldest=(f"64-bit ARM Linux with glibc >= {_GLIBC} (the first glibc for aarch64): "
                 f"RHEL/CentOS 7 for ARM, Ubuntu 14.04, Debian 8 and every later one")),
