@@ -197,11 +197,15 @@ def test_a_loop_without_y_meas_and_t_meas_is_stopped_naming_y_meas(fmu_paths):
 
 
 def test_the_closed_loop_fmu_never_runs_open_loop(closed_loop, make_fmu):
-    """PiezoStageClosedLoop has its loop wired inside: with its defaults (the internal reference)
-    it verifies its loop (sup.status 1) and says nothing of an open loop."""
+    """PiezoStageClosedLoop has its loop wired inside: with its defaults (the internal reference,
+    a 1 Hz tone from rest, the sensor on its 2 nm grid) it verifies its loop (sup.status 1, from
+    sample 501 on: measured; the quantisation floor of the response test asks the tone to grow
+    beyond the grid first) and says nothing of an open loop."""
     fmu = make_fmu(closed_loop)
     fmu.initialize()
-    fmu.step(200)
+    fmu.step(500)
+    assert fmu.get("sup.status") == 0
+    fmu.step(10)
     assert fmu.get("sup.status") == 1
     assert not [text for _, _, text in fmu.messages if OPEN_LOOP in text]
 

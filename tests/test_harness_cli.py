@@ -194,14 +194,14 @@ controller = { "sat.v_min" = -15.0, "sat.v_max" = 15.0 }
 [[scenario]]
 name = "diverging_unsupervised"
 extends = "diverging_d1"
-description = "the same loop with the supervision off: the divergence monitor catches it"
-controller = { "mv.feedthrough" = true, "mv.delay" = 0, "sup.enabled" = false }
+description = "the same loop with the supervision off, under the paper's law: the divergence monitor catches it"
+controller = { "mv.feedthrough" = true, "mv.delay" = 0, "sup.enabled" = false, "rls.robust" = false, "rls.forgetting" = 0.995, "mv.integral" = 0.0, "mv.observer" = 0.4 }
 
 [[scenario]]
 name = "diverging_unmonitored"
 extends = "diverging_d1"
-description = "the same loop with the supervision and the monitor off: the error check of the harness catches it"
-controller = { "mv.feedthrough" = true, "mv.delay" = 0, "monitor.divergence_samples" = 0, "sup.enabled" = false }
+description = "the same loop with the supervision and the monitor off, under the paper's law: the error check of the harness catches it"
+controller = { "mv.feedthrough" = true, "mv.delay" = 0, "monitor.divergence_samples" = 0, "sup.enabled" = false, "rls.robust" = false, "rls.forgetting" = 0.995, "mv.integral" = 0.0, "mv.observer" = 0.4 }
 """
 
 
@@ -215,8 +215,10 @@ controller = { "mv.feedthrough" = true, "mv.delay" = 0, "monitor.divergence_samp
 def test_a_failing_run_exits_3_with_one_line(tmp_path, backend, name, fragment):
     """The documented diverging configuration (plant tf.delay = 1, controller in
     direct-feedthrough mode with d = 1): the supervision says the loop's delay is 2; with it
-    off, the divergence monitor finds the loop unstable; with both off (the limits then hold
-    v at +-150 V) the harness's own error check finds the error larger than the reference.
+    off and the paper's law (the robust law runs this loop one sample off and tracks it, 0.15 nm
+    rms: measured), the divergence monitor finds the loop unstable; with both off (the limits
+    then hold v at +-150 V) the harness's own error check finds the error larger than the
+    reference.
     And a reference the +-15 V limits cannot reach. Each exits with code 3 and a single
     stderr line naming the scenario and why."""
     scen = tmp_path / "failing.toml"
