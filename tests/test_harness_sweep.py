@@ -288,11 +288,14 @@ def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path, mo
     assert sum(batches) == 48                           # every run went through a native batch
     c, c_off = result.counts(NAME), result.counts(off)
     assert sum(c.values()) == sum(c_off.values()) == 24
-    # seed 11 draws the same 24 plants every time: every kind of run, exactly so many (with the
-    # supervision on, 8 are stopped; with it off, none, and 4 of those 8 diverge: the stages far
-    # off the model the supervision stops; 2 did with the paper's law)
-    assert c == {"ok": 7, "diverged": 0, "saturated": 5, "invalid": 4, "stopped": 8}, c
-    assert c_off == {"ok": 8, "diverged": 4, "saturated": 8, "invalid": 4, "stopped": 0}, c_off
+    # seed 11 draws the same 24 plants every time: every kind of run, exactly so many. With the
+    # supervision on, 9 are stopped by it; with it off, none, and 6 of those 9 diverge (the stages
+    # far off the model the supervision stops). 4 more diverge either way (runs 0, 4, 13, 23,
+    # stopped by the divergence monitor at 77 to 199 ms): PI weights far off the model at 75 um
+    # and 20 Hz, near the voltage limit, which the paper's law tracked (7 ok at 36bec57) and the
+    # robust law does not: loud, and named in docs/robustness.md's stress sweep
+    assert c == {"ok": 3, "diverged": 4, "saturated": 4, "invalid": 4, "stopped": 9}, c
+    assert c_off == {"ok": 3, "diverged": 10, "saturated": 7, "invalid": 4, "stopped": 0}, c_off
     loop = native.NativeLoop()
     for name in (NAME, off):
         sc = scenarios[name]
