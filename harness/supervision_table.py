@@ -548,7 +548,7 @@ def _schedule_of(master):
 def run_spec(spec):
     """Run one :class:`RunSpec`; a :class:`RunResult` (its margins on the wired master)."""
     sc = get_scenario(spec.scenario)
-    error, warnings, mg, notes = "", [], None, ()
+    error, warnings, mg, notes, outlier = "", [], None, (), ""
     try:
         if spec.master.startswith("wired: "):
             res = simulate_wired(sc.name, _schedule_of(spec.master), (), duration=spec.duration,
@@ -571,7 +571,7 @@ def run_spec(spec):
         error = str(exc)
     except Exception as exc:     # an importer's own failure is a finding too; keep the family going
         error = f"{type(exc).__name__}: {exc}"
-    return RunResult(spec, error, warnings, mg, notes, outlier if spec.master.startswith("wired: ") else "")
+    return RunResult(spec, error, warnings, mg, notes, outlier)
 
 
 #: the harness's own masters a RunSpec may name (any scenario, tables included), by their backend
