@@ -1429,7 +1429,7 @@ static int run_checked(host_inst *in, int n, char *why, size_t why_size)
     const host_fmu *f = in->f;
     double before[32], after[32];
     int i, n_out;
-    n_out = host_real_outputs(f, in->c, before);
+    n_out = host_real_outputs(f, in->c, before, 32);
     if (n_out < 0) {
         snprintf(why, why_size, "outputs not readable: %s", in->log.last_error);
         return 0;
@@ -1441,14 +1441,14 @@ static int run_checked(host_inst *in, int n, char *why, size_t why_size)
     for (i = 0; i < n; i++) {
         host_status st = host_step(f, in->c, in->k * f->h, f->h);
         if (st == HOST_ERROR) {
-            if (host_real_outputs(f, in->c, after) != n_out || memcmp(before, after, (size_t)n_out * sizeof *after)) {
+            if (host_real_outputs(f, in->c, after, 32) != n_out || memcmp(before, after, (size_t)n_out * sizeof *after)) {
                 snprintf(why, why_size, "a refused step changed the outputs");
                 return 0;
             }
             snprintf(why, why_size, "refused: %s", in->log.last_error);
             return 1;
         }
-        if (st > HOST_ERROR || host_real_outputs(f, in->c, after) != n_out || !all_finite(after, n_out)) {
+        if (st > HOST_ERROR || host_real_outputs(f, in->c, after, 32) != n_out || !all_finite(after, n_out)) {
             snprintf(why, why_size, "status %d with a non-finite or unreadable output", (int)st);
             return 0;
         }
@@ -1465,7 +1465,7 @@ static int init_outputs_ok(host_inst *in)
     double out[32];
     int n;
     host_log_clear(&in->log);
-    n = host_real_outputs(in->f, in->c, out);
+    n = host_real_outputs(in->f, in->c, out, 32);
     return n < 0 ? in->log.n_errors > 0 : all_finite(out, n);
 }
 
@@ -1664,7 +1664,7 @@ static void extreme_values(const host_fmu *f)
                     ok = 1;
                     for (s = 1; s <= 3 && ok; s++) {
                         st = host_step(f, in.c, starts[i] + (s - 1) * f->h, f->h);
-                        n_out = host_real_outputs(f, in.c, out);
+                        n_out = host_real_outputs(f, in.c, out, 32);
                         if (st <= HOST_WARNING)
                             ok = n_out >= 0 && all_finite(out, n_out);
                         else
@@ -1993,7 +1993,7 @@ static int run_with_input(const host_fmu *f, const host_var *v, double value, in
         r->status[k] = host_step(f, in.c, k * f->h, f->h);
         if (r->status[k] == HOST_WARNING && r->first_warning[0] == '\0')
             snprintf(r->first_warning, sizeof r->first_warning, "%s", in.log.last);
-        r->n_out = host_real_outputs(f, in.c, r->out[k]);
+        r->n_out = host_real_outputs(f, in.c, r->out[k], 32);
     }
     host_get_reals(f, in.c, &v->vr, 1, &r->v_read, 1);
     host_log_clear(&in.log);

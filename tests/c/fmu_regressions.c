@@ -281,7 +281,7 @@ static int finite_or_refused2(const host_fmu *f, host_inst *in, const char *para
             *refused = 1;
             break;
         }
-        n_out = host_real_outputs(f, in->c, out);
+        n_out = host_real_outputs(f, in->c, out, 32);
         if (n_out < 0 || !all_finite(out, n_out))
             ok = 0;
         *ran = k + 1;

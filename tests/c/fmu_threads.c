@@ -19,7 +19,7 @@
 
 #define N_THREADS 8
 #define N_SAMPLES 2000
-#define MAX_OUT 16
+#define MAX_OUT 32
 
 typedef struct {
     const host_fmu *f;
@@ -64,7 +64,7 @@ static void *run(void *arg)
         if (k % 250 == 125 && !state_round_trip(f, in.c))
             break;
         if (!host_set_inputs(f, in.c, r->config, k) || host_step(f, in.c, k * f->h, f->h) > HOST_WARNING
-            || host_real_outputs(f, in.c, r->outputs + (size_t)k * MAX_OUT) < 0)
+            || host_real_outputs(f, in.c, r->outputs + (size_t)k * MAX_OUT, MAX_OUT) < 0)
             break;
         r->n_done = k + 1;
     }

@@ -37,7 +37,7 @@
 #include <unistd.h>
 
 #define N_SAMPLES 3000
-#define MAX_OUT 16
+#define MAX_OUT 32
 
 /* Samples [k0, n) of configuration `config` on a prepared instance. */
 static int run_samples(const host_fmu *f, void *c, int config, int k0, int n, double *outputs)
@@ -45,7 +45,7 @@ static int run_samples(const host_fmu *f, void *c, int config, int k0, int n, do
     int k;
     for (k = k0; k < n; k++)
         if (!host_set_inputs(f, c, config, k) || host_step(f, c, k * f->h, f->h) > HOST_WARNING
-            || host_real_outputs(f, c, outputs + (size_t)(k - k0) * MAX_OUT) < 0)
+            || host_real_outputs(f, c, outputs + (size_t)(k - k0) * MAX_OUT, MAX_OUT) < 0)
             return 0;
     return 1;
 }

@@ -363,13 +363,18 @@ static inline fmi2Status host2_set_named(const host2_fmu *f, fmi2Component c, co
     return host2_set(f, c, v, value);
 }
 
-/* Every Real output into out[] (in variable order); returns how many, or -1 on fmi2Error. */
-static inline int host2_real_outputs(const host2_fmu *f, fmi2Component c, double *out)
+/* Every Real output into out[capacity] (in variable order); returns how many, or -1 on fmi2Error
+ * or more outputs than capacity (a FAIL). */
+static inline int host2_real_outputs(const host2_fmu *f, fmi2Component c, double *out, int capacity)
 {
     int i, n = 0;
     for (i = 0; i < f->n_vars; i++) {
         if (f->vars[i].causality != VAR_OUTPUT || f->vars[i].type != VAR_REAL)
             continue;
+        if (n >= capacity) {
+            host_fail("%s has more than %d Real outputs: the host's buffer is too small", f->id, capacity);
+            return -1;
+        }
         if (f->api.GetReal(c, &f->vars[i].vr, 1, &out[n]) != fmi2OK)
             return -1;
         n++;

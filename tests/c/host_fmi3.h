@@ -382,13 +382,18 @@ static inline fmi3Status host3_set_named(const host3_fmu *f, fmi3Instance c, con
     return f->api.SetFloat64(c, &v->vr, 1, x, (size_t)v->n);
 }
 
-/* Every Float64 output into out[] (in variable order); returns how many, or -1 on fmi3Error. */
-static inline int host3_real_outputs(const host3_fmu *f, fmi3Instance c, double *out)
+/* Every Float64 output into out[capacity] (in variable order); returns how many, or -1 on
+ * fmi3Error or more outputs than capacity (a FAIL). */
+static inline int host3_real_outputs(const host3_fmu *f, fmi3Instance c, double *out, int capacity)
 {
     int i, n = 0;
     for (i = 0; i < f->n_vars; i++) {
         if (f->vars[i].causality != VAR_OUTPUT || f->vars[i].type != VAR_REAL)
             continue;
+        if (n >= capacity) {
+            host_fail("%s has more than %d Real outputs: the host's buffer is too small", f->id, capacity);
+            return -1;
+        }
         if (f->api.GetFloat64(c, &f->vars[i].vr, 1, &out[n], 1) != fmi3OK)
             return -1;
         n++;
