@@ -166,36 +166,76 @@ def test_controller_refuses_pi_parameters_without_a_finite_inverse(params, param
 
 
 def test_controller_refuses_a_sample_that_overflows_its_covariance_and_keeps_its_state():
-    """y_meas = 1e200 with mv.delay set (no detection): at the second sample
-    phi = [-1e200, 0, q, 0], so phi^T P phi = 1e400 overflows; P - P phi phi^T P /
+    """y_meas = 5e153 with mv.delay set (no detection) and rls.p0 = 25: at the second sample
+    phi = [-5e153, 0, q, 0], so phi^T P phi = 25 * 2.5e307 overflows; P - P phi phi^T P /
     (lambda + phi^T P phi) is Inf / Inf = NaN while theta and every output stay finite (the
-    update K e is 1e200 / Inf = 0). That sample is refused as divergence and the controller
+    update K e is 5e153 / Inf = 0), and so does the outlier test's sum of squared errors
+    (2.5e307 (1 + lambda)). That sample is refused as divergence and the controller
     is the one before it (supervision off: its sums of squared changes overflow at the first
-    sample). With the delay detected (the default) the first sample already
+    sample). With y_meas = 1e200 and the delay detected (the default) the first sample already
     overflows: its squared a-priori error, 1e400, enters the candidates' sums; it is refused
     the same way, and so is it with the supervision on. (Voltage limits off: a clipped first
     sample would pause the adaptation over the second.) The loop's update is the paper's here
     (rls.robust = false): the robust update adapts only while the reference moves by more
-    than rls.excitation times the measured noise of y_meas, which such a y_meas makes 1e200
-    um, so it holds its estimates and nothing overflows (checked too)."""
-    assert 1e200 * 1e200 == math.inf
-    ctrl = core.Controller({"sat.enabled": False, "mv.delay": 1, "sup.enabled": False, "rls.robust": False})
-    ctrl.step(0.0, 1e200)
+    than rls.excitation times the measured noise of y_meas, which such a y_meas makes huge,
+    so it holds its estimates (checked with y_meas = 1e150); at 1e200 its first sample is
+    refused too, since the outlier test's sum of squared a-priori errors, 1e400, overflows
+    (committing it left a state that its own check refuses: found by the fuzzer)."""
+    assert 1e200 * 1e200 == math.inf and 25.0 * 5e153 * 5e153 == math.inf
+    assert 5e153 * 5e153 * (2.0 - 1.0 / 200.0) < math.inf
+    ctrl = core.Controller({"sat.enabled": False, "mv.delay": 1, "sup.enabled": False, "rls.robust": False,
+                            "rls.p0": 25.0})
+    ctrl.step(0.0, 5e153)
     before = snapshot(ctrl.raw, "piezo_controller")
-    with pytest.raises(core.CoreDivergedError):
-        ctrl.step(0.0, 1e200)
+    with pytest.raises(core.CoreDivergedError, match="not finite"):
+        ctrl.step(0.0, 5e153)
     assert snapshot(ctrl.raw, "piezo_controller") == before
     assert ctrl.k == 1
     robust = core.Controller({"sat.enabled": False, "mv.delay": 1, "sup.enabled": False})
     for k in range(5):
-        robust.step(float(k), 1e200)
+        robust.step(float(k), 1e150)
         assert not robust.raw.out.adapting and list(robust.raw.P) == [0.01 if i % 5 == 0 else 0.0 for i in range(16)]
+        assert check_text(core.lib().piezo_controller_check(robust.raw)) is None
+    robust.reset()
+    before = snapshot(robust.raw, "piezo_controller")
+    with pytest.raises(core.CoreDivergedError, match="not finite"):
+        robust.step(0.0, 1e200)
+    assert snapshot(robust.raw, "piezo_controller") == before and robust.k == 0
     for params in ({"sat.enabled": False}, {"sat.enabled": False, "mv.delay": 1}):
         first = core.Controller(params)
         before = snapshot(first.raw, "piezo_controller")
         with pytest.raises(core.CoreDivergedError):
             first.step(0.0, 1e200)
         assert snapshot(first.raw, "piezo_controller") == before and first.k == 0, params
+
+
+def test_controller_refuses_a_sample_that_overflows_its_outlier_sums_and_keeps_its_state():
+    """Found by fuzz_deserialize (tests/c/fuzz_crashes/, outlier_err_sum_overflow): the
+    outlier test's sum of squared a-priori errors, E(k+1) = lambda E(k) + e^2, overflowed
+    while theta, P and every output stayed finite (adaptation paused on a clipped sample),
+    and the controller committed E = Inf: a state its own check refuses, so it could no
+    longer be saved and restored. Such a sample is refused as divergence, like any value
+    not finite, and the controller is the one before it. Here E is set to DBL_MAX (a state
+    the check accepts) and the next accepted error is 1e153: lambda DBL_MAX + 1e306 is Inf
+    (lambda = 1 - 1/200)."""
+    dbl_max = 1.7976931348623157e308
+    assert (1.0 - 1.0 / 200.0) * dbl_max + 1e153 * 1e153 == math.inf
+    ctrl = core.Controller()
+    plant = core.Plant()
+    y = 0.0
+    for k in range(400):
+        y = plant.step(ctrl.step(5.0 * math.sin(2.0 * math.pi * 5.0 * k * 5e-4), y).v).y_meas
+    ctrl.raw.err_sum = dbl_max
+    ctrl.raw.quiet = 0                       # not an isolated sample: not taken for an outlier
+    assert check_text(core.lib().piezo_controller_check(ctrl.raw)) is None
+    before = snapshot(ctrl.raw, "piezo_controller")
+    with pytest.raises(core.CoreDivergedError, match="not finite"):
+        ctrl.step(0.0, 1e153)
+    assert snapshot(ctrl.raw, "piezo_controller") == before and ctrl.k == 400
+    ctrl.raw.err_sum = 1.0                   # the same sample with room in the sum is accepted
+    ctrl.step(0.0, 1e153)
+    assert ctrl.raw.err_sum == (1.0 - 1.0 / 200.0) * 1.0 + 1e153 * 1e153
+    assert check_text(core.lib().piezo_controller_check(ctrl.raw)) is None
 
 
 def test_controller_check_accepts_runs_and_names_tampered_fields():
@@ -227,6 +267,15 @@ def test_controller_check_accepts_runs_and_names_tampered_fields():
     raw.P[1] = raw.P[4] * (1 + 2 ** -52) if raw.P[4] != 0 else 1e-300
     assert "symmetric" in (check_text(lib.piezo_controller_check(raw)) or "")
     raw.P[1] = old
+    assert check_text(lib.piezo_controller_check(raw)) is None
+    # the outputs a restored state publishes (found by fuzz_deserialize: an adapting of 2
+    # was accepted, published as est.adapting, and the state then no longer restored)
+    for field, value, fragment in [("adapting", 2, "adapting output is not 0 or 1"),
+                                   ("noise", -1e-9, "noise output"), ("noise", math.inf, "noise output")]:
+        old = getattr(raw.out, field)
+        setattr(raw.out, field, value)
+        assert fragment in (check_text(lib.piezo_controller_check(raw)) or ""), field
+        setattr(raw.out, field, old)
     assert check_text(lib.piezo_controller_check(raw)) is None
     # ... and so is each delay candidate's (the same update), while detecting or after
     auto = core.Controller({"monitor.divergence_samples": 0, "sup.enabled": False})

@@ -660,7 +660,13 @@ static int sample_state_finite(const piezo_controller *c, const piezo_controller
      * its gain szw / sww overflows where sww is tiny and szw huge (a restored state) */
     enum { SUP_DOUBLES = (offsetof(piezo_supervisor_next, clip_error_sum) - offsetof(piezo_supervisor_next, z))
                          / sizeof(double) + 1 };
-    return all_finite(s->out.theta, 4)
+    /* the robust update's and the outlier test's next doubles: a square or a difference of
+     * finite values overflows (e^2 of a huge a-priori error, y(k) - y(k-1)); the monitor's
+     * sums are bounded by 1 / (1 - lambda) and computed after this check */
+    const double scalars[] = { s->noise_y, s->noise_e, s->r_anchor, s->offset, s->integral, s->r_velocity,
+                               s->r_plain, s->y_meas, s->raw_error, s->outlier ? s->y_meas + s->raw_error : 0.0,
+                               s->err_sum, s->err_weight, s->outlier_sum };
+    return all_finite(scalars, (int)(sizeof scalars / sizeof scalars[0])) && all_finite(s->out.theta, 4)
            && (!c->sup.enabled || (all_finite(&s->sup.z, SUP_DOUBLES) && isfinite(s->sup.gain)))
            && (!s->rls_updated || all_finite(s->P, 16))
            && (!s->detecting || (all_finite(s->det_theta, PIEZO_DETECT_THETA)
@@ -1325,10 +1331,12 @@ const char *piezo_controller_check(const piezo_controller *c)
     if (!(isfinite(o->v) && isfinite(o->q) && isfinite(o->pred_error) && all_finite(o->theta, 4)))
         return "controller outputs not finite";
     if (o->saturated != 0 && o->saturated != 1) return "saturated output is not 0 or 1";
+    if (o->adapting != 0 && o->adapting != 1) return "adapting output is not 0 or 1";
+    if (!(isfinite(o->noise) && o->noise >= 0.0)) return "noise output not finite or negative";
     if (o->delay < 0 || o->delay > PIEZO_MV_MAX_D || (o->preview != 0 && o->preview != 1))
         return "delay or preview output out of range";
     if (c->fault && (o->v != safe_v(c, c->v_fault, c->k - 1 - c->k_fault) || o->q != 0.0 || o->pred_error != 0.0
-                     || o->saturated || o->preview || memcmp(o->theta, c->theta, sizeof o->theta) != 0))
+                     || o->saturated || o->preview || o->adapting || memcmp(o->theta, c->theta, sizeof o->theta) != 0))
         return "safe state's outputs differ from its ramp";
     return NULL;
 }
