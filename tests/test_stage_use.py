@@ -380,7 +380,6 @@ def test_a_noise_free_quantised_sensor_in_a_dwell_is_not_taken_for_no_response(s
     assert len(run.scans) == 1 and run.scans[0][0] < 0.015
 
 
-
 def test_a_step_after_a_long_tone_is_not_taken_for_an_outlier():
     """Reference: the move of the family's stage 42 with the 20 nm sensor after 60 s of a 1 Hz,
     10 um tone (docs/stage_use.md). The tone leaves the estimates fitted to one frequency, so the

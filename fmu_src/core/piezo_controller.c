@@ -661,12 +661,15 @@ static int sample_state_finite(const piezo_controller *c, const piezo_controller
     enum { SUP_DOUBLES = (offsetof(piezo_supervisor_next, clip_error_sum) - offsetof(piezo_supervisor_next, z))
                          / sizeof(double) + 1 };
     /* the robust update's and the outlier test's next doubles: a square or a difference of
-     * finite values overflows (e^2 of a huge a-priori error, y(k) - y(k-1)); the monitor's
-     * sums are bounded by 1 / (1 - lambda) and computed after this check */
-    const double scalars[] = { s->noise_y, s->noise_e, s->r_anchor, s->offset, s->integral, s->r_velocity,
-                               s->r_plain, s->y_meas, s->raw_error, s->outlier ? s->y_meas + s->raw_error : 0.0,
-                               s->err_sum, s->err_weight, s->outlier_sum };
-    return all_finite(scalars, (int)(sizeof scalars / sizeof scalars[0])) && all_finite(s->out.theta, 4)
+     * finite values overflows (e^2 of a huge a-priori error, y(k) - y(k-1)). x * 0 is 0 for a
+     * finite x and NaN otherwise (all_finite's test, here without building an array on the
+     * sample's path). Not checked, since they cannot overflow: the weights err_weight and
+     * outlier_sum, and the monitor's sums (at most 1 / (1 - lambda)); the raw a-priori error
+     * (finite when err_sum is, or, for an outlier, when the y_meas it left is) */
+    const double robust_zero = s->noise_y * 0.0 + s->noise_e * 0.0 + s->r_anchor * 0.0 + s->offset * 0.0
+                               + s->integral * 0.0 + s->r_velocity * 0.0 + s->r_plain * 0.0 + s->y_meas * 0.0
+                               + s->err_sum * 0.0 + (s->outlier ? s->y_meas + s->raw_error : 0.0) * 0.0;
+    return robust_zero == 0.0 && all_finite(s->out.theta, 4)
            && (!c->sup.enabled || (all_finite(&s->sup.z, SUP_DOUBLES) && isfinite(s->sup.gain)))
            && (!s->rls_updated || all_finite(s->P, 16))
            && (!s->detecting || (all_finite(s->det_theta, PIEZO_DETECT_THETA)

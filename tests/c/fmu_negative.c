@@ -1427,9 +1427,9 @@ static const int extreme_ints[] = {INT_MIN, -1000001, -1, 0, 1, 2, 8, 9, 16, 17,
 static int run_checked(host_inst *in, int n, char *why, size_t why_size)
 {
     const host_fmu *f = in->f;
-    double before[32], after[32];
+    double before[HOST_MAX_OUTPUTS], after[HOST_MAX_OUTPUTS];
     int i, n_out;
-    n_out = host_real_outputs(f, in->c, before, 32);
+    n_out = host_real_outputs(f, in->c, before, HOST_MAX_OUTPUTS);
     if (n_out < 0) {
         snprintf(why, why_size, "outputs not readable: %s", in->log.last_error);
         return 0;
@@ -1441,14 +1441,14 @@ static int run_checked(host_inst *in, int n, char *why, size_t why_size)
     for (i = 0; i < n; i++) {
         host_status st = host_step(f, in->c, in->k * f->h, f->h);
         if (st == HOST_ERROR) {
-            if (host_real_outputs(f, in->c, after, 32) != n_out || memcmp(before, after, (size_t)n_out * sizeof *after)) {
+            if (host_real_outputs(f, in->c, after, HOST_MAX_OUTPUTS) != n_out || memcmp(before, after, (size_t)n_out * sizeof *after)) {
                 snprintf(why, why_size, "a refused step changed the outputs");
                 return 0;
             }
             snprintf(why, why_size, "refused: %s", in->log.last_error);
             return 1;
         }
-        if (st > HOST_ERROR || host_real_outputs(f, in->c, after, 32) != n_out || !all_finite(after, n_out)) {
+        if (st > HOST_ERROR || host_real_outputs(f, in->c, after, HOST_MAX_OUTPUTS) != n_out || !all_finite(after, n_out)) {
             snprintf(why, why_size, "status %d with a non-finite or unreadable output", (int)st);
             return 0;
         }
@@ -1462,10 +1462,10 @@ static int run_checked(host_inst *in, int n, char *why, size_t why_size)
 /* Initialization outputs (read in InitializationMode): Error with a message, or finite values. */
 static int init_outputs_ok(host_inst *in)
 {
-    double out[32];
+    double out[HOST_MAX_OUTPUTS];
     int n;
     host_log_clear(&in->log);
-    n = host_real_outputs(in->f, in->c, out, 32);
+    n = host_real_outputs(in->f, in->c, out, HOST_MAX_OUTPUTS);
     return n < 0 ? in->log.n_errors > 0 : all_finite(out, n);
 }
 
@@ -1659,12 +1659,12 @@ static void extreme_values(const host_fmu *f)
                     snprintf(why, sizeof why, "refused: %s", in.log.last_error);
                 } else {
                     /* step from t0 by whole samples: refused when t0 + k h leaves the doubles */
-                    double out[32];
+                    double out[HOST_MAX_OUTPUTS];
                     int n_out, s;
                     ok = 1;
                     for (s = 1; s <= 3 && ok; s++) {
                         st = host_step(f, in.c, starts[i] + (s - 1) * f->h, f->h);
-                        n_out = host_real_outputs(f, in.c, out, 32);
+                        n_out = host_real_outputs(f, in.c, out, HOST_MAX_OUTPUTS);
                         if (st <= HOST_WARNING)
                             ok = n_out >= 0 && all_finite(out, n_out);
                         else
@@ -1969,7 +1969,7 @@ static void edge_value_counts(const host_fmu *f)
  * initialization or after it): the outputs after each step, the statuses,
  * the first warning, Terminate's status and message, v read back. */
 typedef struct {
-    double out[8][32];
+    double out[8][HOST_MAX_OUTPUTS];
     int n_out;
     host_status status[8], terminate;
     char first_warning[1024], terminate_message[1024];
@@ -1993,7 +1993,7 @@ static int run_with_input(const host_fmu *f, const host_var *v, double value, in
         r->status[k] = host_step(f, in.c, k * f->h, f->h);
         if (r->status[k] == HOST_WARNING && r->first_warning[0] == '\0')
             snprintf(r->first_warning, sizeof r->first_warning, "%s", in.log.last);
-        r->n_out = host_real_outputs(f, in.c, r->out[k], 32);
+        r->n_out = host_real_outputs(f, in.c, r->out[k], HOST_MAX_OUTPUTS);
     }
     host_get_reals(f, in.c, &v->vr, 1, &r->v_read, 1);
     host_log_clear(&in.log);

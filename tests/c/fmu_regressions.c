@@ -253,7 +253,7 @@ static void defect3_stop_time(const host_fmu *f)
 static int finite_or_refused2(const host_fmu *f, host_inst *in, const char *param, double value, const char *param2,
                               double value2, double input, double input2, int n, int *refused, int *ran)
 {
-    double out[32];
+    double out[HOST_MAX_OUTPUTS];
     int k, i, n_out, ok = 1, first_input = 1;
     *refused = 0;
     *ran = 0;
@@ -281,7 +281,7 @@ static int finite_or_refused2(const host_fmu *f, host_inst *in, const char *para
             *refused = 1;
             break;
         }
-        n_out = host_real_outputs(f, in->c, out, 32);
+        n_out = host_real_outputs(f, in->c, out, HOST_MAX_OUTPUTS);
         if (n_out < 0 || !all_finite(out, n_out))
             ok = 0;
         *ran = k + 1;

@@ -19,12 +19,11 @@
 
 #define N_THREADS 8
 #define N_SAMPLES 2000
-#define MAX_OUT 32
 
 typedef struct {
     const host_fmu *f;
     int config;
-    double *outputs;            /* N_SAMPLES x MAX_OUT */
+    double *outputs;            /* N_SAMPLES x HOST_MAX_OUTPUTS */
     int n_done;                 /* samples completed */
     int ok;
     pthread_barrier_t *start;
@@ -64,7 +63,7 @@ static void *run(void *arg)
         if (k % 250 == 125 && !state_round_trip(f, in.c))
             break;
         if (!host_set_inputs(f, in.c, r->config, k) || host_step(f, in.c, k * f->h, f->h) > HOST_WARNING
-            || host_real_outputs(f, in.c, r->outputs + (size_t)k * MAX_OUT, MAX_OUT) < 0)
+            || host_real_outputs(f, in.c, r->outputs + (size_t)k * HOST_MAX_OUTPUTS, HOST_MAX_OUTPUTS) < 0)
             break;
         r->n_done = k + 1;
     }
@@ -81,7 +80,7 @@ static void phase(const char *name, const host_fmu **fmus, const int *configs)
     pthread_barrier_t start;
     int t, started = 1;
     for (t = 0; t < N_THREADS; t++) {
-        size_t bytes = (size_t)N_SAMPLES * MAX_OUT * sizeof(double);
+        size_t bytes = (size_t)N_SAMPLES * HOST_MAX_OUTPUTS * sizeof(double);
         seq[t].f = par[t].f = fmus[t];
         seq[t].config = par[t].config = configs[t];
         seq[t].outputs = calloc(1, bytes);
@@ -103,12 +102,12 @@ static void phase(const char *name, const host_fmu **fmus, const int *configs)
     /* the runs differ, so a thread reading another's state could not go unnoticed */
     for (t = 1; t < N_THREADS; t++)
         if (fmus[t] == fmus[0])
-            check(memcmp(seq[t].outputs, seq[0].outputs, (size_t)N_SAMPLES * MAX_OUT * sizeof(double)) != 0,
+            check(memcmp(seq[t].outputs, seq[0].outputs, (size_t)N_SAMPLES * HOST_MAX_OUTPUTS * sizeof(double)) != 0,
                   "%s: configurations %d and %d give different outputs", name, configs[0], configs[t]);
     for (t = 0; t < N_THREADS; t++) {
         check(seq[t].ok, "%s: thread %d (%s, configuration %d) ran %d samples alone", name, t, fmus[t]->id,
               configs[t], seq[t].n_done);
-        check(par[t].ok && memcmp(seq[t].outputs, par[t].outputs, (size_t)N_SAMPLES * MAX_OUT * sizeof(double)) == 0,
+        check(par[t].ok && memcmp(seq[t].outputs, par[t].outputs, (size_t)N_SAMPLES * HOST_MAX_OUTPUTS * sizeof(double)) == 0,
               "%s: thread %d (%s, configuration %d) concurrently: %d samples, bitwise equal to the sequential run",
               name, t, fmus[t]->id, configs[t], par[t].n_done);
         free(seq[t].outputs);

@@ -37,7 +37,6 @@
 #include <unistd.h>
 
 #define N_SAMPLES 3000
-#define MAX_OUT 32
 
 /* Samples [k0, n) of configuration `config` on a prepared instance. */
 static int run_samples(const host_fmu *f, void *c, int config, int k0, int n, double *outputs)
@@ -45,7 +44,7 @@ static int run_samples(const host_fmu *f, void *c, int config, int k0, int n, do
     int k;
     for (k = k0; k < n; k++)
         if (!host_set_inputs(f, c, config, k) || host_step(f, c, k * f->h, f->h) > HOST_WARNING
-            || host_real_outputs(f, c, outputs + (size_t)(k - k0) * MAX_OUT, MAX_OUT) < 0)
+            || host_real_outputs(f, c, outputs + (size_t)(k - k0) * HOST_MAX_OUTPUTS, HOST_MAX_OUTPUTS) < 0)
             return 0;
     return 1;
 }
@@ -59,7 +58,7 @@ static int child(const char *mode, char **argv)
     int ok, from = first ? 0 : k0;
     size_t size = 0;
     unsigned char *blob = first ? NULL : (unsigned char *)host_read_file(argv[5], &size);
-    double *outputs = calloc((size_t)(n - from) * MAX_OUT, sizeof *outputs);
+    double *outputs = calloc((size_t)(n - from) * HOST_MAX_OUTPUTS, sizeof *outputs);
     if ((!first && blob == NULL) || outputs == NULL || !host_load(&f, argv[0], argv[1]))
         return 3;
     if (first) {
@@ -67,14 +66,14 @@ static int child(const char *mode, char **argv)
              && host_apply_config(&f, in.c, config) && f.api.ExitInitializationMode(in.c) == HOST_OK
              && run_samples(&f, in.c, config, 0, k0, outputs) && (blob = host_snapshot(&f, in.c, &size)) != NULL
              && host_write_file(argv[5], blob, size)
-             && run_samples(&f, in.c, config, k0, n, outputs + (size_t)k0 * MAX_OUT);
+             && run_samples(&f, in.c, config, k0, n, outputs + (size_t)k0 * HOST_MAX_OUTPUTS);
     } else {
         host_state s = NULL;
         ok = host_instantiate(&in, &f, "resumed") != NULL && host_deserialize(&f, in.c, blob, size, &s) == HOST_OK
              && host_set_state(&f, in.c, s) == HOST_OK && host_free_state(&f, in.c, &s) == HOST_OK
              && run_samples(&f, in.c, config, k0, n, outputs);
     }
-    ok = ok && host_write_file(argv[6], outputs, (size_t)(n - from) * MAX_OUT * sizeof *outputs);
+    ok = ok && host_write_file(argv[6], outputs, (size_t)(n - from) * HOST_MAX_OUTPUTS * sizeof *outputs);
     if (!ok)
         printf("%s failed: %s\n", first ? "first run" : "resume", in.log.last_error);
     host_free_instance(&in);
@@ -137,14 +136,14 @@ static void one(const char *id, const edition *from, const edition *to, int conf
          && run_child(from->binary, "--first", from->xml, from->so, config, state_file, ref_file) == 0
          && (blob = (unsigned char *)host_read_file(state_file, &size)) != NULL && size > 0
          && (reference = (double *)(void *)host_read_file(ref_file, &ref_size)) != NULL
-         && ref_size == (size_t)N_SAMPLES * MAX_OUT * sizeof(double);
+         && ref_size == (size_t)N_SAMPLES * HOST_MAX_OUTPUTS * sizeof(double);
     if (!check(ok, "%s configuration %d: %s, state saved at %d (%llu bytes)", id, config, ran, half,
                (unsigned long long)size))
         goto done;
     status = run_child(to->binary, "--resume", to->xml, to->so, config, state_file, out_file);
     theirs = (double *)(void *)host_read_file(out_file, &their_size);
-    check(status == 0 && theirs != NULL && their_size == (size_t)(N_SAMPLES - half) * MAX_OUT * sizeof(double)
-              && memcmp(theirs, reference + (size_t)half * MAX_OUT, their_size) == 0,
+    check(status == 0 && theirs != NULL && their_size == (size_t)(N_SAMPLES - half) * HOST_MAX_OUTPUTS * sizeof(double)
+              && memcmp(theirs, reference + (size_t)half * HOST_MAX_OUTPUTS, their_size) == 0,
           "%s configuration %d: %sanother process continued samples %d..%d from the file, bitwise equal "
           "(exit status %d)", id, config, pair, half, N_SAMPLES, status);
 done:

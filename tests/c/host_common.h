@@ -26,6 +26,10 @@
 
 #include "state_format.h"
 
+/* the Real outputs a host's buffers hold (host_real_outputs fails beyond it; the closed-loop
+ * FMU has 17) */
+#define HOST_MAX_OUTPUTS 32
+
 /* ------------------------------------------------------------------------ */
 /* checks                                                                    */
 
