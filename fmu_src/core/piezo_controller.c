@@ -71,6 +71,14 @@
  * no longer stops it (measured: not within 3000 samples; 86 with 0.995 and 100). */
 #define DETECT_FORGETTING 0.995
 #define DETECT_TRACE_MAX 100.0
+/* The admissible set's projection (docs/model.md, "Estimates with guarantees"): sweeps of
+ * P-metric half-space projections over the violated rows, then a radial step towards the
+ * nominal model (inside the set) that ends inside it whatever the sweeps left. */
+#define ADMISSIBLE_SWEEPS 8
+/* The fallback's prediction test counts only beyond this many times the measured noise of
+ * y_meas (per sample, over the window): two models that both predict within the noise are
+ * not told apart. */
+#define FALLBACK_NOISE 3.0
 
 /* The loop delay's one home is PIEZO_MV_MAX_D (piezo_supervisor.h); the literals the
  * binding reads beside it follow from it. */
@@ -125,6 +133,17 @@ void piezo_controller_default_params(piezo_controller_params *p)
     p->monitor_divergence_samples = PIEZO_MONITOR_DEFAULT_SAMPLES;
     piezo_supervisor_default_params(&p->sup);
     p->mv_probe_max = PIEZO_DETECT_PROBE_MAX;
+    /* estimates with guarantees (docs/model.md): measured on the stage family's days and the
+     * paper's scenarios. The zero of B at 0.5 or above (a drift to -0.3 rang +-44 um; the
+     * paper's tones move it to 0.66-0.95), poles of A in the hull of real poles in [0, 1) (a
+     * fast pole driven to -0.3 by a 1 Hz tone overshot a step by 8.5 um), b1 and the static
+     * gain within a factor 2 of the nominal model's (a 10 Hz raster drove the gain to 6.5
+     * times it); the fallback at twice the nominal model's squared errors over 0.5 s */
+    p->rls_zero_min = 0.5;
+    p->rls_pole_min = 0.0;
+    p->rls_gain_band = 2.0;
+    p->rls_fallback_ratio = 2.0;
+    p->rls_fallback_window = 0.5;
 }
 
 piezo_status piezo_diophantine(double a1, double a2, int d, double *e, double *g)
@@ -158,6 +177,57 @@ piezo_status piezo_diophantine_observer(double a1, double a2, double t, int d, d
 static double monitor_forgetting(int window)
 {
     return window > 0 ? 1.0 - 1.0 / (double)window : 0.0;
+}
+
+/*
+ * The admissible set of the robust update's estimates theta = [a1, a2, b1, b2] (docs/model.md,
+ * "Estimates with guarantees"), as rows c^T theta <= d, from the nominal model n, the lowest
+ * zero z (rls.zero_min), the lowest pole p (rls.pole_min) and the band g (rls.gain_band);
+ * A(x) = 1 + a1 x^-1 + a2 x^-2, so A(1) = 1 + a1 + a2, and m = A_STABILITY_MARGIN:
+ *   A's poles in the convex hull of {real poles in [p, 1)}, the triangle of
+ *     A(1) >= m                    (no pole at 1 or beyond):   -a1 - a2 <= 1 - m
+ *     p^2 + a1 p + a2 >= 0         (both poles on one side of p): -p a1 - a2 <= p^2
+ *     a2 + (1 + p)/2 a1 <= -p - m  (the chord from the double pole at p to the one at 1: complex
+ *                                   poles only where they are damped as real ones between)
+ *   B's zero -b2/b1 in [z, 0.999] (b1 > 0):  -0.999 b1 - b2 <= 0,  z b1 + b2 <= 0
+ *   b1 within [n_b1 / g, g n_b1]:            b1 <= g n_b1,  -b1 <= -n_b1 / g
+ *   B(1)/A(1) within [K / g, g K], K the nominal's (A(1) > 0 by the first row):
+ *     b1 + b2 - g K (1 + a1 + a2) <= 0,   (K / g)(1 + a1 + a2) - b1 - b2 <= 0.
+ * Every row is linear in theta: the set is a convex polytope (the hull, not the real-pole set
+ * itself, which is not convex).
+ */
+static void admissible_rows(const double *n, double z, double p, double g, double rows[][4], double *d)
+{
+    const double m = A_STABILITY_MARGIN;
+    const double gain = (n[2] + n[3]) / (1.0 + n[0] + n[1]);
+    int r = 0;
+#define ADMISSIBLE_ROW(x0, x1, x2, x3, bound) \
+    do { rows[r][0] = (x0); rows[r][1] = (x1); rows[r][2] = (x2); rows[r][3] = (x3); d[r] = (bound); ++r; } while (0)
+    ADMISSIBLE_ROW(-1.0, -1.0, 0.0, 0.0, 1.0 - m);
+    ADMISSIBLE_ROW(-p, -1.0, 0.0, 0.0, p * p);
+    ADMISSIBLE_ROW((1.0 + p) / 2.0, 1.0, 0.0, 0.0, -p - m);
+    ADMISSIBLE_ROW(0.0, 0.0, -ZERO_RADIUS_MAX, -1.0, 0.0);
+    ADMISSIBLE_ROW(0.0, 0.0, z, 1.0, 0.0);
+    ADMISSIBLE_ROW(0.0, 0.0, 1.0, 0.0, g * n[2]);
+    ADMISSIBLE_ROW(0.0, 0.0, -1.0, 0.0, -n[2] / g);
+    ADMISSIBLE_ROW(-g * gain, -g * gain, 1.0, 1.0, g * gain);
+    ADMISSIBLE_ROW(gain / g, gain / g, -1.0, -1.0, -gain / g);
+#undef ADMISSIBLE_ROW
+}
+
+/* c^T theta - d of one row (> 0: theta violates it), in one fixed order */
+static double admissible_excess(const double *row, double d, const double *th)
+{
+    return (((row[0] * th[0] + row[1] * th[1]) + row[2] * th[2]) + row[3] * th[3]) - d;
+}
+
+/* The first row of the admissible set theta violates, -1 when it is inside. */
+static int admissible_violated(const piezo_controller *c, const double *th)
+{
+    int i;
+    for (i = 0; i < PIEZO_ADMISSIBLE_ROWS; ++i)
+        if (admissible_excess(c->adm_c[i], c->adm_d[i], th) > 0.0) return i;
+    return -1;
 }
 
 piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_params *p, piezo_diag *diag)
@@ -228,6 +298,42 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
                             (double)p->monitor_divergence_samples);
     if (!(isfinite(p->mv_probe_max) && p->mv_probe_max >= 0.0))
         return piezo_refuse(diag, "mv.probe_max", "[0, inf) um (0: no delay probe)", p->mv_probe_max);
+    /* the admissible set must hold the nominal model: the estimates start there, and the fallback
+     * returns there (tf.b1 > 0 and |tf.b2| <= 0.999 tf.b1 are checked above) */
+    if (!(isfinite(p->rls_zero_min) && p->rls_zero_min >= -ZERO_RADIUS_MAX && p->rls_zero_min <= -p->tf_b2 / p->tf_b1))
+        return piezo_refuse(diag, "rls.zero_min", "[-0.999, the nominal zero -tf.b2/tf.b1] (lowest zero of B "
+                            "the estimates may have)", p->rls_zero_min);
+    if (!(isfinite(p->rls_pole_min) && p->rls_pole_min >= -1.0 && p->rls_pole_min < 1.0))
+        return piezo_refuse(diag, "rls.pole_min", "[-1, 1) (the poles of A in the hull of real poles in "
+                            "[rls.pole_min, 1))", p->rls_pole_min);
+    if (!(isfinite(p->rls_gain_band) && p->rls_gain_band > 1.0 && p->rls_gain_band <= 1e6))
+        return piezo_refuse(diag, "rls.gain_band", "(1, 1e6] (b1 and the static gain within [1/band, band] "
+                            "times the nominal model's)", p->rls_gain_band);
+    {
+        /* the nominal model inside the set, row by row (the parameter that draws each row) */
+        static const char *const who[PIEZO_ADMISSIBLE_ROWS] = {
+            "rls.pole_min", "rls.pole_min", "rls.pole_min", "rls.zero_min", "rls.zero_min",
+            "rls.gain_band", "rls.gain_band", "rls.gain_band", "rls.gain_band" };
+        double rows[PIEZO_ADMISSIBLE_ROWS][4], bounds[PIEZO_ADMISSIBLE_ROWS], nominal[4];
+        int i;
+        nominal[0] = p->tf_a1;
+        nominal[1] = p->tf_a2;
+        nominal[2] = p->tf_b1;
+        nominal[3] = p->tf_b2;
+        admissible_rows(nominal, p->rls_zero_min, p->rls_pole_min, p->rls_gain_band, rows, bounds);
+        for (i = 0; i < PIEZO_ADMISSIBLE_ROWS; ++i)
+            if (admissible_excess(rows[i], bounds[i], nominal) > 0.0)
+                return piezo_refuse(diag, who[i], i < 3 ? "a value below both nominal poles (tf.a1, tf.a2: real "
+                                    "poles in [rls.pole_min, 1 - 1e-4], or complex ones inside their hull)"
+                                    : "a set that holds the nominal model", i < 3 ? p->rls_pole_min
+                                    : (i < 5 ? p->rls_zero_min : p->rls_gain_band));
+    }
+    if (!(isfinite(p->rls_fallback_ratio) && (p->rls_fallback_ratio == 0.0 || p->rls_fallback_ratio >= 1.0)))
+        return piezo_refuse(diag, "rls.fallback_ratio", "0 (no prediction test) or [1, inf) (times the nominal "
+                            "model's squared prediction errors)", p->rls_fallback_ratio);
+    if (!(isfinite(p->rls_fallback_window) && p->rls_fallback_window >= p->h && p->rls_fallback_window <= 3600.0))
+        return piezo_refuse(diag, "rls.fallback_window", "[h, 3600] s (window of the prediction test)",
+                            p->rls_fallback_window);
 
     memset(c, 0, sizeof *c);
     pi_params = p->pi;
@@ -263,6 +369,13 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->theta_nominal[2] = p->tf_b1;
     c->theta_nominal[3] = p->tf_b2;
     c->probe_max = p->mv_probe_max;
+    c->zero_min = p->rls_zero_min;
+    c->pole_min = p->rls_pole_min;
+    c->gain_band = p->rls_gain_band;
+    admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_band, c->adm_c, c->adm_d);
+    c->fallback_ratio = p->rls_fallback_ratio;
+    c->fallback_samples = (uint64_t)floor(p->rls_fallback_window / p->h + 0.5);
+    c->fallback_forgetting = 1.0 - 1.0 / (double)c->fallback_samples;
     /* the supervisor judges the loop by the nominal model */
     st = piezo_supervisor_init(&c->sup, &p->sup, p->tf_a1, p->tf_a2, p->tf_b1, p->tf_b2, p->h, diag);
     if (st != PIEZO_OK) return st;
@@ -354,6 +467,11 @@ void piezo_controller_reset(piezo_controller *c)
     c->fault = 0;
     c->k_fault = 0;
     c->v_fault = 0.0;
+    c->n_projections = 0;
+    c->fb_adapted = c->fb_nominal = c->learned_rate = 0.0;
+    c->n_fallbacks = c->k_first_fallback = 0;
+    c->first_fallback = PIEZO_FALLBACK_NONE;
+    c->first_fallback_value = c->first_fallback_other = 0.0;
 }
 
 size_t piezo_controller_history_needed(const piezo_controller *c)
@@ -368,6 +486,9 @@ static double q_past(const piezo_controller *c, int i)
     return c->q_ring[at < PIEZO_MV_Q_RING ? at : at - PIEZO_MV_Q_RING];
 }
 
+/* The projection of the paper's update and of the delay candidates: b1 positive, the zero of B
+ * inside the radius, A inside the Jury triangle shrunk by m (coordinate clamps). The robust
+ * update projects into its admissible set instead (admissible_project). */
 static void project(const piezo_controller *c, double *th)
 {
     const double m = A_STABILITY_MARGIN;
@@ -406,23 +527,31 @@ static void project(const piezo_controller *c, double *th)
  * a-priori prediction error of (theta_in, P) under delay d; with update set,
  * the updated estimates and covariance go to theta, P_new (not P's storage).
  */
-static double rls_step(const piezo_controller *c, const double *theta_in, const double *P, int d, double y,
-                       int update, double lambda, double inv_lambda, double trace_max, double *theta, double *P_new)
+/* e = y - phi^T theta under delay d (the a-priori prediction error), in the order above */
+static double rls_error(const piezo_controller *c, const double *theta, int d, double y)
 {
     /* phi as four scalars, not an array: built from separate loads, an array
      * went through the stack and was read back as pairs, a store-to-load
      * forwarding stall on the loop's path from y(k) to the law */
     const double phi0 = -c->y_prev[0], phi1 = -c->y_prev[1];
     const double phi2 = q_past(c, d), phi3 = q_past(c, d + 1);
-    double Pphi[4], denom, inv_denom, e, trace;
-    int i;
-    e = y;
-    e -= phi0 * theta_in[0];
-    e -= phi1 * theta_in[1];
-    e -= phi2 * theta_in[2];
-    e -= phi3 * theta_in[3];
-    if (!update) return e;
+    double e = y;
+    e -= phi0 * theta[0];
+    e -= phi1 * theta[1];
+    e -= phi2 * theta[2];
+    e -= phi3 * theta[3];
+    return e;
+}
 
+/* The update of (theta_in, P) by the a-priori error e under delay d, into theta, P_new (not P's
+ * storage), the trace bounded; no projection (the caller's). */
+static void rls_gain(const piezo_controller *c, const double *theta_in, const double *P, int d, double e,
+                     double lambda, double inv_lambda, double trace_max, double *theta, double *P_new)
+{
+    const double phi0 = -c->y_prev[0], phi1 = -c->y_prev[1];
+    const double phi2 = q_past(c, d), phi3 = q_past(c, d + 1);
+    double Pphi[4], denom, inv_denom, trace;
+    int i;
     /* (P phi)_i = sum_j P_ij phi_j in increasing j (from 0.0), P_ij read as P_ji (symmetric) */
     for (i = 0; i < 4; ++i)
         Pphi[i] = (((0.0 + P[i] * phi0) + P[4 + i] * phi1) + P[8 + i] * phi2) + P[12 + i] * phi3;
@@ -446,13 +575,73 @@ static double rls_step(const piezo_controller *c, const double *theta_in, const 
         double scale = trace_max / trace;
         for (i = 0; i < 16; ++i) P_new[i] *= scale;
     }
+}
+
+/* The a-priori error of (theta_in, P) under delay d and, with update set, the update with the
+ * paper's projection (the delay candidates, the paper's update). */
+static double rls_step(const piezo_controller *c, const double *theta_in, const double *P, int d, double y,
+                       int update, double lambda, double inv_lambda, double trace_max, double *theta, double *P_new)
+{
+    double e = rls_error(c, theta_in, d, y);
+    if (!update) return e;
+    rls_gain(c, theta_in, P, d, e, lambda, inv_lambda, trace_max, theta, P_new);
     project(c, theta);
     return e;
 }
 
 /*
- * The chosen loop's RLS: the a-priori prediction error; the updated theta and
- * P go to *s when the update runs. The robust update (rls.robust) regresses
+ * The robust update's projection into the admissible set (admissible_rows), after its update:
+ * sweeps over the rows, each violated one a projection onto its half-space in the metric of
+ * P^-1 (Goodwin and Sin; Ioannou and Sun, parameter projection), which moves theta along the
+ * directions the data determine least,
+ *     theta -= P c (c^T theta - d) / (c^T P c),
+ * then, if a sweep limit left a row violated, the step towards the nominal model (inside the
+ * set) that ends on the set: theta = n + s (theta - n), s the least of
+ * slack / (slack + excess) over the violated rows (slack = d - c^T n). 1 when theta changed.
+ */
+static int admissible_project(const piezo_controller *c, const double *P, double *th)
+{
+    int sweep, i, j;
+    if (admissible_violated(c, th) < 0) return 0;
+    for (sweep = 0; sweep < ADMISSIBLE_SWEEPS; ++sweep) {
+        int moved = 0;
+        for (i = 0; i < PIEZO_ADMISSIBLE_ROWS; ++i) {
+            const double *row = c->adm_c[i];
+            double excess = admissible_excess(row, c->adm_d[i], th), Pc[4], cPc;
+            if (!(excess > 0.0)) continue;
+            for (j = 0; j < 4; ++j)
+                Pc[j] = ((P[4 * j] * row[0] + P[4 * j + 1] * row[1]) + P[4 * j + 2] * row[2]) + P[4 * j + 3] * row[3];
+            cPc = ((row[0] * Pc[0] + row[1] * Pc[1]) + row[2] * Pc[2]) + row[3] * Pc[3];
+            if (!(cPc > 0.0 && isfinite(cPc))) {       /* P singular along c: the Euclidean metric */
+                for (j = 0; j < 4; ++j) Pc[j] = row[j];
+                cPc = ((row[0] * row[0] + row[1] * row[1]) + row[2] * row[2]) + row[3] * row[3];
+            }
+            for (j = 0; j < 4; ++j) th[j] -= Pc[j] * (excess / cPc);
+            moved = 1;
+        }
+        if (!moved) break;
+    }
+    if (admissible_violated(c, th) >= 0) {
+        const double *n = c->theta_nominal;
+        double s = 1.0;
+        for (i = 0; i < PIEZO_ADMISSIBLE_ROWS; ++i) {
+            double excess = admissible_excess(c->adm_c[i], c->adm_d[i], th);
+            if (excess > 0.0) {
+                double slack = -admissible_excess(c->adm_c[i], c->adm_d[i], n);
+                double ratio = slack / (slack + excess);
+                if (ratio < s) s = ratio;
+            }
+        }
+        for (j = 0; j < 4; ++j) th[j] = n[j] + s * (th[j] - n[j]);
+        /* rounding may leave it an ulp outside: then the nominal model itself */
+        if (admissible_violated(c, th) >= 0) memcpy(th, n, 4 * sizeof(double));
+    }
+    return 1;
+}
+
+/*
+ * The chosen loop's RLS, given its a-priori prediction error e (of y - c for the robust
+ * update); the updated theta and P go to *s when the update runs. The robust update (rls.robust) regresses
  * y - c on phi, updates only while the reference excites the loop
  * (s->excited, excitation_next), and bounds trace(P) by
  *     min(rls.trace_max, rls.variance_max / sigma_e^2),
@@ -462,25 +651,30 @@ static double rls_step(const piezo_controller *c, const double *theta_in, const 
  * sensor burst to 59 um with rls.trace_max alone). While it holds its estimates,
  * c follows the prediction error (OFFSET_GAIN).
  */
-static double rls_update(const piezo_controller *c, double y, piezo_controller_sample *s)
+static void rls_update(const piezo_controller *c, double e, piezo_controller_sample *s)
 {
-    double e, bound = c->trace_max;
+    double bound = c->trace_max;
     int may = c->rls_enabled && !(c->sat_hold > 0) && !s->outlier;
     s->offset = c->offset;
+    s->projected = 0;
     if (!c->robust) {
         s->rls_updated = may;
-        return rls_step(c, c->theta, c->P, c->d, y, may, c->forgetting, c->inv_forgetting, c->trace_max,
-                        s->theta, s->P);
+        if (may) {
+            rls_gain(c, c->theta, c->P, c->d, e, c->forgetting, c->inv_forgetting, c->trace_max, s->theta, s->P);
+            project(c, s->theta);
+        }
+        return;
     }
     if (c->noise_e > 0.0) {
         double b = c->variance_max / (c->noise_e * c->noise_e);
         if (b < bound) bound = b;
     }
     s->rls_updated = may && s->excited;
-    e = rls_step(c, c->theta, c->P, c->d, y - c->offset, s->rls_updated, c->forgetting, c->inv_forgetting, bound,
-                 s->theta, s->P);
+    if (s->rls_updated) {
+        rls_gain(c, c->theta, c->P, c->d, e, c->forgetting, c->inv_forgetting, bound, s->theta, s->P);
+        s->projected = admissible_project(c, s->P, s->theta);
+    }
     if (may && !s->excited) s->offset = c->offset + OFFSET_GAIN * e;
-    return e;
 }
 
 /* The measured noise after one more difference delta (NOISE_STEP): 0 until the first
@@ -668,7 +862,8 @@ static int sample_state_finite(const piezo_controller *c, const piezo_controller
      * (finite when err_sum is, or, for an outlier, when the y_meas it left is) */
     const double robust_zero = s->noise_y * 0.0 + s->noise_e * 0.0 + s->r_anchor * 0.0 + s->offset * 0.0
                                + s->integral * 0.0 + s->r_velocity * 0.0 + s->r_plain * 0.0 + s->y_meas * 0.0
-                               + s->err_sum * 0.0 + (s->outlier ? s->y_meas + s->raw_error : 0.0) * 0.0;
+                               + s->err_sum * 0.0 + (s->outlier ? s->y_meas + s->raw_error : 0.0) * 0.0
+                               + s->fb_adapted * 0.0 + s->fb_nominal * 0.0 + s->learned_rate * 0.0;
     return robust_zero == 0.0 && all_finite(s->out.theta, 4)
            && (!c->sup.enabled || (all_finite(&s->sup.z, SUP_DOUBLES) && isfinite(s->sup.gain)))
            && (!s->rls_updated || all_finite(s->P, 16))
@@ -709,6 +904,71 @@ static void outlier_sums(const piezo_controller *c, piezo_controller_sample *s)
     s->err_weight = s->outlier ? c->err_weight : lam * c->err_weight + 1.0;
 }
 
+/*
+ * The fallback to the nominal model (robust update, while the loop's estimator runs; docs/model.md,
+ * "Estimates with guarantees"), given the law's reference r = y_d(k + d) (without z), the
+ * measurement and the loop model's a-priori error e_a of sample k. Two reasons, each judged
+ * only while the law's estimates differ from the nominal model:
+ * - a jump: |r(k) - r(k-1)| beyond monitor.pred_error_max and beyond PIEZO_FALLBACK_JUMP_RATIO
+ *   times the largest change per sample R the estimates learned on (R = max(|r(k) - r(k-1)|,
+ *   R (1 - 1/PIEZO_FALLBACK_JUMP_MEMORY)) over the samples they adapted at): a step after a long
+ *   tone meets estimates fitted to one frequency (after 60 s of a 1 Hz tone, b1 1.7 times and
+ *   the fast pole -0.09 against 0.385: the step erred 4.1 um, 11 times the fresh step); every
+ *   change of the reference while the estimates run counts (its answer follows, and the
+ *   estimator updates on it), and fades only over the samples it updates at;
+ * - a prediction: over the window of rls.fallback_window (lambda = 1 - 1/N),
+ *     S_a = lambda S_a + e_a^2,  S_n = lambda S_n + e_n^2,  e_n = y - c - phi^T theta_nominal,
+ *   S_a > rls.fallback_ratio S_n + N (FALLBACK_NOISE noise_y)^2.
+ * A fallback puts the nominal model and rls.p0_loop I in the estimator and the law of this very
+ * sample (*theta), empties the window, and counts the jump as learned.
+ */
+static void fallback_test(const piezo_controller *c, double r, double y_meas, double e_a, const double **theta,
+                          piezo_controller_sample *s)
+{
+    double rate, faded;
+    int adapted, reason = PIEZO_FALLBACK_NONE, j;
+    s->fb_adapted = c->fb_adapted;
+    s->fb_nominal = c->fb_nominal;
+    s->learned_rate = c->learned_rate;
+    s->fallback_value = s->fallback_other = 0.0;
+    if (!c->robust || c->detecting || s->detecting) return;
+    rate = fabs(r - c->r_last);
+    adapted = c->rls_enabled && memcmp(*theta, c->theta_nominal, sizeof c->theta) != 0;
+    if (c->fallback_ratio > 0.0) {
+        const double e_n = rls_error(c, c->theta_nominal, c->d, y_meas - c->offset);
+        const double lambda = c->fallback_forgetting, floor_rms = FALLBACK_NOISE * c->noise_y;
+        s->fb_adapted = lambda * c->fb_adapted + e_a * e_a;
+        s->fb_nominal = lambda * c->fb_nominal + e_n * e_n;
+        if (adapted && s->fb_adapted > c->fallback_ratio * s->fb_nominal
+                                       + (double)c->fallback_samples * (floor_rms * floor_rms)) {
+            reason = PIEZO_FALLBACK_PREDICTION;
+            s->fallback_value = sqrt(s->fb_adapted / (double)c->fallback_samples);  /* the rms errors */
+            s->fallback_other = sqrt(s->fb_nominal / (double)c->fallback_samples);
+        }
+    }
+    if (adapted && rate > c->pred_error_max && rate > PIEZO_FALLBACK_JUMP_RATIO * c->learned_rate) {
+        reason = PIEZO_FALLBACK_JUMP;
+        s->fallback_value = rate;
+        s->fallback_other = c->learned_rate;
+    }
+    s->out.fallback = reason;
+    if (reason != PIEZO_FALLBACK_NONE) {
+        memcpy(s->theta, c->theta_nominal, sizeof s->theta);
+        for (j = 0; j < 16; ++j) s->P[j] = j % 5 == 0 ? c->p0_loop : 0.0;
+        s->rls_updated = 1;
+        s->projected = 0;
+        *theta = c->theta_nominal;
+        s->fb_adapted = s->fb_nominal = 0.0;
+        s->learned_rate = rate;
+    } else {
+        /* every change the reference makes while these estimates run is learned: a jump's answer
+         * follows it, and the excitation it is makes the estimator update on that answer; what
+         * is learned fades as the estimator updates on other data */
+        faded = s->rls_updated ? c->learned_rate * (1.0 - 1.0 / PIEZO_FALLBACK_JUMP_MEMORY) : c->learned_rate;
+        s->learned_rate = rate > faded ? rate : faded;
+    }
+}
+
 /* Evaluate sample k into *s without changing *c (the caller guarantees
  * finite inputs and enough history). Exact mode writes history[2k],
  * history[2k+1]. The inputs are finite, so a non-finite value computed on
@@ -732,10 +992,10 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     s->reaches_window = 0;
     s->restarted = 0;
     s->fault = 0;
+    s->projected = 0;
     /* an outlier: the model's prediction stands in for the measurement in this sample */
-    s->raw_error = rls_step(c, c->detecting ? c->theta_nominal : c->theta, c->P, c->d,
-                            y_meas - (c->robust && !c->detecting ? c->offset : 0.0), 0, c->forgetting,
-                            c->inv_forgetting, c->trace_max, NULL, NULL);
+    s->raw_error = rls_error(c, c->detecting ? c->theta_nominal : c->theta, c->d,
+                             y_meas - (c->robust && !c->detecting ? c->offset : 0.0));
     /* a jump of the law's reference by more than the monitor's bound (a step y_d) is answered
      * within d + 1 samples: the large error it may bring then is the loop's, not a glitch (a
      * model drifted by a long tone fits itself back on it) */
@@ -758,7 +1018,11 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
         s->offset = 0.0;
         pred_error = detect_update(c, y_meas, s);
     } else {
-        pred_error = rls_update(c, y_meas, s);
+        /* the loop model's a-priori error is the outlier test's (computed once), unless the
+         * model's prediction stood in for y_meas */
+        pred_error = s->outlier ? rls_error(c, c->theta, c->d, y_meas - (c->robust ? c->offset : 0.0))
+                                : s->raw_error;
+        rls_update(c, pred_error, s);
         detect_carry(c, s);
     }
     s->noise_e = c->robust ? noise_next(c->noise_e, pred_error - c->out.pred_error) : 0.0;
@@ -789,6 +1053,7 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     theta = s->detecting ? c->theta_nominal : (s->rls_updated ? s->theta : c->theta);
     t = s->detecting ? START_OBSERVER : c->observer;
     r = reference(c, in, d, &stamped);
+    fallback_test(c, r, y_meas, pred_error, &theta, s);
     /* integral action (mv.integral): z(k) = z(k-1) + gamma (y_d(k) - y_meas(k)), y_d(k) the
      * reference the law took for sample k (its r(j) is y_d(j + d), kept by sample, so a
      * change of d while detecting leaves no misaligned sample); held while detecting, while a
@@ -1067,6 +1332,19 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
     c->r_anchor = s->r_anchor;
     c->excite_left = s->excite_left;
     c->jump_left = s->jump_left;
+    c->fb_adapted = s->fb_adapted;
+    c->fb_nominal = s->fb_nominal;
+    c->learned_rate = s->learned_rate;
+    c->n_projections += (uint64_t)s->projected;
+    if (s->out.fallback != PIEZO_FALLBACK_NONE) {
+        if (c->n_fallbacks == 0) {
+            c->k_first_fallback = c->k;
+            c->first_fallback = s->out.fallback;
+            c->first_fallback_value = s->fallback_value;
+            c->first_fallback_other = s->fallback_other;
+        }
+        c->n_fallbacks += 1;
+    }
     c->y_prev[1] = c->y_prev[0];
     c->y_prev[0] = y_meas;
     c->r_prev = s->r;
@@ -1330,11 +1608,39 @@ const char *piezo_controller_check(const piezo_controller *c)
         || (c->n_outliers > 0 ? c->k_first_outlier >= c->k
                               : c->k_first_outlier != 0 || c->first_outlier != 0.0 || c->first_outlier_error != 0.0))
         return "outlier sums or counts out of range";
+    /* estimates with guarantees: the set is the one its parameters draw around the nominal model,
+     * and the loop's estimates are in it; the fallback's window and counts in range */
+    {
+        double rows[PIEZO_ADMISSIBLE_ROWS][4], bounds[PIEZO_ADMISSIBLE_ROWS];
+        if (!(isfinite(c->zero_min) && isfinite(c->pole_min) && isfinite(c->gain_band) && c->gain_band > 1.0))
+            return "rls.zero_min, rls.pole_min or rls.gain_band out of range";
+        admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_band, rows, bounds);
+        if (memcmp(rows, c->adm_c, sizeof rows) != 0 || memcmp(bounds, c->adm_d, sizeof bounds) != 0)
+            return "the admissible set differs from the one rls.zero_min, rls.pole_min and rls.gain_band draw";
+        if (admissible_violated(c, c->theta_nominal) >= 0 || (c->robust && admissible_violated(c, c->theta) >= 0))
+            return "the estimates (or the nominal model) outside the admissible set";
+    }
+    if (!(isfinite(c->fallback_ratio) && (c->fallback_ratio == 0.0 || c->fallback_ratio >= 1.0))
+        || c->fallback_samples < 1 || c->fallback_forgetting != 1.0 - 1.0 / (double)c->fallback_samples
+        || !(isfinite(c->fb_adapted) && c->fb_adapted >= 0.0 && isfinite(c->fb_nominal) && c->fb_nominal >= 0.0
+             && isfinite(c->learned_rate) && c->learned_rate >= 0.0)
+        || c->n_projections > c->k || c->n_fallbacks > c->k
+        || (c->n_fallbacks > 0 ? (c->k_first_fallback >= c->k || c->first_fallback < PIEZO_FALLBACK_JUMP
+                                  || c->first_fallback > PIEZO_FALLBACK_PREDICTION)
+                               : (c->k_first_fallback != 0 || c->first_fallback != PIEZO_FALLBACK_NONE
+                                  || c->first_fallback_value != 0.0 || c->first_fallback_other != 0.0))
+        || !(isfinite(c->first_fallback_value) && isfinite(c->first_fallback_other))
+        || (!c->robust && (c->fb_adapted != 0.0 || c->fb_nominal != 0.0 || c->learned_rate != 0.0
+                           || c->n_projections != 0 || c->n_fallbacks != 0)))
+        return "the fallback's window, learned rate or counts out of range";
     o = &c->out;
     if (!(isfinite(o->v) && isfinite(o->q) && isfinite(o->pred_error) && all_finite(o->theta, 4)))
         return "controller outputs not finite";
     if (o->saturated != 0 && o->saturated != 1) return "saturated output is not 0 or 1";
     if (o->adapting != 0 && o->adapting != 1) return "adapting output is not 0 or 1";
+    if (o->fallback < PIEZO_FALLBACK_NONE || o->fallback > PIEZO_FALLBACK_PREDICTION
+        || (o->fallback != PIEZO_FALLBACK_NONE && !c->robust))
+        return "fallback output out of range";
     if (!(isfinite(o->noise) && o->noise >= 0.0)) return "noise output not finite or negative";
     if (o->delay < 0 || o->delay > PIEZO_MV_MAX_D || (o->preview != 0 && o->preview != 1))
         return "delay or preview output out of range";
@@ -1469,7 +1775,9 @@ const char *piezo_controller_check_params(const piezo_controller *c, const piezo
         || c->sup.clip_samples != scratch.sup.clip_samples || c->sup.detect_samples != scratch.sup.detect_samples
         || c->sup.window != scratch.sup.window || c->sup.clip_error != q->sup.clip_error
         || c->sup.reaction != q->sup.reaction || c->sup.ramp_time != q->sup.ramp_time
-        || c->sup.ramp_samples != scratch.sup.ramp_samples || c->probe_max != q->mv_probe_max)
+        || c->sup.ramp_samples != scratch.sup.ramp_samples || c->probe_max != q->mv_probe_max
+        || c->zero_min != q->rls_zero_min || c->pole_min != q->rls_pole_min || c->gain_band != q->rls_gain_band
+        || c->fallback_ratio != q->rls_fallback_ratio || c->fallback_samples != scratch.fallback_samples)
         return "controller state does not match its parameters";
     return NULL;
 }

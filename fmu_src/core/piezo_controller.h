@@ -35,6 +35,21 @@
  * rls.variance_max / sigma_e^2 (sigma_e the measured noise of its prediction
  * error) as well as rls.trace_max. Integral action (mv.integral):
  *     z(k) = z(k-1) + gamma (y_d(k) - y_meas(k)),   the law tracks r(k) + z(k).
+ *
+ * Guarantees of the robust update (docs/model.md, "Estimates with guarantees"):
+ * - the admissible set: after every update the estimates are projected (in the metric of
+ *   P^-1, then radially towards the nominal model) into the polytope
+ *       A's poles in the convex hull of real poles in [rls.pole_min, 1)
+ *           (A(1) >= m, A(p) >= 0 at p = rls.pole_min, the chord a2 + (1+p)/2 a1 <= -p - m),
+ *       B's zero -b2/b1 in [rls.zero_min, 0.999],
+ *       b1 and the static gain B(1)/A(1) within [1/g, g] times the nominal's, g = rls.gain_band;
+ *   the law never uses an estimate outside it;
+ * - the fallback to the nominal model (estimates and covariance p0_loop I, the law from the
+ *   same sample): at a jump of the reference beyond monitor.pred_error_max and beyond
+ *   PIEZO_FALLBACK_JUMP_RATIO times the largest change per sample the estimates learned on
+ *   (a step after a tone: an excitation they never saw), and when the adapted model's
+ *   squared a-priori errors exceed rls.fallback_ratio times the nominal model's over
+ *   rls.fallback_window (exponential window), beyond the measured noise.
  */
 #ifndef PIEZO_CONTROLLER_H
 #define PIEZO_CONTROLLER_H
@@ -78,6 +93,14 @@
 #define PIEZO_OUTLIER_WINDOW 200
 #define PIEZO_OUTLIER_MIN_SAMPLES 20
 #define PIEZO_OUTLIER_QUIET 10   /* samples within the bound, no outlier among them, before one */
+/* The admissible set (rls.zero_min, rls.pole_min, rls.gain_band): its rows c^T theta <= d */
+#define PIEZO_ADMISSIBLE_ROWS 9
+/* The fallback to the nominal model (docs/model.md): its reasons (est.fallback_reason) */
+#define PIEZO_FALLBACK_NONE 0
+#define PIEZO_FALLBACK_JUMP 1       /* a jump of the reference the estimates never learned on */
+#define PIEZO_FALLBACK_PREDICTION 2 /* the adapted model predicted worse than the nominal one */
+#define PIEZO_FALLBACK_JUMP_RATIO 5 /* a jump beyond this many times the largest learned change */
+#define PIEZO_FALLBACK_JUMP_MEMORY 2000 /* adapted samples over which a learned change fades (1/e) */
 
 typedef struct {
     piezo_pi_params pi;          /* nominal hysteresis model */
@@ -112,6 +135,13 @@ typedef struct {
                                         PIEZO_MONITOR_SHARE_PERCENT % beyond it do; 0 = never */
     piezo_supervisor_params sup;     /* supervision (piezo_supervisor.h): sup.* */
     double mv_probe_max;         /* [um] >= 0: largest delay probe on q (0: no probes) */
+    double rls_zero_min;         /* robust: lowest zero of B, [-0.999, the nominal zero] */
+    double rls_pole_min;         /* robust: poles in the hull of real poles in [pole_min, 1), [-1, 1);
+                                    the nominal poles must be in it */
+    double rls_gain_band;        /* robust: b1 and B(1)/A(1) within [1/band, band] x nominal, >= 1 */
+    double rls_fallback_ratio;   /* robust: fallback when the adapted model's squared errors exceed
+                                    this many times the nominal's, >= 1 (0: never) */
+    double rls_fallback_window;  /* robust: [s] the window of that comparison, > 0 */
 } piezo_controller_params;
 
 typedef struct {
@@ -124,6 +154,7 @@ typedef struct {
     int preview;                 /* 1 if the law used a stamped preview, 0 if y_ref */
     int adapting;                /* 1 if the estimates were updated at k */
     double noise;                /* measured noise of y_meas after k [um] (robust update; 0 otherwise) */
+    int fallback;                /* why the law fell back to the nominal model at k (PIEZO_FALLBACK_*) */
 } piezo_controller_output;
 
 /* The inputs of one sample. */
@@ -223,6 +254,23 @@ typedef struct {
     int fault;                   /* 0: running; else the fault code (piezo_sup_fault) */
     uint64_t k_fault;            /* the sample whose verdict it was (the loop's state is of then) */
     double v_fault;              /* v when it came (the ramp's start) [V] */
+    /* estimates with guarantees (robust update): the admissible set, computed at init from the
+     * nominal model and rls.zero_min, rls.pole_min, rls.gain_band, as rows adm_c^T theta <= adm_d */
+    double zero_min, pole_min, gain_band;
+    double adm_c[PIEZO_ADMISSIBLE_ROWS][4];
+    double adm_d[PIEZO_ADMISSIBLE_ROWS];
+    uint64_t n_projections;      /* updates the admissible set changed */
+    /* the fallback to the nominal model */
+    double fallback_ratio;       /* rls.fallback_ratio (0: the prediction test is off) */
+    uint64_t fallback_samples;   /* rls.fallback_window / h, rounded (>= 1) */
+    double fallback_forgetting;  /* 1 - 1 / fallback_samples */
+    double fb_adapted, fb_nominal;   /* the window's sums of squared a-priori errors */
+    double learned_rate;         /* the largest |r(k) - r(k-1)| the estimates learned on, fading */
+    uint64_t n_fallbacks;        /* fallbacks since reset (est.fallbacks) */
+    uint64_t k_first_fallback;   /* the first one's sample (valid when n_fallbacks > 0) */
+    int first_fallback;          /* its reason (PIEZO_FALLBACK_*) */
+    double first_fallback_value; /* its fallback_value and fallback_other (piezo_controller_sample) */
+    double first_fallback_other;
 } piezo_controller;
 
 /*
@@ -271,6 +319,11 @@ typedef struct {
     double raw_error;            /* the a-priori error of y_meas as received [um] */
     double err_sum, err_weight, outlier_sum;    /* the outlier sums of k+1 */
     int fault;                   /* the safe state's fault code after this sample (0: none) */
+    /* estimates with guarantees: the states of k+1 */
+    int projected;               /* the update was projected into the admissible set */
+    double fb_adapted, fb_nominal, learned_rate;
+    double fallback_value;       /* a fallback's jump [um], or the adapted model's rms a-priori error */
+    double fallback_other;       /* ... and the largest change learned [um], or the nominal model's */
 } piezo_controller_sample;
 
 /* Defaults of docs/fmus.md (nominal plant model). */
