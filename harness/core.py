@@ -307,6 +307,11 @@ _CONTROLLER_TABLE = {
     "sup.ramp_time": (("sup", "ramp_time"), "float"),
     "sup.clip_error": (("sup", "clip_error"), "float"),
     "mv.probe_max": (("mv_probe_max",), "float"),
+    "rls.zero_min": (("rls_zero_min",), "float"),
+    "rls.pole_min": (("rls_pole_min",), "float"),
+    "rls.gain_band": (("rls_gain_band",), "float"),
+    "rls.fallback_ratio": (("rls_fallback_ratio",), "float"),
+    "rls.fallback_window": (("rls_fallback_window",), "float"),
 }
 
 PLANT_PARAMETER_NAMES = tuple(_PLANT_TABLE)
@@ -574,18 +579,20 @@ class Plant:
 # Controller
 # --------------------------------------------------------------------------
 ControllerOutput = namedtuple("ControllerOutput",
-                              "v q a1 a2 b1 b2 pred_error saturated delay preview adapting noise")
+                              "v q a1 a2 b1 b2 pred_error saturated delay preview adapting noise fallback")
 ControllerOutput.__doc__ = """Controller result of one sample: v [V], q [um], the estimates
 a1, a2, b1, b2 used for q, the RLS one-step prediction error [um], saturated (bool), the loop
 delay d of the law (int, 0 while it is being detected), preview (bool: the law used a stamped
 preview rather than y_ref), adapting (bool: the estimates were updated; the FMUs' est.adapting)
-and the measured noise of y_meas [um] (est.noise)."""
+the measured noise of y_meas [um] (est.noise) and why the law fell back to the nominal model at
+this sample (0 none, 1 a jump of the reference, 2 a prediction; the FMUs count them in est.fallbacks)."""
 
 
 def _ctrl_out(o) -> ControllerOutput:
     t = o.theta
     return ControllerOutput(o.v, o.q, t[0], t[1], t[2], t[3], o.pred_error, bool(o.saturated),
-                            int(o.delay), bool(o.preview), bool(o.adapting), o.noise)
+                            int(o.delay), bool(o.preview), bool(o.adapting), o.noise,
+                            int(o.fallback))
 
 
 class Controller:

@@ -89,6 +89,12 @@ typedef enum {
     vr_mv_probe_max,        /* [um] largest delay probe */
     vr_sup_fault,           /* output Integer: the fault code of the safe state (0: none) */
     vr_sup_fault_time,      /* output [s] the time of its verdict */
+    vr_rls_zero_min,        /* the admissible set of the estimates (piezo_controller.h) */
+    vr_rls_pole_min,
+    vr_rls_gain_band,
+    vr_rls_fallback_ratio,  /* the fallback to the nominal model */
+    vr_rls_fallback_window, /* [s] */
+    vr_est_fallbacks,       /* output Integer: fallbacks to the nominal model so far */
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -122,6 +128,7 @@ typedef struct {
     int sup_delay;                  /* ... sup.delay, ... */
     int sup_fault;                  /* ... sup.fault, ... */
     double sup_fault_time;          /* ... sup.fault_time */
+    int fallbacks;                  /* est.fallbacks: the controller's count, clamped to INT32 */
     int loop_wired;                 /* an input left its start value at some sample: the loop is
                                        connected (until then it runs open loop) */
     int said_open_loop;             /* the open-loop warning was logged */

@@ -125,6 +125,12 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_mv_probe_max] = PARAM_REAL("mv.probe_max", mv_probe_max),
     [vr_sup_fault] = MODEL_OUTPUT_INT("sup.fault", sup_fault),
     [vr_sup_fault_time] = { "sup.fault_time", MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, sup_fault_time) },
+    [vr_rls_zero_min] = PARAM_REAL("rls.zero_min", rls_zero_min),
+    [vr_rls_pole_min] = PARAM_REAL("rls.pole_min", rls_pole_min),
+    [vr_rls_gain_band] = PARAM_REAL("rls.gain_band", rls_gain_band),
+    [vr_rls_fallback_ratio] = PARAM_REAL("rls.fallback_ratio", rls_fallback_ratio),
+    [vr_rls_fallback_window] = PARAM_REAL("rls.fallback_window", rls_fallback_window),
+    [vr_est_fallbacks] = MODEL_OUTPUT_INT("est.fallbacks", fallbacks),
 };
 
 void model_set_start_values(ModelData *data)
@@ -151,6 +157,7 @@ piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
     data->said_stamps = 0;
     data->sup_status = data->sup_delay = data->sup_fault = 0;
     data->sup_gain = data->sup_fault_time = 0.0;
+    data->fallbacks = 0;
     data->loop_wired = data->said_open_loop = 0;
     /* the controller is time-invariant; t0 places the time stamps on its grid */
     data->t0 = start_time;
@@ -303,6 +310,7 @@ piezo_status model_update_outputs(ModelData *data, double *history, size_t histo
     data->sup_gain = data->ctrl.sup.gain;
     data->sup_delay = data->ctrl.sup.delay;
     fmu_controller_fault_outputs(&data->ctrl, data->t0, data->params.h, &data->sup_fault, &data->sup_fault_time);
+    data->fallbacks = fmu_controller_fallbacks(&data->ctrl);
     if (data->params.mv_feedthrough) {
         int meas_offset;
         stamps_seen seen;
@@ -458,6 +466,8 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         || data->sup_delay < 0 || data->sup_delay > PIEZO_MV_MAX_D || !isfinite(data->sup_gain)
         || data->sup_fault < 0 || data->sup_fault > PIEZO_SUP_FAULT_MAX || !isfinite(data->sup_fault_time))
         return "supervision outputs out of range";
+    if (data->fallbacks < 0)
+        return "est.fallbacks negative";
     if (!(isfinite(data->t0) && isfinite(data->last_t_preview) && isfinite(data->last_t_meas)))
         return "time stamps not finite";
     if (data->loop_delay < 0 || data->loop_delay > PIEZO_MV_MAX_D

@@ -134,6 +134,12 @@ typedef enum {
     vr_mv_probe_max,
     vr_sup_fault,           /* output Integer */
     vr_sup_fault_time,      /* output [s] */
+    vr_rls_zero_min,        /* the admissible set of the estimates (piezo_controller.h) */
+    vr_rls_pole_min,
+    vr_rls_gain_band,
+    vr_rls_fallback_ratio,  /* the fallback to the nominal model */
+    vr_rls_fallback_window, /* [s] */
+    vr_est_fallbacks,       /* output Integer: fallbacks to the nominal model so far */
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -172,6 +178,7 @@ typedef struct {
     int sup_delay;
     int sup_fault;
     double sup_fault_time;
+    int fallbacks;                      /* est.fallbacks */
     /* what the stage and the preview said */
     uint64_t n_clamped;                 /* samples whose v was outside the rated range (applied clamped) */
     uint64_t k_first_clamped;           /* the first of them (valid when n_clamped > 0) */

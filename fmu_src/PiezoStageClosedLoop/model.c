@@ -214,6 +214,12 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_mv_probe_max] = CTRL_REAL("mv.probe_max", mv_probe_max),
     [vr_sup_fault] = CTRL_OUT_INT("sup.fault", sup_fault),
     [vr_sup_fault_time] = CTRL_OUT_REAL("sup.fault_time", sup_fault_time),
+    [vr_rls_zero_min] = CTRL_REAL("rls.zero_min", rls_zero_min),
+    [vr_rls_pole_min] = CTRL_REAL("rls.pole_min", rls_pole_min),
+    [vr_rls_gain_band] = CTRL_REAL("rls.gain_band", rls_gain_band),
+    [vr_rls_fallback_ratio] = CTRL_REAL("rls.fallback_ratio", rls_fallback_ratio),
+    [vr_rls_fallback_window] = CTRL_REAL("rls.fallback_window", rls_fallback_window),
+    [vr_est_fallbacks] = CTRL_OUT_INT("est.fallbacks", fallbacks),
 };
 
 /* ModelData.refused_by: which block refused the last refused sample (for its message), or
@@ -410,6 +416,7 @@ piezo_status model_update_outputs(ModelData *data, double *history, size_t histo
     data->sup_gain = data->ctrl.sup.gain;
     data->sup_delay = data->ctrl.sup.delay;
     fmu_controller_fault_outputs(&data->ctrl, data->t0, data->stage.h, &data->sup_fault, &data->sup_fault_time);
+    data->fallbacks = fmu_controller_fallbacks(&data->ctrl);
     return PIEZO_OK;
 }
 
@@ -548,7 +555,7 @@ const char *model_check_data(const ModelData *data, int core_initialized, double
         || data->preview_lead >= PIEZO_PREVIEW_RING || data->loop_delay < 0 || data->loop_delay > PIEZO_MV_MAX_D
         || data->sup_status < 0 || data->sup_status > 2 || data->sup_delay < 0 || data->sup_delay > PIEZO_MV_MAX_D
         || !isfinite(data->sup_gain) || data->sup_fault < 0 || data->sup_fault > PIEZO_SUP_FAULT_MAX
-        || !isfinite(data->sup_fault_time))
+        || !isfinite(data->sup_fault_time) || data->fallbacks < 0)
         return "outputs out of range";
     if (data->control.mv_hold_inputs != 0)
         return "mv.hold_inputs set (this FMU has no such parameter)";

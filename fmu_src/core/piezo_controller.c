@@ -137,11 +137,13 @@ void piezo_controller_default_params(piezo_controller_params *p)
      * paper's scenarios. The zero of B at 0.5 or above (a drift to -0.3 rang +-44 um; the
      * paper's tones move it to 0.66-0.95), poles of A in the hull of real poles in [0, 1) (a
      * fast pole driven to -0.3 by a 1 Hz tone overshot a step by 8.5 um), b1 and the static
-     * gain within a factor 2 of the nominal model's (a 10 Hz raster drove the gain to 6.5
-     * times it); the fallback at twice the nominal model's squared errors over 0.5 s */
+     * gain within a factor 3 of the nominal model's (a 10 Hz raster drove the gain to 6.5
+     * times it; a factor 2 held the estimates at its edge after a sensor halved its gain, and
+     * the supervision no longer saw the change); the fallback at twice the nominal model's
+     * squared errors over 0.5 s */
     p->rls_zero_min = 0.5;
     p->rls_pole_min = 0.0;
-    p->rls_gain_band = 2.0;
+    p->rls_gain_band = 3.0;
     p->rls_fallback_ratio = 2.0;
     p->rls_fallback_window = 0.5;
 }

@@ -18,6 +18,7 @@ void fmu_controller_track_init(fmu_controller_track *t, const piezo_controller *
     t->said_large_error = 0;
     t->said_outlier = 0;
     t->said_fault = 0;
+    t->said_fallback = 0;
 }
 
 void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller *c, double t0, double h)
@@ -72,6 +73,26 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
                  c->first_outlier, fmu_sample_time(t0, c->k_first_outlier, h), c->first_outlier_error);
         return 1;
     }
+    if (c->n_fallbacks > 0 && !t->said_fallback) {
+        t->said_fallback = 1;
+        if (c->first_fallback == PIEZO_FALLBACK_JUMP)
+            snprintf(text, size, "the law fell back to the nominal model at t = %.9g s: the reference jumped "
+                     "%.4g um in one sample, beyond %d times the largest change the estimates had learned on "
+                     "(%.4g um a sample; a step after a tone or a scan, which taught them one kind of motion); "
+                     "the estimator restarts from the nominal model (rls.p0_loop). Harmless: the jump is "
+                     "answered as by a fresh controller. Further fallbacks are counted (est.fallbacks, and at "
+                     "terminate), not logged", fmu_sample_time(t0, c->k_first_fallback, h), c->first_fallback_value,
+                     PIEZO_FALLBACK_JUMP_RATIO, c->first_fallback_other);
+        else
+            snprintf(text, size, "the law fell back to the nominal model at t = %.9g s: over the last "
+                     "rls.fallback_window = %g s the adapted estimates predicted y_meas worse than the nominal model "
+                     "(rms a-priori errors %.4g um against %.4g um, beyond rls.fallback_ratio = %g times); the "
+                     "estimator restarts from the nominal model (rls.p0_loop). Further fallbacks are counted "
+                     "(est.fallbacks, and at terminate), not logged", fmu_sample_time(t0, c->k_first_fallback, h),
+                     (double)c->fallback_samples * h, c->first_fallback_value, c->first_fallback_other,
+                     c->fallback_ratio);
+        return 1;
+    }
     if (c->n_detections > 1 && !t->said_redetect) {
         t->said_redetect = 1;
         snprintf(text, size, "the chosen loop delay no longer predicts the measurement (|pred_error| above "
@@ -112,7 +133,8 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
 int fmu_controller_summary(const piezo_controller *c, char *text, size_t size)
 {
     int used;
-    if (c->n_saturated == 0 && c->n_large_error == 0 && c->n_detections <= 1 && c->n_outliers == 0 && !c->fault)
+    if (c->n_saturated == 0 && c->n_large_error == 0 && c->n_detections <= 1 && c->n_outliers == 0 && !c->fault
+        && c->n_fallbacks == 0)
         return 0;
     used = snprintf(text, size, "of %llu samples, v was clipped in %llu; |pred_error| exceeded "
                     "monitor.pred_error_max = %g um in %llu (largest %.6g um); delay detection ran %llu times",
@@ -122,6 +144,10 @@ int fmu_controller_summary(const piezo_controller *c, char *text, size_t size)
     if (c->n_outliers > 0 && used > 0 && (size_t)used < size)
         used += snprintf(text + used, size - (size_t)used, "; %llu outliers of y_meas were replaced by the "
                          "model's prediction", (unsigned long long)c->n_outliers);
+    if (c->n_fallbacks > 0 && used > 0 && (size_t)used < size)
+        used += snprintf(text + used, size - (size_t)used, "; the law fell back to the nominal model %llu times "
+                         "(est.fallbacks), the admissible set bounded %llu updates of the estimates",
+                         (unsigned long long)c->n_fallbacks, (unsigned long long)c->n_projections);
     if (c->fault && used > 0 && (size_t)used < size)
         snprintf(text + used, size - (size_t)used, "; the loop was held in its safe state for the last %llu "
                  "(sup.fault = %d, %s)", (unsigned long long)(c->k - c->k_fault), c->fault,
@@ -136,6 +162,11 @@ int fmu_controller_failure(const piezo_controller *c, const piezo_sup_context *c
     return piezo_controller_explain_in(c, st, ctx, text, size) > 0;
 }
 
+int fmu_controller_fallbacks(const piezo_controller *c)
+{
+    return c->n_fallbacks > (uint64_t)INT32_MAX ? INT32_MAX : (int)c->n_fallbacks;
+}
+
 void fmu_controller_fault_outputs(const piezo_controller *c, double t0, double h, int *fault, double *fault_time)
 {
     *fault = c->fault;
@@ -148,7 +179,8 @@ const char *fmu_controller_track_check(const fmu_controller_track *t, int core_i
     if ((t->said_verified != 0 && t->said_verified != 1) || (t->said_redetect != 0 && t->said_redetect != 1)
         || (t->said_saturated != 0 && t->said_saturated != 1)
         || (t->said_large_error != 0 && t->said_large_error != 1)
-        || (t->said_outlier != 0 && t->said_outlier != 1) || (t->said_fault != 0 && t->said_fault != 1))
+        || (t->said_outlier != 0 && t->said_outlier != 1) || (t->said_fault != 0 && t->said_fault != 1)
+        || (t->said_fallback != 0 && t->said_fallback != 1))
         return "warning flags are not 0 or 1";
     if (!isfinite(t->delay_time))
         return "time stamps not finite";

@@ -29,6 +29,7 @@ typedef struct {
     int said_large_error;       /* the first large-pred_error warning was logged */
     int said_outlier;           /* the first-outlier warning was logged */
     int said_fault;             /* the safe state's warning was logged */
+    int said_fallback;          /* the first fallback to the nominal model was logged */
 } fmu_controller_track;
 
 /* At initialization (the controller just initialized, sample 0 at t0). */
@@ -50,6 +51,9 @@ int fmu_controller_failure(const piezo_controller *c, const piezo_sup_context *c
                            char *text, size_t size);
 /* The outputs sup.fault (0: none) and sup.fault_time (t0 + k h of the verdict's sample; 0 while none). */
 void fmu_controller_fault_outputs(const piezo_controller *c, double t0, double h, int *fault, double *fault_time);
+
+/* The output est.fallbacks: the controller's fallbacks to its nominal model, clamped to INT32_MAX. */
+int fmu_controller_fallbacks(const piezo_controller *c);
 
 /* A restored struct against the controller it belongs to: NULL, or what is wrong.
  * core_initialized: the state was saved after initialization (k samples since t0). */
