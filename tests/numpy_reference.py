@@ -26,7 +26,10 @@ DOC_DEFAULTS = {
 # covariance scale 1, integral action 0.01, the observer pole 0.5, mv.lambda_u 0; the drop-in timing (v published at
 # the end of the step that sampled the inputs: no direct feedthrough, the loop delay detected);
 # voltage limits on at +-150 V (the paper's amplifier range; every paper scenario stays below
-# 62 V); the divergence monitor at 1 um for 200 samples.
+# 62 V); the divergence monitor at 1 um for 200 samples; the estimates' admissible set (the zero
+# of B at 0.5 or above, A's poles in the hull of real poles in [0, 1), b1 and the static gain
+# within a factor 3 of the nominal's) and the fallback at twice the nominal model's squared
+# errors over 0.5 s.
 CONTROLLER_DOC_DEFAULTS = {
     "mv.delay": -1, "mv.feedthrough": False, "mv.hold_inputs": False, "mv.lambda_u": 0.0,
     "mv.observer": 0.5, "mv.integral": 0.01, "rls.enabled": True,
@@ -34,6 +37,9 @@ CONTROLLER_DOC_DEFAULTS = {
     "rls.excitation": 3.0, "rls.excitation_time": 0.05, "rls.variance_max": 0.004, "rls.p0_loop": 0.01,
     "sat.enabled": True, "sat.v_min": -150.0, "sat.v_max": 150.0, "monitor.pred_error_max": 1.0,
     "monitor.divergence_samples": 200,
+    # the estimates' guarantees (docs/model.md): the admissible set and the fallback
+    "rls.zero_min": 0.5, "rls.pole_min": 0.0, "rls.gain_band": 3.0, "rls.fallback_ratio": 2.0,
+    "rls.fallback_window": 0.5,
 }
 # The paper's law: its update on every sample with the tuning measured for it, no integral
 # action, the observer pole measured for it (docs/model.md, adaptation); the robust update's
@@ -357,9 +363,61 @@ def measured_noise(x) -> np.ndarray:
     return out
 
 
+def admissible_rows(theta0, zero_min: float, pole_min: float, gain_band: float, margin: float = 1e-4):
+    """The admissible set of docs/model.md ("Estimates with guarantees") around the nominal model
+    theta0 as rows C theta <= d: A's poles in the hull of real poles in [pole_min, 1) (A(1) >= m,
+    A at pole_min >= 0, the chord from the double pole at pole_min to the one at 1), the zero
+    -b2/b1 in [zero_min, 0.999], b1 and B(1)/A(1) within [1/g, g] times the nominal's."""
+    a1, a2, b1, b2 = theta0
+    gain = (b1 + b2) / (1.0 + a1 + a2)
+    p, z, g, m = pole_min, zero_min, gain_band, margin
+    C = np.array([[-1.0, -1.0, 0.0, 0.0], [-p, -1.0, 0.0, 0.0], [(1.0 + p) / 2.0, 1.0, 0.0, 0.0],
+                  [0.0, 0.0, -0.999, -1.0], [0.0, 0.0, z, 1.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, -1.0, 0.0],
+                  [-g * gain, -g * gain, 1.0, 1.0], [gain / g, gain / g, -1.0, -1.0]])
+    d = np.array([1.0 - m, p * p, -p - m, 0.0, 0.0, g * b1, -b1 / g, g * gain, -gain / g])
+    return C, d
+
+
+def admissible_projection(theta, P, C, d, nominal, sweeps: int = 8):
+    """Into C theta <= d: sweeps of projections onto each violated half-space in the metric of
+    P^-1 (theta - P c (c^T theta - d) / c^T P c), then the step towards the nominal model that
+    ends inside (theta = n + s (theta - n), s the least slack / (slack + excess)), then the
+    nominal model itself if still outside."""
+    if np.all(C @ theta <= d):
+        return theta
+    th = np.array(theta, dtype=float)
+    for _ in range(sweeps):
+        moved = False
+        for i in range(len(d)):
+            excess = C[i] @ th - d[i]
+            if excess > 0.0:
+                pc = P @ C[i]
+                cpc = C[i] @ pc
+                if not (cpc > 0.0 and np.isfinite(cpc)):
+                    pc, cpc = C[i], C[i] @ C[i]
+                th = th - pc * (excess / cpc)
+                moved = True
+        if not moved:
+            break
+    outside = C @ th - d > 0.0
+    if np.any(outside):
+        slack = d - C @ nominal
+        excess = C @ th - d
+        s = min(1.0, float(np.min(slack[outside] / (slack[outside] + excess[outside]))))
+        th = nominal + s * (th - nominal)
+        if np.any(C @ th - d > 0.0):
+            th = np.array(nominal, dtype=float)
+    return th
+
+
+#: the fallback's constants (piezo_controller.h): a jump beyond 5 times the largest change learned,
+#: which fades over 2000 adapted samples; the prediction test beyond 3 times the measured noise
+FALLBACK_JUMP_RATIO, FALLBACK_JUMP_MEMORY, FALLBACK_NOISE = 5.0, 2000.0, 3.0
+
+
 def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, trace_max: float,
                          variance_max: float, excitation: float, excitation_samples: int,
-                         theta0, e_before=0.0) -> dict:
+                         theta0, e_before=0.0, admissible=(0.5, 0.0, 3.0), fallback=(2.0, 1000, 1.0)) -> dict:
     """The robust update over recorded data (q(k), y(k)) with the law's references r(k)
     (r(-1) = 0), from theta0 and P = p0_loop I, offset c = 0:
 
@@ -372,10 +430,19 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         adapting: the exponentially weighted RLS of rls_reference with
                   trace(P) <= min(trace_max, variance_max / m_e(k)^2), m_e the measured noise
                   of e before sample k (no bound from it while it is 0), then the projection
+                  into the admissible set (admissible_rows of theta0 and admissible = (zero_min,
+                  pole_min, gain_band), admissible_projection)
         holding:  theta, P kept; c = c + 0.01 e(k)
+        fallback: while theta differs from theta0, with fallback = (ratio, N, pred_error_max):
+                  S_a = l S_a + e^2, S_n = l S_n + e_n^2 (l = 1 - 1/N, e_n the nominal model's
+                  a-priori error with the same c); S_a > ratio S_n + N (3 m_y)^2 (m_y before k),
+                  or |r(k) - r(k-1)| beyond pred_error_max and 5 times the largest change
+                  learned R (R = max(|r(k) - r(k-1)|, R (1 - 1/2000) when adapting) at every
+                  sample): theta = theta0, P = p0_loop I, S_a = S_n = 0, R = the jump
 
     e_before is the prediction error of the sample before the first (0 from rest). Returns
-    theta (N, 4), P (N, 4, 4), e (N,), c (N,) after each sample and adapting (N, bool)."""
+    theta (N, 4), P (N, 4, 4), e (N,), c (N,) after each sample, adapting (N, bool: updated,
+    or reset by a fallback) and fallback (N, int: 0, 1 a jump, 2 a prediction)."""
     q = np.asarray(q, dtype=float)
     y = np.asarray(y, dtype=float)
     r = np.asarray(r, dtype=float)
@@ -385,14 +452,18 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
     Y, Q = _past(y), _past(q)
 
     theta = np.array(theta0, dtype=float)
-    b1_nominal = theta[2]
+    nominal = np.array(theta0, dtype=float)
+    C, d_rows = admissible_rows(nominal, *admissible)
+    ratio, window, pe_max = fallback
+    lam_f = 1.0 - 1.0 / window
+    s_a = s_n = learned = 0.0
     P = p0_loop * np.eye(4)
     c = 0.0
     m_y = m_e = 0.0
     anchor, velocity, left = 0.0, 0.0, 0
     e_prev = e_before
     out = {"theta": np.zeros((n, 4)), "P": np.zeros((n, 4, 4)), "e": np.zeros(n), "c": np.zeros(n),
-           "adapting": np.zeros(n, dtype=bool)}
+           "adapting": np.zeros(n, dtype=bool), "fallback": np.zeros(n, dtype=int)}
 
     def track(m, delta):
         delta = abs(delta) * NOISE_SCALE
@@ -412,9 +483,11 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         else:
             anchor = line
         left = excitation_samples if event else max(left - 1, 0)
+        m_y_before = m_y
         m_y = track(m_y, Y(k) - Y(k - 1))
         phi = np.array([-Y(k - 1), -Y(k - 2), Q(k - d), Q(k - d - 1)])
         e = y[k] - c - phi @ theta
+        e_n = y[k] - c - phi @ nominal
         if adapting:
             bound = trace_max if m_e == 0.0 else min(trace_max, variance_max / m_e ** 2)
             K = P @ phi / (lam + phi @ P @ phi)
@@ -423,9 +496,26 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
             tr = np.trace(P)
             if tr > bound:
                 P = P * (bound / tr)
-            theta = rls_project(theta, b1_nominal)
+            theta = admissible_projection(theta, P, C, d_rows, nominal)
         else:
             c = c + OFFSET_GAIN * e
+        rate = abs(r[k] - r1)
+        adapted = not np.array_equal(theta, nominal)
+        reason = 0
+        s_a_next, s_n_next = lam_f * s_a + e * e, lam_f * s_n + e_n * e_n
+        if ratio > 0.0 and adapted and s_a_next > ratio * s_n_next + window * (FALLBACK_NOISE * m_y_before) ** 2:
+            reason = 2
+        if adapted and rate > pe_max and rate > FALLBACK_JUMP_RATIO * learned:
+            reason = 1
+        if reason:
+            theta, P = nominal.copy(), p0_loop * np.eye(4)
+            s_a = s_n = 0.0
+            learned = rate
+        else:
+            s_a, s_n = s_a_next, s_n_next
+            learned = max(rate, learned * (1.0 - 1.0 / FALLBACK_JUMP_MEMORY) if adapting else learned)
+        out["fallback"][k] = reason
+        adapting = adapting or reason > 0
         m_e = track(m_e, e - e_prev)
         e_prev = e
         out["theta"][k], out["P"][k], out["e"][k], out["c"][k] = theta, P, e, c

@@ -918,7 +918,8 @@ def test_saturation_counts():
 # ------------------------------------------------------------------ the robust update, integral action
 ROBUST = {k: ref.CONTROLLER_DOC_DEFAULTS[k] for k in (
     "rls.robust", "rls.forgetting", "rls.trace_max", "rls.excitation", "rls.excitation_time",
-    "rls.variance_max", "rls.p0_loop", "mv.integral")}
+    "rls.variance_max", "rls.p0_loop", "mv.integral", "rls.zero_min", "rls.pole_min", "rls.gain_band",
+    "rls.fallback_ratio", "rls.fallback_window", "monitor.pred_error_max")}
 
 
 def _stage_use_reference(n_hold=600):
@@ -931,8 +932,9 @@ def _stage_use_reference(n_hold=600):
     return np.concatenate(segs)
 
 
-@pytest.mark.parametrize("noise", [0.001, 0.02], ids=["1nm", "20nm"])
-def test_robust_update_matches_numpy_reference(noise):
+@pytest.mark.parametrize("noise, case", [(0.001, "use"), (0.02, "use"), (0.001, "tone-step-narrow")],
+                         ids=["1nm", "20nm", "tone-then-step-narrow-set"])
+def test_robust_update_matches_numpy_reference(noise, case):
     """Reference: numpy_reference.rls_robust_reference, the robust update written from
     docs/model.md (excitation by the reference against rls.excitation times the measured noise
     of y_meas, rls.excitation_time after it, the offset c following the prediction error while
@@ -943,13 +945,22 @@ def test_robust_update_matches_numpy_reference(noise):
     defaults otherwise). theta, P, pred_error and c must match at every sample (theta 1e-9 of
     max|theta|, P 1e-7 of max|P|, pred_error and c 1e-9 um), the estimates must hold for a
     third of the samples or more and adapt for 100 or more, c must move (> 1e-4 um), and with
-    the 20 nm sensor the noise bound must act (trace(P) below rls.trace_max / 10)."""
+    the 20 nm sensor the noise bound must act (trace(P) below rls.trace_max / 10). A third
+    case runs 1.5 s of a 10 Hz, 4 um tone, a hold and an 8 um step with a narrow admissible set
+    (rls.gain_band 1.2, rls.zero_min 0.9): the projection must act (20 updates or more) and
+    the step must make the jump fallback, at the step's sample, in both."""
     k_c, alpha = ROWS["10 Hz row"]
-    y_d = _stage_use_reference()
+    params = dict(ROBUST)
+    if case == "use":
+        y_d = _stage_use_reference()
+    else:
+        k = np.arange(4000)
+        y_d = np.where(k < 3000, 4.0 * np.sin(2 * np.pi * 10 * k * H), np.where(k < 3400, 0.0, 8.0))
+        params.update({"rls.gain_band": 1.2, "rls.zero_min": 0.9})
     n = len(y_d) - 1
     plant = core.Plant({**_pi_scaled(1.1), "creep.k_c": k_c, "creep.alpha": alpha,
                         "sensor.resolution": 0.002, "sensor.noise_rms": noise, "sensor.seed": 3})
-    ctrl = controller({**ROBUST, "mv.integral": 0.0})
+    ctrl = controller({**params, "mv.integral": 0.0})
     q, ym, r, P = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, 4, 4))
     theta, pe, c_off, adapting = np.zeros((n, 4)), np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool)
     for k in range(n):
@@ -962,19 +973,28 @@ def test_robust_update_matches_numpy_reference(noise):
         P[k] = np.reshape(list(ctrl.raw.P), (4, 4))
         c_off[k] = ctrl.raw.offset
         adapting[k] = bool(ctrl.raw.out.adapting)
-    p = ROBUST
+    p = params
     want = ref.rls_robust_reference(q, ym, r, 1, p["rls.forgetting"], p["rls.p0_loop"], p["rls.trace_max"],
                                     p["rls.variance_max"], p["rls.excitation"],
-                                    round(p["rls.excitation_time"] / H), THETA)
+                                    round(p["rls.excitation_time"] / H), THETA,
+                                    admissible=(p["rls.zero_min"], p["rls.pole_min"], p["rls.gain_band"]),
+                                    fallback=(p["rls.fallback_ratio"], round(p["rls.fallback_window"] / H),
+                                              p["monitor.pred_error_max"]))
     e_theta = np.max(np.max(np.abs(want["theta"] - theta), axis=1) / np.max(np.abs(theta), axis=1))
     e_P = np.max(np.max(np.abs(want["P"] - P), axis=(1, 2)) / np.max(np.abs(P), axis=(1, 2)))
     e_pe, e_c = np.max(np.abs(want["e"] - pe)), np.max(np.abs(want["c"] - c_off))
     traces = np.trace(P, axis1=1, axis2=2)
     print(f"\n{noise * 1e3:g} nm: theta rel {e_theta:.1e}, P rel {e_P:.1e}, pred_error {e_pe:.1e} um, "
           f"c {e_c:.1e} um; adapting {adapting.sum()} of {n}, max|c| {np.abs(c_off).max():.3g} um, "
-          f"max trace(P) {traces.max():.4g}")
+          f"max trace(P) {traces.max():.4g}; {ctrl.raw.n_projections} projections, fallbacks at "
+          f"{np.flatnonzero(want['fallback']).tolist()} ({ctrl.raw.n_fallbacks} in the core)")
     assert e_theta <= 1e-9 and e_P <= 1e-7 and e_pe <= 1e-9 and e_c <= 1e-9
     assert np.array_equal(adapting, want["adapting"])
+    if case != "use":
+        assert ctrl.raw.n_projections >= 20
+        assert np.flatnonzero(want["fallback"]).tolist() == [3399] and ctrl.raw.n_fallbacks == 1
+        assert ctrl.raw.first_fallback == core.lib().PIEZO_FALLBACK_JUMP and ctrl.raw.k_first_fallback == 3399
+        return
     assert (~adapting).sum() >= n / 3 and adapting.sum() >= 100
     assert np.abs(c_off).max() > 1e-4
     if noise > 0.01:

@@ -155,8 +155,11 @@ class ControllerRef:
     offset, the noise-scaled trace bound, the candidates' own forgetting and bound, the
     loop's fresh covariance at the choice), Diophantine with the observer polynomial T, MV
     law on T r with the integral action, inverse creep, inverse PI, saturation with
-    back-calculation, monitor counts. Written from the header's and the docs' description,
-    operation by operation in the C order."""
+    back-calculation, monitor counts, and the guarantees of the robust update (its projection
+    into the admissible set in the metric of P^-1 with the radial step, the fallback to the
+    nominal model at a jump or a worse prediction). Written from the header's and the docs'
+    description, operation by operation in the C order; the admissible set's rows are constants
+    the core derives at init."""
 
     START_D, START_T, N, CONFIRM, TRIAL, REDETECT, PROBES = 2, 0.9, 3, 3, 20, 10, 8
     DETECT_LAMBDA, DETECT_TRACE, OFFSET_GAIN = 0.995, 100.0, 0.01
@@ -186,6 +189,11 @@ class ControllerRef:
         self.detecting = False
         if self.auto:
             self.start_detection()
+        self.adm_c = [list(c.adm_c[i]) for i in range(9)]
+        self.adm_d = list(c.adm_d)
+        self.fb_ratio, self.fb_n_samples, self.fb_lam = c.fallback_ratio, c.fallback_samples, c.fallback_forgetting
+        self.fb_a = self.fb_n = self.learned = 0.0
+        self.n_fallbacks = 0
 
     def start_detection(self):
         self.detecting, self.d = True, self.START_D
@@ -212,8 +220,63 @@ class ControllerRef:
         if abs(th[3]) > 0.999 * th[2]:
             th[3] = math.copysign(0.999 * th[2], th[3])
 
-    def rls_step(self, theta, P, d, y, update, lam=None, trace_max=None):
-        """(a-priori error, theta, P) of one RLS under delay d."""
+    def excess(self, i, th):
+        """c_i^T theta - d_i of the admissible set's row i, in the C order."""
+        row = self.adm_c[i]
+        return (((row[0] * th[0] + row[1] * th[1]) + row[2] * th[2]) + row[3] * th[3]) - self.adm_d[i]
+
+    def outside(self, th):
+        return any(self.excess(i, th) > 0.0 for i in range(9))
+
+    def admissible_project(self, P, th):
+        """Sweeps of P-metric half-space projections over the violated rows (at most 8), then
+        the radial step towards the nominal model, then the nominal model itself if rounding
+        left it outside."""
+        if not self.outside(th):
+            return th
+        th = list(th)
+        for _ in range(8):
+            moved = False
+            for i in range(9):
+                row, excess = self.adm_c[i], self.excess(i, th)
+                if not excess > 0.0:
+                    continue
+                pc = [((P[j][0] * row[0] + P[j][1] * row[1]) + P[j][2] * row[2]) + P[j][3] * row[3]
+                      for j in range(4)]
+                cpc = ((row[0] * pc[0] + row[1] * pc[1]) + row[2] * pc[2]) + row[3] * pc[3]
+                if not (cpc > 0.0 and math.isfinite(cpc)):
+                    pc = list(row)
+                    cpc = ((row[0] * row[0] + row[1] * row[1]) + row[2] * row[2]) + row[3] * row[3]
+                th = [th[j] - pc[j] * (excess / cpc) for j in range(4)]
+                moved = True
+            if not moved:
+                break
+        if self.outside(th):
+            n, s = self.nominal, 1.0
+            for i in range(9):
+                excess = self.excess(i, th)
+                if excess > 0.0:
+                    slack = -self.excess(i, n)
+                    ratio = slack / (slack + excess)
+                    if ratio < s:
+                        s = ratio
+            th = [n[j] + s * (th[j] - n[j]) for j in range(4)]
+            if self.outside(th):
+                th = list(n)
+        return th
+
+    def error(self, theta, d, y):
+        """The a-priori error y - phi^T theta, in the C order."""
+        phi = [-self.y_prev[0], -self.y_prev[1], self.q_past[d - 1], self.q_past[d]]
+        e = y
+        for i in range(4):
+            e -= phi[i] * theta[i]
+        return e
+
+    def rls_step(self, theta, P, d, y, update, lam=None, trace_max=None, paper_projection=True):
+        """(a-priori error, theta, P) of one RLS under delay d; the paper's projection (the
+        delay candidates, the paper's update) unless paper_projection is false (the robust
+        update, whose caller projects into the admissible set)."""
         lam = self.lam if lam is None else lam
         trace_max = self.trace_max if trace_max is None else trace_max
         phi = [-self.y_prev[0], -self.y_prev[1], self.q_past[d - 1], self.q_past[d]]
@@ -238,7 +301,8 @@ class ControllerRef:
         if trace > trace_max:
             scale = trace_max / trace
             new = [[v * scale for v in row] for row in new]
-        self.project(theta)
+        if paper_projection:
+            self.project(theta)
         return e, theta, new
 
     def detect(self, y):
@@ -283,6 +347,7 @@ class ControllerRef:
         was_detecting = self.detecting
         self.new_trial = False
         excited, offset = True, self.offset
+        offset_before, noise_y_before, updated = self.offset, self.noise_y, False
         if self.robust:
             r1 = self.r_last
             line = self.anchor + self.velocity
@@ -303,8 +368,11 @@ class ControllerRef:
                 b = self.variance_max / (self.noise_e * self.noise_e)
                 if b < bound:
                     bound = b
+            updated = may and excited
             pred_error, self.theta, self.P = self.rls_step(self.theta, self.P, self.d, y_meas - self.offset,
-                                                           may and excited, self.lam, bound)
+                                                           updated, self.lam, bound, paper_projection=False)
+            if updated:
+                self.theta = self.admissible_project(self.P, self.theta)
             if may and not excited:
                 offset = self.offset + self.OFFSET_GAIN * pred_error
         else:
@@ -316,9 +384,33 @@ class ControllerRef:
         self.prev_pred_error = pred_error
         self.offset = offset
         d = self.d
+        r_plain = y_ref
+        if self.robust and not was_detecting and not self.detecting:
+            # the fallback to the nominal model: a worse prediction over the window, or a jump
+            rate = abs(r_plain - self.r_last)
+            adapted = self.rls and bits(self.theta).tobytes() != bits(self.nominal).tobytes()
+            reason, fb_a, fb_n = 0, self.fb_a, self.fb_n
+            if self.fb_ratio > 0.0:
+                e_n = self.error(self.nominal, d, y_meas - offset_before)
+                fb_a = self.fb_lam * self.fb_a + pred_error * pred_error
+                fb_n = self.fb_lam * self.fb_n + e_n * e_n
+                floor = 3.0 * noise_y_before
+                if adapted and fb_a > self.fb_ratio * fb_n + float(self.fb_n_samples) * (floor * floor):
+                    reason = 2
+            if adapted and rate > self.pe_max and rate > 5 * self.learned:
+                reason = 1
+            if reason:
+                self.theta = list(self.nominal)
+                self.P = [[self.p0_loop if i == j else 0.0 for j in range(4)] for i in range(4)]
+                self.fb_a = self.fb_n = 0.0
+                self.learned = rate
+                self.n_fallbacks += 1
+            else:
+                self.fb_a, self.fb_n = fb_a, fb_n
+                faded = self.learned * (1.0 - 1.0 / 2000) if updated else self.learned
+                self.learned = rate if rate > faded else faded
         a1, a2, b1, b2 = self.nominal if self.detecting else self.theta
         t = self.START_T if self.detecting else self.observer
-        r_plain = y_ref
         z = self.z
         if self.gamma > 0.0 and not self.detecting and self.sat_hold == 0 and self.k in self.yd:
             z = self.z + self.gamma * (self.yd[self.k] - y_meas)
@@ -439,10 +531,10 @@ def test_closed_loop_equals_scalar_transcription_bitwise(cparams, d):
         assert abs(ctrl.raw.theta[0] - ctrl.raw.theta_nominal[0]) > 1e-4
 
 
-def _run_bitwise(cparams, d, y_d, n):
+def _run_bitwise(cparams, d, y_d, n, plant_params=MISMATCH):
     """The loop of test_closed_loop_equals_scalar_transcription_bitwise: n samples of the
     core and the transcription side by side, asserting bit identity at every sample."""
-    plant, ctrl = core.Plant(MISMATCH), core.Controller(cparams)
+    plant, ctrl = core.Plant(plant_params), core.Controller(cparams)
     pref, cref = PlantRef(plant, core_normals(plant.raw.sensor_seed)), ControllerRef(ctrl)
     # the loop delay d: the plant's own sample plus d - 1 samples before v is applied
     pending, pending_ref = [0.0] * (d - 1), [0.0] * (d - 1)
@@ -493,6 +585,38 @@ def test_holds_and_moves_equal_scalar_transcription_bitwise(cparams, d):
         assert ctrl.raw.noise_y == cref.noise_y and ctrl.raw.noise_e == cref.noise_e
     else:
         assert ctrl.held <= 50       # the paper's update adapts on every sample (but while detecting)
+
+
+@pytest.mark.parametrize("case", ["tone-then-step", "raster-narrow-set", "steps-prediction"])
+def test_guarantees_equal_scalar_transcription_bitwise(case):
+    """Reference: ControllerRef and PlantRef as above, on what the robust update's guarantees
+    (docs/model.md, "Estimates with guarantees") act on, each case made to exercise its part:
+    1.5 s of a 10 Hz tone then an 8 um step (projections into the admissible set, and the jump
+    fallback: the step is 32 times the tone's largest change a sample); a 10 Hz triangle raster
+    with a narrow set (rls.gain_band 1.2, rls.zero_min 0.9: the projection at most samples); a
+    square wave of 3 um steps on a stage with 20 % more hysteresis gain, with the prediction test
+    at rls.fallback_ratio 1 over 5 ms (prediction fallbacks). Bit identity at every sample."""
+    k = np.arange(6002)
+    plant = MISMATCH
+    if case == "tone-then-step":
+        cparams, y_d = {}, np.where(k < 3000, 4 * np.sin(2 * np.pi * 10 * k * H), 8.0)
+    elif case == "raster-narrow-set":
+        cparams = {"rls.gain_band": 1.2, "rls.zero_min": 0.9}
+        y_d = 10 * np.abs(((k * H * 10) % 1.0) * 2 - 1)
+    else:
+        cparams = {"rls.fallback_ratio": 1.0, "rls.fallback_window": 0.005}
+        y_d = np.where((k // 1000) % 2 == 1, 3.0, 0.0)
+        plant = {"pi.w0": 0.40}
+    ctrl, cref = _run_bitwise(cparams, 2, y_d, 6000, plant)
+    raw = ctrl.raw
+    assert raw.n_fallbacks == cref.n_fallbacks
+    if case == "tone-then-step":
+        assert raw.n_projections > 0 and raw.n_fallbacks == 1
+        assert (raw.first_fallback, raw.k_first_fallback) == (core.lib().PIEZO_FALLBACK_JUMP, 2998)
+    elif case == "raster-narrow-set":
+        assert raw.n_projections > 1000 and raw.n_fallbacks == 0
+    else:
+        assert raw.n_fallbacks > 10 and raw.first_fallback == core.lib().PIEZO_FALLBACK_PREDICTION
 
 
 # --------------------------------------------------------------------------- refusals
