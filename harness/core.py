@@ -309,7 +309,6 @@ _CONTROLLER_TABLE = {
     "mv.probe_max": (("mv_probe_max",), "float"),
     "rls.zero_min": (("rls_zero_min",), "float"),
     "rls.pole_min": (("rls_pole_min",), "float"),
-    "rls.gain_band": (("rls_gain_band",), "float"),
     "rls.fallback_ratio": (("rls_fallback_ratio",), "float"),
     "rls.fallback_window": (("rls_fallback_window",), "float"),
 }

@@ -28,8 +28,8 @@ DOC_DEFAULTS = {
 # voltage limits on at +-150 V (the paper's amplifier range; every paper scenario stays below
 # 62 V); the divergence monitor at 1 um for 200 samples; the estimates' admissible set (the zero
 # of B at 0.5 or above, A's poles in the hull of real poles in [0, 1), b1 and the static gain
-# within a factor 3 of the nominal's) and the fallback at twice the nominal model's squared
-# errors over 0.5 s.
+# within the supervision's sup.gain_min .. sup.gain_max, 0.25 .. 4, times the nominal's) and the
+# fallback at twice the nominal model's squared errors over 0.5 s.
 CONTROLLER_DOC_DEFAULTS = {
     "mv.delay": -1, "mv.feedthrough": False, "mv.hold_inputs": False, "mv.lambda_u": 0.0,
     "mv.observer": 0.5, "mv.integral": 0.01, "rls.enabled": True,
@@ -38,8 +38,7 @@ CONTROLLER_DOC_DEFAULTS = {
     "sat.enabled": True, "sat.v_min": -150.0, "sat.v_max": 150.0, "monitor.pred_error_max": 1.0,
     "monitor.divergence_samples": 200,
     # the estimates' guarantees (docs/model.md): the admissible set and the fallback
-    "rls.zero_min": 0.5, "rls.pole_min": 0.0, "rls.gain_band": 3.0, "rls.fallback_ratio": 2.0,
-    "rls.fallback_window": 0.5,
+    "rls.zero_min": 0.5, "rls.pole_min": 0.0, "rls.fallback_ratio": 2.0, "rls.fallback_window": 0.5,
 }
 # The paper's law: its update on every sample with the tuning measured for it, no integral
 # action, the observer pole measured for it (docs/model.md, adaptation); the robust update's
@@ -363,18 +362,21 @@ def measured_noise(x) -> np.ndarray:
     return out
 
 
-def admissible_rows(theta0, zero_min: float, pole_min: float, gain_band: float, margin: float = 1e-4):
+def admissible_rows(theta0, zero_min: float, pole_min: float, gain_min: float = 0.25, gain_max: float = 4.0,
+                    margin: float = 1e-4):
     """The admissible set of docs/model.md ("Estimates with guarantees") around the nominal model
     theta0 as rows C theta <= d: A's poles in the hull of real poles in [pole_min, 1) (A(1) >= m,
     A at pole_min >= 0, the chord from the double pole at pole_min to the one at 1), the zero
-    -b2/b1 in [zero_min, 0.999], b1 and B(1)/A(1) within [1/g, g] times the nominal's."""
+    -b2/b1 in [zero_min, 0.999], b1 and B(1)/A(1) within [gain_min, gain_max] times the
+    nominal's (the supervision's sup.gain_min, sup.gain_max)."""
     a1, a2, b1, b2 = theta0
     gain = (b1 + b2) / (1.0 + a1 + a2)
-    p, z, g, m = pole_min, zero_min, gain_band, margin
+    p, z, m = pole_min, zero_min, margin
     C = np.array([[-1.0, -1.0, 0.0, 0.0], [-p, -1.0, 0.0, 0.0], [(1.0 + p) / 2.0, 1.0, 0.0, 0.0],
                   [0.0, 0.0, -0.999, -1.0], [0.0, 0.0, z, 1.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, -1.0, 0.0],
-                  [-g * gain, -g * gain, 1.0, 1.0], [gain / g, gain / g, -1.0, -1.0]])
-    d = np.array([1.0 - m, p * p, -p - m, 0.0, 0.0, g * b1, -b1 / g, g * gain, -gain / g])
+                  [-gain_max * gain, -gain_max * gain, 1.0, 1.0], [gain_min * gain, gain_min * gain, -1.0, -1.0]])
+    d = np.array([1.0 - m, p * p, -p - m, 0.0, 0.0, gain_max * b1, -gain_min * b1, gain_max * gain,
+                  -gain_min * gain])
     return C, d
 
 
@@ -417,7 +419,7 @@ FALLBACK_JUMP_RATIO, FALLBACK_JUMP_MEMORY, FALLBACK_NOISE = 5.0, 2000.0, 3.0
 
 def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, trace_max: float,
                          variance_max: float, excitation: float, excitation_samples: int,
-                         theta0, e_before=0.0, admissible=(0.5, 0.0, 3.0), fallback=(2.0, 1000, 1.0)) -> dict:
+                         theta0, e_before=0.0, admissible=(0.5, 0.0, 0.25, 4.0), fallback=(2.0, 1000, 1.0)) -> dict:
     """The robust update over recorded data (q(k), y(k)) with the law's references r(k)
     (r(-1) = 0), from theta0 and P = p0_loop I, offset c = 0:
 
@@ -431,7 +433,7 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
                   trace(P) <= min(trace_max, variance_max / m_e(k)^2), m_e the measured noise
                   of e before sample k (no bound from it while it is 0), then the projection
                   into the admissible set (admissible_rows of theta0 and admissible = (zero_min,
-                  pole_min, gain_band), admissible_projection)
+                  pole_min, gain_min, gain_max), admissible_projection)
         holding:  theta, P kept; c = c + 0.01 e(k)
         fallback: while theta differs from theta0, with fallback = (ratio, N, pred_error_max):
                   S_a = l S_a + e^2, S_n = l S_n + e_n^2 (l = 1 - 1/N, e_n the nominal model's

@@ -918,7 +918,7 @@ def test_saturation_counts():
 # ------------------------------------------------------------------ the robust update, integral action
 ROBUST = {k: ref.CONTROLLER_DOC_DEFAULTS[k] for k in (
     "rls.robust", "rls.forgetting", "rls.trace_max", "rls.excitation", "rls.excitation_time",
-    "rls.variance_max", "rls.p0_loop", "mv.integral", "rls.zero_min", "rls.pole_min", "rls.gain_band",
+    "rls.variance_max", "rls.p0_loop", "mv.integral", "rls.zero_min", "rls.pole_min",
     "rls.fallback_ratio", "rls.fallback_window", "monitor.pred_error_max")}
 
 
@@ -947,7 +947,7 @@ def test_robust_update_matches_numpy_reference(noise, case):
     third of the samples or more and adapt for 100 or more, c must move (> 1e-4 um), and with
     the 20 nm sensor the noise bound must act (trace(P) below rls.trace_max / 10). A third
     case runs 1.5 s of a 10 Hz, 4 um tone, a hold and an 8 um step with a narrow admissible set
-    (rls.gain_band 1.2, rls.zero_min 0.9): the projection must act (20 updates or more) and
+    (sup.gain_min 0.85, sup.gain_max 1.2, rls.zero_min 0.9): the projection must act (20 updates or more) and
     the step must make the jump fallback, at the step's sample, in both."""
     k_c, alpha = ROWS["10 Hz row"]
     params = dict(ROBUST)
@@ -956,7 +956,7 @@ def test_robust_update_matches_numpy_reference(noise, case):
     else:
         k = np.arange(4000)
         y_d = np.where(k < 3000, 4.0 * np.sin(2 * np.pi * 10 * k * H), np.where(k < 3400, 0.0, 8.0))
-        params.update({"rls.gain_band": 1.2, "rls.zero_min": 0.9})
+        params.update({"sup.gain_min": 0.85, "sup.gain_max": 1.2, "rls.zero_min": 0.9})
     n = len(y_d) - 1
     plant = core.Plant({**_pi_scaled(1.1), "creep.k_c": k_c, "creep.alpha": alpha,
                         "sensor.resolution": 0.002, "sensor.noise_rms": noise, "sensor.seed": 3})
@@ -977,7 +977,8 @@ def test_robust_update_matches_numpy_reference(noise, case):
     want = ref.rls_robust_reference(q, ym, r, 1, p["rls.forgetting"], p["rls.p0_loop"], p["rls.trace_max"],
                                     p["rls.variance_max"], p["rls.excitation"],
                                     round(p["rls.excitation_time"] / H), THETA,
-                                    admissible=(p["rls.zero_min"], p["rls.pole_min"], p["rls.gain_band"]),
+                                    admissible=(p["rls.zero_min"], p["rls.pole_min"], p.get("sup.gain_min", 0.25),
+                                                p.get("sup.gain_max", 4.0)),
                                     fallback=(p["rls.fallback_ratio"], round(p["rls.fallback_window"] / H),
                                               p["monitor.pred_error_max"]))
     e_theta = np.max(np.max(np.abs(want["theta"] - theta), axis=1) / np.max(np.abs(theta), axis=1))

@@ -593,7 +593,7 @@ def test_guarantees_equal_scalar_transcription_bitwise(case):
     (docs/model.md, "Estimates with guarantees") act on, each case made to exercise its part:
     1.5 s of a 10 Hz tone then an 8 um step (projections into the admissible set, and the jump
     fallback: the step is 32 times the tone's largest change a sample); a 10 Hz triangle raster
-    with a narrow set (rls.gain_band 1.2, rls.zero_min 0.9: the projection at most samples); a
+    with a narrow set (sup.gain_min 0.85, sup.gain_max 1.2, rls.zero_min 0.9: the projection at most samples); a
     square wave of 3 um steps on a stage with 20 % more hysteresis gain, with the prediction test
     at rls.fallback_ratio 1 over 5 ms (prediction fallbacks). Bit identity at every sample."""
     k = np.arange(6002)
@@ -601,7 +601,7 @@ def test_guarantees_equal_scalar_transcription_bitwise(case):
     if case == "tone-then-step":
         cparams, y_d = {}, np.where(k < 3000, 4 * np.sin(2 * np.pi * 10 * k * H), 8.0)
     elif case == "raster-narrow-set":
-        cparams = {"rls.gain_band": 1.2, "rls.zero_min": 0.9}
+        cparams = {"sup.gain_min": 0.85, "sup.gain_max": 1.2, "rls.zero_min": 0.9}
         y_d = 10 * np.abs(((k * H * 10) % 1.0) * 2 - 1)
     else:
         cparams = {"rls.fallback_ratio": 1.0, "rls.fallback_window": 0.005}

@@ -127,7 +127,6 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_sup_fault_time] = { "sup.fault_time", MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, sup_fault_time) },
     [vr_rls_zero_min] = PARAM_REAL("rls.zero_min", rls_zero_min),
     [vr_rls_pole_min] = PARAM_REAL("rls.pole_min", rls_pole_min),
-    [vr_rls_gain_band] = PARAM_REAL("rls.gain_band", rls_gain_band),
     [vr_rls_fallback_ratio] = PARAM_REAL("rls.fallback_ratio", rls_fallback_ratio),
     [vr_rls_fallback_window] = PARAM_REAL("rls.fallback_window", rls_fallback_window),
     [vr_est_fallbacks] = MODEL_OUTPUT_INT("est.fallbacks", fallbacks),

@@ -136,7 +136,6 @@ typedef enum {
     vr_sup_fault_time,      /* output [s] */
     vr_rls_zero_min,        /* the admissible set of the estimates (piezo_controller.h) */
     vr_rls_pole_min,
-    vr_rls_gain_band,
     vr_rls_fallback_ratio,  /* the fallback to the nominal model */
     vr_rls_fallback_window, /* [s] */
     vr_est_fallbacks,       /* output Integer: fallbacks to the nominal model so far */

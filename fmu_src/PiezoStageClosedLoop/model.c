@@ -216,7 +216,6 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_sup_fault_time] = CTRL_OUT_REAL("sup.fault_time", sup_fault_time),
     [vr_rls_zero_min] = CTRL_REAL("rls.zero_min", rls_zero_min),
     [vr_rls_pole_min] = CTRL_REAL("rls.pole_min", rls_pole_min),
-    [vr_rls_gain_band] = CTRL_REAL("rls.gain_band", rls_gain_band),
     [vr_rls_fallback_ratio] = CTRL_REAL("rls.fallback_ratio", rls_fallback_ratio),
     [vr_rls_fallback_window] = CTRL_REAL("rls.fallback_window", rls_fallback_window),
     [vr_est_fallbacks] = CTRL_OUT_INT("est.fallbacks", fallbacks),

@@ -136,14 +136,12 @@ void piezo_controller_default_params(piezo_controller_params *p)
     /* estimates with guarantees (docs/model.md): measured on the stage family's days and the
      * paper's scenarios. The zero of B at 0.5 or above (a drift to -0.3 rang +-44 um; the
      * paper's tones move it to 0.66-0.95), poles of A in the hull of real poles in [0, 1) (a
-     * fast pole driven to -0.3 by a 1 Hz tone overshot a step by 8.5 um), b1 and the static
-     * gain within a factor 3 of the nominal model's (a 10 Hz raster drove the gain to 6.5
-     * times it; a factor 2 held the estimates at its edge after a sensor halved its gain, and
-     * the supervision no longer saw the change); the fallback at twice the nominal model's
-     * squared errors over 0.5 s */
+     * fast pole driven to -0.3 by a 1 Hz tone overshot a step by 8.5 um); b1 and the static
+     * gain are kept within the supervision's sup.gain_min .. sup.gain_max times the nominal
+     * model's (piezo_supervisor.h); the fallback at twice the nominal model's squared errors
+     * over 0.5 s */
     p->rls_zero_min = 0.5;
     p->rls_pole_min = 0.0;
-    p->rls_gain_band = 3.0;
     p->rls_fallback_ratio = 2.0;
     p->rls_fallback_window = 0.5;
 }
@@ -184,7 +182,9 @@ static double monitor_forgetting(int window)
 /*
  * The admissible set of the robust update's estimates theta = [a1, a2, b1, b2] (docs/model.md,
  * "Estimates with guarantees"), as rows c^T theta <= d, from the nominal model n, the lowest
- * zero z (rls.zero_min), the lowest pole p (rls.pole_min) and the band g (rls.gain_band);
+ * zero z (rls.zero_min), the lowest pole p (rls.pole_min) and the supervision's range of a working
+ * loop's response gain [g_lo, g_hi] (sup.gain_min, sup.gain_max: a gain the supervision takes for
+ * a working loop the estimates can follow, and one beyond it the supervision stops);
  * A(x) = 1 + a1 x^-1 + a2 x^-2, so A(1) = 1 + a1 + a2, and m = A_STABILITY_MARGIN:
  *   A's poles in the convex hull of {real poles in [p, 1)}, the triangle of
  *     A(1) >= m                    (no pole at 1 or beyond):   -a1 - a2 <= 1 - m
@@ -192,13 +192,14 @@ static double monitor_forgetting(int window)
  *     a2 + (1 + p)/2 a1 <= -p - m  (the chord from the double pole at p to the one at 1: complex
  *                                   poles only where they are damped as real ones between)
  *   B's zero -b2/b1 in [z, 0.999] (b1 > 0):  -0.999 b1 - b2 <= 0,  z b1 + b2 <= 0
- *   b1 within [n_b1 / g, g n_b1]:            b1 <= g n_b1,  -b1 <= -n_b1 / g
- *   B(1)/A(1) within [K / g, g K], K the nominal's (A(1) > 0 by the first row):
- *     b1 + b2 - g K (1 + a1 + a2) <= 0,   (K / g)(1 + a1 + a2) - b1 - b2 <= 0.
+ *   b1 within [g_lo n_b1, g_hi n_b1]:        b1 <= g_hi n_b1,  -b1 <= -g_lo n_b1
+ *   B(1)/A(1) within [g_lo K, g_hi K], K the nominal's (A(1) > 0 by the first row):
+ *     b1 + b2 - g_hi K (1 + a1 + a2) <= 0,   g_lo K (1 + a1 + a2) - b1 - b2 <= 0.
  * Every row is linear in theta: the set is a convex polytope (the hull, not the real-pole set
  * itself, which is not convex).
  */
-static void admissible_rows(const double *n, double z, double p, double g, double rows[][4], double *d)
+static void admissible_rows(const double *n, double z, double p, double g_lo, double g_hi, double rows[][4],
+                            double *d)
 {
     const double m = A_STABILITY_MARGIN;
     const double gain = (n[2] + n[3]) / (1.0 + n[0] + n[1]);
@@ -210,10 +211,10 @@ static void admissible_rows(const double *n, double z, double p, double g, doubl
     ADMISSIBLE_ROW((1.0 + p) / 2.0, 1.0, 0.0, 0.0, -p - m);
     ADMISSIBLE_ROW(0.0, 0.0, -ZERO_RADIUS_MAX, -1.0, 0.0);
     ADMISSIBLE_ROW(0.0, 0.0, z, 1.0, 0.0);
-    ADMISSIBLE_ROW(0.0, 0.0, 1.0, 0.0, g * n[2]);
-    ADMISSIBLE_ROW(0.0, 0.0, -1.0, 0.0, -n[2] / g);
-    ADMISSIBLE_ROW(-g * gain, -g * gain, 1.0, 1.0, g * gain);
-    ADMISSIBLE_ROW(gain / g, gain / g, -1.0, -1.0, -gain / g);
+    ADMISSIBLE_ROW(0.0, 0.0, 1.0, 0.0, g_hi * n[2]);
+    ADMISSIBLE_ROW(0.0, 0.0, -1.0, 0.0, -g_lo * n[2]);
+    ADMISSIBLE_ROW(-g_hi * gain, -g_hi * gain, 1.0, 1.0, g_hi * gain);
+    ADMISSIBLE_ROW(g_lo * gain, g_lo * gain, -1.0, -1.0, -g_lo * gain);
 #undef ADMISSIBLE_ROW
 }
 
@@ -308,27 +309,29 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     if (!(isfinite(p->rls_pole_min) && p->rls_pole_min >= -1.0 && p->rls_pole_min < 1.0))
         return piezo_refuse(diag, "rls.pole_min", "[-1, 1) (the poles of A in the hull of real poles in "
                             "[rls.pole_min, 1))", p->rls_pole_min);
-    if (!(isfinite(p->rls_gain_band) && p->rls_gain_band > 1.0 && p->rls_gain_band <= 1e6))
-        return piezo_refuse(diag, "rls.gain_band", "(1, 1e6] (b1 and the static gain within [1/band, band] "
-                            "times the nominal model's)", p->rls_gain_band);
     {
         /* the nominal model inside the set, row by row (the parameter that draws each row) */
         static const char *const who[PIEZO_ADMISSIBLE_ROWS] = {
             "rls.pole_min", "rls.pole_min", "rls.pole_min", "rls.zero_min", "rls.zero_min",
-            "rls.gain_band", "rls.gain_band", "rls.gain_band", "rls.gain_band" };
+            "sup.gain_min", "sup.gain_min", "sup.gain_max", "sup.gain_min" };
         double rows[PIEZO_ADMISSIBLE_ROWS][4], bounds[PIEZO_ADMISSIBLE_ROWS], nominal[4];
         int i;
         nominal[0] = p->tf_a1;
         nominal[1] = p->tf_a2;
         nominal[2] = p->tf_b1;
         nominal[3] = p->tf_b2;
-        admissible_rows(nominal, p->rls_zero_min, p->rls_pole_min, p->rls_gain_band, rows, bounds);
+        if (!(isfinite(p->sup.gain_min) && p->sup.gain_min > 0.0 && p->sup.gain_min < 1.0))
+            return piezo_refuse(diag, "sup.gain_min", "(0, 1) (times the model's response)", p->sup.gain_min);
+        if (!(isfinite(p->sup.gain_max) && p->sup.gain_max > 1.0))
+            return piezo_refuse(diag, "sup.gain_max", "(1, inf) (times the model's response)", p->sup.gain_max);
+        admissible_rows(nominal, p->rls_zero_min, p->rls_pole_min, p->sup.gain_min, p->sup.gain_max, rows, bounds);
         for (i = 0; i < PIEZO_ADMISSIBLE_ROWS; ++i)
             if (admissible_excess(rows[i], bounds[i], nominal) > 0.0)
                 return piezo_refuse(diag, who[i], i < 3 ? "a value below both nominal poles (tf.a1, tf.a2: real "
                                     "poles in [rls.pole_min, 1 - 1e-4], or complex ones inside their hull)"
                                     : "a set that holds the nominal model", i < 3 ? p->rls_pole_min
-                                    : (i < 5 ? p->rls_zero_min : p->rls_gain_band));
+                                    : (i < 5 ? p->rls_zero_min : (i == 5 || i == 7 ? p->sup.gain_max
+                                                                                    : p->sup.gain_min)));
     }
     if (!(isfinite(p->rls_fallback_ratio) && (p->rls_fallback_ratio == 0.0 || p->rls_fallback_ratio >= 1.0)))
         return piezo_refuse(diag, "rls.fallback_ratio", "0 (no prediction test) or [1, inf) (times the nominal "
@@ -373,8 +376,9 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->probe_max = p->mv_probe_max;
     c->zero_min = p->rls_zero_min;
     c->pole_min = p->rls_pole_min;
-    c->gain_band = p->rls_gain_band;
-    admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_band, c->adm_c, c->adm_d);
+    c->gain_lo = p->sup.gain_min;
+    c->gain_hi = p->sup.gain_max;
+    admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_lo, c->gain_hi, c->adm_c, c->adm_d);
     c->fallback_ratio = p->rls_fallback_ratio;
     c->fallback_samples = (uint64_t)floor(p->rls_fallback_window / p->h + 0.5);
     c->fallback_forgetting = 1.0 - 1.0 / (double)c->fallback_samples;
@@ -1614,11 +1618,12 @@ const char *piezo_controller_check(const piezo_controller *c)
      * and the loop's estimates are in it; the fallback's window and counts in range */
     {
         double rows[PIEZO_ADMISSIBLE_ROWS][4], bounds[PIEZO_ADMISSIBLE_ROWS];
-        if (!(isfinite(c->zero_min) && isfinite(c->pole_min) && isfinite(c->gain_band) && c->gain_band > 1.0))
-            return "rls.zero_min, rls.pole_min or rls.gain_band out of range";
-        admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_band, rows, bounds);
+        if (!(isfinite(c->zero_min) && isfinite(c->pole_min) && isfinite(c->gain_lo) && isfinite(c->gain_hi)
+              && c->gain_lo > 0.0 && c->gain_lo < 1.0 && c->gain_hi > 1.0))
+            return "rls.zero_min, rls.pole_min or the admissible gain range out of range";
+        admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_lo, c->gain_hi, rows, bounds);
         if (memcmp(rows, c->adm_c, sizeof rows) != 0 || memcmp(bounds, c->adm_d, sizeof bounds) != 0)
-            return "the admissible set differs from the one rls.zero_min, rls.pole_min and rls.gain_band draw";
+            return "the admissible set differs from the one rls.zero_min, rls.pole_min and the gain range draw";
         if (admissible_violated(c, c->theta_nominal) >= 0 || (c->robust && admissible_violated(c, c->theta) >= 0))
             return "the estimates (or the nominal model) outside the admissible set";
     }
@@ -1778,7 +1783,7 @@ const char *piezo_controller_check_params(const piezo_controller *c, const piezo
         || c->sup.window != scratch.sup.window || c->sup.clip_error != q->sup.clip_error
         || c->sup.reaction != q->sup.reaction || c->sup.ramp_time != q->sup.ramp_time
         || c->sup.ramp_samples != scratch.sup.ramp_samples || c->probe_max != q->mv_probe_max
-        || c->zero_min != q->rls_zero_min || c->pole_min != q->rls_pole_min || c->gain_band != q->rls_gain_band
+        || c->zero_min != q->rls_zero_min || c->pole_min != q->rls_pole_min || c->gain_lo != q->sup.gain_min || c->gain_hi != q->sup.gain_max
         || c->fallback_ratio != q->rls_fallback_ratio || c->fallback_samples != scratch.fallback_samples)
         return "controller state does not match its parameters";
     return NULL;

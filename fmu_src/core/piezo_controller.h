@@ -42,7 +42,8 @@
  *       A's poles in the convex hull of real poles in [rls.pole_min, 1)
  *           (A(1) >= m, A(p) >= 0 at p = rls.pole_min, the chord a2 + (1+p)/2 a1 <= -p - m),
  *       B's zero -b2/b1 in [rls.zero_min, 0.999],
- *       b1 and the static gain B(1)/A(1) within [1/g, g] times the nominal's, g = rls.gain_band;
+ *       b1 and the static gain B(1)/A(1) within [sup.gain_min, sup.gain_max] times the nominal's
+ *           (the supervision's range of a working loop's response gain);
  *   the law never uses an estimate outside it;
  * - the fallback to the nominal model (estimates and covariance p0_loop I, the law from the
  *   same sample): at a jump of the reference beyond monitor.pred_error_max and beyond
@@ -93,7 +94,7 @@
 #define PIEZO_OUTLIER_WINDOW 200
 #define PIEZO_OUTLIER_MIN_SAMPLES 20
 #define PIEZO_OUTLIER_QUIET 10   /* samples within the bound, no outlier among them, before one */
-/* The admissible set (rls.zero_min, rls.pole_min, rls.gain_band): its rows c^T theta <= d */
+/* The admissible set (rls.zero_min, rls.pole_min, sup.gain_min .. sup.gain_max): its rows c^T theta <= d */
 #define PIEZO_ADMISSIBLE_ROWS 9
 /* The fallback to the nominal model (docs/model.md): its reasons (est.fallback_reason) */
 #define PIEZO_FALLBACK_NONE 0
@@ -138,7 +139,6 @@ typedef struct {
     double rls_zero_min;         /* robust: lowest zero of B, [-0.999, the nominal zero] */
     double rls_pole_min;         /* robust: poles in the hull of real poles in [pole_min, 1), [-1, 1);
                                     the nominal poles must be in it */
-    double rls_gain_band;        /* robust: b1 and B(1)/A(1) within [1/band, band] x nominal, >= 1 */
     double rls_fallback_ratio;   /* robust: fallback when the adapted model's squared errors exceed
                                     this many times the nominal's, >= 1 (0: never) */
     double rls_fallback_window;  /* robust: [s] the window of that comparison, > 0 */
@@ -255,8 +255,9 @@ typedef struct {
     uint64_t k_fault;            /* the sample whose verdict it was (the loop's state is of then) */
     double v_fault;              /* v when it came (the ramp's start) [V] */
     /* estimates with guarantees (robust update): the admissible set, computed at init from the
-     * nominal model and rls.zero_min, rls.pole_min, rls.gain_band, as rows adm_c^T theta <= adm_d */
-    double zero_min, pole_min, gain_band;
+     * nominal model and rls.zero_min, rls.pole_min, sup.gain_min (gain_lo), sup.gain_max (gain_hi), as
+     * rows adm_c^T theta <= adm_d */
+    double zero_min, pole_min, gain_lo, gain_hi;
     double adm_c[PIEZO_ADMISSIBLE_ROWS][4];
     double adm_d[PIEZO_ADMISSIBLE_ROWS];
     uint64_t n_projections;      /* updates the admissible set changed */

@@ -212,13 +212,15 @@ class NativeLoop:
             raise FMUInitializationError(
                 self._message(res.failed_role, _CALLS.get(res.failed_call, "initialization"), res.status))
 
-    def _run(self, setup, rows_ptr, stride, block):
+    def _run(self, setup, rows_ptr, stride, block, first=0, count=None, last=True):
+        """Samples [first, first + count) of the run (all by default); ``last``: the run ends
+        with them (the safe state's warning, fmi2Terminate)."""
         ffi, lib, r, res = self._ffi, self._lib, self._runner, self._result
-        n, h = setup.n, setup.h
-        y_ref = np.ascontiguousarray(setup.y_ref, dtype=np.float64)
+        n, h = setup.n - first if count is None else count, setup.h
+        y_ref = np.ascontiguousarray(setup.y_ref[first:first + n], dtype=np.float64)
         stamped = setup.y_preview is not None
-        y_preview = np.ascontiguousarray(setup.y_preview if stamped else [], dtype=np.float64)
-        t_preview = np.ascontiguousarray(setup.t_preview if stamped else [], dtype=np.float64)
+        y_preview = np.ascontiguousarray(setup.y_preview[first:first + n] if stamped else [], dtype=np.float64)
+        t_preview = np.ascontiguousarray(setup.t_preview[first:first + n] if stamped else [], dtype=np.float64)
         master = 1 if setup.master == "jacobi" else 0
         order = 1 if setup.step_order == "controller-first" else 0
         block_ns = np.zeros(n // block if block > 0 else 0)
@@ -229,12 +231,15 @@ class NativeLoop:
                                   rows_ptr, stride, block if block_ns.size else 0, timing, res)
         self.last_block_ns = block_ns if block_ns.size else None
         if st > 1:
-            k, role = res.samples, res.failed_role
+            k, role = first + res.samples, res.failed_role
             what = f"{_CALLS.get(res.failed_call, 'fmi2 call')} at t = {k * h:.6g} s (sample {k})"
             message = self._message(role, what, st)
-            raise loop_error_class(self.log(role))(message)
-        warn_safe_state(self.log(CONTROLLER), self.controller_info.model)   # sup.reaction = 1: say why
-        lib.piezo_runner_terminate(r)
+            error = loop_error_class(self.log(role))(message)
+            error.sample = k
+            raise error
+        if last:
+            warn_safe_state(self.log(CONTROLLER), self.controller_info.model)   # sup.reaction = 1: say why
+            lib.piezo_runner_terminate(r)
 
     def run(self, setup, *, block=0):
         """Run one closed loop.
@@ -260,6 +265,29 @@ class NativeLoop:
         ptr = self._ffi.from_buffer("double[]", rows) + 2
         self._run(setup, ptr, rows.shape[1], block)
         return as_structured(rows, CLOSED_LOOP_DTYPE)
+
+    def run_chunks(self, setup, sink, *, chunk=1 << 16):
+        """Run one closed loop as :meth:`run` does, handing its rows over in chunks instead of
+        keeping them: ``sink(first, rows)`` for samples ``[first, first + len(rows))`` (the
+        structured rows of :meth:`run`, the same bits). A long run (an hour is 7.2 million
+        samples) then needs the memory of one chunk.
+
+        Raises
+        ------
+        harness.fmu.FMUError
+            As :meth:`run`; its ``sample`` attribute is the sample that failed (the chunks
+            before it were handed over).
+        """
+        n = setup.n
+        self._start(setup)
+        for first in range(0, n, chunk):
+            m = min(chunk, n - first)
+            rows = np.zeros((m, len(CLOSED_LOOP_FIELDS)))
+            rows[:, 0] = setup.time[first:first + m]
+            rows[:, 1] = setup.y_d[first:first + m]
+            ptr = self._ffi.from_buffer("double[]", rows) + 2
+            self._run(setup, ptr, rows.shape[1], 0, first, m, last=first + m == n)
+            sink(first, as_structured(rows, CLOSED_LOOP_DTYPE))
 
     def run_minimal(self, setup, *, block=0):
         """Run the loop with the minimal exchange (``y_meas`` and ``v`` only) and record
