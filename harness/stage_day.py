@@ -140,12 +140,13 @@ def tone_part(f, seconds):
 FRESH = DayPart("fresh step", "fresh", ({"hold": 0.2}, {"move": STEP}, {"hold": 0.5}))
 
 
-def random_hour(seed, seconds=HOUR, low=0.0, high=60.0):
+def random_hour(seed, seconds=HOUR, low=0.0, high=40.0):
     """A seeded random hour of a stage's use, as profile segments: holds (0.5 to 60 s, log-uniform),
     steps (0.5 to 20 um), S-curves (5 to 40 um in 20 to 200 ms), bursts of 1 to 10 raster frames
     (a triangle of 2 to 20 um at 1, 10 or 50 Hz, 2 s each, 0.1 to 2 s dwells between) and tones (1
     to 10 um at 1, 5 or 20 Hz for 5 to 60 s, whole periods), each from where the one before left
-    the stage, within [low, high] um. Every time is a whole number of samples."""
+    the stage, within [low, high] um (40 um: a stage of the family reaches 60 um only beyond 150 V). Every time is a whole
+    number of samples."""
     rng = np.random.default_rng(seed)
     segs, pos, t = [{"hold": 0.2}], 0.0, 0.2
 
@@ -315,15 +316,20 @@ def family_tasks(stages=50, seed=SEED, sensors=SENSORS_NM, laws=LAWS, parts=None
     return tasks
 
 
-def _segments_of(signal):
+def _segments_of(signal, n=None):
     """``(first, stop, kind)`` of every motion segment (scan frames and tones as "scan", moves as
-    "move"): the windows whose worst errors a part's metrics keep."""
+    "move"): the windows whose worst errors a part's metrics keep. A move's window runs on to
+    ``profiles.SETTLE`` after its last sample (within the run's ``n`` samples), as
+    :func:`harness.profiles.move_windows` has it."""
+    from . import profiles
+    tail = int(round(profiles.SETTLE / H))
+    n = signal.samples if n is None else n
     out = []
     for s in signal.segments:
         if s.kind == "scan":
             out.append((s.first, s.stop, "scan"))
         elif s.kind == "move" and s.end != s.start:
-            out.append((s.first, s.stop, "move"))
+            out.append((s.first, min(n, s.stop + tail), "move"))
     return out
 
 
@@ -332,11 +338,7 @@ class _Streamer:
 
     def __init__(self, signal, n, controller_params, robust):
         from . import profiles
-        self.windows = _segments_of(signal)
-        moves = {(a, b) for a, b, k in self.windows if k == "move"}
-        tail = int(round(profiles.SETTLE / H))
-        # a move's window runs on to SETTLE after it (profiles.move_windows)
-        self.windows = [(a, min(n, b + tail) if (a, b) in moves else b, k) for a, b, k in self.windows]
+        self.windows = _segments_of(signal, n)
         self.worst = np.full(len(self.windows), np.nan)
         self.holds_w = profiles.hold_windows(signal, n, H)
         self.holds = np.full(len(self.holds_w), np.nan)

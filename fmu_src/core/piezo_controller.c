@@ -224,13 +224,20 @@ static double admissible_excess(const double *row, double d, const double *th)
     return (((row[0] * th[0] + row[1] * th[1]) + row[2] * th[2]) + row[3] * th[3]) - d;
 }
 
-/* The first row of the admissible set theta violates, -1 when it is inside. */
+/* Whether theta violates a row of the admissible set (1) or is inside it (0). Once per update, so
+ * each row is written out with its zero coefficients left out: the same products and sums in the
+ * same order as admissible_excess, whose verdict (> 0) a dropped +-0 term cannot change. */
 static int admissible_violated(const piezo_controller *c, const double *th)
 {
-    int i;
-    for (i = 0; i < PIEZO_ADMISSIBLE_ROWS; ++i)
-        if (admissible_excess(c->adm_c[i], c->adm_d[i], th) > 0.0) return i;
-    return -1;
+    const double (*r)[4] = c->adm_c;
+    const double *d = c->adm_d;
+    const double a1 = th[0], a2 = th[1], b1 = th[2], b2 = th[3];
+    return ((r[0][0] * a1 + r[0][1] * a2) - d[0] > 0.0) | ((r[1][0] * a1 + r[1][1] * a2) - d[1] > 0.0)
+           | ((r[2][0] * a1 + r[2][1] * a2) - d[2] > 0.0) | ((r[3][2] * b1 + r[3][3] * b2) - d[3] > 0.0)
+           | ((r[4][2] * b1 + r[4][3] * b2) - d[4] > 0.0) | (r[5][2] * b1 - d[5] > 0.0)
+           | (r[6][2] * b1 - d[6] > 0.0)
+           | ((((r[7][0] * a1 + r[7][1] * a2) + r[7][2] * b1) + r[7][3] * b2) - d[7] > 0.0)
+           | ((((r[8][0] * a1 + r[8][1] * a2) + r[8][2] * b1) + r[8][3] * b2) - d[8] > 0.0);
 }
 
 piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_params *p, piezo_diag *diag)
@@ -608,7 +615,7 @@ static double rls_step(const piezo_controller *c, const double *theta_in, const 
 static int admissible_project(const piezo_controller *c, const double *P, double *th)
 {
     int sweep, i, j;
-    if (admissible_violated(c, th) < 0) return 0;
+    if (!admissible_violated(c, th)) return 0;
     for (sweep = 0; sweep < ADMISSIBLE_SWEEPS; ++sweep) {
         int moved = 0;
         for (i = 0; i < PIEZO_ADMISSIBLE_ROWS; ++i) {
@@ -627,7 +634,7 @@ static int admissible_project(const piezo_controller *c, const double *P, double
         }
         if (!moved) break;
     }
-    if (admissible_violated(c, th) >= 0) {
+    if (admissible_violated(c, th)) {
         const double *n = c->theta_nominal;
         double s = 1.0;
         for (i = 0; i < PIEZO_ADMISSIBLE_ROWS; ++i) {
@@ -640,7 +647,7 @@ static int admissible_project(const piezo_controller *c, const double *P, double
         }
         for (j = 0; j < 4; ++j) th[j] = n[j] + s * (th[j] - n[j]);
         /* rounding may leave it an ulp outside: then the nominal model itself */
-        if (admissible_violated(c, th) >= 0) memcpy(th, n, 4 * sizeof(double));
+        if (admissible_violated(c, th)) memcpy(th, n, 4 * sizeof(double));
     }
     return 1;
 }
@@ -932,31 +939,33 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
                           piezo_controller_sample *s)
 {
     double rate, faded;
-    int adapted, reason = PIEZO_FALLBACK_NONE, j;
+    int reason = PIEZO_FALLBACK_NONE, j;
     s->fb_adapted = c->fb_adapted;
     s->fb_nominal = c->fb_nominal;
     s->learned_rate = c->learned_rate;
     s->fallback_value = s->fallback_other = 0.0;
     if (!c->robust || c->detecting || s->detecting) return;
     rate = fabs(r - c->r_last);
-    adapted = c->rls_enabled && memcmp(*theta, c->theta_nominal, sizeof c->theta) != 0;
+    /* whether the law's estimates differ from the nominal model (asked only where it decides) */
+#define ADAPTED (c->rls_enabled && memcmp(*theta, c->theta_nominal, sizeof c->theta) != 0)
     if (c->fallback_ratio > 0.0) {
         const double e_n = rls_error(c, c->theta_nominal, c->d, y_meas - c->offset);
         const double lambda = c->fallback_forgetting, floor_rms = FALLBACK_NOISE * c->noise_y;
         s->fb_adapted = lambda * c->fb_adapted + e_a * e_a;
         s->fb_nominal = lambda * c->fb_nominal + e_n * e_n;
-        if (adapted && s->fb_adapted > c->fallback_ratio * s->fb_nominal
-                                       + (double)c->fallback_samples * (floor_rms * floor_rms)) {
+        if (s->fb_adapted > c->fallback_ratio * s->fb_nominal
+                            + (double)c->fallback_samples * (floor_rms * floor_rms) && ADAPTED) {
             reason = PIEZO_FALLBACK_PREDICTION;
             s->fallback_value = sqrt(s->fb_adapted / (double)c->fallback_samples);  /* the rms errors */
             s->fallback_other = sqrt(s->fb_nominal / (double)c->fallback_samples);
         }
     }
-    if (adapted && rate > c->pred_error_max && rate > PIEZO_FALLBACK_JUMP_RATIO * c->learned_rate) {
+    if (rate > c->pred_error_max && rate > PIEZO_FALLBACK_JUMP_RATIO * c->learned_rate && ADAPTED) {
         reason = PIEZO_FALLBACK_JUMP;
         s->fallback_value = rate;
         s->fallback_other = c->learned_rate;
     }
+#undef ADAPTED
     s->out.fallback = reason;
     if (reason != PIEZO_FALLBACK_NONE) {
         memcpy(s->theta, c->theta_nominal, sizeof s->theta);
@@ -1624,7 +1633,7 @@ const char *piezo_controller_check(const piezo_controller *c)
         admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_lo, c->gain_hi, rows, bounds);
         if (memcmp(rows, c->adm_c, sizeof rows) != 0 || memcmp(bounds, c->adm_d, sizeof bounds) != 0)
             return "the admissible set differs from the one rls.zero_min, rls.pole_min and the gain range draw";
-        if (admissible_violated(c, c->theta_nominal) >= 0 || (c->robust && admissible_violated(c, c->theta) >= 0))
+        if (admissible_violated(c, c->theta_nominal) || (c->robust && admissible_violated(c, c->theta)))
             return "the estimates (or the nominal model) outside the admissible set";
     }
     if (!(isfinite(c->fallback_ratio) && (c->fallback_ratio == 0.0 || c->fallback_ratio >= 1.0))

@@ -36,6 +36,8 @@ from .provenance import collect_provenance
 from .run import evaluate_tracking, evaluate_validation, parameter_defaults, validation_series
 from .stage_use import (HOLD_STEP, LAWS, STAGE_USE_NOTES, format_stage_use_table, run_stage_use,
                         stage_use_table_rows, write_stage_use_csv)
+from .stage_day import (DAY_LAWS, REPORT_PARTS, STAGE_DAY_NOTES, day_estimates_figure, day_frames_figure,
+                        run_stage_day, stage_day_table_rows, write_stage_day_csv)
 
 __all__ = ["run_all", "run_scenario", "check_out_dir", "prepare_out_dir", "VALIDATION_NOTES",
            "REPORT_WIDTH"]
@@ -215,7 +217,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
 
     stage_names = stage_use_scenarios()
     total = (sum(len(c.scenarios) for c in conditions) + len(validation_names)
-             + len(LAWS) * len(stage_names))
+             + len(LAWS) * len(stage_names) + len(DAY_LAWS) * len(REPORT_PARTS))
     prog = Progress(total, progress, progress_interval)
     tracking = {}
     for cond in conditions:
@@ -241,12 +243,14 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
         validation.append(r)
     stage = run_stage_use(stage_names, registry=registry, fmu_dir=fmu_dir, fmi_version=fmi_version,
                           keep_data=plots, progress=prog)
+    day = run_stage_day(fmu_dir=fmu_dir, fmi_version=fmi_version, keep_data=plots, progress=prog)
 
     files = []
     all_tracking = [r for c in conditions for r in tracking[c.key]]
     files.append(tables.write_tracking_csv(all_tracking, out / "tracking.csv"))
     files.append(tables.write_validation_csv(validation, out / "validation.csv"))
     files.append(write_stage_use_csv(stage, out / "stage_use.csv"))
+    files.append(write_stage_day_csv(day, out / "stage_day.csv"))
 
     figures = []
     if plots:
@@ -262,6 +266,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
         figures += draw_stage_use_figures(out, stage, nominal_g=_effective(ctrl_def, {}),
                                           plants={r.scenario: _effective(plant_def, r.spec.plant)
                                                   for r in stage})
+        figures += [day_frames_figure(day, out), day_estimates_figure(day, out, _effective(ctrl_def, {}))]
         for f in figures:
             files += f.files
 
@@ -274,7 +279,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     defaults_source = ("the start value in the modelDescription of the FMUs above"
                        if backend != "core" else "the C core's default")
     report = _main_document(conditions, tracking, validation, figures, prov, unique,
-                            defaults_source, plots, registry, stage, fmi_version)
+                            defaults_source, plots, registry, stage, fmi_version, day)
     (out / "report.md").write_text(doc_.render_markdown(report), encoding="utf-8")
     (out / "report.html").write_text(doc_.render_html(report), encoding="utf-8")
     (out / "provenance.json").write_text(json.dumps(prov.as_dict(), indent=2) + "\n",
@@ -287,7 +292,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
                      f"({len(files)} files in {out}/)\n")
         stream.flush()
     return {"tracking": tracking, "validation": validation, "conditions": conditions,
-            "stage_use": stage, "provenance": prov, "figures": figures, "files": files}
+            "stage_use": stage, "stage_day": day, "provenance": prov, "figures": figures, "files": files}
 
 
 def condition_notes(conditions, registry=None):
@@ -363,7 +368,7 @@ def _figure_block(fig):
 
 
 def _main_document(conditions, tracking, validation, figures, prov, scenarios, defaults_source,
-                   plots, registry=None, stage=(), fmi_version=2):
+                   plots, registry=None, stage=(), fmi_version=2, day=()):
     D = doc_
     figs = {f.name: f for f in figures}
     head = next(c for c in conditions if c.role == "headline")
@@ -433,8 +438,22 @@ def _main_document(conditions, tracking, validation, figures, prov, scenarios, d
             if f.name.startswith("stage_use_"):
                 doc.add(_figure_block(f))
 
+    if day:
+        d_head, d_rows = stage_day_table_rows(day)
+        doc.add(D.Heading("A stage's day"), D.Paragraph(
+            "The fourth stage of the identification family (the one issue 43 found the robust update of "
+            "issue 35 bursting on after a few raster frames), 1 nm sensor, through PiezoStageClosedLoop at "
+            "10 ms communication steps while the reference holds: 60 raster frames with 0.5 s dwells, 60 s "
+            "of a 1 Hz tone then a 10 µm step, and the fresh step. The whole family over a day of "
+            "rasters, tones and a random hour: docs/stage_day.md (python -m harness.stage_day)."),
+            D.Table(tuple(d_head), tuple(map(tuple, d_rows))), D.Bullets(STAGE_DAY_NOTES))
+        for f in figures:
+            if f.name.startswith("stage_day_"):
+                doc.add(_figure_block(f))
+
     doc.add(*_provenance_blocks(prov, scenarios, defaults_source))
     names = ["tracking.csv", "validation.csv"] + (["stage_use.csv"] if stage else [])
+    names += ["stage_day.csv"] if day else []
     names += [p.name for f in figures for p in f.files]
     names += ["report.md", "report.html", "provenance.json"]
     doc.add(D.Heading("Files"), D.Bullets(tuple(f"`{n}`" for n in names)))
