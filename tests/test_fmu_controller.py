@@ -84,7 +84,8 @@ def test_model_description_matches_design(controller, piezo_stage):
 
     assert [n for n, x in v.items() if x.causality == "input"] == INPUTS
     assert [n for n, x in v.items() if x.causality == "output"] == \
-        OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS[:3] + ADAPT_OUTPUTS + SUP_OUTPUTS[3:]
+        OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS[:3] + ADAPT_OUTPUTS + SUP_OUTPUTS[3:] + ["est.fallbacks"]
+    assert v["est.fallbacks"].type == "Integer"
     assert [v[n].type for n in SUP_OUTPUTS] == ["Integer", "Real", "Integer", "Integer", "Real"]
     assert [v[n].type for n in ADAPT_OUTPUTS] == ["Boolean", "Real"]
     assert v["est.noise"].unit == "um"
@@ -115,6 +116,8 @@ def test_model_description_matches_design(controller, piezo_stage):
            "rls.variance_max": ("Real", 0.004), "rls.p0_loop": ("Real", 0.01), "sat.enabled": ("Boolean", True),
            "sat.v_min": ("Real", -150.0), "sat.v_max": ("Real", 150.0),
            "monitor.pred_error_max": ("Real", 1.0), "monitor.divergence_samples": ("Integer", 200),
+           "rls.zero_min": ("Real", 0.5), "rls.pole_min": ("Real", 0.0), "rls.fallback_ratio": ("Real", 2.0),
+           "rls.fallback_window": ("Real", 0.5),
            **SUPERVISION}
     for name, (type_, start) in own.items():
         assert v[name].type == type_ and start_value(v[name]) == start, name
@@ -125,7 +128,8 @@ def test_model_description_matches_design(controller, piezo_stage):
 
     # honest for the default: no output depends directly on an input
     deps = {u.variable.name: sorted(d.name for d in u.dependencies) for u in md.outputs}
-    assert deps == {name: [] for name in OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS + ADAPT_OUTPUTS}
+    assert deps == {name: [] for name in OUTPUTS + ["saturated"] + TIMING + SUP_OUTPUTS + ADAPT_OUTPUTS
+                    + ["est.fallbacks"]}
 
 
 def test_start_values_in_the_binary_match_the_xml(controller, make_fmu):
@@ -334,6 +338,7 @@ NON_DEFAULT_PARAMETERS = {
     "monitor.divergence_samples": 0, "sup.enabled": False, "sup.gain_min": 0.1, "sup.gain_max": 8.0,
     "sup.window": 400, "sup.clip_time": 0.25, "sup.detect_time": 1.0, "sup.reaction": 1, "sup.ramp_time": 0.02,
     "sup.clip_error": 2.0, "mv.probe_max": 0.5,
+    "rls.zero_min": 0.2, "rls.pole_min": 0.1, "rls.fallback_ratio": 3.0, "rls.fallback_window": 0.25,
 }
 
 

@@ -340,12 +340,12 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
                                     : (i < 5 ? p->rls_zero_min : (i == 5 || i == 7 ? p->sup.gain_max
                                                                                     : p->sup.gain_min)));
     }
-    if (!(isfinite(p->rls_fallback_ratio) && (p->rls_fallback_ratio == 0.0 || p->rls_fallback_ratio >= 1.0)))
-        return piezo_refuse(diag, "rls.fallback_ratio", "0 (no prediction test) or [1, inf) (times the nominal "
-                            "model's squared prediction errors)", p->rls_fallback_ratio);
-    if (!(isfinite(p->rls_fallback_window) && p->rls_fallback_window >= p->h && p->rls_fallback_window <= 3600.0))
-        return piezo_refuse(diag, "rls.fallback_window", "[h, 3600] s (window of the prediction test)",
-                            p->rls_fallback_window);
+    if (!(isfinite(p->rls_fallback_ratio) && p->rls_fallback_ratio >= 0.0))
+        return piezo_refuse(diag, "rls.fallback_ratio", "[0, inf) (times the nominal model's squared prediction "
+                            "errors; 0: no prediction test)", p->rls_fallback_ratio);
+    if (!(isfinite(p->rls_fallback_window) && p->rls_fallback_window > 0.0 && p->rls_fallback_window <= 3600.0))
+        return piezo_refuse(diag, "rls.fallback_window", "(0, 3600] s (window of the prediction test, at least "
+                            "one sample)", p->rls_fallback_window);
 
     memset(c, 0, sizeof *c);
     pi_params = p->pi;
@@ -388,6 +388,7 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_lo, c->gain_hi, c->adm_c, c->adm_d);
     c->fallback_ratio = p->rls_fallback_ratio;
     c->fallback_samples = (uint64_t)floor(p->rls_fallback_window / p->h + 0.5);
+    if (c->fallback_samples < 1) c->fallback_samples = 1;
     c->fallback_forgetting = 1.0 - 1.0 / (double)c->fallback_samples;
     /* the supervisor judges the loop by the nominal model */
     st = piezo_supervisor_init(&c->sup, &p->sup, p->tf_a1, p->tf_a2, p->tf_b1, p->tf_b2, p->h, diag);
@@ -1636,7 +1637,7 @@ const char *piezo_controller_check(const piezo_controller *c)
         if (admissible_violated(c, c->theta_nominal) || (c->robust && admissible_violated(c, c->theta)))
             return "the estimates (or the nominal model) outside the admissible set";
     }
-    if (!(isfinite(c->fallback_ratio) && (c->fallback_ratio == 0.0 || c->fallback_ratio >= 1.0))
+    if (!(isfinite(c->fallback_ratio) && c->fallback_ratio >= 0.0)
         || c->fallback_samples < 1 || c->fallback_forgetting != 1.0 - 1.0 / (double)c->fallback_samples
         || !(isfinite(c->fb_adapted) && c->fb_adapted >= 0.0 && isfinite(c->fb_nominal) && c->fb_nominal >= 0.0
              && isfinite(c->learned_rate) && c->learned_rate >= 0.0)

@@ -140,8 +140,9 @@ typedef struct {
     double rls_pole_min;         /* robust: poles in the hull of real poles in [pole_min, 1), [-1, 1);
                                     the nominal poles must be in it */
     double rls_fallback_ratio;   /* robust: fallback when the adapted model's squared errors exceed
-                                    this many times the nominal's, >= 1 (0: never) */
-    double rls_fallback_window;  /* robust: [s] the window of that comparison, > 0 */
+                                    this many times the nominal's, >= 0 (0: never) */
+    double rls_fallback_window;  /* robust: [s] the window of that comparison, (0, 3600], at least a
+                                    sample */
 } piezo_controller_params;
 
 typedef struct {
