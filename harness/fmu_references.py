@@ -228,7 +228,8 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
               ("est.adapting", "adapting"), ("est.noise", "noise"))
     refs = {"time": time, **{name: [] for name, _ in fields},
             "loop_delay": [], "loop_delay_time": [], "preview_lead": [], "meas_offset": [],
-            "sup.status": [], "sup.gain": [], "sup.delay": [], "sup.fault": [], "sup.fault_time": []}
+            "sup.status": [], "sup.gain": [], "sup.delay": [], "sup.fault": [], "sup.fault_time": [],
+            "est.fallbacks": []}
     published, out, lead_used = ctrl.output, plant.output, 0
     sup = ctrl.raw.sup
     for k in range(n + 1):
@@ -248,6 +249,7 @@ def adaptive_compound_controller(start_values=None, plant_start_values=None):
         # the safe state (sup.reaction = 1 only; the experiment runs no fault): 0 throughout
         refs["sup.fault"].append(ctrl.fault)
         refs["sup.fault_time"].append(0.0 if not ctrl.fault else ctrl.fault_sample * STEP)
+        refs["est.fallbacks"].append(int(ctrl.raw.n_fallbacks))
         if k < n:
             lead = preview if k > 0 else 0
             published = ctrl.step_input(y_ref[k], out.y_meas, y_preview[k], lead)  # published at t_(k+1) ...
@@ -333,7 +335,7 @@ def piezo_stage_closed_loop(start_values=None, plant_start_values=None):
               ("saturated", "saturated"), ("loop_delay", None), ("loop_delay_time", None),
               ("preview_lead", None), ("sup.status", None), ("sup.gain", None), ("sup.delay", None),
               ("est.adapting", "adapting"), ("est.noise", "noise"),
-              ("sup.fault", None), ("sup.fault_time", None))
+              ("sup.fault", None), ("sup.fault_time", None), ("est.fallbacks", None))
     refs = {"time": time, **{name: [] for name, _ in fields}}
     published, out = ctrl.output, plant.output
     sup = ctrl.raw.sup
@@ -344,7 +346,8 @@ def piezo_stage_closed_loop(start_values=None, plant_start_values=None):
                 "reference": ref.y_d, "error": ref.y_d - out.y, "loop_delay": delay,
                 "loop_delay_time": delay_time, "preview_lead": lead_used,
                 "sup.status": int(sup.status), "sup.gain": sup.gain, "sup.delay": int(sup.delay),
-                "sup.fault": ctrl.fault, "sup.fault_time": 0.0 if not ctrl.fault else ctrl.fault_sample * STEP}
+                "sup.fault": ctrl.fault, "sup.fault_time": 0.0 if not ctrl.fault else ctrl.fault_sample * STEP,
+                "est.fallbacks": int(ctrl.raw.n_fallbacks)}
         for name, field in fields:
             value = loop[name] if field is None else getattr(published, field)
             refs[name].append(int(value) if name in ("saturated", "est.adapting") else value)
