@@ -1,0 +1,131 @@
+"""A stage's day (harness/stage_day.py, docs/stage_day.md): the parts of the day, the admissible
+set's check against the core's own, the native runner in chunks, and the slice of the family the
+suite runs (the family's fourth stage over 30 raster frames, and a 60 s tone then a step) with its
+exact figures."""
+import numpy as np
+import pytest
+
+from harness import core, profiles
+from harness import stage_day as sd
+from harness.masters.core import simulate_closed_loop_core
+from harness.scenarios import profile_signal
+
+H = sd.H
+
+
+def test_random_hour_is_seeded_on_the_grid_and_within_range():
+    """Reference: its own definition (harness.stage_day.random_hour): the same seed gives the same
+    segments, another seed others; every segment's time is a whole number of samples; the profile
+    lasts at least the hour and stays within [0, 40] um at every sample; it holds, moves and scans."""
+    a, b, c = sd.random_hour(3), sd.random_hour(3), sd.random_hour(4)
+    assert a == b and a != c
+    sig = profile_signal(a, step=H)
+    for seg in a:
+        for key in ("hold", "time"):
+            if key in seg:
+                assert abs(seg[key] / H - round(seg[key] / H)) < 1e-9, seg
+    assert sig.samples * H >= sd.HOUR
+    y = sig.evaluate(np.arange(sig.samples) * H)
+    assert y.min() >= -1e-9 and y.max() <= 40.0 + 1e-9
+    kinds = {s.kind for s in sig.segments}
+    assert kinds == {"hold", "move", "scan"}
+
+
+def test_outside_admissible_is_the_cores_verdict():
+    """Reference: the core's own check of a restored state (piezo_controller_check refuses estimates
+    outside the admissible set). 2000 estimates drawn around the set's boundary (the nominal model
+    moved along random directions by up to 1.5 times the distance to a row): the Python check with the
+    core's rows gives the core's verdict on every one, both kinds occur."""
+    ctrl = core.Controller({})
+    C, d = sd.admissible_rows()
+    raw = ctrl.raw
+    nominal = np.array(list(raw.theta_nominal))
+    assert np.array_equal(C, np.array([list(raw.adm_c[i]) for i in range(9)]))
+    assert np.array_equal(d, np.array(list(raw.adm_d)))
+    rng = np.random.default_rng(5)
+    verdicts = []
+    for _ in range(2000):
+        u = rng.normal(size=4) * np.array([0.05, 0.05, 0.3, 0.3])
+        theta = nominal + rng.uniform(0.0, 1.5) * u
+        raw.theta = list(theta)
+        fault = core.lib().piezo_controller_check(raw)
+        text = core.ffi.string(fault).decode() if fault != core.ffi.NULL else ""
+        core_outside = "outside the admissible set" in text
+        assert core_outside or text == "", text
+        mine = bool(sd.outside_admissible(theta[None, :], C, d)[0])
+        assert mine == core_outside, theta
+        verdicts.append(mine)
+    assert 100 < sum(verdicts) < 1900
+
+
+def test_the_native_runner_in_chunks_gives_the_runs_bits():
+    """Reference: NativeLoop.run, the whole run at once. The same run in chunks of 1000 samples
+    (NativeLoop.run_chunks) hands over the same rows, bit for bit, in order."""
+    from harness.loop import prepare_closed_loop
+    from harness.masters import native
+    part = sd.raster_part(50.0, 0.1, frames=2)
+    sc = part.scenario(sd._plant(sd._stages(1)[0], 0, 1), {})
+    setup = prepare_closed_loop(sc)
+    loop = native.native_loop()
+    whole = loop.run(setup)
+    pieces = []
+    loop.run_chunks(setup, lambda first, rows: pieces.append((first, rows.copy())), chunk=1000)
+    assert [f for f, _ in pieces] == list(range(0, setup.n, 1000))
+    joined = np.concatenate([r for _, r in pieces])
+    for name in whole.dtype.names:
+        assert np.array_equal(whole[name].view(np.uint64), joined[name].view(np.uint64)), name
+
+
+def _core_run(part, law, stage=3, nm=1):
+    st = sd._stages(stage + 1)[stage]
+    sc = part.scenario(sd._plant(st, stage, nm), sd._controller(law))
+    rows = simulate_closed_loop_core(sc)
+    err = np.abs(rows["y_d"] - rows["y"])
+    k = profiles.sample_index(rows["time"], H)
+    worst = [float(np.max(err[(k >= a) & (k < b)])) for a, b, _ in sd._segments_of(sc.signal)]
+    return rows, worst
+
+
+def test_the_family_stage_of_issue_43_scans_30_frames_flat_inside_the_set():
+    """Reference: the same frames with the estimates fixed at the nominal model, and the issue's
+    measurement on main 14744e4 (the family's fourth stage, 1 nm sensor with seed 4, 30 frames of a
+    10 Hz, 10 um raster with 0.5 s dwells: worst per frame 88 22 22 61 3409 4993 ... 61870 nm, 52-55
+    nm with the estimates fixed). On the C core: every frame after the first within 1.5 times the
+    worst of frames 2-11 and within 1.5 times the same frame with the estimates fixed, none above
+    1 um, the estimates inside the admissible set at every sample; the figures as measured (the
+    first frame 87.4 nm, the second 9.1 nm, the worst after the first 73.6 nm: from the fourth
+    frame on the estimates rest on the set's bounds of the zero and the fast pole; fixed 52.2 to
+    55.0 nm)."""
+    part = sd.raster_part(10.0, 0.5, frames=30)
+    rows, ours = _core_run(part, "ours")
+    _, fixed = _core_run(part, "fixed")
+    ours, fixed = np.array(ours), np.array(fixed)
+    print("\nours [nm]:", " ".join(f"{x * 1e3:.0f}" for x in ours))
+    print("fixed [nm]:", " ".join(f"{x * 1e3:.0f}" for x in fixed))
+    assert np.max(ours[1:]) <= 1.5 * np.max(ours[1:11])
+    assert np.all(ours[1:] <= 1.5 * fixed[1:])
+    assert np.max(ours) < 1.0
+    theta = np.column_stack([rows["a1"], rows["a2"], rows["b1"], rows["b2"]])
+    C, d = sd.admissible_rows()
+    assert not sd.outside_admissible(theta, C, d).any()
+    assert ours[0] * 1e3 == pytest.approx(87.4, abs=0.1)
+    assert ours[1] * 1e3 == pytest.approx(9.1, abs=0.1)
+    assert np.max(ours[1:]) * 1e3 == pytest.approx(73.6, abs=0.1)
+    assert fixed.min() * 1e3 == pytest.approx(52.2, abs=0.1) and fixed.max() * 1e3 == pytest.approx(55.0, abs=0.1)
+
+
+def test_a_step_after_a_minute_of_a_tone_is_met_by_the_nominal_model():
+    """Reference: the fresh step (0.2 s at rest, the same 10 um step) and the issue's measurement
+    on main 14744e4 (after 60 s of a 1 Hz, 10 um tone a 10 um step erred 7.15 um on a stage unlike
+    the model, against 0.96 um after a 0.2 s hold). On the C core, the family's fourth stage with
+    the 1 nm sensor: the step after the tone (which falls back to the nominal model at its first
+    sample: test_stage_use.py, test_core_hot_path.py) errs within 1.25 times the fresh step, the
+    figures as measured (1.504 um against 1.518 um)."""
+    tone, fresh = sd.tone_part(1.0, 60.0), sd.FRESH
+    rows, after = _core_run(tone, "ours")
+    _, fresh_worst = _core_run(fresh, "ours")
+    ratio = after[-1] / fresh_worst[-1]
+    print(f"\nstep after the tone {after[-1]:.4f} um, fresh {fresh_worst[-1]:.4f} um: {ratio:.3f}")
+    assert ratio <= 1.25
+    assert after[-1] == pytest.approx(1.5036, abs=5e-4)
+    assert fresh_worst[-1] == pytest.approx(1.5181, abs=5e-4)
