@@ -47,22 +47,19 @@ docs/stage_day.md (:data:`DOCUMENTED`): a regression.
 from __future__ import annotations
 
 import argparse
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field
-import json
+from dataclasses import dataclass, field
 import math
 from pathlib import Path
 import re
 import sys
 import time as _time
-from types import MappingProxyType
 
 import numpy as np
 
 from .fmu import FMUError
-from .identify.family import draw_stage
 from .loop import prepare_closed_loop
-from .scenarios import Scenario, profile_signal
+from . import stage_use_table
+from .stage_use_table import GRID, draw_stages, hold_band, profile_scenario, stage_plant
 from .text_tables import markdown_table
 
 __all__ = ["SEED", "SENSORS_NM", "RASTER_FREQUENCIES", "DWELLS", "FRAMES", "TONE_FREQUENCIES",
@@ -72,7 +69,6 @@ __all__ = ["SEED", "SENSORS_NM", "RASTER_FREQUENCIES", "DWELLS", "FRAMES", "TONE
 
 H = 0.0005
 SEED = 2026
-GRID = 0.002
 SENSORS_NM = (0, 1, 5, 20, 100, 200)
 RASTER_FREQUENCIES = (1.0, 10.0, 50.0)
 DWELLS = (0.1, 0.5, 2.0)
@@ -111,11 +107,7 @@ class DayPart:
     seed: int = -1              # the random hour's
 
     def scenario(self, plant, controller):
-        signal = profile_signal(self.segments, step=H)
-        duration = signal.samples * H
-        return Scenario(self.name, "tracking", self.name, signal, duration=duration, step_size=H,
-                        metric_window=(0.0, duration), plant=MappingProxyType(dict(plant)),
-                        controller=MappingProxyType(dict(controller)))
+        return profile_scenario(self.name, self.segments, plant, controller)
 
 
 def _frame(f, amplitude=AMPLITUDE, time=FRAME_TIME):
@@ -288,15 +280,6 @@ class PartMetrics:
     seconds: float = 0.0
 
 
-def _stages(n, seed=SEED):
-    rng = np.random.default_rng(seed)
-    return [draw_stage(rng) for _ in range(n)]
-
-
-def _plant(stage, index, nm):
-    return {**stage, "sensor.resolution": GRID, "sensor.noise_rms": nm * 1e-3, "sensor.seed": index + 1}
-
-
 def _controller(law):
     """The controller of a law: the defaults, or the estimates fixed at the nominal model. The fixed
     reference is given its loop delay (d = 2, the exchange's): with its candidates' estimates held
@@ -310,13 +293,13 @@ def family_tasks(stages=50, seed=SEED, sensors=SENSORS_NM, laws=LAWS, parts=None
     """Every :class:`Task` of the family (see the module docstring)."""
     parts = day_parts() if parts is None else parts
     tasks = []
-    for i, stage in enumerate(_stages(stages, seed)):
+    for i, stage in enumerate(draw_stages(stages, seed)):
         for nm in sensors:
             for law in laws:
                 for part in parts:
                     if part.kind == "hour":
                         part = hour_part(i)
-                    tasks.append(Task(i, nm, law, part, _plant(stage, i, nm), _controller(law),
+                    tasks.append(Task(i, nm, law, part, stage_plant(stage, i, nm), _controller(law),
                                       fmu=i < fmu_stages and nm in fmu_sensors and law == "ours"))
     return tasks
 
@@ -470,31 +453,19 @@ def run_task(task):
     return out
 
 
-def _run_one(task):
-    return task, run_task(task)
-
-
 def run_family(tasks, jobs=1, progress=None, every=50):
-    """Run every task (on ``jobs`` processes): ``{(stage, sensor, law, part name, master): PartMetrics}``."""
-    results = {}
-    start = _time.perf_counter()
+    """Run every task (on ``jobs`` processes, the longest first: the pool ends together):
+    ``{(stage, sensor, law, part name, master): PartMetrics}``."""
+    return stage_use_table.run_tasks(tasks, run_task, _part_name, jobs, progress, every,
+                                     order=_longest_first)
 
-    def keep(i, task, metrics):
-        for m in metrics:
-            results[(task.stage, task.sensor_nm, task.law, task.part.name, m.master)] = m
-        if progress is not None and (i + 1) % every == 0:
-            progress(f"{i + 1} of {len(tasks)} tasks, {_time.perf_counter() - start:.0f} s")
 
-    # the longest first: the pool ends together
-    order = sorted(range(len(tasks)), key=lambda i: -_part_seconds(tasks[i].part))
-    if jobs <= 1:
-        for n, i in enumerate(order):
-            keep(n, *_run_one(tasks[i]))
-    else:
-        with ProcessPoolExecutor(jobs) as ex:
-            for n, (task, metrics) in enumerate(ex.map(_run_one, [tasks[i] for i in order], chunksize=1)):
-                keep(n, task, metrics)
-    return results
+def _part_name(task):
+    return task.part.name
+
+
+def _longest_first(task):
+    return -_part_seconds(task.part)
 
 
 def _part_seconds(part):
@@ -508,18 +479,12 @@ def _part_seconds(part):
 
 def save_results(results, path):
     """Write the runs' metrics as JSON (one object per run)."""
-    rows = [{"stage": k[0], "sensor_nm": k[1], "law": k[2], "part": k[3], **asdict(m)}
-            for k, m in results.items()]
-    Path(path).write_text(json.dumps(rows), encoding="utf-8")
+    stage_use_table.save_results(results, path, part="part")
 
 
 def load_results(path):
     """The runs' metrics written by :func:`save_results`."""
-    out = {}
-    for row in json.loads(Path(path).read_text(encoding="utf-8")):
-        key = (row.pop("stage"), row.pop("sensor_nm"), row.pop("law"), row.pop("part"), row["master"])
-        out[key] = PartMetrics(**row)
-    return out
+    return stage_use_table.load_results(path, lambda row: PartMetrics(**row), part="part")
 
 
 # ---------------------------------------------------------------------------
@@ -535,11 +500,6 @@ class Ratio:
     sensor_nm: float
     part: str
     detail: str = ""
-
-
-def _band(nm):
-    """5 x (noise rms + grid step) [um]: the hold band (issue 35's target (d))."""
-    return 5.0 * (nm * 1e-3 + GRID)
 
 
 def summarize(results):
@@ -582,7 +542,7 @@ def summarize(results):
                                            f"segment {j + 1} ({m.kinds[j]}): {ours[j] * 1e3:.3g} nm "
                                            f"against {fx[j] * 1e3:.3g} nm fixed"))
             for w in m.holds:
-                out["hold"].append(Ratio(w / _band(nm), stage, nm, name, f"{w * 1e3:.3g} nm"))
+                out["hold"].append(Ratio(w / hold_band(nm), stage, nm, name, f"{w * 1e3:.3g} nm"))
         elif m.kinds and m.kinds[-1] == "move" and name != FRESH.name:
             fresh = ex.get((stage, nm, "ours", FRESH.name))
             if fresh is not None and not fresh.error and fresh.worst:

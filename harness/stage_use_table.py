@@ -51,6 +51,7 @@ from __future__ import annotations
 import argparse
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
+from functools import partial
 import json
 import math
 from pathlib import Path
@@ -72,7 +73,8 @@ from .text_tables import markdown_table
 
 __all__ = ["SEED", "SENSORS_NM", "HOLDS", "MOVES", "LONG_HOLD_MOVES", "SCAN_FREQUENCIES",
            "TONE_FREQUENCIES", "GS_ORDERS", "TARGETS", "DOCUMENTED", "Profile", "Task", "RunMetrics",
-           "profiles_of", "family_tasks", "run_task", "run_family", "save_results", "load_results",
+           "profiles_of", "profile_scenario", "draw_stages", "stage_plant", "hold_band", "family_tasks", "run_task", "run_tasks", "run_family",
+           "save_results", "load_results",
            "summarize", "family_markdown", "verdicts", "write_into", "main"]
 
 H = 0.0005
@@ -134,11 +136,17 @@ class Profile:
     gs: bool = True             # also run on the true Gauss-Seidel master
 
     def scenario(self, plant, controller):
-        signal = profile_signal(self.segments, step=H)
-        duration = signal.samples * H
-        return Scenario(self.name, "tracking", self.name, signal, duration=duration, step_size=H,
-                        metric_window=(0.0, duration), plant=MappingProxyType(dict(plant)),
-                        controller=MappingProxyType(dict(controller)))
+        return profile_scenario(self.name, self.segments, plant, controller)
+
+
+def profile_scenario(name, segments, plant, controller):
+    """The tracking scenario of profile segments on the 0.5 ms grid, its error measured over its whole
+    length."""
+    signal = profile_signal(segments, step=H)
+    duration = signal.samples * H
+    return Scenario(name, "tracking", name, signal, duration=duration, step_size=H,
+                    metric_window=(0.0, duration), plant=MappingProxyType(dict(plant)),
+                    controller=MappingProxyType(dict(controller)))
 
 
 def _move_profile(key, hold):
@@ -208,12 +216,15 @@ class RunMetrics:
     seconds: float = 0.0
 
 
-def _stages(n, seed):
+def draw_stages(n, seed):
+    """The family's first n stages drawn with this seed (:func:`harness.identify.family.draw_stage`)."""
     rng = np.random.default_rng(seed)
     return [draw_stage(rng) for _ in range(n)]
 
 
-def _plant(stage, index, nm):
+def stage_plant(stage, index, nm):
+    """The plant parameters of a drawn stage with a sensor of nm rms noise on the 2 nm grid (its
+    noise seeded by the stage's index)."""
     return {**stage, "sensor.resolution": GRID, "sensor.noise_rms": nm * 1e-3, "sensor.seed": index + 1}
 
 
@@ -228,12 +239,12 @@ def family_tasks(stages=50, seed=SEED, sensors=SENSORS_NM, laws=("ours", "paper"
     """Every :class:`Task` of the family (see the module docstring)."""
     profile_list = profiles_of() if profile_list is None else profile_list
     tasks = []
-    for i, stage in enumerate(_stages(stages, seed)):
+    for i, stage in enumerate(draw_stages(stages, seed)):
         for nm in sensors:
             for law in laws:
                 for prof in profile_list:
                     gs = gs_orders if (i < gs_stages and nm in gs_sensors and prof.gs) else ()
-                    tasks.append(Task(i, nm, law, prof, _plant(stage, i, nm), _controller(law),
+                    tasks.append(Task(i, nm, law, prof, stage_plant(stage, i, nm), _controller(law),
                                       i < jacobi_stages, i < fmu_stages, gs))
     return tasks
 
@@ -303,54 +314,70 @@ def run_task(task):
     return out
 
 
-def _run_one(task):
-    return task, run_task(task)
+def _run_with(run, task):
+    return task, run(task)
+
+
+def run_tasks(tasks, run, part_name, jobs=1, progress=None, every=100, order=None):
+    """Run every task with ``run(task)`` (a list of metrics, each with its ``master``) on ``jobs``
+    processes, in the given order or by ``order`` (a sort key): ``{(stage, sensor, law,
+    part_name(task), master): metrics}``; ``progress`` is told every ``every`` tasks."""
+    results = {}
+    start = _time.perf_counter()
+    todo = sorted(tasks, key=order) if order is not None else list(tasks)
+
+    def keep(i, task, metrics):
+        for m in metrics:
+            results[(task.stage, task.sensor_nm, task.law, part_name(task), m.master)] = m
+        if progress is not None and (i + 1) % every == 0:
+            progress(f"{i + 1} of {len(todo)} tasks, {_time.perf_counter() - start:.0f} s")
+
+    if jobs <= 1:
+        for i, task in enumerate(todo):
+            keep(i, *_run_with(run, task))
+    else:
+        with ProcessPoolExecutor(jobs) as ex:
+            for i, (task, metrics) in enumerate(ex.map(partial(_run_with, run), todo, chunksize=1)):
+                keep(i, task, metrics)
+    return results
 
 
 def run_family(tasks, jobs=1, progress=None, every=100):
     """Run every task (in order, on ``jobs`` processes): ``{(stage, sensor, law, profile name,
     master): RunMetrics}``."""
-    results = {}
-    start = _time.perf_counter()
+    return run_tasks(tasks, run_task, _profile_name, jobs, progress, every)
 
-    def keep(i, task, metrics):
-        for m in metrics:
-            results[(task.stage, task.sensor_nm, task.law, task.profile.name, m.master)] = m
-        if progress is not None and (i + 1) % every == 0:
-            progress(f"{i + 1} of {len(tasks)} tasks, {_time.perf_counter() - start:.0f} s")
 
-    if jobs <= 1:
-        for i, task in enumerate(tasks):
-            keep(i, *_run_one(task))
-    else:
-        with ProcessPoolExecutor(jobs) as ex:
-            for i, (task, metrics) in enumerate(ex.map(_run_one, tasks, chunksize=2)):
-                keep(i, task, metrics)
-    return results
+def _profile_name(task):
+    return task.profile.name
 
 
 # ---------------------------------------------------------------------------
 # the targets
 # ---------------------------------------------------------------------------
 
-def save_results(results, path):
-    """Write the runs' metrics as JSON (one object per run)."""
-    rows = [{"stage": k[0], "sensor_nm": k[1], "law": k[2], "profile": k[3], **asdict(m)}
+def save_results(results, path, part="profile"):
+    """Write the runs' metrics as JSON, one object per run: its key (stage, sensor_nm, law, and the
+    profile or day part under the name ``part``; the master is one of the metrics) beside them."""
+    rows = [{"stage": k[0], "sensor_nm": k[1], "law": k[2], part: k[3], **asdict(m)}
             for k, m in results.items()]
     Path(path).write_text(json.dumps(rows), encoding="utf-8")
 
 
-def load_results(path):
-    """The runs' metrics written by :func:`save_results`."""
+def _run_metrics(row):
+    return RunMetrics(**{**row, "scans": [tuple(x) for x in row["scans"]]})
+
+
+def load_results(path, metrics=_run_metrics, part="profile"):
+    """The runs' metrics written by :func:`save_results`, each made by ``metrics(row)``."""
     out = {}
     for row in json.loads(Path(path).read_text(encoding="utf-8")):
-        key = (row.pop("stage"), row.pop("sensor_nm"), row.pop("law"), row.pop("profile"), row["master"])
-        row["scans"] = [tuple(x) for x in row["scans"]]
-        out[key] = RunMetrics(**row)
+        key = (row.pop("stage"), row.pop("sensor_nm"), row.pop("law"), row.pop(part), row["master"])
+        out[key] = metrics(row)
     return out
 
 
-def _band(nm):
+def hold_band(nm):
     """5 x (noise rms + grid step) [um]: the hold band of target (d)."""
     return 5.0 * (nm * 1e-3 + GRID)
 
@@ -405,7 +432,7 @@ def summarize(results, profile_list):
         if m.master == MASTER_JACOBI:
             continue
         for worst in m.holds:
-            out["d" + suffix].append(Ratio(worst / _band(nm), stage, nm, law, name, master,
+            out["d" + suffix].append(Ratio(worst / hold_band(nm), stage, nm, law, name, master,
                                            f"{worst * 1e3:.3g} nm"))
         if prof is None:
             continue
@@ -630,7 +657,7 @@ def _fixed_ratio(key, task):
         worst, steady = m.scans[0]
         return f"{worst / steady:.3g} ({worst * 1e3:.3g} nm / {steady * 1e3:.3g} nm)"
     stage = {k: v for k, v in task.plant.items() if not k.startswith("sensor.")}
-    ref_plant = _plant(stage, task.stage, REFERENCE_NM)
+    ref_plant = stage_plant(stage, task.stage, REFERENCE_NM)
     ref_prof = _move_profile(task.profile.move, REFERENCE_HOLD)
     ref_sc = ref_prof.scenario(ref_plant, fixed)
     ref_rows, _, _ = _native(ref_sc, "gauss-seidel")

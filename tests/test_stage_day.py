@@ -64,7 +64,7 @@ def test_the_native_runner_in_chunks_gives_the_runs_bits():
     from harness.loop import prepare_closed_loop
     from harness.masters import native
     part = sd.raster_part(50.0, 0.1, frames=2)
-    sc = part.scenario(sd._plant(sd._stages(1)[0], 0, 1), {})
+    sc = part.scenario(sd.stage_plant(sd.draw_stages(1, sd.SEED)[0], 0, 1), {})
     setup = prepare_closed_loop(sc)
     loop = native.native_loop()
     whole = loop.run(setup)
@@ -77,8 +77,8 @@ def test_the_native_runner_in_chunks_gives_the_runs_bits():
 
 
 def _core_run(part, law, stage=3, nm=1):
-    st = sd._stages(stage + 1)[stage]
-    sc = part.scenario(sd._plant(st, stage, nm), sd._controller(law))
+    st = sd.draw_stages(stage + 1, sd.SEED)[stage]
+    sc = part.scenario(sd.stage_plant(st, stage, nm), sd._controller(law))
     rows = simulate_closed_loop_core(sc)
     err = np.abs(rows["y_d"] - rows["y"])
     k = profiles.sample_index(rows["time"], H)
@@ -129,3 +129,21 @@ def test_a_step_after_a_minute_of_a_tone_is_met_by_the_nominal_model():
     assert ratio <= 1.25
     assert after[-1] == pytest.approx(1.5036, abs=5e-4)
     assert fresh_worst[-1] == pytest.approx(1.5181, abs=5e-4)
+
+
+def test_saved_results_load_as_they_were(tmp_path):
+    """Reference: the runs themselves (a round trip through JSON): the stage day's and the stage-use
+    table's results, saved with --save and read with --load, are equal to what was saved, keys
+    (stage, sensor, law, part or profile, master) and metrics alike (the scans' pairs as tuples)."""
+    from harness import stage_use_table as su
+    day = {(3, 1.0, "ours", "tone 1 Hz, 60 s", sd.MASTER_EXCHANGE):
+           sd.PartMetrics(sd.MASTER_EXCHANGE, worst=[0.5, 0.25], kinds=["tone", "step"], holds=[0.004],
+                          outside=0, fallbacks=1, warnings=["fallback at t = 60.5 s"], samples=120000,
+                          seconds=1.5)}
+    use = {(0, 20.0, "ours", "raster", "native"):
+           su.RunMetrics("native", moves=[0.125], holds=[0.01], scans=[(0.5, 0.25), (0.375, 0.125)],
+                         error="monitor: stopped", equal=True, seconds=2.0)}
+    sd.save_results(day, tmp_path / "day.json")
+    su.save_results(use, tmp_path / "use.json")
+    assert sd.load_results(tmp_path / "day.json") == day
+    assert su.load_results(tmp_path / "use.json") == use

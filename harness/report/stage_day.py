@@ -72,8 +72,8 @@ def _controller(law):
 
 def run_stage_day(*, fmu_dir=None, fmi_version=2, keep_data=True, progress=None):
     """Run the report's day (:data:`REPORT_PARTS` under :data:`DAY_LAWS`): a list of :class:`DayRun`."""
-    stage = sd._stages(REPORT_STAGE + 1)[REPORT_STAGE]
-    plant = sd._plant(stage, REPORT_STAGE, REPORT_SENSOR_NM)
+    stage = sd.draw_stages(REPORT_STAGE + 1, sd.SEED)[REPORT_STAGE]
+    plant = sd.stage_plant(stage, REPORT_STAGE, REPORT_SENSOR_NM)
     C, d = sd.admissible_rows()
     out = []
     for part in REPORT_PARTS:
