@@ -210,6 +210,10 @@ def day_estimates_figure(runs, out_dir, nominal):
     axes[2].set_yscale("log")
     axes[2].set_ylabel("b1, static gain\n/ nominal")
     axes[2].set_xlabel("time over the day's parts [s] (raster, tone then step, fresh step)")
+    for ax, names, where in ((axes[1], ("slow pole", "fast pole"), "center right"),
+                             (axes[2], ("b1", "static gain"), "lower right")):
+        if ticks:               # the first part's two curves name the colours
+            ax.legend(ax.get_lines()[:2], names, loc=where, frameon=True, framealpha=0.85)
     for ax in axes:
         ax.grid(True, alpha=0.3)
         for x, _ in ticks[1:]:
