@@ -994,7 +994,7 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
 static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_input *in,
                               double *history, size_t capacity, piezo_controller_sample *s)
 {
-    double e[PIEZO_MV_MAX_D] = {0.0}, g[2] = {0.0, 0.0}, f[PIEZO_MV_MAX_D + 1];
+    double e[PIEZO_MV_MAX_D], g[2] = {0.0, 0.0}, f[PIEZO_MV_MAX_D + 1];
     double pred_error, numerator, q, r, v, t, y_meas = in->y_meas;
     const double *theta;
     piezo_status st;
@@ -1082,10 +1082,12 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
         s->integral = c->integral + c->integral_gain * (c->yd_value[c->k % PIEZO_MV_Q_RING] - y_meas);
     if (c->integral_gain > 0.0) r += s->integral;   /* (r + 0 would turn a -0 reference into +0) */
 
-    /* Diophantine with the current estimate; F = B E: f_n = b1 e_n + b2 e_{n-1} */
+    /* Diophantine with the current estimate; F = B E: f_n = b1 e_n + b2 e_{n-1}
+     * (e_{-1} = e_d = 0, multiplied as any other: b * 0 is -0 for a negative b) */
     piezo_diophantine_observer(theta[0], theta[1], t, d, e, g);
-    for (i = 0; i <= d; ++i)
-        f[i] = theta[2] * (i < d ? e[i] : 0.0) + theta[3] * (i >= 1 ? e[i - 1] : 0.0);
+    f[0] = theta[2] * e[0] + theta[3] * 0.0;
+    for (i = 1; i < d; ++i) f[i] = theta[2] * e[i] + theta[3] * e[i - 1];
+    f[d] = theta[2] * 0.0 + theta[3] * e[d - 1];
 
     /* MV: T y(k+d) = Gd y(k) + F q(k) := T r(k), weighted by lambda_u */
     numerator = (r - t * c->r_prev) - g[0] * y_meas - g[1] * c->y_prev[0];
