@@ -534,8 +534,10 @@ static void project(const piezo_controller *c, double *th)
  *   trace(P) <= trace_max.
  * One division per sample: 1 / (lambda + phi^T P phi); 1/lambda is fixed
  * between samples (c->inv_forgetting, set at init). P stays bitwise symmetric
- * from the diagonal P0 on: (P phi)_i (P phi)_j is the same product as
- * (P phi)_j (P phi)_i, so P_new[ij] = P_new[ji] with no mirroring, and
+ * from the diagonal P0 on (a restored P that is not is refused,
+ * piezo_controller_check): (P phi)_i (P phi)_j is the same product as
+ * (P phi)_j (P phi)_i, so P_new[ij] = P_new[ji], and only the upper triangle
+ * is computed (and scaled by the trace bound), then mirrored;
  * P phi = sum_j phi_j (row j of P), four-element rows the compiler vectorises.
  * The same update serves the chosen loop and each delay candidate: the
  * a-priori prediction error of (theta_in, P) under delay d; with update set,
@@ -564,7 +566,7 @@ static void rls_gain(const piezo_controller *c, const double *theta_in, const do
 {
     const double phi0 = -c->y_prev[0], phi1 = -c->y_prev[1];
     const double phi2 = q_past(c, d), phi3 = q_past(c, d + 1);
-    double Pphi[4], denom, inv_denom, trace;
+    double Pphi[4], denom, inv_denom, trace, n00, n01, n02, n03, n11, n12, n13, n22, n23, n33;
     int i;
     /* (P phi)_i = sum_j P_ij phi_j in increasing j (from 0.0), P_ij read as P_ji (symmetric) */
     for (i = 0; i < 4; ++i)
@@ -572,23 +574,26 @@ static void rls_gain(const piezo_controller *c, const double *theta_in, const do
     denom = (((lambda + phi0 * Pphi[0]) + phi1 * Pphi[1]) + phi2 * Pphi[2]) + phi3 * Pphi[3];
     inv_denom = 1.0 / denom;
     for (i = 0; i < 4; ++i) theta[i] = theta_in[i] + Pphi[i] * inv_denom * e;
-    for (i = 0; i < 4; ++i) {
-        /* the row is read before the new one is written (P_new is not P) */
-        const double *row = P + 4 * i;
-        double n0 = (row[0] - Pphi[i] * Pphi[0] * inv_denom) * inv_lambda;
-        double n1 = (row[1] - Pphi[i] * Pphi[1] * inv_denom) * inv_lambda;
-        double n2 = (row[2] - Pphi[i] * Pphi[2] * inv_denom) * inv_lambda;
-        double n3 = (row[3] - Pphi[i] * Pphi[3] * inv_denom) * inv_lambda;
-        P_new[4 * i] = n0;
-        P_new[4 * i + 1] = n1;
-        P_new[4 * i + 2] = n2;
-        P_new[4 * i + 3] = n3;
-    }
-    trace = ((P_new[0] + P_new[5]) + P_new[10]) + P_new[15];
+    /* the upper triangle j >= i (P_new is not P), the lower one its mirror image: P_ij = P_ji
+     * and (P phi)_i (P phi)_j = (P phi)_j (P phi)_i, so its entries are these bits */
+#define P_NEW(i, j) ((P[4 * (i) + (j)] - Pphi[i] * Pphi[j] * inv_denom) * inv_lambda)
+    n00 = P_NEW(0, 0); n01 = P_NEW(0, 1); n02 = P_NEW(0, 2); n03 = P_NEW(0, 3);
+    n11 = P_NEW(1, 1); n12 = P_NEW(1, 2); n13 = P_NEW(1, 3);
+    n22 = P_NEW(2, 2); n23 = P_NEW(2, 3);
+    n33 = P_NEW(3, 3);
+#undef P_NEW
+    trace = ((n00 + n11) + n22) + n33;
     if (trace > trace_max) {
         double scale = trace_max / trace;
-        for (i = 0; i < 16; ++i) P_new[i] *= scale;
+        n00 *= scale; n01 *= scale; n02 *= scale; n03 *= scale;
+        n11 *= scale; n12 *= scale; n13 *= scale;
+        n22 *= scale; n23 *= scale;
+        n33 *= scale;
     }
+    P_new[0] = n00;  P_new[1] = n01;  P_new[2] = n02;  P_new[3] = n03;
+    P_new[4] = n01;  P_new[5] = n11;  P_new[6] = n12;  P_new[7] = n13;
+    P_new[8] = n02;  P_new[9] = n12;  P_new[10] = n22; P_new[11] = n23;
+    P_new[12] = n03; P_new[13] = n13; P_new[14] = n23; P_new[15] = n33;
 }
 
 /* The a-priori error of (theta_in, P) under delay d and, with update set, the update with the
