@@ -950,6 +950,7 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
     s->fb_nominal = c->fb_nominal;
     s->learned_rate = c->learned_rate;
     s->fallback_value = s->fallback_other = 0.0;
+    s->out.fallback = PIEZO_FALLBACK_NONE;
     if (!c->robust || c->detecting || s->detecting) return;
     rate = fabs(r - c->r_last);
     /* whether the law's estimates differ from the nominal model (asked only where it decides) */
@@ -1005,7 +1006,8 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     piezo_status st;
     int i, d, stamped, saturated = 0, operators_finite;
 
-    memset(&s->out, 0, sizeof s->out);   /* defined padding: FMU states are hashed bytewise */
+    /* s->out: each member is set below (its padding is left as it is: the commit copies the
+     * members, copy_output) */
     s->k = c->k;
     s->y_ref = in->y_ref;
     s->y_preview = in->y_preview;
@@ -1290,6 +1292,24 @@ static void commit_timing(piezo_controller *c, const piezo_controller_sample *s)
     }
 }
 
+/* *to = *from member by member, every member of piezo_controller_output (a new one is set in
+ * loop_eval and safe_sample and copied here): the padding of *to stays as it was (zero from
+ * init: FMU states are hashed bytewise), whatever an evaluated sample's holds (loop_eval sets
+ * the members only) */
+static void copy_output(piezo_controller_output *to, const piezo_controller_output *from)
+{
+    to->v = from->v;
+    to->q = from->q;
+    memcpy(to->theta, from->theta, sizeof to->theta);
+    to->pred_error = from->pred_error;
+    to->saturated = from->saturated;
+    to->delay = from->delay;
+    to->preview = from->preview;
+    to->adapting = from->adapting;
+    to->noise = from->noise;
+    to->fallback = from->fallback;
+}
+
 /* Make the evaluated sample k the controller's state (k -> k+1). */
 static void controller_commit(piezo_controller *c, const piezo_controller_sample *s)
 {
@@ -1373,7 +1393,7 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
     c->r_prev = s->r;
     commit_timing(c, s);
     c->k += 1;
-    c->out = s->out;
+    copy_output(&c->out, &s->out);
     piezo_supervisor_commit(&c->sup, &s->sup_in, &s->sup, s->r);
     if (s->restarted) {
         if (c->k - c->k_delay >= PIEZO_DETECT_HELD)
