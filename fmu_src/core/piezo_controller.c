@@ -883,7 +883,10 @@ static int sample_state_finite(const piezo_controller *c, const piezo_controller
                                + s->integral * 0.0 + s->r_velocity * 0.0 + s->r_plain * 0.0 + s->y_meas * 0.0
                                + s->err_sum * 0.0 + (s->outlier ? s->y_meas + s->raw_error : 0.0) * 0.0
                                + s->fb_adapted * 0.0 + s->fb_nominal * 0.0 + s->learned_rate * 0.0;
-    return robust_zero == 0.0 && all_finite(s->out.theta, 4)
+    /* the estimates the law used, the same way (four values: no call) */
+    const double theta_zero = s->out.theta[0] * 0.0 + s->out.theta[1] * 0.0 + s->out.theta[2] * 0.0
+                              + s->out.theta[3] * 0.0;
+    return robust_zero + theta_zero == 0.0
            && (!c->sup.enabled || (all_finite(&s->sup.z, SUP_DOUBLES) && isfinite(s->sup.gain)))
            && (!s->rls_updated || all_finite(s->P, 16))
            && (!s->detecting || (all_finite(s->det_theta, PIEZO_DETECT_THETA)
