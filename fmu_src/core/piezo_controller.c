@@ -846,18 +846,24 @@ int piezo_controller_preview(const piezo_controller *c, uint64_t sample, double 
 
 /* 1 when every x[i] is finite: x * 0 is +-0 for a finite x and NaN for Inf or
  * NaN (IEEE 754; no -ffinite-math-only here), so a sum of those products is 0
- * exactly when all are finite. No branch per element, and two short chains of
- * additions instead of one (the check runs on every sample). */
+ * exactly when all are finite, in whatever order it is added. No branch per
+ * element, and four short chains of additions, z[j] over the x[i] with
+ * i mod 4 = j, instead of one (the check runs on every sample, some 50 values):
+ * the compiler adds them as two pairs in two vector registers; the last n mod 4
+ * as a pair and one (not a loop: a 32-bit build's loop optimisation warned of one). */
 static int all_finite(const double *x, int n)
 {
-    double z0 = 0.0, z1 = 0.0;
-    int i;
-    for (i = 0; i + 2 <= n; i += 2) {
-        z0 += x[i] * 0.0;
-        z1 += x[i + 1] * 0.0;
+    double z[4] = { 0.0, 0.0, 0.0, 0.0 };
+    int i, j;
+    for (i = 0; i + 4 <= n; i += 4)
+        for (j = 0; j < 4; ++j) z[j] += x[i + j] * 0.0;
+    if (i + 2 <= n) {
+        z[0] += x[i] * 0.0;
+        z[1] += x[i + 1] * 0.0;
+        i += 2;
     }
-    if (i < n) z0 += x[i] * 0.0;
-    return z0 + z1 == 0.0;
+    if (i < n) z[2] += x[i] * 0.0;
+    return (z[0] + z[1]) + (z[2] + z[3]) == 0.0;
 }
 
 /* The estimates, the covariance and the supervisor's next statistics and gain (an output:
