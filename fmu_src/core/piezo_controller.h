@@ -145,6 +145,9 @@ typedef struct {
                                     sample */
 } piezo_controller_params;
 
+/* A sample's outputs. A new member is set in loop_eval and safe_sample and copied in
+ * copy_output (piezo_controller.c): the commit copies them member by member, so that the
+ * padding of the controller's copy stays zero (FMU states are hashed bytewise). */
 typedef struct {
     double v;                    /* control voltage v(k) [V] */
     double q;                    /* virtual input q(k) [um] (after saturation back-calculation) */
