@@ -38,7 +38,7 @@ CONTROLLER_DOC_DEFAULTS = {
     "sat.enabled": True, "sat.v_min": -150.0, "sat.v_max": 150.0, "monitor.pred_error_max": 1.0,
     "monitor.divergence_samples": 200,
     # the estimates' guarantees (docs/model.md): the admissible set and the fallback
-    "rls.zero_min": 0.5, "rls.pole_min": 0.0, "rls.fallback_ratio": 2.0, "rls.fallback_window": 0.5,
+    "rls.zero_min": 0.75, "rls.pole_min": 0.0, "rls.fallback_ratio": 2.0, "rls.fallback_window": 0.5,
 }
 # The paper's law: its update on every sample with the tuning measured for it, no integral
 # action, the observer pole measured for it (docs/model.md, adaptation); the robust update's

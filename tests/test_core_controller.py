@@ -372,6 +372,7 @@ BAD = [
     ("rls.p0", 0.0), ("rls.p0", -1.0),
     ("creep.alpha", 2.0), ("creep.k_c", 0.0), ("pi.w0", 0.0), ("pi.m", 17), ("pi.m", 0),
     ("pi.w[3]", -0.1), ("h", 0.0),
+    ("rls.zero_min", 1.0), ("rls.zero_min", -1.0), ("rls.zero_min", float("nan")), ("rls.pole_min", 1.0),
 ]
 
 
@@ -411,6 +412,20 @@ def test_non_minimum_phase_nominal_b_refused():
         with pytest.raises(core.CoreParameterError) as ei:
             controller(over)
         assert ei.value.parameter in ("tf.b1", "tf.b2"), over
+
+
+def test_admissible_zero_bound_follows_a_lower_nominal_zero():
+    """Reference: piezo_controller.h (rls_zero_min): the admissible set's lowest zero of B is
+    rls.zero_min, or the nominal zero -tf.b2/tf.b1 when that is lower, so the set always holds
+    the nominal model and the default suits an identified stage whose zero is lower. A nominal
+    zero of 0.6 (tf.b2 = -0.6 tf.b1) with rls.zero_min 0.9 draws the bound at exactly 0.6; with
+    the paper's nominal (zero 0.99328) the bound is rls.zero_min itself."""
+    b1 = core.default_controller_params()["tf.b1"]
+    low = controller({"rls.zero_min": 0.9, "tf.b2": -0.6 * b1})
+    assert low.raw.zero_min == -(-0.6 * b1) / b1
+    assert abs(low.raw.zero_min - 0.6) < 1e-15
+    paper = controller({"rls.zero_min": 0.9})
+    assert paper.raw.zero_min == 0.9
 
 
 # ------------------------------------------------------------------ saturation

@@ -116,7 +116,7 @@ def test_model_description_matches_design(controller, piezo_stage):
            "rls.variance_max": ("Real", 0.004), "rls.p0_loop": ("Real", 0.01), "sat.enabled": ("Boolean", True),
            "sat.v_min": ("Real", -150.0), "sat.v_max": ("Real", 150.0),
            "monitor.pred_error_max": ("Real", 1.0), "monitor.divergence_samples": ("Integer", 200),
-           "rls.zero_min": ("Real", 0.5), "rls.pole_min": ("Real", 0.0), "rls.fallback_ratio": ("Real", 2.0),
+           "rls.zero_min": ("Real", 0.75), "rls.pole_min": ("Real", 0.0), "rls.fallback_ratio": ("Real", 2.0),
            "rls.fallback_window": ("Real", 0.5),
            **SUPERVISION}
     for name, (type_, start) in own.items():

@@ -140,7 +140,7 @@ void piezo_controller_default_params(piezo_controller_params *p)
      * gain are kept within the supervision's sup.gain_min .. sup.gain_max times the nominal
      * model's (piezo_supervisor.h); the fallback at twice the nominal model's squared errors
      * over 0.5 s */
-    p->rls_zero_min = 0.5;
+    p->rls_zero_min = 0.75;
     p->rls_pole_min = 0.0;
     p->rls_fallback_ratio = 2.0;
     p->rls_fallback_window = 0.5;
@@ -179,10 +179,19 @@ static double monitor_forgetting(int window)
     return window > 0 ? 1.0 - 1.0 / (double)window : 0.0;
 }
 
+/* The admissible set's lowest zero of B: rls.zero_min, or the nominal zero -tf.b2/tf.b1 when that
+ * is lower (the set always holds the nominal model; a stage identified with a lower zero keeps
+ * the default) */
+static double admissible_zero_min(const piezo_controller_params *p)
+{
+    double nominal_zero = -p->tf_b2 / p->tf_b1;
+    return p->rls_zero_min < nominal_zero ? p->rls_zero_min : nominal_zero;
+}
+
 /*
  * The admissible set of the robust update's estimates theta = [a1, a2, b1, b2] (docs/model.md,
  * "Estimates with guarantees"), as rows c^T theta <= d, from the nominal model n, the lowest
- * zero z (rls.zero_min), the lowest pole p (rls.pole_min) and the supervision's range of a working
+ * zero z (admissible_zero_min), the lowest pole p (rls.pole_min) and the supervision's range of a working
  * loop's response gain [g_lo, g_hi] (sup.gain_min, sup.gain_max: a gain the supervision takes for
  * a working loop the estimates can follow, and one beyond it the supervision stops);
  * A(x) = 1 + a1 x^-1 + a2 x^-2, so A(1) = 1 + a1 + a2, and m = A_STABILITY_MARGIN:
@@ -309,10 +318,12 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     if (!(isfinite(p->mv_probe_max) && p->mv_probe_max >= 0.0))
         return piezo_refuse(diag, "mv.probe_max", "[0, inf) um (0: no delay probe)", p->mv_probe_max);
     /* the admissible set must hold the nominal model: the estimates start there, and the fallback
-     * returns there (tf.b1 > 0 and |tf.b2| <= 0.999 tf.b1 are checked above) */
-    if (!(isfinite(p->rls_zero_min) && p->rls_zero_min >= -ZERO_RADIUS_MAX && p->rls_zero_min <= -p->tf_b2 / p->tf_b1))
-        return piezo_refuse(diag, "rls.zero_min", "[-0.999, the nominal zero -tf.b2/tf.b1] (lowest zero of B "
-                            "the estimates may have)", p->rls_zero_min);
+     * returns there (tf.b1 > 0 and |tf.b2| <= 0.999 tf.b1 are checked above). A nominal zero below
+     * rls.zero_min lowers the bound to it (admissible_zero_min), so the default suits any
+     * identified stage */
+    if (!(isfinite(p->rls_zero_min) && p->rls_zero_min >= -ZERO_RADIUS_MAX && p->rls_zero_min <= ZERO_RADIUS_MAX))
+        return piezo_refuse(diag, "rls.zero_min", "[-0.999, 0.999] (lowest zero of B the estimates may have; "
+                            "the nominal zero -tf.b2/tf.b1 when that is lower)", p->rls_zero_min);
     if (!(isfinite(p->rls_pole_min) && p->rls_pole_min >= -1.0 && p->rls_pole_min < 1.0))
         return piezo_refuse(diag, "rls.pole_min", "[-1, 1) (the poles of A in the hull of real poles in "
                             "[rls.pole_min, 1))", p->rls_pole_min);
@@ -331,7 +342,7 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
             return piezo_refuse(diag, "sup.gain_min", "(0, 1) (times the model's response)", p->sup.gain_min);
         if (!(isfinite(p->sup.gain_max) && p->sup.gain_max > 1.0))
             return piezo_refuse(diag, "sup.gain_max", "(1, inf) (times the model's response)", p->sup.gain_max);
-        admissible_rows(nominal, p->rls_zero_min, p->rls_pole_min, p->sup.gain_min, p->sup.gain_max, rows, bounds);
+        admissible_rows(nominal, admissible_zero_min(p), p->rls_pole_min, p->sup.gain_min, p->sup.gain_max, rows, bounds);
         for (i = 0; i < PIEZO_ADMISSIBLE_ROWS; ++i)
             if (admissible_excess(rows[i], bounds[i], nominal) > 0.0)
                 return piezo_refuse(diag, who[i], i < 3 ? "a value below both nominal poles (tf.a1, tf.a2: real "
@@ -381,7 +392,7 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->theta_nominal[2] = p->tf_b1;
     c->theta_nominal[3] = p->tf_b2;
     c->probe_max = p->mv_probe_max;
-    c->zero_min = p->rls_zero_min;
+    c->zero_min = admissible_zero_min(p);
     c->pole_min = p->rls_pole_min;
     c->gain_lo = p->sup.gain_min;
     c->gain_hi = p->sup.gain_max;
@@ -1829,7 +1840,7 @@ const char *piezo_controller_check_params(const piezo_controller *c, const piezo
         || c->sup.window != scratch.sup.window || c->sup.clip_error != q->sup.clip_error
         || c->sup.reaction != q->sup.reaction || c->sup.ramp_time != q->sup.ramp_time
         || c->sup.ramp_samples != scratch.sup.ramp_samples || c->probe_max != q->mv_probe_max
-        || c->zero_min != q->rls_zero_min || c->pole_min != q->rls_pole_min || c->gain_lo != q->sup.gain_min || c->gain_hi != q->sup.gain_max
+        || c->zero_min != scratch.zero_min || c->pole_min != q->rls_pole_min || c->gain_lo != q->sup.gain_min || c->gain_hi != q->sup.gain_max
         || c->fallback_ratio != q->rls_fallback_ratio || c->fallback_samples != scratch.fallback_samples)
         return "controller state does not match its parameters";
     return NULL;

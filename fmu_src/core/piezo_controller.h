@@ -41,7 +41,7 @@
  *   P^-1, then radially towards the nominal model) into the polytope
  *       A's poles in the convex hull of real poles in [rls.pole_min, 1)
  *           (A(1) >= m, A(p) >= 0 at p = rls.pole_min, the chord a2 + (1+p)/2 a1 <= -p - m),
- *       B's zero -b2/b1 in [rls.zero_min, 0.999],
+ *       B's zero -b2/b1 in [min(rls.zero_min, the nominal zero), 0.999],
  *       b1 and the static gain B(1)/A(1) within [sup.gain_min, sup.gain_max] times the nominal's
  *           (the supervision's range of a working loop's response gain);
  *   the law never uses an estimate outside it;
@@ -136,7 +136,8 @@ typedef struct {
                                         PIEZO_MONITOR_SHARE_PERCENT % beyond it do; 0 = never */
     piezo_supervisor_params sup;     /* supervision (piezo_supervisor.h): sup.* */
     double mv_probe_max;         /* [um] >= 0: largest delay probe on q (0: no probes) */
-    double rls_zero_min;         /* robust: lowest zero of B, [-0.999, the nominal zero] */
+    double rls_zero_min;         /* robust: lowest zero of B, [-0.999, 0.999] (the nominal zero
+                                    -tf.b2/tf.b1 when that is lower) */
     double rls_pole_min;         /* robust: poles in the hull of real poles in [pole_min, 1), [-1, 1);
                                     the nominal poles must be in it */
     double rls_fallback_ratio;   /* robust: fallback when the adapted model's squared errors exceed
