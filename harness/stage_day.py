@@ -214,14 +214,15 @@ def day_parts(frequencies=RASTER_FREQUENCIES, dwells=DWELLS, frames=FRAMES, tone
 def admissible_rows(controller_params=None, margin=1e-4, radius=0.999):
     """The admissible set of the controller's estimates (docs/model.md, "Estimates with
     guarantees") as ``(C, d)``, ``C theta <= d``, from the controller's parameters (its nominal
-    model ``tf.*``, ``rls.zero_min``, ``rls.pole_min`` and the supervision's ``sup.gain_min``,
-    ``sup.gain_max``), each row computed
+    model ``tf.*``, ``rls.zero_min`` or the nominal zero ``-tf.b2/tf.b1`` where that is lower,
+    ``rls.pole_min`` and the supervision's ``sup.gain_min``, ``sup.gain_max``), each row computed
     with the core's operations in the core's order (``admissible_rows`` in piezo_controller.c), so
     that :func:`outside_admissible` gives the core's verdict bit for bit."""
     from .core import default_controller_params
     p = {**default_controller_params(), **(controller_params or {})}
     a1, a2, b1, b2 = p["tf.a1"], p["tf.a2"], p["tf.b1"], p["tf.b2"]
     z, pm, g_lo, g_hi = p["rls.zero_min"], p["rls.pole_min"], p["sup.gain_min"], p["sup.gain_max"]
+    z = min(z, -b2 / b1)
     gain = (b1 + b2) / (1.0 + a1 + a2)
     C = np.array([[-1.0, -1.0, 0.0, 0.0], [-pm, -1.0, 0.0, 0.0], [(1.0 + pm) / 2.0, 1.0, 0.0, 0.0],
                   [0.0, 0.0, -radius, -1.0], [0.0, 0.0, z, 1.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, -1.0, 0.0],

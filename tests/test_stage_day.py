@@ -58,6 +58,20 @@ def test_outside_admissible_is_the_cores_verdict():
     assert 100 < sum(verdicts) < 1900
 
 
+def test_admissible_rows_follow_a_lower_nominal_zero_as_the_core_does():
+    """Reference: the core's rows (raw.adm_c, raw.adm_d). For a nominal model whose zero (0.6) is
+    below rls.zero_min (0.75, the default), the set's zero bound is the nominal zero in the core
+    and in harness.stage_day.admissible_rows alike, bit for bit, and the nominal model is inside."""
+    b1 = core.default_controller_params()["tf.b1"]
+    params = {"tf.b2": -0.6 * b1}
+    raw = core.Controller(params).raw
+    C, d = sd.admissible_rows(params)
+    assert np.array_equal(C, np.array([list(raw.adm_c[i]) for i in range(9)]))
+    assert np.array_equal(d, np.array(list(raw.adm_d)))
+    assert C[4, 2] == 0.6 * b1 / b1
+    assert not sd.outside_admissible(np.array([list(raw.theta_nominal)]), C, d)[0]
+
+
 def test_the_native_runner_in_chunks_gives_the_runs_bits():
     """Reference: NativeLoop.run, the whole run at once. The same run in chunks of 1000 samples
     (NativeLoop.run_chunks) hands over the same rows, bit for bit, in order."""

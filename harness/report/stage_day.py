@@ -199,7 +199,7 @@ def day_estimates_figure(runs, out_dir, nominal):
         axes[2].plot(t, ((b1 + b2) / (1.0 + a1 + a2)) / kn, lw=0.8, color="C4")
         ticks.append((t_off, part.name))
         t_off = float(t[-1]) + 1.0
-    axes[0].axhline(p["rls.zero_min"], ls="--", color="k", lw=0.8)
+    axes[0].axhline(min(p["rls.zero_min"], -p["tf.b2"] / p["tf.b1"]), ls="--", color="k", lw=0.8)
     axes[0].axhline(0.999, ls="--", color="k", lw=0.8)
     axes[0].set_ylabel("zero of B")
     axes[1].axhline(p["rls.pole_min"], ls="--", color="k", lw=0.8)
@@ -219,7 +219,7 @@ def day_estimates_figure(runs, out_dir, nominal):
         for x, _ in ticks[1:]:
             ax.axvline(x, color="grey", lw=0.5)
     caption = ("The estimates the law used over the report's day (the defaults), dashed: the admissible "
-               "set's bounds (rls.zero_min and 0.999 on the zero, rls.pole_min and 1 on the poles, "
+               "set's bounds (rls.zero_min, or the nominal zero where that is lower, and 0.999 on the zero, rls.pole_min and 1 on the poles, "
                "sup.gain_min and sup.gain_max on b1 and the static gain over the nominal model's). The "
                "set holds the hull of the poles too; a pair of complex poles shows as one line.")
     return _save(plt, fig, out_dir, "stage_day_estimates", caption, title="A stage's day: the estimates")
