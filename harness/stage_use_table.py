@@ -108,15 +108,16 @@ MASTER_FMU = "closed-loop FMU, 10 ms in holds"
 _SUPERVISION_WARNINGS = ("is not connected (", "cannot be aligned")
 _WARNING_KINDS = (("|pred_error| exceeded", "pred_error beyond its bound"),
                   ("was clipped", "v clipped"),
-                  ("delay detection restarted", "delay detection restarted"))
+                  ("delay detection restarted", "delay detection restarted"),
+                  ("fell back to the nominal model", "the law fell back to the nominal model"))
 
 #: the issue's bound of each target (a ratio; e: a count)
 TARGETS = {"a": 1.1, "b": 1.0, "c": 1.1, "d": 1.0, "e": 0}
 #: the robust law's worst over the 50-stage family (every master) as docs/stage_use.md documents it,
-#: measured by this command on this release's core (2.818, 1.038, 13.16, 1.089, 5 runs; at 8580b7d's:
-#: 7.82, 8.02, 2615, 1.33, 11): a larger value is a regression and exits 1. Where the issue's bound
-#: is met, the bound is the limit.
-DOCUMENTED = {"a": 2.82, "b": 1.04, "c": 13.2, "d": 1.09, "e": 5}
+#: measured by this command on this release's core (2.205, 1.065, 6.412, 1.089, 7 runs; at 14744e4's:
+#: 2.818, 1.038, 13.16, 1.089, 5; at 8580b7d's: 7.82, 8.02, 2615, 1.33, 11): a larger value is a
+#: regression and exits 1. Where the issue's bound is met, the bound is the limit.
+DOCUMENTED = {"a": 2.21, "b": 1.07, "c": 6.42, "d": 1.09, "e": 7}
 
 
 # ---------------------------------------------------------------------------
