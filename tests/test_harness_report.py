@@ -84,7 +84,7 @@ def test_main_job_writes_four_conditions_of_six_scenarios(main_job):
         assert float(r["paper_e_r"]) == pytest.approx(PAPER[s][1] / 100, rel=1e-12)
         assert int(r["n_samples"]) == 4000 and r["master"] == "gauss-seidel"
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["provenance.json", "report.html", "report.md", "stage_use.csv", "tracking.csv",
+    assert names == ["provenance.json", "report.html", "report.md", "stage_day.csv", "stage_use.csv", "tracking.csv",
                      "validation.csv"]
 
 

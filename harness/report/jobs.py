@@ -5,8 +5,9 @@ A job runs what :mod:`.conditions` and :mod:`.run` define, then writes what
 
 * terminal: the headline table first (ours, paper, ratio), then every
   condition side by side, the user's scenarios, the validation table, the
-  stage-use table (:mod:`.stage_use`), and what each condition is;
-* files: ``tracking.csv``, ``validation.csv``, ``stage_use.csv``, ``report.md``,
+  stage-use table (:mod:`.stage_use`), the stage's day (:mod:`.stage_day`), and what each
+  condition is;
+* files: ``tracking.csv``, ``validation.csv``, ``stage_use.csv``, ``stage_day.csv``, ``report.md``,
   ``report.html``, ``provenance.json`` and, unless disabled, the figures as
   PNG (150 dpi) and SVG.
 """
