@@ -557,13 +557,31 @@ static void explain_delay(char *t, size_t size, int *u, const piezo_sup_verdict 
     }
 }
 
+/* a noise-like y_meas whose steps are this many times the candidates' prediction errors is a loop
+ * that oscillates, not a noisy sensor */
+#define OSCILLATION_RATIO 10.0
+
 static void explain_undetected(char *t, size_t size, int *u, const piezo_sup_verdict *v,
                                const piezo_sup_context *c)
 {
     add(t, size, u, "no loop delay of 1 to 3 samples explains y_meas after %llu samples (%.3g s, "
         "sup.detect_time, since t = %.9g s): ", (unsigned long long)v->clip_samples,
         c->h * (double)v->clip_samples, time_of(c, v->k + 1 - v->clip_samples));
-    if (v->noise > 0.0 && v->probe_wanted > v->probe_max && v->reversal_share * 100.0 >= PIEZO_SUP_NOISY_PERCENT) {
+    if (v->noise > 0.0 && v->reversal_share * 100.0 >= PIEZO_SUP_NOISY_PERCENT
+        && v->step_rms > OSCILLATION_RATIO * v->noise) {
+        /* y_meas reverses as noise would, but by steps far beyond what the candidates fail to
+         * predict: the loop itself swings from sample to sample (a sensor's noise gives steps of
+         * about 1.4 times its rms, and the candidates' errors are at least that noise) */
+        add(t, size, u, "y_meas swings from sample to sample: it reversed its direction in %.0f %% of the samples "
+            "by steps of %.3g um rms, while the candidates' prediction errors were %.3g um rms: the loop "
+            "oscillates, and the loop's gain is far above the model's. ", 100.0 * v->reversal_share, v->step_rms,
+            v->noise);
+        if (c->internal)
+            add(t, size, u, COMPARE_MODEL " (or widen sup.gain_max)");
+        else
+            add(t, size, u, "Check the amplifier's gain, the units of v (V) and y_meas (um), and that the "
+                "controller's model (pi.*, tf.*, creep.*) is this stage's");
+    } else if (v->noise > 0.0 && v->probe_wanted > v->probe_max && v->reversal_share * 100.0 >= PIEZO_SUP_NOISY_PERCENT) {
         /* a noise-dominated measurement (it reverses its direction often), and the probes that
          * would show the delay through it are beyond mv.probe_max */
         add(t, size, u, "the measurement's noise buries the delay probes. y_meas reversed its direction in %.0f %% "
