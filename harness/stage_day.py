@@ -82,8 +82,9 @@ HOUR = 3600.0
 #: the issue's bound of each target (ratios; frame: um; set and supervision: counts)
 TARGETS = {"growth": 1.5, "fixed": 1.5, "frame": 1.0, "tone": 1.25, "set": 0, "supervision": 0}
 #: the worst measured over the whole family by this command, as docs/stage_day.md documents it: a
-#: larger value is a regression (exit 1). None: not measured yet (only the issue's bound applies).
-DOCUMENTED = {"growth": None, "fixed": None, "frame": None, "tone": None, "set": 0, "supervision": None}
+#: larger value is a regression (exit 1). Measured at rls.zero_min 0.75: 29.78, 1591.6, 36.15 um,
+#: 3.5895, 0 samples, 249 runs stopped.
+DOCUMENTED = {"growth": 29.8, "fixed": 1592.0, "frame": 36.2, "tone": 3.59, "set": 0, "supervision": 249}
 #: the laws each part runs with
 LAWS = ("ours", "fixed")
 MASTER_EXCHANGE = "native exchange"
