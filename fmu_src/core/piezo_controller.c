@@ -179,6 +179,16 @@ static double monitor_forgetting(int window)
     return window > 0 ? 1.0 - 1.0 / (double)window : 0.0;
 }
 
+/* samples of a duration t at h, rounded to the nearest, saturated far below 2^63 (a tiny h with a
+ * long duration must not overflow the conversion, as the fuzzer found) */
+static uint64_t rounded_samples(double t, double h)
+{
+    double n = floor(t / h + 0.5);
+    if (!(n >= 0.0)) return 0;
+    if (n > 9.0e15) return (uint64_t)9.0e15;
+    return (uint64_t)n;
+}
+
 /* The admissible set's lowest zero of B: rls.zero_min, or the nominal zero -tf.b2/tf.b1 when that
  * is lower (the set always holds the nominal model; a stage identified with a lower zero keeps
  * the default) */
@@ -377,7 +387,7 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->trace_max = p->rls_trace_max;
     c->robust = p->rls_robust;
     c->excitation = p->rls_excitation;
-    c->excitation_samples = (uint64_t)floor(p->rls_excitation_time / p->h + 0.5);
+    c->excitation_samples = rounded_samples(p->rls_excitation_time, p->h);
     c->variance_max = p->rls_variance_max;
     c->p0_loop = p->rls_p0_loop;
     c->integral_gain = p->mv_integral;
@@ -398,7 +408,7 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     c->gain_hi = p->sup.gain_max;
     admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_lo, c->gain_hi, c->adm_c, c->adm_d);
     c->fallback_ratio = p->rls_fallback_ratio;
-    c->fallback_samples = (uint64_t)floor(p->rls_fallback_window / p->h + 0.5);
+    c->fallback_samples = rounded_samples(p->rls_fallback_window, p->h);
     if (c->fallback_samples < 1) c->fallback_samples = 1;
     c->fallback_forgetting = 1.0 - 1.0 / (double)c->fallback_samples;
     /* the supervisor judges the loop by the nominal model */
