@@ -105,7 +105,8 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
         ``travel_meas``, ``weight``, ``reversals`` (samples where y_meas reversed its direction,
         the last change kept over equal samples), ``steps2`` (its squared sample-to-sample
         changes), ``big_steps`` (its reversals by more than ``PIEZO_SUP_BIG_STEP_PERCENT`` % of the
-        smallest nonzero step before), ``min_step`` (that smallest step, 0 before the first), ``y_same`` (samples y_meas equalled the one before, in a row): the
+        smallest nonzero step before), ``min_step`` (that smallest step, 0 before the first), ``y_same`` (samples y_meas equalled the one before, in a row), ``repeats`` (the samples
+        y_meas equalled the one before): the
         supervisor's sums after each sample; ``mon_share``,
         ``mon_weight``: the divergence monitor's (samples with ``|pred_error|`` beyond the
         bound; where v was clipped the core also counts the nominal model's error, which a
@@ -151,7 +152,7 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
         "reversals": _ew((dy * last < 0.0).astype(float), lam), "steps2": _ew(dy * dy, lam), "y_same": same,
         "big_steps": _ew(((smallest > 0.0) & (dy * last < 0.0)
                           & (np.abs(dy) * 100.0 > big_step * smallest)).astype(float), lam),
-        "min_step": smallest,
+        "min_step": smallest, "repeats": _ew((same > 0).astype(float), lam),
         "mon_share": _ew((np.abs(np.asarray(pred_error, dtype=float)) > error_bound).astype(float), lam_m),
         "mon_weight": _ew(np.ones(n), lam_m),
     }
@@ -193,6 +194,11 @@ class Margins:
         ``PIEZO_SUP_FROZEN_PERCENT`` and whose share of big steps (beyond
         ``PIEZO_SUP_BIG_STEP_PERCENT`` % of the smallest) reached ``PIEZO_SUP_FROZEN_BIG_PERMILLE``
         per mille (threshold ``sup.window``).
+    frozen_ratio : float
+        The largest such run over the run that makes it a verdict: ``PIEZO_SUP_STUCK_SAME`` at
+        least, ``sup.window`` at most, and between them as many samples m as the share p of equal
+        samples before makes improbable, p^m = e^-``PIEZO_SUP_STUCK_LOG_ODDS`` (p at least 1e-3).
+        A verdict at 1.
     """
 
     gain_low: float | None
@@ -206,6 +212,7 @@ class Margins:
     gain_drop: float | None = None
     gain_rise: float | None = None
     frozen_run: int = 0
+    frozen_ratio: float = 0.0
 
 
 def _longest_run(mask):
@@ -303,6 +310,14 @@ def margins(samples, nominal, controller_params=None):
         noisy = (before >= 1.0) & (st["reversals"] >= th.frozen_share * before) \
             & (st["big_steps"] >= th.frozen_big * before)
     frozen_run = int(same[noisy & (same > 0)].max()) if np.any(noisy & (same > 0)) else 0
+    lib = core.lib()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = np.maximum((st["repeats"] - stretch) / before, 1e-3)
+        log_p = np.log(np.minimum(p, 1.0))
+        needed = np.where(log_p < 0.0, lib.PIEZO_SUP_STUCK_LOG_ODDS / -log_p, np.inf)
+    needed = np.clip(needed, lib.PIEZO_SUP_STUCK_SAME, th.window)
+    hit = noisy & (same > 0)
+    frozen_ratio = float(np.max(same[hit] / needed[hit])) if np.any(hit) else 0.0
     return Margins(
         gain_low=float(np.nanmin(gs)) if np.isfinite(gs).any() else None,
         gain_high=float(np.nanmax(gs)) if np.isfinite(gs).any() else None,
@@ -312,7 +327,7 @@ def margins(samples, nominal, controller_params=None):
         clip_run=_longest_run(samples["clipped"]),
         detection_run=_longest_run(loop_delay == 0) if auto else 0,
         monitor_run=_longest_run(np.abs(np.asarray(samples["pred_error"], dtype=float)) > bound),
-        gain_drop=drop, gain_rise=rise, frozen_run=frozen_run,
+        gain_drop=drop, gain_rise=rise, frozen_run=frozen_run, frozen_ratio=frozen_ratio,
     )
 
 

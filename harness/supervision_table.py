@@ -63,7 +63,8 @@ __all__ = ["FaultCase", "FAULTS", "FAULT_SCHEDULES", "SAFE_SCHEDULES", "FaultRes
            "run_fault_safe", "harness_fault", "REACTIONS", "HARNESS_MASTERS", "with_reactions", "false_alarms",
            "fault_results", "fault_markdown", "FaultSpec", "fault_family_specs", "run_fault_spec",
            "fault_family", "fault_family_markdown", "RunSpec", "RunResult", "family_specs", "run_spec",
-           "summarize", "family_markdown", "main"]
+           "summarize", "family_markdown", "StuckCase", "STUCK_CASES", "run_stuck", "stuck_family",
+           "stuck_markdown", "START_PARTS", "run_start", "start_family", "start_markdown", "main"]
 
 H = 0.0005
 #: the schedules of the fault table: an exchanging master and true Gauss-Seidel
@@ -645,7 +646,7 @@ def summarize(results):
             "outliers": g["outliers"],
             "gain_drop": (max(drops) if drops else None, th.gain_drop),
             "gain_rise": (max(rises) if rises else None, th.gain_rise),
-            "frozen_run": (max((m.frozen_run for m in ms), default=0), th.window),
+            "frozen_run": (max((m.frozen_ratio for m in ms), default=0.0), 1.0),
             "gain_low": (min(lows) if lows else None, th.gain_min),
             "gain_high": (max(highs) if highs else None, th.gain_max),
             "delay_unexplained": (max(delays) if delays else None, th.delay_fraction),
@@ -676,7 +677,7 @@ def family_markdown(summary):
             f"longest fault candidate (< {th['candidate_run']}) | share of large errors (< {th['monitor_share']}) | "
             f"longest clipping [samples] (< {th['clip_run']}) | longest detection [samples] "
             f"(< {th['detection_run']}) | longest large-error run (< {th['monitor_run']}) | "
-            f"longest still y_meas after noise [samples] (< {th['frozen_run']}) | group |",
+            f"longest still y_meas after noise, over the run that stops it (< {th['frozen_run']}) | group |",
             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, s in summary.items():
         rows.append(f"| {s['runs']} | {len(s['errors'])} | {len(s['warnings'])} | {len(s['notes'])} | "
@@ -684,7 +685,7 @@ def family_markdown(summary):
                     f"{fmt(s['gain_high'][0])} | {fmt(s['delay_unexplained'][0])} | {fmt(s['gain_drop'][0])} | "
                     f"{fmt(s['gain_rise'][0])} | {s['candidate_run'][0]} | "
                     f"{fmt(s['monitor_share'][0])} | {s['clip_run'][0]} | {s['detection_run'][0]} | "
-                    f"{s['monitor_run'][0]} | {s['frozen_run'][0]} | {name} |")
+                    f"{s['monitor_run'][0]} | {fmt(s['frozen_run'][0])} | {name} |")
     return "\n".join(rows)
 
 
@@ -721,6 +722,226 @@ def false_alarms(specs, reactions=("error", "safe"), jobs=2, progress=None):
     return summary, alarms
 
 
+# ---------------------------------------------------------------------------
+# a sensor that stops answering (issue 44): stuck, dead, stuck after a dropout
+# ---------------------------------------------------------------------------
+
+#: the sensors of the stuck family: rms noise [nm] on the 2 nm grid (the stage's day's)
+STUCK_SENSORS_NM = (0, 1, 5, 20, 100, 200)
+#: when the sensor fails in a hold (the reference at 5 um since 0.3 s) and mid-ramp of a scan
+STUCK_HOLD_ONSET = 2.0
+STUCK_SCAN_ONSET = 1.2125
+#: how long each run goes on after the onset [s]
+STUCK_AFTER = 0.5
+#: the targets: named within 20 ms in motion, 0.2 s in a hold; the stage within 2 um beyond the
+#: reference in a scan, 0.1 um of the set-point in a hold (a reading that sticks where it was)
+STUCK_TARGETS = {"scan": (0.02, 2.0), "hold": (0.2, 0.1)}
+
+
+@dataclass(frozen=True)
+class StuckCase:
+    """One way a sensor stops answering: in a hold or a scan, what y_meas reads from the onset.
+
+    Attributes
+    ----------
+    name : str
+    where : {"hold", "scan"}
+    reads : {"last", "zero", "dropout"}
+        The last reading (plus ``offset``), 0 (a dead sensor), or one reading of 0 and then the
+        last good one (a sensor that sticks after a dropout); "none": no fault (the legitimate run).
+    offset : float
+        Added to the stuck reading [um].
+    """
+
+    name: str
+    where: str
+    reads: str
+    offset: float = 0.0
+
+
+STUCK_CASES = (
+    StuckCase("none, hold", "hold", "none"),
+    StuckCase("none, scan", "scan", "none"),
+    StuckCase("stuck in a hold", "hold", "last"),
+    StuckCase("stuck 2 nm off in a hold", "hold", "last", 0.002),
+    StuckCase("stuck mid-scan", "scan", "last"),
+    StuckCase("dead (reads 0) in a hold", "hold", "zero"),
+    StuckCase("dead (reads 0) mid-scan", "scan", "zero"),
+    StuckCase("stuck after a dropout, mid-scan", "scan", "dropout"),
+)
+
+
+def _stuck_profile(where, after=STUCK_AFTER):
+    from .scenarios import profile_signal
+    if where == "hold":
+        segs = ({"hold": 0.2}, {"to": 5.0, "shape": "scurve", "time": 0.1}, {"hold": STUCK_HOLD_ONSET + after})
+    else:
+        segs = ({"hold": 0.2}, {"scan": "triangle", "frequency": 10.0, "amplitude": 10.0,
+                                "time": STUCK_SCAN_ONSET + after})
+    sig = profile_signal(segs, step=H)
+    return sig.evaluate(np.arange(sig.samples) * H)
+
+
+def run_stuck(case, plant, controller=None, after=STUCK_AFTER):
+    """Run one :class:`StuckCase` on the C core (the plant and the controller stepped as a master that
+    exchanges at communication points: y_ref = y_d two samples ahead). Returns a dict: ``fault`` (the
+    verdict's name, "" for none), ``error`` (its message), ``time`` (from the onset to the verdict [s],
+    nan for none), ``excursion`` (the largest |y - y_d| from the onset to the end [um]), ``before``
+    (the largest |y - y_d| over the 0.5 s before the onset [um]) and ``drift`` (for a run nothing
+    stopped, how far y went from y_d at the end [um]). ``after``: how long the run goes on after the
+    onset [s]."""
+    y_d = _stuck_profile(case.where, after)
+    n = len(y_d)
+    k0 = int(round((STUCK_HOLD_ONSET if case.where == "hold" else STUCK_SCAN_ONSET) / H))
+    p = core.Plant(plant)
+    c = core.Controller(controller or {})
+    v, held, fault, text, stop = 0.0, 0.0, "", "", n
+    y = np.empty(n)
+    for k in range(n):
+        y[k] = p.output.y
+        meas = p.output.y_meas
+        if case.reads != "none" and k >= k0:
+            if k == k0:
+                held = (0.0 if case.reads == "zero" else meas) + case.offset
+            meas = 0.0 if case.reads == "dropout" and k == k0 else held
+        try:
+            out = c.step(y_d[min(n - 1, k + 2)], meas)
+        except core.CoreDivergedError as exc:
+            fault = getattr(exc, "fault", "monitor")
+            text, stop = str(exc), k
+            break
+        p.step(v)
+        v = out.v
+    err = np.abs(y[:stop] - y_d[:stop])
+    return {"fault": fault, "error": text, "time": (stop - k0) * H if fault else float("nan"),
+            "excursion": float(err[k0:].max()) if stop > k0 else 0.0,
+            "before": float(err[max(0, k0 - 1000):k0].max()) if stop > k0 else float(err.max()),
+            "stopped_before": fault != "" and stop < k0,
+            "drift": float(abs(y[stop - 1] - y_d[stop - 1])) if not fault else float("nan")}
+
+
+def _run_stuck_spec(spec):
+    i, nm, case_index = spec
+    from .stage_day import SEED
+    from .stage_use_table import draw_stages, stage_plant
+    stage = draw_stages(i + 1, SEED)[i]
+    return spec, run_stuck(STUCK_CASES[case_index], stage_plant(stage, i, nm))
+
+
+def stuck_family(stages=50, sensors=STUCK_SENSORS_NM, cases=None, jobs=2, progress=None):
+    """Every :data:`STUCK_CASES` case on the stage's day's stages (seed 2026, the controller at its
+    defaults: the nominal model) with each sensor: ``{(case, nm): [result, ...]}``."""
+    cases = range(len(STUCK_CASES)) if cases is None else cases
+    specs = [(i, nm, c) for c in cases for nm in sensors for i in range(stages)]
+    out = {}
+    for spec, res in _run_all(specs, jobs, progress, run=_run_stuck_spec, chunksize=4, every=200):
+        out.setdefault((spec[2], spec[1]), []).append(res)
+    return out
+
+
+def stuck_markdown(family):
+    """The stuck family as a Markdown table: per case and sensor the runs, those stopped (before the
+    onset: false alarms), the time to the verdict (median, worst), the stage's excursion from y_d
+    after the onset (median, worst) beside the largest error before it, and the verdicts."""
+    from .text_tables import markdown_table
+    rows = []
+    for (ci, nm), res in sorted(family.items()):
+        case = STUCK_CASES[ci]
+        t = np.array([r["time"] for r in res if not r["stopped_before"]])
+        ex = np.array([r["excursion"] for r in res if not r["stopped_before"]])
+        before = max(r["before"] for r in res)
+        stopped = int(np.isfinite(t).sum())
+        early = sum(r["stopped_before"] for r in res)
+        kinds = {}
+        for r in res:
+            kinds[r["fault"] or "none"] = kinds.get(r["fault"] or "none", 0) + 1
+        ms = lambda x: f"{1e3 * x:.1f} ms" if np.isfinite(x) else "-"      # noqa: E731
+        rows.append([case.name, f"{nm:g}", str(len(res)), str(stopped), str(early),
+                     ms(np.nanmedian(t)) if stopped else "-", ms(np.nanmax(t)) if stopped else "-",
+                     f"{np.median(ex):.3g}" if ex.size else "-", f"{np.max(ex):.3g}" if ex.size else "-",
+                     f"{before:.3g}", ", ".join(f"{k} {v}" for k, v in sorted(kinds.items()))])
+    return markdown_table(["case", "sensor [nm rms]", "runs", "stopped", "stopped before the onset",
+                           "time median", "time worst", "excursion median [um]", "excursion worst [um]",
+                           "largest error before [um]", "verdicts"], rows)
+
+
+# ---------------------------------------------------------------------------
+# noisy sensors at start (issue 44): the delay detection on a stage at rest from t = 0
+# ---------------------------------------------------------------------------
+
+#: the start-up parts: 0.2 s at rest, then two raster frames (1, 10, 50 Hz, 0.1 s dwells) or a
+#: 10 um step; or a tone from t = 0 (1 and 20 Hz, 2 s), 0.5 s at rest and a step
+START_PARTS = ("raster 1 Hz", "raster 10 Hz", "raster 50 Hz", "fresh step", "1 Hz tone", "20 Hz tone")
+#: the loop delay of the exchange the start-up family runs in (y_ref two samples ahead)
+START_DELAY = 2
+
+
+def _start_profile(part):
+    from .scenarios import profile_signal
+    from .stage_day import FRESH, raster_part, tone_part
+    if part.startswith("raster"):
+        segs = raster_part(float(part.split()[1]), 0.1, 2).segments
+    elif part == "fresh step":
+        segs = FRESH.segments
+    else:
+        segs = tone_part(float(part.split()[0]), 2.0).segments
+    sig = profile_signal(segs, step=H)
+    return sig.evaluate(np.arange(sig.samples) * H)
+
+
+def run_start(part, plant, controller=None):
+    """Run one start-up part on the C core in an exchange (y_ref = y_d two samples ahead, a loop of
+    delay 2): ``{"delay": the first d chosen (0: none), "time": when [s], "error": the Error's
+    message ("" for none)}``."""
+    y_d = _start_profile(part)
+    n = len(y_d)
+    p = core.Plant(plant)
+    c = core.Controller(controller or {})
+    v, first, at, error = 0.0, 0, float("nan"), ""
+    for k in range(n):
+        try:
+            out = c.step(y_d[min(n - 1, k + START_DELAY)], p.output.y_meas)
+        except core.CoreDivergedError as exc:
+            error = str(exc)
+            break
+        if first == 0 and out.delay > 0:
+            first, at = out.delay, k * H
+        p.step(v)
+        v = out.v
+    return {"delay": first, "time": at, "error": error}
+
+
+def _run_start_spec(spec):
+    i, nm, part = spec
+    from .stage_day import SEED
+    from .stage_use_table import draw_stages, stage_plant
+    return spec, run_start(part, stage_plant(draw_stages(i + 1, SEED)[i], i, nm))
+
+
+def start_family(stages=50, sensors=STUCK_SENSORS_NM, parts=START_PARTS, jobs=2, progress=None):
+    """Every start-up part on the stage's day's stages with each sensor: ``{(part, nm): [result]}``."""
+    specs = [(i, nm, part) for part in parts for nm in sensors for i in range(stages)]
+    out = {}
+    for spec, res in _run_all(specs, jobs, progress, run=_run_start_spec, chunksize=4, every=300):
+        out.setdefault((spec[2], spec[1]), []).append(res)
+    return out
+
+
+def start_markdown(family):
+    """Per part and sensor: runs, Errors, the delays first chosen (the loop's is 2), the runs still
+    detecting at the end (waiting for the reference), and when the delay was chosen."""
+    from .text_tables import markdown_table
+    rows = []
+    for (part, nm), res in sorted(family.items(), key=lambda kv: (START_PARTS.index(kv[0][0]), kv[0][1])):
+        t = np.array([r["time"] for r in res if r["delay"] > 0])
+        wrong = sum(r["delay"] not in (0, START_DELAY) for r in res)
+        rows.append([part, f"{nm:g}", str(len(res)), str(sum(bool(r["error"]) for r in res)), str(wrong),
+                     str(sum(r["delay"] == 0 and not r["error"] for r in res)),
+                     f"{1e3 * np.median(t):.1f} ms" if t.size else "-", f"{1e3 * np.max(t):.1f} ms" if t.size else "-"])
+    return markdown_table(["part", "sensor [nm rms]", "runs", "Errors", "wrong delay chosen",
+                           "still detecting at the end", "chosen, median", "chosen, worst"], rows)
+
+
 def main(argv=None):
     """``python -m harness.supervision_table``: the fault table or the family, in Markdown."""
     ap = argparse.ArgumentParser(prog="python -m harness.supervision_table",
@@ -744,6 +965,16 @@ def main(argv=None):
     fm.add_argument("--jobs", type=int, default=2)
     fm.add_argument("--reactions", nargs="+", default=["error", "safe"], choices=list(REACTIONS),
                     help="sup.reaction of the runs (default: both, each run twice)")
+    st = sub.add_parser("stuck", help="a sensor that sticks, dies or sticks after a dropout, in holds and "
+                        "scans, on the stage's day's stages with sensors of 0 to 200 nm rms")
+    st.add_argument("--stages", type=int, default=50)
+    st.add_argument("--sensors", type=float, nargs="+", default=list(STUCK_SENSORS_NM))
+    st.add_argument("--jobs", type=int, default=2)
+    sa = sub.add_parser("start", help="noisy sensors at start: the delay detection on the stage's day's "
+                        "stages at rest from t = 0, sensors of 0 to 200 nm rms")
+    sa.add_argument("--stages", type=int, default=50)
+    sa.add_argument("--sensors", type=float, nargs="+", default=list(STUCK_SENSORS_NM))
+    sa.add_argument("--jobs", type=int, default=2)
     fa_ = sub.add_parser("false-alarms", help="the no-false-alarm check of any family: a function "
                          "returning RunSpecs, as module:function (e.g. harness.supervision_table:family_specs)")
     fa_.add_argument("--specs", required=True, help="module:function; called without arguments")
@@ -771,6 +1002,21 @@ def main(argv=None):
             print(f"{len(silent)} runs neither stopped nor tracking within {1e3 * SILENT_ERROR:g} nm: "
                   "silently wrong", file=sys.stderr)
         return 1 if silent else 0
+    if args.job == "stuck":
+        family = stuck_family(args.stages, tuple(args.sensors), jobs=args.jobs, progress=say)
+        print(stuck_markdown(family))
+        early = sum(r["stopped_before"] or (STUCK_CASES[c].reads == "none" and r["fault"] != "")
+                    for (c, _), res in family.items() for r in res)
+        if early:
+            print(f"{early} runs stopped where no fault was: false alarms", file=sys.stderr)
+        return 1 if early else 0
+    if args.job == "start":
+        family = start_family(args.stages, tuple(args.sensors), jobs=args.jobs, progress=say)
+        print(start_markdown(family))
+        bad = sum(bool(r["error"]) or r["delay"] not in (0, START_DELAY) for res in family.values() for r in res)
+        if bad:
+            print(f"{bad} runs stopped or chose a wrong loop delay", file=sys.stderr)
+        return 1 if bad else 0
     if args.job == "false-alarms":
         module, _, function = args.specs.partition(":")
         specs = list(getattr(importlib.import_module(module), function)())

@@ -150,19 +150,23 @@ class ControllerRef:
     """piezo_controller.h/.c: RLS (sums over i = 0..3, one reciprocal of the denominator,
     1/lambda from init, the update (P phi)_i (P phi)_j / denom symmetric by itself),
     projection, delay detection (one RLS per candidate d = 1, 2, 3, sums of squared
-    a-priori errors per trial, the clear-leader rule, probes, restarts), the robust update
+    a-priori errors per trial, the clear-leader rule, probes, restarts; with the robust update,
+    the wait of probes buried in the noise: scores and leads only on the samples that teach,
+    adapting while the reference moves, a leader of 10 samples), the robust update
     (the excitation by the law's past reference against the measured noise of y_meas, the
     offset, the noise-scaled trace bound, the candidates' own forgetting and bound, the
     loop's fresh covariance at the choice), Diophantine with the observer polynomial T, MV
     law on T r with the integral action, inverse creep, inverse PI, saturation with
     back-calculation, monitor counts, and the guarantees of the robust update (its projection
     into the admissible set in the metric of P^-1 with the radial step, the fallback to the
-    nominal model at a jump or a worse prediction). Written from the header's and the docs'
+    nominal model at a jump or a worse prediction), the integral action and the offset held on a
+    reading unchanged for PIEZO_SUP_STUCK_SAME samples. Written from the header's and the docs'
     description, operation by operation in the C order; the admissible set's rows are constants
     the core derives at init."""
 
     START_D, START_T, N, CONFIRM, TRIAL, REDETECT, PROBES = 2, 0.9, 3, 3, 20, 10, 8
     DETECT_LAMBDA, DETECT_TRACE, OFFSET_GAIN = 0.995, 100.0, 0.01
+    CONFIRM_BURIED, NOISE_SETTLE, STUCK_SAME, INV_SQRT3 = 10, 100, 4, 0.57735026918962576
 
     def __init__(self, ctrl):
         c = ctrl.raw
@@ -171,7 +175,8 @@ class ControllerRef:
         self.rls, self.lam, self.trace_max, self.p0 = c.rls_enabled, c.forgetting, c.trace_max, c.p0
         self.robust, self.excitation, self.excitation_samples = bool(c.robust), c.excitation, c.excitation_samples
         self.variance_max, self.p0_loop, self.gamma = c.variance_max, c.p0_loop, c.integral_gain
-        self.noise_y = self.noise_e = self.anchor = self.offset = self.z = 0.0
+        self.noise_y = self.noise_y2 = self.noise_e = self.anchor = self.offset = self.z = 0.0
+        self.probe_max, self.sup_enabled, self.same = c.probe_max, bool(c.sup.enabled), 0
         self.left, self.prev_pred_error = 0, 0.0
         self.r_last = self.r_last2 = self.velocity = 0.0   # the law's reference without z at k-1, k-2
         self.yd = {}                            # y_d by sample: the law's r(j) is y_d(j + d)
@@ -305,16 +310,23 @@ class ControllerRef:
             self.project(theta)
         return e, theta, new
 
-    def detect(self, y):
+    def buried(self):
+        """piezo_controller_probes_buried: the robust update's probes buried in the noise."""
+        return self.robust and self.k >= self.NOISE_SETTLE and 20.0 * self.noise_y2 > self.probe_max * self.nominal[2]
+
+    def detect(self, y, live=True):
         """One sample of the detection; returns the leader's a-priori error."""
-        update = self.rls and not self.sat_hold > 0
-        errs = []
+        update = self.rls and not self.sat_hold > 0 and (live or self.r_last != self.r_last2)
+        errs, scores = [], []
         for i in range(self.N):
             e, self.det_theta[i], self.det_P[i] = self.rls_step(
                 self.det_theta[i], self.det_P[i], i + 1, y, update,
                 self.DETECT_LAMBDA if self.robust else None, self.DETECT_TRACE if self.robust else None)
             errs.append(e)
-            self.scores[i] = self.scores[i] + e * e
+            scores.append(self.scores[i] + e * e)
+        if not live:
+            return errs[self.START_D - 1]
+        self.scores = scores
         order = [self.START_D - 1, 0, 2]
         best = order[0]
         for i in order[1:]:
@@ -329,13 +341,15 @@ class ControllerRef:
             self.leader = best
         else:
             self.run, self.leader = 0, -1
-        self.detecting = self.run < self.CONFIRM
+        self.detecting = self.run < (self.CONFIRM_BURIED if self.buried() else self.CONFIRM)
         self.new_trial = self.detecting and self.k + 1 - self.trial >= self.TRIAL
         if self.new_trial:
             p = 20.0 * math.sqrt(self.scores[best] / self.TRIAL) / self.nominal[2]
             if p < 2.0 * self.probe:
                 p = 2.0 * self.probe
-            self.next_probe = 0.0 if self.probes >= self.PROBES else (1e-3 if p < 1e-3 else (1.0 if p > 1.0 else p))
+            lo = 1e-3 if 1e-3 < self.probe_max else self.probe_max
+            self.next_probe = 0.0 if self.probes >= self.PROBES else (lo if p < lo else
+                                                                      (self.probe_max if p > self.probe_max else p))
         if not self.detecting:
             self.d, self.k_delay = best + 1, self.k
             self.theta, self.P = list(self.nominal if self.robust else self.det_theta[best]), self.det_P[best]
@@ -354,13 +368,18 @@ class ControllerRef:
             still = r1 == self.r_last2
             event = abs(r1 - line) > self.excitation * self.noise_y
             noise_y = track_noise(self.noise_y, y_meas - self.y_prev[0])
+            noise_y2 = track_noise(self.noise_y2, (y_meas - 2.0 * self.y_prev[0] + self.y_prev[1]) * self.INV_SQRT3)
             excited = event or self.left > 0
             anchor = r1 if event or still else line
             velocity = r1 - self.r_last2 if event or still else self.velocity
             left = self.excitation_samples if event else (self.left - 1 if self.left > 0 else 0)
+        # a reading unchanged for STUCK_SAME samples (the supervision's count): integral and offset hold
+        same = self.same + 1 if self.k > 0 and y_meas == self.y_prev[0] else 0
+        held = self.sup_enabled and same >= self.STUCK_SAME
+        live = not self.buried() or (self.robust and excited)
         if was_detecting:
             offset = 0.0
-            pred_error = self.detect(y_meas)
+            pred_error = self.detect(y_meas, live)
         elif self.robust:
             may = self.rls and not self.sat_hold > 0
             bound = self.trace_max
@@ -373,7 +392,7 @@ class ControllerRef:
                                                            updated, self.lam, bound, paper_projection=False)
             if updated:
                 self.theta = self.admissible_project(self.P, self.theta)
-            if may and not excited:
+            if may and not excited and not held:
                 offset = self.offset + self.OFFSET_GAIN * pred_error
         else:
             pred_error, self.theta, self.P = self.rls_step(self.theta, self.P, self.d, y_meas,
@@ -381,6 +400,8 @@ class ControllerRef:
         if self.robust:
             self.noise_e = track_noise(self.noise_e, pred_error - self.prev_pred_error)
             self.noise_y, self.anchor, self.left, self.velocity = noise_y, anchor, left, velocity
+            self.noise_y2 = noise_y2
+        self.same = same
         self.prev_pred_error = pred_error
         self.offset = offset
         d = self.d
@@ -412,7 +433,7 @@ class ControllerRef:
         a1, a2, b1, b2 = self.nominal if self.detecting else self.theta
         t = self.START_T if self.detecting else self.observer
         z = self.z
-        if self.gamma > 0.0 and not self.detecting and self.sat_hold == 0 and self.k in self.yd:
+        if self.gamma > 0.0 and not self.detecting and self.sat_hold == 0 and self.k in self.yd and not held:
             z = self.z + self.gamma * (self.yd[self.k] - y_meas)
         r = r_plain + z if self.gamma > 0.0 else r_plain
         e = []
@@ -531,7 +552,7 @@ def test_closed_loop_equals_scalar_transcription_bitwise(cparams, d):
         assert abs(ctrl.raw.theta[0] - ctrl.raw.theta_nominal[0]) > 1e-4
 
 
-def _run_bitwise(cparams, d, y_d, n, plant_params=MISMATCH):
+def _run_bitwise(cparams, d, y_d, n, plant_params=MISMATCH, each=None):
     """The loop of test_closed_loop_equals_scalar_transcription_bitwise: n samples of the
     core and the transcription side by side, asserting bit identity at every sample."""
     plant, ctrl = core.Plant(plant_params), core.Controller(cparams)
@@ -541,6 +562,8 @@ def _run_bitwise(cparams, d, y_d, n, plant_params=MISMATCH):
     y_meas = y_meas_ref = 0.0
     ctrl.held = 0
     for j in range(n):
+        if each is not None:
+            each(ctrl, cref)
         out = ctrl.step(y_d[j + d], y_meas)
         ctrl.held += not ctrl.raw.out.adapting
         want = cref.step(y_d[j + d], y_meas_ref)
@@ -554,6 +577,24 @@ def _run_bitwise(cparams, d, y_d, n, plant_params=MISMATCH):
         y_meas, y_meas_ref = p.y_meas, p_ref[3]
     assert ctrl.raw.n_saturated == cref.n_saturated
     return ctrl, cref
+
+
+def test_a_detection_that_waits_for_the_reference_equals_scalar_transcription_bitwise():
+    """Reference: ControllerRef and PlantRef as above, behind a 150 nm rms sensor: 0.3 s at rest
+    (the probes buried in the noise from sample 100: the detection waits, no candidate scores),
+    a 10 um step and a 20 Hz triangle (the reference's excitations decide). Bit identity at every
+    sample; the wait must happen (samples buried, still detecting) and the delay be chosen after
+    the step, the loop's own (2)."""
+    y_d = np.concatenate([np.zeros(600), np.full(200, 10.0),
+                          10.0 - 4.0 * np.abs(((np.arange(1400) * H * 20) % 1.0) * 2 - 1)])
+    n = len(y_d) - 2
+    buried = []
+    plant = {**MISMATCH, "sensor.noise_rms": 0.15}
+    ctrl, cref = _run_bitwise({"mv.probe_max": 0.05}, 2, y_d, n, plant_params=plant,
+                              each=lambda c, r: buried.append((r.buried(), bool(c.raw.detecting))))
+    waits = sum(b and det for b, det in buried)
+    print(f"\nburied and detecting in {waits} samples; d = {ctrl.raw.d} chosen at sample {ctrl.raw.k_delay}")
+    assert waits > 300 and not ctrl.raw.detecting and ctrl.raw.d == 2 and ctrl.raw.k_delay >= 600
 
 
 PAPER_LAW = {"rls.robust": False, "rls.forgetting": 0.995, "rls.trace_max": 100.0, "mv.integral": 0.0,

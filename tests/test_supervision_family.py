@@ -172,7 +172,7 @@ def test_a_family_of_legitimate_loops_raises_no_alarm(fmu_paths):
         assert m.candidate_run < th.confirm and m.monitor_share < 0.25, (r.spec, m)
         assert m.clip_run < th.clip_time / 0.0005 and m.detection_run < th.detect_time / 0.0005, (r.spec, m)
         assert (m.gain_drop or 1.0) < th.gain_drop and (m.gain_rise or 1.0) < th.gain_rise, (r.spec, m)
-        assert m.frozen_run < th.window, (r.spec, m)
+        assert m.frozen_run < th.window and m.frozen_ratio < 1.0, (r.spec, m)
     # the family is no demo: most runs were verified with strong evidence, at several gains
     gains = [r.margins.gain_high for r in results if r.margins.gain_high is not None]
     assert len(gains) > 0.5 * len(results) and np.ptp(gains) > 0.3

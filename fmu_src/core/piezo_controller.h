@@ -76,6 +76,7 @@
 #define PIEZO_DETECT_P 48        /* PIEZO_DETECT_N * 16 */
 #define PIEZO_DETECT_START_D 2   /* the start-up law's d */
 #define PIEZO_DETECT_CONFIRM 3   /* samples a clear leader must lead before it is chosen */
+#define PIEZO_DETECT_CONFIRM_BURIED 10 /* the same while the probes are buried in the noise */
 #define PIEZO_DETECT_RATIO_INV 10 /* clear: sum at most 1/10 of every other candidate's */
 #define PIEZO_DETECT_REDETECT 10 /* samples beyond the monitor bound that restart detection */
 #define PIEZO_DETECT_TRIAL 20    /* samples of one detection trial (the next one starts with a probe) */
@@ -181,6 +182,9 @@ typedef struct {
     int detecting;               /* 1 until d is chosen: the start-up law runs */
     uint64_t k_delay;            /* sample at which d took its current value */
     uint64_t k_search;           /* sample since which no chosen d held for PIEZO_DETECT_HELD samples */
+    uint64_t det_clock;          /* samples since k_search the watchdog (sup.detect_time) counted:
+                                    all of them, but those whose noise asked for a probe beyond
+                                    mv.probe_max (the detection waits for the reference then) */
     uint64_t n_detections;       /* detections started (1 at reset in auto mode, +1 per restart) */
     int det_leader;              /* candidate leading clearly (index, d - 1), -1: none */
     int det_run;                 /* consecutive samples it has led */
@@ -204,6 +208,7 @@ typedef struct {
     double integral_gain;        /* mv.integral */
     /* robust adaptation and integral action: the states of k (reset to 0) */
     double noise_y;              /* measured noise of y_meas [um] (0: not yet measured) */
+    double noise_y2;             /* the same from its second differences (a move's removed) [um] */
     double noise_e;              /* measured noise of the prediction error [um] (0: not yet) */
     double r_anchor;             /* the reference extrapolated from the last excitation to k-1 */
     uint64_t excite_left;        /* samples the RLS still updates (0: it holds its estimates) */
@@ -233,6 +238,8 @@ typedef struct {
     uint64_t run_large_error;    /* consecutive samples beyond the bound up to the last one */
     uint64_t k_first_saturated;  /* first clipped sample (valid when n_saturated > 0) */
     uint64_t k_first_large_error;/* first sample beyond the bound (valid when n_large_error > 0) */
+    uint64_t n_large_settled;    /* those outside the answer to a jump of the reference (jump_left) */
+    uint64_t k_first_large_settled;  /* the first of them (valid when n_large_settled > 0) */
     double max_abs_pred_error;   /* largest |pred_error| so far [um] */
     double mon_forgetting;       /* 1 - 1/monitor.divergence_samples (0 when the monitor is off) */
     double mon_share, mon_weight;/* sums of lambda^(k-j) [beyond the bound] and of lambda^(k-j) */
@@ -297,7 +304,7 @@ typedef struct {
     double theta[4], P[16];      /* RLS result (valid when rls_updated) */
     int rls_updated;
     /* robust adaptation and integral action: the states of k+1 */
-    double noise_y, noise_e, r_anchor, offset, integral, r_velocity;
+    double noise_y, noise_y2, noise_e, r_anchor, offset, integral, r_velocity;
     uint64_t excite_left;
     uint64_t jump_left;
     int excited;                 /* the reference excites the loop at k */
@@ -311,6 +318,8 @@ typedef struct {
     double r;                    /* the reference the law used */
     /* delay detection: the states of k+1 */
     int d, detecting, det_leader, det_run, restarted, new_trial;
+    int live;                    /* the detection can learn from this sample */
+    int clock;                   /* the watchdog counts this sample (det_clock) */
     uint64_t k_delay;
     double probe;                /* probe added to q this sample [um] */
     double next_probe;           /* probe amplitude of the trial starting at k+1 (new_trial) */
@@ -322,6 +331,8 @@ typedef struct {
     piezo_supervisor_next sup;
     double next_noise;           /* det_noise of k+1 (new_trial) */
     int outlier;                 /* y_meas was replaced by the model's prediction */
+    int held;                    /* y_meas has not changed for PIEZO_SUP_STUCK_SAME samples: integral and
+                                    offset hold */
     double raw_error;            /* the a-priori error of y_meas as received [um] */
     double err_sum, err_weight, outlier_sum;    /* the outlier sums of k+1 */
     int fault;                   /* the safe state's fault code after this sample (0: none) */
@@ -417,6 +428,11 @@ piezo_status piezo_controller_fault_status(int fault);
  * piezo_gl_check_history(&ctrl->inv_creep, ...).
  */
 const char *piezo_controller_check(const piezo_controller *ctrl);
+/* 1: the delay probes are buried in the noise (the probe the last detection trial's noise asked
+ * for is beyond mv.probe_max): while the stage rests the detection waits, its watchdog stopped. */
+int piezo_controller_probes_buried(const piezo_controller *ctrl);
+/* The response a delay probe needs, in times the measured noise (PROBE_SNR). */
+double piezo_controller_probe_snr(void);
 /* NULL when a controller runs on `params` (valid, and the copies piezo_controller_init keeps
  * of them equal them), else a static text saying which does not hold. */
 const char *piezo_controller_check_params(const piezo_controller *ctrl, const piezo_controller_params *params);

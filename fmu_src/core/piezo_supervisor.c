@@ -117,7 +117,12 @@ void piezo_supervisor_reset(piezo_supervisor *s)
     s->weight = s->travel_model = s->travel_meas = 0.0;
     s->followed_gain = s->reversals = s->steps2 = s->dy1 = 0.0;
     s->followed_n = 0;
-    s->min_step = s->big_steps = 0.0;
+    s->min_step = s->big_steps = s->repeats = 0.0;
+    memset(s->yhat_frozen, 0, sizeof s->yhat_frozen);
+    memset(s->yhat_turned, 0, sizeof s->yhat_turned);
+    s->v2 = 0.0;
+    s->v_dir = 0;
+    s->bridged_run = 0;
 }
 
 /* Sww_d(k) = Sww_1(k - d + 1): the new one for d = 1, the kept ones for d >= 2 */
@@ -202,15 +207,22 @@ static int response_kind(const piezo_supervisor *s, const piezo_supervisor_input
     return 0;
 }
 
-/* y_meas frozen: constant for sup.window samples (y_same of them equal to the one before),
- * although before it reversed its direction in PIEZO_SUP_FROZEN_PERCENT % of the samples.
- * Over the constant stretch of m samples the window's weight grew by S_m = sum_{j<m} lambda^j
- * and its reversals by none, so the share before it is reversals / (weight - S_m) (the sums
- * at the stretch's start, both scaled by lambda^m). *share, *step_rms: the evidence. */
-static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, double *share, double *step_rms)
+/* y_meas frozen by its noise: constant for m samples (y_same of them equal to the one before),
+ * although before it reversed its direction in PIEZO_SUP_FROZEN_PERCENT % of the samples and
+ * stepped by more than PIEZO_SUP_BIG_STEP_PERCENT % of its smallest step in
+ * PIEZO_SUP_FROZEN_BIG_PERMILLE per mille of them (a sensor whose noise showed), and m is
+ * at least PIEZO_SUP_STUCK_SAME and sup.window or as many as a chance of e^-PIEZO_SUP_STUCK_LOG_ODDS (7e-13)
+ * allows, p^m <= e^-L, for the share p of equal samples before (a 20 nm sensor on a 2 nm grid
+ * repeats 2 % of its samples: 8 samples; a sensor updated every 20 samples 95 %: 540, so
+ * sup.window). Over the constant stretch of m samples the window's weight grew by
+ * S_m = sum_{j<m} lambda^j, its repeats by S_m and its reversals by none, so the shares before it
+ * are (sum - S_m) / (weight - S_m) (the sums at the stretch's start, all scaled by lambda^m).
+ * *share, *step_rms, *repeat_share: the evidence. */
+static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, double *share, double *step_rms,
+                  double *repeat_share)
 {
-    double lam = s->forgetting, stretch, before;
-    if (n->y_same < s->window)
+    double lam = s->forgetting, stretch, before, p, m;
+    if (n->y_same < PIEZO_SUP_STUCK_SAME)
         return 0;
     stretch = (1.0 - pow(lam, (double)n->y_same)) / (1.0 - lam);
     before = n->weight - stretch;
@@ -218,7 +230,57 @@ static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, dou
         return 0;
     *share = n->reversals / before;
     *step_rms = sqrt(n->steps2 / before);
-    return *share * 100.0 >= PIEZO_SUP_FROZEN_PERCENT && n->big_steps * 1000.0 >= PIEZO_SUP_FROZEN_BIG_PERMILLE * before;
+    p = (n->repeats - stretch) / before;
+    *repeat_share = p > 0.0 ? p : 0.0;
+    if (!(*share * 100.0 >= PIEZO_SUP_FROZEN_PERCENT && n->big_steps * 1000.0 >= PIEZO_SUP_FROZEN_BIG_PERMILLE * before))
+        return 0;
+    if (n->y_same >= s->window)
+        return 1;
+    /* m ln p <= -L, p at least 1e-3 (a stretch of PIEZO_SUP_STUCK_SAME does not rest on one share) */
+    m = (double)n->y_same;
+    return m * log(p > 1e-3 ? p : 1e-3) <= -(double)PIEZO_SUP_STUCK_LOG_ODDS;
+}
+
+/* y_meas held on an outlier: the reading jumped away from the model's prediction (an outlier, for
+ * which the prediction stood in) and has held that value to the bit since, PIEZO_SUP_STUCK_SAME
+ * samples in all: a sensor that died or stuck on a glitch (a stage bumped that far would not hold a
+ * reading to the bit) */
+static int held_outlier(const piezo_supervisor_next *n)
+{
+    return n->bridged_run >= PIEZO_SUP_STUCK_SAME && n->y_same + 1 >= PIEZO_SUP_STUCK_SAME;
+}
+
+/* y_meas stuck against the model: y_meas has not changed since sample f, and v has moved one way
+ * since (y_same >= the loop's
+ * delay d, 1..3, chosen) while the model says the stage moved, over the samples the constant
+ * readings answer, |yhat(k - d + 1) - yhat(f - d + 1)| (yhat is the model's y_meas of a loop of
+ * delay 1), so far that even sup.gain_min of that move is beyond two of the reading's steps and
+ * PIEZO_SUP_STUCK_NOISE times its measured noise: a stage that moved that much shows it, whatever its
+ * gain within the supervision's band. 0 before y_meas ever changed (the "no response" verdict's
+ * case). The move is returned in *move, 0 when not judged. */
+static int stuck(const piezo_supervisor *s, const piezo_supervisor_input *in, const piezo_supervisor_next *n,
+                 double *move, double *bound)
+{
+    int d = in->loop_delay > 0 ? in->loop_delay : in->law_delay;   /* detecting: the start-up law's 2 (a
+                                        loop of 1 or 3 shifts the move by one sample, within the margin of
+                                        PIEZO_SUP_STUCK_SPEED samples of the model's speed) */
+    double now, near, far, floor = 2.0 * s->min_step + PIEZO_SUP_STUCK_NOISE * in->noise;
+    *move = *bound = 0.0;
+    if (d < 1 || d > 3 || n->y_same < (uint64_t)d || !(s->min_step > 0.0) || s->open_loop)
+        return 0;
+    now = d == 1 ? n->yhat : (d == 2 ? s->yhat1 : s->yhat2);
+    /* less PIEZO_SUP_STUCK_SPEED samples of the model's mean speed over the window: its transient
+     * after a fast move errs in proportion to the move */
+    near = fabs(now - n->yhat_turned[d - 1]) - PIEZO_SUP_STUCK_SPEED * n->travel_model / n->weight;
+    far = fabs(now - n->yhat_frozen[d - 1]) - PIEZO_SUP_STUCK_SPEED * n->travel_model / n->weight;
+    *bound = floor > PIEZO_SUP_STUCK_MOVE_NM * 1e-3 ? floor : PIEZO_SUP_STUCK_MOVE_NM * 1e-3;
+    if (near * s->gain_min > *bound) {
+        *move = near;
+        return 1;
+    }
+    *bound = floor > PIEZO_SUP_STUCK_FAR_NM * 1e-3 ? floor : PIEZO_SUP_STUCK_FAR_NM * 1e-3;
+    *move = far;
+    return far * s->gain_min > *bound;
 }
 
 void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor_input *in,
@@ -231,6 +293,7 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         n->fault = PIEZO_SUP_NONE;  /* switched off: no statistics, no verdict */
         return;
     }
+    n->stuck_move = 0.0;
 
     /* dz(k) = Delta[A y](k), dw(k) = Delta[B q](k-1) = w(k) - w(k-1) */
     n->z = in->y_meas + s->a1 * s->y1 + s->a2 * s->y2;
@@ -269,6 +332,20 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         n->big_steps = lam * s->big_steps + (s->min_step > 0.0 && dy * s->dy1 < 0.0
                                               && a * 100.0 > PIEZO_SUP_BIG_STEP_PERCENT * s->min_step ? 1.0 : 0.0);
         n->min_step = a > 0.0 && (s->min_step == 0.0 || a < s->min_step) ? a : s->min_step;
+        n->repeats = lam * s->repeats + (n->y_same > 0 ? 1.0 : 0.0);
+    }
+    n->bridged_run = in->bridged ? s->bridged_run + 1 : 0;
+    /* v's direction; a reversal restarts the stuck test's move as a change of y_meas does (right after
+     * a reversal a stage answers by its hysteresis' initial slope, which may be far below the model's:
+     * at the end of a 50 Hz scan the model moved 207 nm while the stage stood still) */
+    {
+        double dv = s->k > 0 ? in->v1 - s->v2 : 0.0;
+        int dir = dv > 0.0 ? 1 : (dv < 0.0 ? -1 : s->v_dir);
+        const double now[3] = { n->yhat, s->yhat1, s->yhat2 };
+        n->v_dir = dir;
+        memcpy(n->yhat_frozen, n->y_same == 0 ? now : s->yhat_frozen, sizeof n->yhat_frozen);
+        memcpy(n->yhat_turned, n->y_same == 0 || (s->v_dir != 0 && dir != s->v_dir) ? now : s->yhat_turned,
+               sizeof n->yhat_turned);
     }
     n->followed_gain = s->followed_gain;
     n->followed_n = s->followed_n;
@@ -329,9 +406,12 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     else if (in->detecting_for >= s->detect_samples && !s->open_loop)
         n->fault = PIEZO_SUP_UNDETECTED;
     else {
-        double share, step_rms;
-        if (frozen(s, n, &share, &step_rms))
+        double share, step_rms, repeat_share, bound;
+        if (held_outlier(n) || frozen(s, n, &share, &step_rms, &repeat_share))
             n->fault = PIEZO_SUP_FROZEN;
+        else if (stuck(s, in, n, &n->stuck_move, &bound))
+            n->fault = PIEZO_SUP_NO_RESPONSE;   /* y_meas stuck, or v not reaching the stage: a quiet
+                                                   reading does not tell them apart */
     }
 }
 
@@ -385,6 +465,12 @@ void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *
     s->dy1 = n->dy1;
     s->min_step = n->min_step;
     s->big_steps = n->big_steps;
+    s->repeats = n->repeats;
+    memcpy(s->yhat_frozen, n->yhat_frozen, sizeof s->yhat_frozen);
+    memcpy(s->yhat_turned, n->yhat_turned, sizeof s->yhat_turned);
+    s->v2 = in->v1;
+    s->v_dir = n->v_dir;
+    s->bridged_run = n->bridged_run;
     s->k += 1;
 }
 
@@ -434,8 +520,13 @@ void piezo_supervisor_verdict(const piezo_supervisor *s, const piezo_supervisor_
     v->error_bound = s->clip_error;
     v->verified_gain = s->status ? s->verified_gain : 0.0;
     v->followed_gain = s->followed_gain;
-    if (n->fault == PIEZO_SUP_FROZEN)
-        frozen(s, n, &v->reversal_share, &v->step_rms);
+    v->gain_min = s->gain_min;
+    if (n->fault == PIEZO_SUP_FROZEN && held_outlier(n))
+        v->bridged_error = in->bridged_error != 0.0 ? in->bridged_error : 1e-300;
+    else if (n->fault == PIEZO_SUP_FROZEN)
+        frozen(s, n, &v->reversal_share, &v->step_rms, &v->repeat_share);
+    else if (n->fault == PIEZO_SUP_NO_RESPONSE && !stuck(s, in, n, &v->stuck_move, &v->stuck_bound))
+        v->stuck_move = 0.0;
 }
 
 const char *piezo_supervisor_fault_name(int fault)
@@ -502,6 +593,23 @@ static int internal_delay(const piezo_sup_context *c)
 static void explain_no_response(char *t, size_t size, int *u, const piezo_sup_verdict *v,
                                 const piezo_sup_context *c)
 {
+    if (v->stuck_move > 0.0) {
+        /* y_meas stuck against the model: the stage moved, by the model, beyond what y_meas shows */
+        add(t, size, u, "y_meas does not follow v: y_meas has not changed at all for the last %llu samples (t = %.9g "
+            "to %.9g s; it stays at %.6g um), while the controller's model says the stage moved %.4g um in that "
+            "time: even sup.gain_min = %g of that move is beyond what y_meas would show (%.3g um: two of its "
+            "steps, %d times its measured noise, at least %d nm). ", (unsigned long long)(v->y_same + 1),
+            time_of(c, v->k - v->y_same), time_of(c, v->k), v->y_meas, v->stuck_move, v->gain_min,
+            v->stuck_bound, PIEZO_SUP_STUCK_NOISE, PIEZO_SUP_STUCK_MOVE_NM);
+        if (c->internal)
+            add(t, size, u, "The stage does not move in answer to v as its model says, or its sensor model stopped. "
+                COMPARE_MODEL ", and check sensor.resolution");
+        else
+            add(t, size, u, "y_meas is stuck, or v does not reach the stage: a quiet reading does not tell them "
+                "apart, and the stage may move unseen. Check the connections PiezoStage.y_meas -> y_meas and "
+                "AdaptiveCompoundController.v -> PiezoStage.v, and the sensor");
+        return;
+    }
     add(t, size, u, "y_meas does not follow v: ");
     add_evidence(t, size, u, v, c);
     if (v->y_constant) {
@@ -651,7 +759,13 @@ int piezo_supervisor_explain_in(const piezo_sup_verdict *v, const piezo_sup_cont
             "sup.clip_error = %.4g um): the loop cannot reach the reference. ", v->clip_v,
             (unsigned long long)v->clip_samples, c->h * (double)v->clip_samples,
             time_of(c, v->k - v->clip_samples), v->error, v->error_bound);
-        if (v->verified_gain > 0.0)
+        if (v->y_constant)
+            add(t, size, &u, "y_meas has not changed at all for the last %llu samples (it stays at %.6g um) while v "
+                "went to the limit: the measurement is stuck, not the reference out of reach. %s",
+                (unsigned long long)(v->y_same + 1), v->y_meas, c->internal
+                ? "The stage's sensor model stopped (sensor.noise_rms, sensor.resolution)"
+                : "Check the sensor and the connection PiezoStage.y_meas -> y_meas");
+        else if (v->verified_gain > 0.0)
             add(t, size, &u, "y_meas answered v as the model expects (%.3g times its response), so the "
                 "reference asks for more than the stage reaches within the limits: reduce the reference%s "
                 "or widen sat.v_min .. sat.v_max", v->verified_gain,
@@ -681,11 +795,19 @@ int piezo_supervisor_explain_in(const piezo_sup_verdict *v, const piezo_sup_cont
                 v->gain != 0.0 ? v->followed_gain / v->gain : 0.0);
         break;
     case PIEZO_SUP_FROZEN:
-        add(t, size, &u, "y_meas has frozen: it has not changed at all for the last %llu samples (t = %.9g to "
-            "%.9g s; it stays at %.6g um), although before it reversed its direction from one sample to the "
-            "next in %.0f %% of the samples (its sample-to-sample changes were %.3g um rms: the sensor's noise). "
-            "A live sensor does not stop its noise: ", (unsigned long long)(v->y_same + 1),
-            time_of(c, v->k - v->y_same), time_of(c, v->k), v->y_meas, 100.0 * v->reversal_share, v->step_rms);
+        if (v->bridged_error != 0.0)
+            add(t, size, &u, "y_meas is stuck: it jumped to %.6g um, %.4g um from what the controller's model "
+                "predicted (an outlier: the prediction stood in for it), and has held that value to the bit for "
+                "%llu samples (t = %.9g to %.9g s), while the model's prediction kept standing in: a sensor "
+                "that died or stuck. ", v->y_meas, v->bridged_error, (unsigned long long)(v->y_same + 1),
+                time_of(c, v->k - v->y_same), time_of(c, v->k));
+        else
+            add(t, size, &u, "y_meas has frozen: it has not changed at all for the last %llu samples (t = %.9g to "
+                "%.9g s; it stays at %.6g um), although before it reversed its direction from one sample to the "
+                "next in %.0f %% of the samples (its sample-to-sample changes were %.3g um rms: the sensor's noise) "
+                "and repeated a value in %.0f %% of them. A live sensor does not stop its noise: ",
+                (unsigned long long)(v->y_same + 1), time_of(c, v->k - v->y_same), time_of(c, v->k), v->y_meas,
+                100.0 * v->reversal_share, v->step_rms, 100.0 * v->repeat_share);
         if (c->internal)
             add(t, size, &u, "the stage's sensor model stopped (sensor.noise_rms, sensor.resolution)");
         else
@@ -719,8 +841,10 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
 {
     int i;
     if (!s) return "supervisor missing";
+    if (s->bridged_run > s->k)
+        return "supervisor counters exceed the sample count";
     if ((s->enabled != 0 && s->enabled != 1) || (s->status != 0 && s->status != 1)
-        || (s->open_loop != 0 && s->open_loop != 1))
+        || (s->open_loop != 0 && s->open_loop != 1) || s->v_dir < -1 || s->v_dir > 1)
         return "supervisor flags are not 0 or 1";
     if (!(s->forgetting >= 1.0 - 1.0 / WINDOW_MIN && s->forgetting < 1.0)
         || !(s->gain_min > 0.0 && s->gain_min < 1.0 && s->gain_max > 1.0 && isfinite(s->gain_max))
@@ -749,12 +873,15 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
         double sc[] = { s->y1, s->y2, s->r1, s->r2, s->z1, s->zr1, s->w1, s->szz, s->srr, s->yhat1, s->yhat2,
                         s->gain, s->verified_gain, s->clip_error_sum, s->a1, s->a2, s->b1, s->b2,
                         s->weight, s->travel_model, s->travel_meas, s->followed_gain, s->reversals,
-                        s->steps2, s->dy1, s->min_step, s->big_steps };
+                        s->steps2, s->dy1, s->min_step, s->big_steps, s->repeats, s->yhat_frozen[0],
+                        s->yhat_frozen[1], s->yhat_frozen[2], s->yhat_turned[0], s->yhat_turned[1],
+                        s->yhat_turned[2], s->v2 };
         if (!finite_all(sc, (int)(sizeof sc / sizeof sc[0]))) return "supervisor values not finite";
     }
     if (s->szz < 0.0 || s->srr < 0.0 || s->clip_error_sum < 0.0 || s->travel_model < 0.0 || s->travel_meas < 0.0
         || s->weight > (double)s->k || s->followed_gain < 0.0 || s->reversals < 0.0 || s->reversals > s->weight
-        || s->steps2 < 0.0 || s->min_step < 0.0 || s->big_steps < 0.0 || s->big_steps > s->weight)
+        || s->steps2 < 0.0 || s->min_step < 0.0 || s->big_steps < 0.0 || s->big_steps > s->weight
+        || s->repeats < 0.0 || s->repeats > s->weight)
         return "supervisor sums negative or beyond their weight";
     for (i = 0; i < PIEZO_MV_MAX_D; ++i)
         if (s->sww[i] < 0.0) return "supervisor sums negative";

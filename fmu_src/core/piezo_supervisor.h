@@ -58,15 +58,34 @@
  *
  * Watchdogs: v clipped for sup.clip_time without a pause while the mean
  * |y_d - y_meas| over that time exceeds sup.clip_error; a loop delay still not
- * chosen after sup.detect_time; y_meas exactly constant for sup.window samples
- * although, over the window before, it reversed its direction from one sample
- * to the next in PIEZO_SUP_FROZEN_PERCENT % of the samples or more and stepped
- * by more than PIEZO_SUP_BIG_STEP_PERCENT % of the smallest step it ever made
- * in PIEZO_SUP_FROZEN_BIG_PERMILLE per mille of them while reversing (a sensor whose noise
- * showed, frozen: a sensor at rest whose noise is below its resolution repeats
- * its value legitimately and reverses seldom, and a noise-free quantised one
- * that dithers by one step and settles never reverses by more than one: a move's
- * big steps keep their direction).
+ * chosen after sup.detect_time (counted over the samples whose probes are not buried
+ * in the noise: piezo_controller_probes_buried).
+ *
+ * A measurement that stops answering (issue 44), three ways (the first and the last are
+ * y_meas frozen; the second "no response", since a quiet reading that does not change while
+ * the model says the stage moved is a stuck y_meas or a v that does not reach the stage):
+ * - held on an outlier: the reading jumped away from the model's prediction (the
+ *   controller took it for an outlier, and its prediction stood in) and has held that
+ *   value to the bit for PIEZO_SUP_STUCK_SAME samples: a sensor that died or stuck on a
+ *   glitch, bridged by the model from its first sample;
+ * - against the model: y_meas has not changed while the model says the stage moved, so
+ *   far that sup.gain_min of the move is beyond two of the reading's steps, four times
+ *   its measured noise and PIEZO_SUP_STUCK_MOVE_NM (since v last reversed; or
+ *   PIEZO_SUP_STUCK_FAR_NM whatever v did), less PIEZO_SUP_STUCK_SPEED samples of the
+ *   model's mean speed (its transient after a fast move);
+ * - by its noise: y_meas exactly constant for m samples although, over the window
+ *   before, it reversed its direction from one sample to the next in
+ *   PIEZO_SUP_FROZEN_PERCENT % of the samples or more and stepped by more than
+ *   PIEZO_SUP_BIG_STEP_PERCENT % of the smallest step it ever made in
+ *   PIEZO_SUP_FROZEN_BIG_PERMILLE per mille of them while reversing (a sensor whose
+ *   noise showed; a sensor at rest whose noise is below its resolution repeats its value
+ *   legitimately and reverses seldom, and a noise-free quantised one that dithers by one
+ *   step and settles never reverses by more than one: a move's big steps keep their
+ *   direction), m at least PIEZO_SUP_STUCK_SAME and as many as the share p of equal
+ *   samples before makes improbable, p^m <= e^-PIEZO_SUP_STUCK_LOG_ODDS (sup.window at
+ *   most).
+ * Meanwhile the controller holds its integral action and its estimator's offset on a
+ * reading unchanged for PIEZO_SUP_STUCK_SAME samples: they never walk the stage on it.
  *
  * The evidence a message gives: over the window, the distance the model
  * expected y_meas to travel in answer to q (the sum of its sample-to-sample
@@ -104,6 +123,22 @@
 #define PIEZO_SUP_FROZEN_PERCENT 30  /* share of reversals of y_meas before a frozen stretch */
 #define PIEZO_SUP_BIG_STEP_PERCENT 150   /* a step of y_meas beyond this share of its smallest is noise's */
 #define PIEZO_SUP_FROZEN_BIG_PERMILLE 400 /* share of such steps before a frozen stretch [per mille] */
+#define PIEZO_SUP_STUCK_SAME 4       /* a frozen y_meas: at least this many equal samples (held on an outlier,
+                                        or by its noise) */
+#define PIEZO_SUP_STUCK_LOG_ODDS 28  /* ... and as many as its share of equal samples before makes a chance
+                                        of e^-28 = 7e-13 */
+#define PIEZO_SUP_STUCK_NOISE 4      /* a stuck y_meas against the model: beyond 2 steps and this many times
+                                        the measured noise */
+#define PIEZO_SUP_STUCK_MOVE_NM 50   /* ... and at least this move [nm] since v last reversed: the model's
+                                        transient after a move differs from a stage's by tens of nm (at the
+                                        end of a 5 um S-curve the model moved 17 nm while a noise-free
+                                        reading stood still) */
+#define PIEZO_SUP_STUCK_SPEED 2     /* ... beyond this many samples of the model's mean speed (its tail
+                                        after the stop of a 50 Hz, 10 um scan: 207 nm) */
+#define PIEZO_SUP_STUCK_FAR_NM 250   /* ... or at least this move [nm] whatever v did: right after a reversal
+                                        a stage answers by its hysteresis' initial slope, far below the
+                                        model's (the end of a 50 Hz scan: 207 nm by the model, none by the
+                                        stage) */
 #define PIEZO_SUP_NOISY_PERCENT 33   /* y_meas reversing in this share of the samples is noise-dominated
                                         (white noise at rest: 2/3; a moving stage: seldom) */
 #define PIEZO_SUP_REACT_ERROR 0      /* sup.reaction: a verdict fails the step (the default) */
@@ -164,6 +199,13 @@ typedef struct {
     double followed_gain;        /* GAIN_CHANGED: the gain followed until the change */
     double reversal_share;       /* FROZEN: share of samples y_meas reversed in before it froze */
     double step_rms;             /* FROZEN: rms of its sample-to-sample changes then [um] */
+    double stuck_move;           /* FROZEN against the model: the stage's least move since [um] (0: by
+                                    its noise) */
+    double stuck_bound;          /* the move y_meas would have shown [um] */
+    double repeat_share;         /* FROZEN by its noise: share of equal samples before */
+    double bridged_error;        /* FROZEN on an outlier: how far the held value is from the model [um]
+                                    (0: not this case) */
+    double gain_min;             /* sup.gain_min */
     /* UNDETECTED, filled by the controller: the delay probes against the noise */
     double noise;                /* rms a-priori error of the best candidate in the last trial [um] */
     double probe;                /* the last probe's amplitude on q [um] (0: none yet) */
@@ -200,6 +242,9 @@ typedef struct {
     int loop_delay;              /* d of the law, 0 while detecting */
     int auto_delay;              /* 1: the controller detects d */
     uint64_t detecting_for;      /* samples of the current detection (0: not detecting) */
+    double noise;                /* the measured noise of y_meas [um] (0: not measured) */
+    int bridged;                 /* y_meas(k) was taken for an outlier: the model's prediction stood in */
+    double bridged_error;        /* then: y_meas(k) less that prediction [um] */
 } piezo_supervisor_input;
 
 typedef struct {
@@ -256,6 +301,13 @@ typedef struct {
     double dy1;                  /* y_meas(k-1) - y_meas(k-2) (0 when equal: the last change kept) */
     double min_step;             /* the smallest nonzero |y_meas(j) - y_meas(j-1)| so far (0: none) */
     double big_steps;            /* sum of lambda^(k-j) [|step| > PIEZO_SUP_BIG_STEP_PERCENT % of min_step] */
+    double repeats;              /* sum of lambda^(k-j) [y_meas(j) = y_meas(j-1)] */
+    double yhat_frozen[3];       /* the model's yhat at the last sample y_meas changed, and at the one
+                                    and two before it (the loop delays 1, 2, 3) */
+    double yhat_turned[3];       /* the same at the last sample y_meas changed or v reversed */
+    double v2;                   /* v(k-2) [V] */
+    uint64_t bridged_run;        /* consecutive samples the model's prediction stood in for y_meas */
+    int v_dir;                   /* the direction v last moved in: +1, -1 (0: not yet) */
 } piezo_supervisor;
 
 /* One evaluated sample: the statistics of k+1 and the verdict. */
@@ -264,9 +316,13 @@ typedef struct {
     double szw[PIEZO_MV_MAX_D];
     double srw[PIEZO_SUP_DEFAULT_DETECTABLE];
     double weight, travel_model, travel_meas;
-    double followed_gain, reversals, steps2, dy1, min_step, big_steps;
-    double clip_error_sum;
+    double followed_gain, reversals, steps2, dy1, min_step, big_steps, repeats;
+    double yhat_frozen[3], yhat_turned[3];
+    double stuck_move;           /* FROZEN against the model: the move since y_meas froze, by the model [um] */
+    double clip_error_sum;       /* the last double: z .. clip_error_sum are the doubles checked finite */
     uint64_t y_same;
+    uint64_t bridged_run;
+    int v_dir;
     int candidate, candidate_run, status, delay;
     double gain;
     uint64_t followed_n;

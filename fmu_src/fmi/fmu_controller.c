@@ -19,6 +19,7 @@ void fmu_controller_track_init(fmu_controller_track *t, const piezo_controller *
     t->said_outlier = 0;
     t->said_fault = 0;
     t->said_fallback = 0;
+    t->said_wait = 0;
 }
 
 void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller *c, double t0, double h)
@@ -37,6 +38,16 @@ int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, dou
         snprintf(text, size, "supervision: y_meas answers v as the model says (%.3g times its response, %d "
                  "samples after it), verified at t = %.9g s", c->sup.verified_gain, c->sup.delay,
                  fmu_sample_time(t0, c->sup.k_verified, h));
+        return 1;
+    }
+    if (c->detecting && c->auto_delay && !t->said_wait && piezo_controller_probes_buried(c)) {
+        t->said_wait = 1;
+        snprintf(text, size, "delay detection waits for the reference to move (t = %.9g s): y_meas's noise, "
+                 "%.3g um rms, buries a probe of mv.probe_max = %g um (it needs %g times the noise over the "
+                 "model's first response tf.b1). While the stage rests the start-up law holds it (d = %d), "
+                 "sup.status stays 0 (not verified) and sup.detect_time does not run; the reference's moves "
+                 "decide the delay", fmu_sample_time(t0, c->k - 1, h), c->noise_y2, c->probe_max,
+                 piezo_controller_probe_snr(), PIEZO_DETECT_START_D);
         return 1;
     }
     if (t->delay == t->said_delay)
@@ -109,7 +120,7 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
                  c->sat_v_min, c->sat_v_max, fmu_sample_time(t0, c->k_first_saturated, h));
         return 1;
     }
-    if (c->n_large_error > 0 && !t->said_large_error) {
+    if (c->n_large_settled > 0 && !t->said_large_error) {
         char consequence[192];
         t->said_large_error = 1;
         /* monitor.divergence_samples = 0 switches the verdict off: say so, not "after 0 samples" */
@@ -121,10 +132,10 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
         else
             snprintf(consequence, sizeof consequence, "With monitor.divergence_samples = 0 the loop is never "
                      "declared unstable, however long it stays above");
-        snprintf(text, size, "|pred_error| exceeded monitor.pred_error_max = %g um, first at t = %.9g s: "
-                 "the model of G no longer predicts the measurement. %s; further exceedances are counted, "
-                 "not logged", c->pred_error_max, fmu_sample_time(t0, c->k_first_large_error, h),
-                 consequence);
+        snprintf(text, size, "|pred_error| exceeded monitor.pred_error_max = %g um, first at t = %.9g s "
+                 "(not in the answer to a jump of the reference, which is counted but not logged): the model "
+                 "of G no longer predicts the measurement. %s; further exceedances are counted, not logged",
+                 c->pred_error_max, fmu_sample_time(t0, c->k_first_large_settled, h), consequence);
         return 1;
     }
     return 0;
@@ -180,7 +191,7 @@ const char *fmu_controller_track_check(const fmu_controller_track *t, int core_i
         || (t->said_saturated != 0 && t->said_saturated != 1)
         || (t->said_large_error != 0 && t->said_large_error != 1)
         || (t->said_outlier != 0 && t->said_outlier != 1) || (t->said_fault != 0 && t->said_fault != 1)
-        || (t->said_fallback != 0 && t->said_fallback != 1))
+        || (t->said_fallback != 0 && t->said_fallback != 1) || (t->said_wait != 0 && t->said_wait != 1))
         return "warning flags are not 0 or 1";
     if (!isfinite(t->delay_time))
         return "time stamps not finite";

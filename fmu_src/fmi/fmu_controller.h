@@ -30,6 +30,7 @@ typedef struct {
     int said_outlier;           /* the first-outlier warning was logged */
     int said_fault;             /* the safe state's warning was logged */
     int said_fallback;          /* the first fallback to the nominal model was logged */
+    int said_wait;              /* the detection's first wait for the reference was logged as an event */
 } fmu_controller_track;
 
 /* At initialization (the controller just initialized, sample 0 at t0). */

@@ -1,0 +1,114 @@
+"""Issue 44 on the C core: a sensor that stops answering (stuck, dead, stuck after a dropout) is
+named within the targets and bridged, no legitimate run is stopped, a quiet sensor stuck at the
+set-point costs only the stage's own drift, and noisy sensors at start make the delay detection
+wait instead of failing. A small deterministic slice of the studies whose whole families
+docs/robustness.md shows (``python -m harness.supervision_table stuck`` and ``start``).
+
+References: the faults by construction (harness.supervision_table.STUCK_CASES), the issue's
+targets (named within 20 ms in motion and 0.2 s in a hold; the stage within 2 um beyond the
+reference in a scan and 0.1 um of the set-point in a hold), the loop's own delay (2) and the
+whole families' figures of docs/robustness.md."""
+
+import pytest
+
+from harness import supervision_table as st
+from harness.stage_day import SEED
+from harness.stage_use_table import draw_stages, stage_plant
+
+STAGES = 3
+
+
+def case(name):
+    return next(c for c in st.STUCK_CASES if c.name == name)
+
+
+def plant(i, nm):
+    return stage_plant(draw_stages(i + 1, SEED)[i], i, nm)
+
+
+@pytest.mark.parametrize("nm", [0, 1, 20, 200])
+@pytest.mark.parametrize("where", ["none, hold", "none, scan"])
+def test_the_legitimate_runs_of_the_slice_raise_no_alarm(where, nm):
+    """The same hold and scan without a fault, sensors of 0 to 200 nm: nothing stops them, and the
+    stage stays within the band the sensor's noise gives (as measured on the family: 0.58 um at
+    200 nm in a hold, 0.87 um in the scan)."""
+    for i in range(STAGES):
+        r = st.run_stuck(case(where), plant(i, nm))
+        assert r["fault"] == "", (i, r["error"])
+        assert r["excursion"] < 0.9
+
+
+@pytest.mark.parametrize("nm", [1, 20, 100])
+@pytest.mark.parametrize("name", ["stuck mid-scan", "dead (reads 0) mid-scan", "stuck after a dropout, mid-scan"])
+def test_a_sensor_that_stops_answering_in_a_scan_is_named_within_20_ms(name, nm):
+    """Mid-ramp of a 10 Hz, 10 um raster the reading sticks (where it was, at 0, or after a dropout):
+    the loop is stopped naming y_meas ("y_meas frozen", or "no response" whose message says "y_meas
+    is stuck, or v does not reach the stage") within 20 ms of the onset (the family: 6 ms at worst),
+    the stage within 2 um of the reference (the family: 1 um at worst)."""
+    for i in range(STAGES):
+        r = st.run_stuck(case(name), plant(i, nm))
+        assert r["fault"] in ("y_meas frozen", "no response"), (i, r["error"])
+        assert "y_meas" in r["error"] and r["time"] <= 0.02, (i, r["time"])
+        assert r["excursion"] < 2.0, (i, r["excursion"])
+        if r["fault"] == "no response":
+            assert "y_meas is stuck, or v does not reach the stage" in r["error"]
+
+
+@pytest.mark.parametrize("nm", [1, 20, 200])
+def test_a_dead_sensor_in_a_hold_is_bridged_and_named_at_once(nm):
+    """A sensor that reads 0 from t = 2 s in a 5 um hold: the reading is taken for an outlier, the
+    model's prediction stands in for it and for its repeats, and after 4 equal samples (1.5 ms; 2.5
+    with the 200 nm sensor, whose noise test needs 5) the loop is stopped, the message saying the
+    reading jumped to 0 um and held it to the bit; the stage stays where it was (within the band
+    of the sensor's noise: 0.34 um at 200 nm on the family, 4 nm at 1 nm)."""
+    for i in range(STAGES):
+        r = st.run_stuck(case("dead (reads 0) in a hold"), plant(i, nm))
+        assert r["fault"] == "y_meas frozen" and r["time"] <= 0.003, (i, r["time"], r["error"])
+        if nm < 200:
+            assert "it jumped to 0 um" in r["error"] and "has held that value to the bit" in r["error"]
+            assert r["time"] == pytest.approx(0.0015)
+        assert r["excursion"] < (0.01 if nm == 1 else 0.4), (i, r["excursion"])
+
+
+@pytest.mark.parametrize("nm", [5, 20, 200])
+def test_a_noisy_sensor_stuck_in_a_hold_is_named_within_10_ms(nm):
+    """A sensor whose noise shows (5 nm and more on the 2 nm grid) stuck where it was in a hold is
+    stopped as "y_meas frozen" within 10 ms (the family: 7 ms at worst; the target 0.2 s). The stage
+    is within 0.15 um beyond the noise band it had before: the law acts on the stuck noisy reading
+    for the 2 to 4 ms before the verdict (a miss of the issue's 0.1 um: the family's worst with the
+    20 nm sensor is 0.17 um against 0.08 before the onset)."""
+    for i in range(STAGES):
+        r = st.run_stuck(case("stuck in a hold"), plant(i, nm))
+        assert r["fault"] == "y_meas frozen" and r["time"] <= 0.01, (i, r["time"], r["error"])
+        assert r["excursion"] <= r["before"] + 0.15, (i, r["excursion"], r["before"])
+
+
+def test_a_quiet_sensor_stuck_at_the_set_point_costs_the_stages_drift():
+    """The case nothing can see: a 1 nm sensor stuck where the stage holds. The integral action
+    holds on the unchanged reading, the law holds v, and the stage drifts by the difference between
+    its creep and the model's: over the 0.5 s after the onset, within 0.17 um (the family's worst,
+    0.16 um), and runs on unnamed on most stages (46 of 50)."""
+    runs = [st.run_stuck(case("stuck in a hold"), plant(i, 1)) for i in range(STAGES)]
+    assert all(r["excursion"] < 0.17 for r in runs), [r["excursion"] for r in runs]
+    assert sum(r["fault"] == "" for r in runs) >= 2
+
+
+@pytest.mark.parametrize("nm", [100, 200])
+@pytest.mark.parametrize("part", ["raster 10 Hz", "fresh step", "1 Hz tone"])
+def test_noisy_sensors_at_start_wait_for_the_reference_without_a_false_error(part, nm):
+    """0.2 s at rest (or a tone from t = 0) behind a 100 or 200 nm sensor: no Error, and the delay
+    chosen, if any, is the loop's own (2); before issue 44, 70 of the family's 600 such start-ups
+    were stopped with "no loop delay found" (docs/robustness.md, "Noisy sensors at start")."""
+    for i in range(4):
+        r = st.run_start(part, plant(i, nm))
+        assert r["error"] == "", (i, r["error"])
+        assert r["delay"] in (0, st.START_DELAY), (i, r)
+
+
+@pytest.mark.parametrize("nm", [0, 1, 20])
+def test_quiet_sensors_at_start_choose_the_delay_as_before(nm):
+    """Sensors of 0 to 20 nm do not bury the probes: the delay is chosen within 63 ms (the family's
+    worst, unchanged by issue 44), and it is the loop's."""
+    for i in range(4):
+        r = st.run_start("fresh step", plant(i, nm))
+        assert r["error"] == "" and r["delay"] == st.START_DELAY and r["time"] <= 0.063, (i, r)
