@@ -8,6 +8,8 @@ validation family (no false alarm, and how close the legitimate runs came to eac
     python -m harness.supervision_table family --stages 50    # the legitimate family and its margins
     python -m harness.supervision_table family --stages 50 --duration 120 --scenarios 1hz 20hz
     python -m harness.supervision_table false-alarms --specs module:function   # any family of RunSpecs
+    python -m harness.supervision_table stuck                 # a sensor that stops answering (issue 44)
+    python -m harness.supervision_table start                 # noisy sensors at start (issue 44)
 
 **Faults** (:data:`FAULTS`): each is a wiring or rig fault a user can make, run on the three
 FMUs wired by hand (:mod:`harness.masters.wired`) in both FMI editions, in a master that
@@ -35,6 +37,13 @@ included); ``false-alarms --specs module:function`` runs it on the RunSpecs a fu
 The fault table also runs each fault with ``sup.reaction`` = 1 (:func:`run_fault_safe`), and
 holds the blind spots issue 36 measured: a fault a working loop must ride through
 (``tolerated``: dropouts) and one the supervision cannot tell (``blind``: an offset drift).
+
+**Stuck** (:data:`STUCK_CASES`, :func:`stuck_family`) and **start** (:data:`START_PARTS`,
+:func:`start_family`): issue 44's studies, on the C core through the binding (an exchange: y_ref two
+samples ahead) on the stage's day's 50 stages with sensors of 0 to 200 nm rms: a sensor that sticks,
+dies or sticks after a dropout in a hold and mid-scan (the time to the verdict, the stage's
+excursion), and the delay detection of a stage at rest from t = 0 (Errors, wrong delays, how long it
+waits). Each exits 1 on a false alarm or a wrong delay.
 """
 
 from __future__ import annotations
@@ -820,12 +829,24 @@ def run_stuck(case, plant, controller=None, after=STUCK_AFTER):
             "drift": float(abs(y[stop - 1] - y_d[stop - 1])) if not fault else float("nan")}
 
 
-def _run_stuck_spec(spec):
-    i, nm, case_index = spec
+def _day_plant(i, nm):
+    """The stage's day's i-th stage (seed 2026) with a sensor of nm rms on the 2 nm grid."""
     from .stage_day import SEED
     from .stage_use_table import draw_stages, stage_plant
-    stage = draw_stages(i + 1, SEED)[i]
-    return spec, run_stuck(STUCK_CASES[case_index], stage_plant(stage, i, nm))
+    return stage_plant(draw_stages(i + 1, SEED)[i], i, nm)
+
+
+def _run_stuck_spec(spec):
+    i, nm, case_index = spec
+    return spec, run_stuck(STUCK_CASES[case_index], _day_plant(i, nm))
+
+
+def _per_key_and_sensor(specs, run, jobs, progress):
+    """Run (i, nm, key) specs: ``{(key, nm): [result, ...]}`` in stage order."""
+    out = {}
+    for spec, res in _run_all(specs, jobs, progress, run=run, chunksize=4, every=200):
+        out.setdefault((spec[2], spec[1]), []).append(res)
+    return out
 
 
 def stuck_family(stages=50, sensors=STUCK_SENSORS_NM, cases=None, jobs=2, progress=None):
@@ -833,10 +854,7 @@ def stuck_family(stages=50, sensors=STUCK_SENSORS_NM, cases=None, jobs=2, progre
     defaults: the nominal model) with each sensor: ``{(case, nm): [result, ...]}``."""
     cases = range(len(STUCK_CASES)) if cases is None else cases
     specs = [(i, nm, c) for c in cases for nm in sensors for i in range(stages)]
-    out = {}
-    for spec, res in _run_all(specs, jobs, progress, run=_run_stuck_spec, chunksize=4, every=200):
-        out.setdefault((spec[2], spec[1]), []).append(res)
-    return out
+    return _per_key_and_sensor(specs, _run_stuck_spec, jobs, progress)
 
 
 def stuck_markdown(family):
@@ -913,18 +931,13 @@ def run_start(part, plant, controller=None):
 
 def _run_start_spec(spec):
     i, nm, part = spec
-    from .stage_day import SEED
-    from .stage_use_table import draw_stages, stage_plant
-    return spec, run_start(part, stage_plant(draw_stages(i + 1, SEED)[i], i, nm))
+    return spec, run_start(part, _day_plant(i, nm))
 
 
 def start_family(stages=50, sensors=STUCK_SENSORS_NM, parts=START_PARTS, jobs=2, progress=None):
     """Every start-up part on the stage's day's stages with each sensor: ``{(part, nm): [result]}``."""
     specs = [(i, nm, part) for part in parts for nm in sensors for i in range(stages)]
-    out = {}
-    for spec, res in _run_all(specs, jobs, progress, run=_run_start_spec, chunksize=4, every=300):
-        out.setdefault((spec[2], spec[1]), []).append(res)
-    return out
+    return _per_key_and_sensor(specs, _run_start_spec, jobs, progress)
 
 
 def start_markdown(family):
@@ -965,16 +978,15 @@ def main(argv=None):
     fm.add_argument("--jobs", type=int, default=2)
     fm.add_argument("--reactions", nargs="+", default=["error", "safe"], choices=list(REACTIONS),
                     help="sup.reaction of the runs (default: both, each run twice)")
-    st = sub.add_parser("stuck", help="a sensor that sticks, dies or sticks after a dropout, in holds and "
-                        "scans, on the stage's day's stages with sensors of 0 to 200 nm rms")
-    st.add_argument("--stages", type=int, default=50)
-    st.add_argument("--sensors", type=float, nargs="+", default=list(STUCK_SENSORS_NM))
-    st.add_argument("--jobs", type=int, default=2)
-    sa = sub.add_parser("start", help="noisy sensors at start: the delay detection on the stage's day's "
-                        "stages at rest from t = 0, sensors of 0 to 200 nm rms")
-    sa.add_argument("--stages", type=int, default=50)
-    sa.add_argument("--sensors", type=float, nargs="+", default=list(STUCK_SENSORS_NM))
-    sa.add_argument("--jobs", type=int, default=2)
+    for name, text in (("stuck", "a sensor that sticks, dies or sticks after a dropout, in holds and scans, on "
+                                  "the stage's day's stages with sensors of 0 to 200 nm rms"),
+                       ("start", "noisy sensors at start: the delay detection on the stage's day's stages at "
+                                 "rest from t = 0, sensors of 0 to 200 nm rms")):
+        study = sub.add_parser(name, help=text)
+        study.add_argument("--stages", type=int, default=50, help="stages of the stage's day's family (default 50)")
+        study.add_argument("--sensors", type=float, nargs="+", default=list(STUCK_SENSORS_NM),
+                           help="sensor noise [nm rms] on the 2 nm grid (default 0 1 5 20 100 200)")
+        study.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     fa_ = sub.add_parser("false-alarms", help="the no-false-alarm check of any family: a function "
                          "returning RunSpecs, as module:function (e.g. harness.supervision_table:family_specs)")
     fa_.add_argument("--specs", required=True, help="module:function; called without arguments")

@@ -12,8 +12,6 @@ whole families' figures of docs/robustness.md."""
 import pytest
 
 from harness import supervision_table as st
-from harness.stage_day import SEED
-from harness.stage_use_table import draw_stages, stage_plant
 
 STAGES = 3
 
@@ -23,7 +21,7 @@ def case(name):
 
 
 def plant(i, nm):
-    return stage_plant(draw_stages(i + 1, SEED)[i], i, nm)
+    return st._day_plant(i, nm)
 
 
 @pytest.mark.parametrize("nm", [0, 1, 20, 200])
