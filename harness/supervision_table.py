@@ -791,21 +791,24 @@ def _stuck_profile(where, after=STUCK_AFTER):
     return sig.evaluate(np.arange(sig.samples) * H)
 
 
-def run_stuck(case, plant, controller=None, after=STUCK_AFTER):
+def run_stuck(case, plant, controller=None, after=STUCK_AFTER, keep=False):
     """Run one :class:`StuckCase` on the C core (the plant and the controller stepped as a master that
     exchanges at communication points: y_ref = y_d two samples ahead). Returns a dict: ``fault`` (the
     verdict's name, "" for none), ``error`` (its message), ``time`` (from the onset to the verdict [s],
-    nan for none), ``excursion`` (the largest |y - y_d| from the onset to the end [um]), ``before``
-    (the largest |y - y_d| over the 0.5 s before the onset [um]) and ``drift`` (for a run nothing
-    stopped, how far y went from y_d at the end [um]). ``after``: how long the run goes on after the
-    onset [s]."""
+    nan for none), ``excursion`` (the largest |y - y_d| from the onset to the verdict, or to the end
+    [um]), ``before`` (the largest |y - y_d| over the 0.5 s before the onset [um]), ``stopped_before``
+    (a verdict before the onset: a false alarm) and ``drift`` (for a run nothing stopped, how far y
+    went from y_d at the end [um]). ``after``: how long the run goes on after the onset [s]. With
+    ``sup.reaction`` = 1 in ``controller`` the run goes on in the safe state (the verdict from
+    ``sup.fault``) and the excursion runs to the verdict. ``keep``: also ``trace``, the arrays
+    ``time, y_d, y, y_meas`` (as the controller received it) and ``v`` up to the last sample run."""
     y_d = _stuck_profile(case.where, after)
     n = len(y_d)
     k0 = int(round((STUCK_HOLD_ONSET if case.where == "hold" else STUCK_SCAN_ONSET) / H))
     p = core.Plant(plant)
     c = core.Controller(controller or {})
-    v, held, fault, text, stop = 0.0, 0.0, "", "", n
-    y = np.empty(n)
+    v, held, fault, text, stop, k_fault = 0.0, 0.0, "", "", n, n
+    y, ym, vs = np.empty(n), np.empty(n), np.empty(n)
     for k in range(n):
         y[k] = p.output.y
         meas = p.output.y_meas
@@ -813,20 +816,28 @@ def run_stuck(case, plant, controller=None, after=STUCK_AFTER):
             if k == k0:
                 held = (0.0 if case.reads == "zero" else meas) + case.offset
             meas = 0.0 if case.reads == "dropout" and k == k0 else held
+        ym[k] = meas
+        vs[k] = v
         try:
             out = c.step(y_d[min(n - 1, k + 2)], meas)
         except core.CoreDivergedError as exc:
             fault = getattr(exc, "fault", "monitor")
-            text, stop = str(exc), k
+            text, stop, k_fault = str(exc), k, k
             break
+        if c.raw.fault and not fault:
+            fault = core.ffi.string(core.lib().piezo_supervisor_fault_name(c.raw.fault)).decode()
+            k_fault = k
         p.step(v)
         v = out.v
     err = np.abs(y[:stop] - y_d[:stop])
-    return {"fault": fault, "error": text, "time": (stop - k0) * H if fault else float("nan"),
-            "excursion": float(err[k0:].max()) if stop > k0 else 0.0,
-            "before": float(err[max(0, k0 - 1000):k0].max()) if stop > k0 else float(err.max()),
-            "stopped_before": fault != "" and stop < k0,
-            "drift": float(abs(y[stop - 1] - y_d[stop - 1])) if not fault else float("nan")}
+    res = {"fault": fault, "error": text, "time": (k_fault - k0) * H if fault else float("nan"),
+           "excursion": float(err[k0:k_fault].max()) if k_fault > k0 else 0.0,
+           "before": float(err[max(0, k0 - 1000):k0].max()) if stop > k0 else float(err.max()),
+           "stopped_before": fault != "" and k_fault < k0,
+           "drift": float(abs(y[stop - 1] - y_d[stop - 1])) if not fault else float("nan")}
+    if keep:
+        res["trace"] = (np.arange(stop) * H, y_d[:stop], y[:stop], ym[:stop], vs[:stop])
+    return res
 
 
 def _day_plant(i, nm):

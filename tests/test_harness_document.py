@@ -34,7 +34,7 @@ metric_window = [0.25, 0.5]
 FIGURES = {"headline", "tracking_error", "tracking_period", "control_voltage", "rls_estimates",
            "hysteresis", "creep", "user_tracking_error", "stage_use_stage_step10_hold60s",
            "stage_use_stage_scan10hz_dwell10s", "stage_use_stage_hold5um_100nm",
-           "stage_use_stage_staircase", "stage_day_frames", "stage_day_estimates"}
+           "stage_use_stage_staircase", "stage_day_frames", "stage_day_estimates", "sensor_faults"}
 
 
 @pytest.fixture(scope="module")

@@ -5,8 +5,8 @@ A job runs what :mod:`.conditions` and :mod:`.run` define, then writes what
 
 * terminal: the headline table first (ours, paper, ratio), then every
   condition side by side, the user's scenarios, the validation table, the
-  stage-use table (:mod:`.stage_use`), the stage's day (:mod:`.stage_day`), and what each
-  condition is;
+  stage-use table (:mod:`.stage_use`), the stage's day (:mod:`.stage_day`), a sensor that stops
+  answering (:mod:`.sensor_faults`, in the report), and what each condition is;
 * files: ``tracking.csv``, ``validation.csv``, ``stage_use.csv``, ``stage_day.csv``, ``report.md``,
   ``report.html``, ``provenance.json`` and, unless disabled, the figures as
   PNG (150 dpi) and SVG.
@@ -37,6 +37,7 @@ from .provenance import collect_provenance
 from .run import evaluate_tracking, evaluate_validation, parameter_defaults, validation_series
 from .stage_use import (HOLD_STEP, LAWS, STAGE_USE_NOTES, format_stage_use_table, run_stage_use,
                         stage_use_table_rows, write_stage_use_csv)
+from .sensor_faults import SENSOR_FAULT_NOTES, run_sensor_faults, sensor_fault_rows, sensor_faults_figure
 from .stage_day import (DAY_LAWS, REPORT_PARTS, STAGE_DAY_NOTES, day_estimates_figure, day_frames_figure,
                         run_stage_day, stage_day_table_rows, write_stage_day_csv)
 
@@ -245,6 +246,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     stage = run_stage_use(stage_names, registry=registry, fmu_dir=fmu_dir, fmi_version=fmi_version,
                           keep_data=plots, progress=prog)
     day = run_stage_day(fmu_dir=fmu_dir, fmi_version=fmi_version, keep_data=plots, progress=prog)
+    sensor_faults = run_sensor_faults()
 
     files = []
     all_tracking = [r for c in conditions for r in tracking[c.key]]
@@ -267,7 +269,8 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
         figures += draw_stage_use_figures(out, stage, nominal_g=_effective(ctrl_def, {}),
                                           plants={r.scenario: _effective(plant_def, r.spec.plant)
                                                   for r in stage})
-        figures += [day_frames_figure(day, out), day_estimates_figure(day, out, _effective(ctrl_def, {}))]
+        figures += [day_frames_figure(day, out), day_estimates_figure(day, out, _effective(ctrl_def, {})),
+                    sensor_faults_figure(sensor_faults, out)]
         for f in figures:
             files += f.files
 
@@ -280,7 +283,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     defaults_source = ("the start value in the modelDescription of the FMUs above"
                        if backend != "core" else "the C core's default")
     report = _main_document(conditions, tracking, validation, figures, prov, unique,
-                            defaults_source, plots, registry, stage, fmi_version, day)
+                            defaults_source, plots, registry, stage, fmi_version, day, sensor_faults)
     (out / "report.md").write_text(doc_.render_markdown(report), encoding="utf-8")
     (out / "report.html").write_text(doc_.render_html(report), encoding="utf-8")
     (out / "provenance.json").write_text(json.dumps(prov.as_dict(), indent=2) + "\n",
@@ -293,7 +296,8 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
                      f"({len(files)} files in {out}/)\n")
         stream.flush()
     return {"tracking": tracking, "validation": validation, "conditions": conditions,
-            "stage_use": stage, "stage_day": day, "provenance": prov, "figures": figures, "files": files}
+            "stage_use": stage, "stage_day": day, "sensor_faults": sensor_faults, "provenance": prov,
+            "figures": figures, "files": files}
 
 
 def condition_notes(conditions, registry=None):
@@ -369,7 +373,7 @@ def _figure_block(fig):
 
 
 def _main_document(conditions, tracking, validation, figures, prov, scenarios, defaults_source,
-                   plots, registry=None, stage=(), fmi_version=2, day=()):
+                   plots, registry=None, stage=(), fmi_version=2, day=(), sensor_faults=()):
     D = doc_
     figs = {f.name: f for f in figures}
     head = next(c for c in conditions if c.role == "headline")
@@ -450,6 +454,18 @@ def _main_document(conditions, tracking, validation, figures, prov, scenarios, d
             D.Table(tuple(d_head), tuple(map(tuple, d_rows))), D.Bullets(STAGE_DAY_NOTES))
         for f in figures:
             if f.name.startswith("stage_day_"):
+                doc.add(_figure_block(f))
+
+    if sensor_faults:
+        f_head, f_rows = sensor_fault_rows(sensor_faults)
+        doc.add(D.Heading("A sensor that stops answering"), D.Paragraph(
+            "The report's stage with a sensor that sticks where it was (or 2 nm off), dies (reads 0) or "
+            "sticks after a dropout, in a 5 µm hold and mid-ramp of a 10 Hz raster: how soon the supervision "
+            "names it and how far the stage went. The whole family, sensors of 0 to 200 nm on 50 stages: "
+            "docs/robustness.md (python -m harness.supervision_table stuck)."),
+            D.Table(tuple(f_head), tuple(map(tuple, f_rows))), D.Bullets(SENSOR_FAULT_NOTES))
+        for f in figures:
+            if f.name == "sensor_faults":
                 doc.add(_figure_block(f))
 
     doc.add(*_provenance_blocks(prov, scenarios, defaults_source))
