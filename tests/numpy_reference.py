@@ -419,7 +419,8 @@ FALLBACK_JUMP_RATIO, FALLBACK_JUMP_MEMORY, FALLBACK_NOISE = 5.0, 2000.0, 3.0
 
 def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, trace_max: float,
                          variance_max: float, excitation: float, excitation_samples: int,
-                         theta0, e_before=0.0, admissible=(0.5, 0.0, 0.25, 4.0), fallback=(2.0, 1000, 1.0)) -> dict:
+                         theta0, e_before=0.0, admissible=(0.5, 0.0, 0.25, 4.0), fallback=(2.0, 1000, 1.0),
+                         probe_max=1.0, hold_same=4) -> dict:
     """The robust update over recorded data (q(k), y(k)) with the law's references r(k)
     (r(-1) = 0), from theta0 and P = p0_loop I, offset c = 0:
 
@@ -434,7 +435,12 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
                   of e before sample k (no bound from it while it is 0), then the projection
                   into the admissible set (admissible_rows of theta0 and admissible = (zero_min,
                   pole_min, gain_min, gain_max), admissible_projection)
-        holding:  theta, P kept; c = c + 0.01 e(k)
+        holding:  theta, P kept; c = c + 0.01 e(k), but while y(k) has equalled the samples before
+                  it hold_same times in a row (a reading that may be stuck: c holds too; the
+                  controller counts them in its supervision: None when that is off)
+        too noisy: from sample 100, while 20 m_2 > 2 probe_max b1 (m_2 the measured noise of y's
+                  second differences over sqrt 3, before sample k; b1 of theta0), an excited
+                  sample does not adapt (and c holds)
         fallback: while theta differs from theta0, with fallback = (ratio, N, pred_error_max):
                   S_a = l S_a + e^2, S_n = l S_n + e_n^2 (l = 1 - 1/N, e_n the nominal model's
                   a-priori error with the same c); S_a > ratio S_n + N (3 m_y)^2 (m_y before k),
@@ -461,7 +467,8 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
     s_a = s_n = learned = 0.0
     P = p0_loop * np.eye(4)
     c = 0.0
-    m_y = m_e = 0.0
+    m_y = m_e = m_2 = 0.0
+    same = 0
     anchor, velocity, left = 0.0, 0.0, 0
     e_prev = e_before
     out = {"theta": np.zeros((n, 4)), "P": np.zeros((n, 4, 4)), "e": np.zeros(n), "c": np.zeros(n),
@@ -487,9 +494,13 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         left = excitation_samples if event else max(left - 1, 0)
         m_y_before = m_y
         m_y = track(m_y, Y(k) - Y(k - 1))
+        noisy = k >= 100 and 20.0 * m_2 > 2.0 * probe_max * nominal[2]
+        m_2 = track(m_2, (Y(k) - 2.0 * Y(k - 1) + Y(k - 2)) * 0.57735026918962576)
+        same = same + 1 if k > 0 and y[k] == y[k - 1] else 0
         phi = np.array([-Y(k - 1), -Y(k - 2), Q(k - d), Q(k - d - 1)])
         e = y[k] - c - phi @ theta
         e_n = y[k] - c - phi @ nominal
+        excited, adapting = adapting, adapting and not noisy
         if adapting:
             bound = trace_max if m_e == 0.0 else min(trace_max, variance_max / m_e ** 2)
             K = P @ phi / (lam + phi @ P @ phi)
@@ -499,7 +510,7 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
             if tr > bound:
                 P = P * (bound / tr)
             theta = admissible_projection(theta, P, C, d_rows, nominal)
-        else:
+        elif not excited and (hold_same is None or same < hold_same):
             c = c + OFFSET_GAIN * e
         rate = abs(r[k] - r1)
         adapted = not np.array_equal(theta, nominal)

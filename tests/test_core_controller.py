@@ -986,7 +986,7 @@ def test_robust_update_matches_numpy_reference(noise, case):
                                     admissible=(p["rls.zero_min"], p["rls.pole_min"], p.get("sup.gain_min", 0.25),
                                                 p.get("sup.gain_max", 4.0)),
                                     fallback=(p["rls.fallback_ratio"], round(p["rls.fallback_window"] / H),
-                                              p["monitor.pred_error_max"]))
+                                              p["monitor.pred_error_max"]), hold_same=None)   # sup.enabled false
     e_theta = np.max(np.max(np.abs(want["theta"] - theta), axis=1) / np.max(np.abs(theta), axis=1))
     e_P = np.max(np.max(np.abs(want["P"] - P), axis=(1, 2)) / np.max(np.abs(P), axis=(1, 2)))
     e_pe, e_c = np.max(np.abs(want["e"] - pe)), np.max(np.abs(want["c"] - c_off))

@@ -250,7 +250,7 @@ def test_controller_check_accepts_runs_and_names_tampered_fields():
     for field, value, fragment in [("d", 10, "loop delay"), ("head", -1, "q ring"), ("sat_hold", 99, "adaptation"),
                                    ("n_saturated", 10 ** 6, "monitor counts"), ("k", 5, "sample counter"),
                                    ("detecting", 1, "delay detection flags"), ("det_leader", 3, "leader"),
-                                   ("det_run", 11, "leader"), ("det_trial", 10 ** 6, "trial"),
+                                   ("det_run", 41, "leader"), ("det_trial", 10 ** 6, "trial"),
                                    ("det_probe", -1.0, "trial"), ("k_delay", 10 ** 6, "counters"),
                                    ("det_clock", 10 ** 6, "counters"), ("r_prev", math.inf, "not finite")]:
         old = getattr(raw, field)

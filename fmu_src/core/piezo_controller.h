@@ -76,7 +76,7 @@
 #define PIEZO_DETECT_P 48        /* PIEZO_DETECT_N * 16 */
 #define PIEZO_DETECT_START_D 2   /* the start-up law's d */
 #define PIEZO_DETECT_CONFIRM 3   /* samples a clear leader must lead before it is chosen */
-#define PIEZO_DETECT_CONFIRM_BURIED 10 /* the same while the probes are buried in the noise */
+#define PIEZO_DETECT_CONFIRM_BURIED 40 /* the same while the probes are buried in the noise (20 ms) */
 #define PIEZO_DETECT_RATIO_INV 10 /* clear: sum at most 1/10 of every other candidate's */
 #define PIEZO_DETECT_REDETECT 10 /* samples beyond the monitor bound that restart detection */
 #define PIEZO_DETECT_TRIAL 20    /* samples of one detection trial (the next one starts with a probe) */
@@ -428,8 +428,8 @@ piezo_status piezo_controller_fault_status(int fault);
  * piezo_gl_check_history(&ctrl->inv_creep, ...).
  */
 const char *piezo_controller_check(const piezo_controller *ctrl);
-/* 1: the delay probes are buried in the noise (the probe the last detection trial's noise asked
- * for is beyond mv.probe_max): while the stage rests the detection waits, its watchdog stopped. */
+/* 1: the delay probes are buried in the noise (the probe the measured noise of y_meas asks for is
+ * beyond mv.probe_max): the detection waits, chooses nothing, and its watchdog stops. */
 int piezo_controller_probes_buried(const piezo_controller *ctrl);
 /* The response a delay probe needs, in times the measured noise (PROBE_SNR). */
 double piezo_controller_probe_snr(void);

@@ -42,11 +42,12 @@ int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, dou
     }
     if (c->detecting && c->auto_delay && !t->said_wait && piezo_controller_probes_buried(c)) {
         t->said_wait = 1;
-        snprintf(text, size, "delay detection waits for the reference to move (t = %.9g s): y_meas's noise, "
-                 "%.3g um rms, buries a probe of mv.probe_max = %g um (it needs %g times the noise over the "
-                 "model's first response tf.b1). While the stage rests the start-up law holds it (d = %d), "
-                 "sup.status stays 0 (not verified) and sup.detect_time does not run; the reference's moves "
-                 "decide the delay", fmu_sample_time(t0, c->k - 1, h), c->noise_y2, c->probe_max,
+        snprintf(text, size, "delay detection waits (t = %.9g s): y_meas's noise, %.3g um rms, buries a probe of "
+                 "mv.probe_max = %g um (it needs %g times the noise over the model's first response tf.b1). While "
+                 "the noise stays this high no loop delay is chosen: the start-up law (d = %d, the nominal model) "
+                 "runs on, sup.status stays 0 (not verified) and sup.detect_time does not run. Set mv.delay to "
+                 "the loop's delay to run the adaptive law", fmu_sample_time(t0, c->k - 1, h), c->noise_y2,
+                 c->probe_max,
                  piezo_controller_probe_snr(), PIEZO_DETECT_START_D);
         return 1;
     }
