@@ -243,8 +243,8 @@ static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, dou
 
 /* y_meas held on an outlier: the reading jumped away from the model's prediction (an outlier, for
  * which the prediction stood in) and has held that value to the bit since, PIEZO_SUP_STUCK_SAME
- * samples in all: a sensor that died or stuck on a glitch (a stage bumped that far would not hold a
- * reading to the bit) */
+ * samples in all: a sensor that died or stuck on a glitch (a stage bumped that far that reads the same
+ * value to the bit, behind a noise-free sensor, would be taken for one: not measured) */
 static int held_outlier(const piezo_supervisor_next *n)
 {
     return n->bridged_run >= PIEZO_SUP_STUCK_SAME && n->y_same + 1 >= PIEZO_SUP_STUCK_SAME;
