@@ -439,7 +439,8 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
                   it hold_same times in a row (a reading that may be stuck: c holds too; the
                   controller counts them in its supervision: None when that is off)
         too noisy: from sample 100, while 20 m_2 > 2 probe_max b1 (m_2 the measured noise of y's
-                  second differences over sqrt 3, before sample k; b1 of theta0), an excited
+                  second differences over sqrt 3 at the samples that are not excited, before
+                  sample k; b1 of theta0), an excited
                   sample does not adapt (and c holds)
         fallback: while theta differs from theta0, with fallback = (ratio, N, pred_error_max):
                   S_a = l S_a + e^2, S_n = l S_n + e_n^2 (l = 1 - 1/N, e_n the nominal model's
@@ -495,7 +496,8 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         m_y_before = m_y
         m_y = track(m_y, Y(k) - Y(k - 1))
         noisy = k >= 100 and 20.0 * m_2 > 2.0 * probe_max * nominal[2]
-        m_2 = track(m_2, (Y(k) - 2.0 * Y(k - 1) + Y(k - 2)) * 0.57735026918962576)
+        if not adapting:                # the sensor's noise, measured while the reference does not excite
+            m_2 = track(m_2, (Y(k) - 2.0 * Y(k - 1) + Y(k - 2)) * 0.57735026918962576)
         same = same + 1 if k > 0 and y[k] == y[k - 1] else 0
         phi = np.array([-Y(k - 1), -Y(k - 2), Q(k - d), Q(k - d - 1)])
         e = y[k] - c - phi @ theta

@@ -368,7 +368,8 @@ class ControllerRef:
             still = r1 == self.r_last2
             event = abs(r1 - line) > self.excitation * self.noise_y
             noise_y = track_noise(self.noise_y, y_meas - self.y_prev[0])
-            noise_y2 = track_noise(self.noise_y2, (y_meas - 2.0 * self.y_prev[0] + self.y_prev[1]) * self.INV_SQRT3)
+            noise_y2 = (track_noise(self.noise_y2, (y_meas - 2.0 * self.y_prev[0] + self.y_prev[1]) * self.INV_SQRT3)
+                        if not (event or self.left > 0) else self.noise_y2)
             excited = event or self.left > 0
             anchor = r1 if event or still else line
             velocity = r1 - self.r_last2 if event or still else self.velocity

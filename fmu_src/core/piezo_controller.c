@@ -759,12 +759,16 @@ static void excitation_next(const piezo_controller *c, double y_meas, piezo_cont
     const int still = r1 == c->r_last2;     /* the reference holds: the line does too */
     int event = fabs(r1 - line) > c->excitation * c->noise_y;
     s->noise_y = noise_next(c->noise_y, y_meas - c->y_prev[0]);
-    /* white noise's second difference has sqrt(3) times the rms of its first; a move's (a 20 Hz,
-     * 10 um tone: 39 nm a sample) is far below its first (630 nm) */
-    s->noise_y2 = noise_next(c->noise_y2, (y_meas - 2.0 * c->y_prev[0] + c->y_prev[1]) * INV_SQRT3);
     s->r_anchor = event || still ? r1 : line;
     s->r_velocity = event || still ? r1 - c->r_last2 : c->r_velocity;
     s->excited = event || c->excite_left > 0;
+    /* the sensor's noise, measured while the reference does not excite (at rest or on a straight
+     * line: a move's start would set the tracker far above it, as a tone from t = 0 did at its first
+     * acceleration, 200 samples later still burying the probes of a 1 nm sensor; and a master that
+     * repeats y_ref makes "at rest" every other sample of a tone), from second differences: white
+     * noise's has sqrt(3) times the rms of its first, a line's none */
+    s->noise_y2 = !s->excited ? noise_next(c->noise_y2, (y_meas - 2.0 * c->y_prev[0] + c->y_prev[1]) * INV_SQRT3)
+                              : c->noise_y2;
     s->excite_left = event ? c->excitation_samples : (c->excite_left > 0 ? c->excite_left - 1 : 0);
 }
 
@@ -772,7 +776,8 @@ static void excitation_next(const piezo_controller *c, double y_meas, piezo_cont
  * Whether the delay probes are buried in the noise (robust update): the probe a trial needs to be
  * seen, PROBE_SNR times the measured noise of y_meas over the model's first response tf.b1, is
  * beyond mv.probe_max (with the defaults: a sensor noise above 30 nm rms), the noise measured from
- * the second differences of y_meas (noise_y2), which a scan or a tone does not inflate, from
+ * the second differences of y_meas while the reference does not excite (noise_y2: at rest or on a
+ * straight line, which a tone's start or a scan's corner does not inflate), from
  * sample NOISE_SETTLE on. Then a sample at rest teaches the detection nothing: its candidates score
  * only the reference's excitations (rls.excitation, for rls.excitation_time) and adapt only while
  * it moves, a leader must lead PIEZO_DETECT_CONFIRM_BURIED samples (in effect none is chosen: the

@@ -208,7 +208,8 @@ typedef struct {
     double integral_gain;        /* mv.integral */
     /* robust adaptation and integral action: the states of k (reset to 0) */
     double noise_y;              /* measured noise of y_meas [um] (0: not yet measured) */
-    double noise_y2;             /* the same from its second differences (a move's removed) [um] */
+    double noise_y2;             /* the same from its second differences, while the reference does not
+                                    excite (a move's removed) [um] */
     double noise_e;              /* measured noise of the prediction error [um] (0: not yet) */
     double r_anchor;             /* the reference extrapolated from the last excitation to k-1 */
     uint64_t excite_left;        /* samples the RLS still updates (0: it holds its estimates) */
