@@ -854,7 +854,7 @@ static double detect_update(const piezo_controller *c, double y, piezo_controlle
      * 200 nm sensors, 1300 runs: leading 10 samples, two wrong choices of d = 3 after waits of 25 and
      * 49 s swung the stage 5.6 um before the restart; 20, 4.2 and 5.3 um; 40, none, the frames within
      * 2.2 um) */
-    s->detecting = s->det_run < (piezo_controller_probes_buried(c) ? PIEZO_DETECT_CONFIRM_BURIED
+    s->detecting = s->det_run < (!s->clock ? PIEZO_DETECT_CONFIRM_BURIED
                                                                                : PIEZO_DETECT_CONFIRM);
     /* a trial that chose nothing: the next starts with a probe */
     s->new_trial = s->detecting && c->k + 1 - c->det_trial >= PIEZO_DETECT_TRIAL;
@@ -1001,10 +1001,10 @@ static int sample_state_finite(const piezo_controller *c, const piezo_controller
  * while the delay is detected, but while it waits with its probes buried in the noise: the
  * start-up law's errors (a probe's answer) are the detection's evidence.
  */
-static int is_outlier(const piezo_controller *c, double e)
+static int is_outlier(const piezo_controller *c, double e, int buried)
 {
     double a = fabs(e);
-    return c->k >= PIEZO_OUTLIER_MIN_SAMPLES && (!c->detecting || piezo_controller_probes_buried(c))
+    return c->k >= PIEZO_OUTLIER_MIN_SAMPLES && (!c->detecting || buried)
            && c->quiet >= PIEZO_OUTLIER_QUIET
            && c->outlier_sum * 100.0 < PIEZO_OUTLIER_MAX_PERCENT * (double)PIEZO_OUTLIER_WINDOW
            && a * 100.0 > PIEZO_OUTLIER_FLOOR_PERCENT * c->pred_error_max
@@ -1127,7 +1127,10 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     /* a reading that repeats, to the bit, one taken for an outlier is one too (a sensor that died or
      * stuck on a glitch: the model's prediction keeps standing in, and the supervision names it once it
      * held PIEZO_SUP_STUCK_SAME samples) */
-    s->outlier = (s->jump_left == 0 && is_outlier(c, s->raw_error)) || (c->suspect && in->y_meas == c->suspect_y);
+    /* the probes buried in the noise (judged once a sample, from the state the sample starts from) */
+    s->clock = !piezo_controller_probes_buried(c);
+    s->outlier = (s->jump_left == 0 && is_outlier(c, s->raw_error, !s->clock))
+                 || (c->suspect && in->y_meas == c->suspect_y);
     /* a reading equal to the ones before for PIEZO_SUP_STUCK_SAME samples (the supervision's count, so
      * not while it is off) tells nothing new: the integral action and the estimator's offset hold,
      * and never walk the stage on a reading that may be stuck */
@@ -1148,7 +1151,6 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     /* the detection learns from this sample unless the stage rests (the reference does not
      * excite) while the noise asks for a probe beyond mv.probe_max, and its watchdog counts it
      * unless the noise asks for such a probe (the paper's update: every sample, both) */
-    s->clock = !piezo_controller_probes_buried(c);
     s->live = s->clock || s->excited;
     if (c->detecting) {
         s->offset = 0.0;

@@ -372,6 +372,17 @@ def _figure_block(fig):
     return doc_.Figure(fig.png.name, fig.svg.name, fig.caption, alt=fig.name)
 
 
+def _add_section(doc, figures, title, text, table, notes, wanted):
+    """A study's section: its heading, text, table ``(head, rows)``, notes and the figures ``wanted``
+    picks."""
+    D = doc_
+    head, rows = table
+    doc.add(D.Heading(title), D.Paragraph(text), D.Table(tuple(head), tuple(map(tuple, rows))), D.Bullets(notes))
+    for f in figures:
+        if wanted(f):
+            doc.add(_figure_block(f))
+
+
 def _main_document(conditions, tracking, validation, figures, prov, scenarios, defaults_source,
                    plots, registry=None, stage=(), fmi_version=2, day=(), sensor_faults=()):
     D = doc_
@@ -444,29 +455,21 @@ def _main_document(conditions, tracking, validation, figures, prov, scenarios, d
                 doc.add(_figure_block(f))
 
     if day:
-        d_head, d_rows = stage_day_table_rows(day)
-        doc.add(D.Heading("A stage's day"), D.Paragraph(
+        _add_section(doc, figures, "A stage's day", (
             "The fourth stage of the identification family (the one issue 43 found the robust update of "
             "issue 35 bursting on after a few raster frames), 1 nm sensor, through PiezoStageClosedLoop at "
             "10 ms communication steps while the reference holds: 60 raster frames with 0.5 s dwells, 60 s "
             "of a 1 Hz tone then a 10 µm step, and the fresh step. The whole family over a day of "
             "rasters, tones and a random hour: docs/stage_day.md (python -m harness.stage_day)."),
-            D.Table(tuple(d_head), tuple(map(tuple, d_rows))), D.Bullets(STAGE_DAY_NOTES))
-        for f in figures:
-            if f.name.startswith("stage_day_"):
-                doc.add(_figure_block(f))
+            stage_day_table_rows(day), STAGE_DAY_NOTES, lambda f: f.name.startswith("stage_day_"))
 
     if sensor_faults:
-        f_head, f_rows = sensor_fault_rows(sensor_faults)
-        doc.add(D.Heading("A sensor that stops answering"), D.Paragraph(
+        _add_section(doc, figures, "A sensor that stops answering", (
             "The report's stage with a sensor that sticks where it was (or 2 nm off), dies (reads 0) or "
             "sticks after a dropout, in a 5 µm hold and mid-ramp of a 10 Hz raster: how soon the supervision "
             "names it and how far the stage went. The whole family, sensors of 0 to 200 nm on 50 stages: "
             "docs/robustness.md (python -m harness.supervision_table stuck)."),
-            D.Table(tuple(f_head), tuple(map(tuple, f_rows))), D.Bullets(SENSOR_FAULT_NOTES))
-        for f in figures:
-            if f.name == "sensor_faults":
-                doc.add(_figure_block(f))
+            sensor_fault_rows(sensor_faults), SENSOR_FAULT_NOTES, lambda f: f.name == "sensor_faults")
 
     doc.add(*_provenance_blocks(prov, scenarios, defaults_source))
     names = ["tracking.csv", "validation.csv"] + (["stage_use.csv"] if stage else [])
