@@ -685,6 +685,39 @@ class Controller:
         self._lib.piezo_controller_explain_safe_state(self._c, ctx, buf, size)
         return ffi.string(buf).decode()
 
+    def fault_reset(self, y_ref: float, y_meas: float, t0: float = 0.0) -> tuple[bool, str]:
+        """Raise ``sup.reset`` before the current sample, as the FMUs do on its rising edge.
+
+        In the safe state, and once the cause the safe state can see is gone
+        (``piezo_controller_reset_refusal``), the loop restarts from its nominal model at the
+        current sample, from the stage at rest at ``y_meas``, with v ramping from 0 V
+        (``piezo_controller_restart``); else nothing changes.
+
+        Parameters
+        ----------
+        y_ref, y_meas : float
+            The inputs of the sample the loop would restart at [um].
+        t0 : float
+            The time of sample 0, for the message's times [s].
+
+        Returns
+        -------
+        (bool, str)
+            Whether the loop restarted, and the message the FMUs log (an event when accepted,
+            a Warning when refused).
+        """
+        inp = ffi.new("piezo_controller_input *")
+        inp.y_ref, inp.y_meas = float(y_ref), float(y_meas)
+        refusal = int(self._lib.piezo_controller_reset_refusal(self._c, inp))
+        k = int(self._c.k)
+        if refusal == 0:
+            self._lib.piezo_controller_restart(self._c, inp.y_meas)
+        ctx = ffi.new("piezo_sup_context *")
+        ctx.t0, ctx.h = float(t0), float(self._c.sup.h)
+        buf = ffi.new("char[]", 2048)
+        self._lib.piezo_controller_explain_reset(self._c, refusal, inp, k, ctx, buf, 2048)
+        return refusal == 0, ffi.string(buf).decode()
+
     def _raise_fault(self, status, name):
         """Raise the loop's refusals (supervision, monitor, divergence) with the core's words."""
         if status == PIEZO_ERR_FAULT:

@@ -459,13 +459,13 @@ static void detection_start(piezo_controller *c)
     }
 }
 
-void piezo_controller_reset(piezo_controller *c)
+/* The loop's states as a fresh controller's at sample c->k (c->k_start): the nominal model, its
+ * covariance, the delay detection, the supervision, every sum of the loop; the hysteresis model and
+ * the inverse creep are the caller's (reset: zero states; restart: the stage's after 0 V). The
+ * counts of the run are not touched. */
+static void loop_start(piezo_controller *c)
 {
     int i;
-    if (!c) return;
-    piezo_pi_reset(&c->fwd_pi);
-    piezo_pi_inverse_init(&c->inv_pi, &c->fwd_pi);   /* consistent with zero states */
-    piezo_gl_reset(&c->inv_creep);
     memcpy(c->theta, c->theta_nominal, sizeof c->theta);
     memset(c->P, 0, sizeof c->P);
     for (i = 0; i < 4; ++i) c->P[5 * i] = c->robust ? c->p0_loop : c->p0;
@@ -479,21 +479,15 @@ void piezo_controller_reset(piezo_controller *c)
     memset(c->yd_tag, 0, sizeof c->yd_tag);
     memset(c->preview_value, 0, sizeof c->preview_value);
     memset(c->preview_tag, 0, sizeof c->preview_tag);
-    c->k_delay = 0;
-    c->k_search = 0;
+    c->k_delay = c->k;
+    c->k_search = c->k;
     c->det_clock = 0;
-    c->n_detections = 0;
     c->detecting = 0;
     if (c->auto_delay)
         detection_start(c);
     c->sat_hold = 0;
-    c->n_saturated = c->n_large_error = 0;
     c->run_saturated = c->run_large_error = 0;
-    c->k_first_saturated = c->k_first_large_error = 0;
-    c->n_large_settled = c->k_first_large_settled = 0;
-    c->max_abs_pred_error = 0.0;
     c->mon_share = c->mon_weight = 0.0;
-    c->k = 0;
     memset(&c->out, 0, sizeof c->out);
     memcpy(c->out.theta, c->theta, sizeof c->theta);
     piezo_supervisor_reset(&c->sup);
@@ -503,16 +497,108 @@ void piezo_controller_reset(piezo_controller *c)
     c->quiet = 0;
     c->suspect = 0;
     c->suspect_y = c->suspect_error = 0.0;
-    c->n_outliers = c->k_first_outlier = 0;
-    c->first_outlier = c->first_outlier_error = 0.0;
     c->fault = 0;
     c->k_fault = 0;
     c->v_fault = 0.0;
-    c->n_projections = 0;
+    c->y_fault = 0.0;
+    c->y_moved = 0;
     c->fb_adapted = c->fb_nominal = c->learned_rate = 0.0;
+}
+
+void piezo_controller_reset(piezo_controller *c)
+{
+    if (!c) return;
+    piezo_pi_reset(&c->fwd_pi);
+    piezo_pi_inverse_init(&c->inv_pi, &c->fwd_pi);   /* consistent with zero states */
+    piezo_gl_reset(&c->inv_creep);
+    c->k = 0;
+    c->k_start = c->k_ramp_end = c->n_resets = 0;
+    c->y_start = 0.0;
+    c->n_detections = 0;
+    loop_start(c);
+    c->n_saturated = c->n_large_error = 0;
+    c->k_first_saturated = c->k_first_large_error = 0;
+    c->n_large_settled = c->k_first_large_settled = 0;
+    c->max_abs_pred_error = 0.0;
+    c->n_outliers = c->k_first_outlier = 0;
+    c->first_outlier = c->first_outlier_error = 0.0;
+    c->n_projections = 0;
     c->n_fallbacks = c->k_first_fallback = 0;
     c->first_fallback = PIEZO_FALLBACK_NONE;
     c->first_fallback_value = c->first_fallback_other = 0.0;
+}
+
+int piezo_controller_reset_refusal(const piezo_controller *c, const piezo_controller_input *in)
+{
+    double rail;
+    if (!c || !c->fault) return PIEZO_RESET_NO_FAULT;
+    if (c->k - c->k_fault < c->sup.ramp_samples) return PIEZO_RESET_RAMPING;
+    if (!in || !isfinite(in->y_ref) || !isfinite(in->y_meas)) return PIEZO_RESET_INPUTS;
+    /* a reading that never left the verdict's: the frozen or silent sensor is still there (a
+     * sensor that came back reads the stage, which moved as v went to 0 V) */
+    if ((c->fault == PIEZO_SUP_FROZEN || c->fault == PIEZO_SUP_NO_RESPONSE || c->fault == PIEZO_SUP_CLIPPED)
+        && !c->y_moved && in->y_meas == c->y_fault)
+        return PIEZO_RESET_STUCK;
+    /* the rail the loop was held at (the clipping watchdog's verdict, or another one while v was at
+     * a rail: the monitor's, say), and the reading it reached there: a reference still beyond
+     * it by more than the watchdog's bound would clip again. Only where the stage answered the rail
+     * the right way round, its reading falling back from there as v went to 0 V: an inverted
+     * amplifier or sensor also holds v at a rail, and its reading there says nothing of the reach
+     * (the restarted supervision judges that loop) */
+    rail = c->v_fault >= 0.0 ? 1.0 : -1.0;
+    if ((c->fault == PIEZO_SUP_CLIPPED || (c->sat_enabled && (c->v_fault == c->sat_v_max || c->v_fault == c->sat_v_min)))
+        && (c->y_fault - in->y_meas) * rail > 0.0
+        && (in->y_ref - c->y_fault) * rail > c->sup.clip_error)
+        return PIEZO_RESET_OUT_OF_REACH;
+    return PIEZO_RESET_ACCEPTED;
+}
+
+/*
+ * The restart from rest at y = y_meas(k) after v went to 0 V: the forward PI's operators take
+ * v = 0 (a play operator is rate independent, so the ramp's monotone path ends where a jump to 0
+ * does) and the inverse is rebuilt consistent with them (eq 28); the inverse creep starts anew;
+ * the law's past is that of a stage at rest there, q(k-i) = q0 = P[0] / gain of the inverse creep
+ * (what 0 V gives the model) and y(k-i) = y, and its reference starts from y: the reference then
+ * comes as a step.
+ */
+piezo_status piezo_controller_restart(piezo_controller *c, double y)
+{
+    double r0, q0, w, noise_y, noise_y2, noise_e;
+    int i, d, keep_d;
+    if (!c) return PIEZO_ERR_NULL;
+    if (!c->fault || !isfinite(y)) return PIEZO_ERR_PARAM;
+    piezo_pi_eval(&c->fwd_pi, 0.0, c->fwd_pi.z, &r0);     /* the operators after 0 V, committed */
+    piezo_pi_inverse_init(&c->inv_pi, &c->fwd_pi);
+    piezo_gl_reset(&c->inv_creep);
+    c->k_start = c->k;
+    c->k_ramp_end = c->k + c->sup.ramp_samples;
+    c->n_resets += 1;
+    /* what the loop learned of its wiring and its sensor, not of the stage's model, stays: the
+     * loop delay chosen (unless the verdict was about the delay), the measured noise (a restart that
+     * measured it anew would probe behind a 200 nm sensor, which it had found buries the probes) */
+    keep_d = c->auto_delay && !c->detecting && c->fault != PIEZO_SUP_DELAY && c->fault != PIEZO_SUP_UNDETECTED;
+    d = c->d;
+    noise_y = c->noise_y;
+    noise_y2 = c->noise_y2;
+    noise_e = c->noise_e;
+    loop_start(c);
+    c->noise_y = noise_y;
+    c->noise_y2 = noise_y2;
+    c->noise_e = noise_e;
+    if (keep_d) {
+        c->detecting = 0;
+        c->d = d;
+        c->n_detections -= 1;
+    }
+    q0 = r0 / c->inv_creep.gain;
+    if (!isfinite(q0)) q0 = 0.0;
+    for (i = 0; i < PIEZO_MV_Q_RING; ++i) c->q_ring[i] = q0;
+    c->y_prev[0] = c->y_prev[1] = y;
+    c->r_prev = c->r_last = c->r_last2 = c->r_anchor = y;
+    c->y_start = y;
+    w = (c->theta_nominal[2] + c->theta_nominal[3]) * q0;
+    piezo_supervisor_restart(&c->sup, y, w);
+    return PIEZO_OK;
 }
 
 size_t piezo_controller_history_needed(const piezo_controller *c)
@@ -1004,7 +1090,7 @@ static int sample_state_finite(const piezo_controller *c, const piezo_controller
 static int is_outlier(const piezo_controller *c, double e, int buried)
 {
     double a = fabs(e);
-    return c->k >= PIEZO_OUTLIER_MIN_SAMPLES && (!c->detecting || buried)
+    return c->k - c->k_start >= PIEZO_OUTLIER_MIN_SAMPLES && (!c->detecting || buried)
            && c->quiet >= PIEZO_OUTLIER_QUIET
            && c->outlier_sum * 100.0 < PIEZO_OUTLIER_MAX_PERCENT * (double)PIEZO_OUTLIER_WINDOW
            && a * 100.0 > PIEZO_OUTLIER_FLOOR_PERCENT * c->pred_error_max
@@ -1086,6 +1172,16 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
         faded = s->rls_updated ? c->learned_rate * (1.0 - 1.0 / PIEZO_FALLBACK_JUMP_MEMORY) : c->learned_rate;
         s->learned_rate = rate > faded ? rate : faded;
     }
+}
+
+/* After a reset (sup.reset) the law's reference ramps from where the stage rested, y_start, to
+ * y_d over sup.ramp_time's n samples: r(k) = y_start + (j + 1) / n (y_d(k + d) - y_start) for
+ * j = k - k_start < n, so v ramps from 0 V as the law follows (a step of v would excite the
+ * stage's resonance, as the safe state's own ramp to 0 V avoids) */
+static double ramp_reference(const piezo_controller *c, double r)
+{
+    double f = (double)(c->k - c->k_start + 1) / (double)(c->k_ramp_end - c->k_start);
+    return c->y_start + f * (r - c->y_start);
 }
 
 /* Evaluate sample k into *s without changing *c (the caller guarantees
@@ -1194,6 +1290,7 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     theta = s->detecting ? c->theta_nominal : (s->rls_updated ? s->theta : c->theta);
     t = s->detecting ? START_OBSERVER : c->observer;
     r = reference(c, in, d, &stamped);
+    if (c->k < c->k_ramp_end) r = ramp_reference(c, r);
     fallback_test(c, r, y_meas, pred_error, &theta, s);
     /* integral action (mv.integral): z(k) = z(k-1) + gamma (y_d(k) - y_meas(k)), y_d(k) the
      * reference the law took for sample k (its r(j) is y_d(j + d), kept by sample, so a
@@ -1302,7 +1399,7 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     s->mon_weight = c->mon_forgetting * c->mon_weight + 1.0;
     s->reaches_window = c->divergence_samples > 0
                         && (s->run_large_error >= c->divergence_samples
-                            || (c->k >= PIEZO_MONITOR_SHARE_MIN_SAMPLES
+                            || (c->k - c->k_start >= PIEZO_MONITOR_SHARE_MIN_SAMPLES
                                 && s->mon_share * 100.0
                                    >= PIEZO_MONITOR_SHARE_PERCENT * (double)c->divergence_samples));
     return PIEZO_OK;
@@ -1593,6 +1690,10 @@ static void safe_commit(piezo_controller *c, const piezo_controller_sample *s)
         c->fault = s->fault;
         c->k_fault = c->k;
         c->v_fault = c->out.v;
+        c->y_fault = isfinite(s->y_meas) ? s->y_meas : 0.0;
+        c->y_moved = 0;
+    } else if (s->y_meas != c->y_fault) {
+        c->y_moved = 1;
     }
     c->k += 1;
     c->out = s->out;
@@ -1674,12 +1775,21 @@ const char *piezo_controller_check(const piezo_controller *c)
                     || (c->sat_enabled && (c->v_fault > c->sat_v_max || c->v_fault < c->sat_v_min)))
                  : c->k_fault != 0 || c->v_fault != 0.0)
         return "safe state inconsistent (reaction, sample, start of the ramp or verdict)";
+    if (!isfinite(c->y_fault) || (c->y_moved != 0 && c->y_moved != 1)
+        || (!c->fault && (c->y_fault != 0.0 || c->y_moved)))
+        return "safe state's reading at the verdict inconsistent";
     k_loop = c->fault ? c->k_fault : c->k;
+    /* sup.reset: the loop restarted at k_start (>= 1, a safe state came before), v ramping until
+     * k_ramp_end; the loop's counters run from k_start */
+    if (c->k_start > k_loop || c->n_resets > c->k || !isfinite(c->y_start)
+        || (c->n_resets == 0 ? c->k_start != 0 || c->k_ramp_end != 0
+                             : c->k_start == 0 || c->k_ramp_end != c->k_start + c->sup.ramp_samples))
+        return "restart (sup.reset) sample, ramp or count inconsistent";
     if ((fault = piezo_pi_check(&c->fwd_pi)) != NULL) return fault;
     if ((fault = piezo_pi_inverse_check(&c->inv_pi)) != NULL) return fault;
     if (c->inv_pi.m != c->fwd_pi.m) return "inverse PI and forward PI differ in m";
     if ((fault = piezo_gl_check(&c->inv_creep)) != NULL) return fault;
-    if (c->inv_creep.k != k_loop) return "inverse creep sample counter differs from the controller's";
+    if (c->inv_creep.k != k_loop - c->k_start) return "inverse creep sample counter differs from the controller's";
     if (c->d < 1 || c->d > PIEZO_MV_MAX_D) return "loop delay d outside 1..9";
     if (c->head < 0 || c->head >= PIEZO_MV_Q_RING) return "q ring index out of range";
     if (c->sat_hold < 0 || c->sat_hold > (c->d > PIEZO_DETECT_N ? c->d : PIEZO_DETECT_N) + 1)
@@ -1768,11 +1878,11 @@ const char *piezo_controller_check(const piezo_controller *c)
     /* a run reaching the window, or a share reaching its quarter, would have been refused */
     if (c->divergence_samples > 0 && c->run_large_error >= c->divergence_samples)
         return "monitor run at or beyond the divergence window";
-    if (c->divergence_samples > 0 && c->k > PIEZO_MONITOR_SHARE_MIN_SAMPLES
+    if (c->divergence_samples > 0 && k_loop - c->k_start > PIEZO_MONITOR_SHARE_MIN_SAMPLES
         && c->mon_share * 100.0 >= PIEZO_MONITOR_SHARE_PERCENT * (double)c->divergence_samples)
         return "monitor share at or beyond its bound";
     if ((fault = piezo_supervisor_check(&c->sup)) != NULL) return fault;
-    if (c->sup.k != k_loop) return "supervisor sample counter differs from the controller's";
+    if (c->sup.k != k_loop - c->k_start) return "supervisor sample counter differs from the controller's";
     if (c->verdict.fault < PIEZO_SUP_NONE || c->verdict.fault > PIEZO_SUP_FROZEN)
         return "supervision verdict out of range";
     /* outliers: sums within their weights, counts within the samples */
@@ -1930,6 +2040,60 @@ int piezo_controller_explain_safe_state(const piezo_controller *c, const piezo_s
     return used + piezo_controller_explain_in(c, piezo_controller_fault_status(c->fault), ctx,
                                               (size_t)used < size ? text + used : NULL,
                                               (size_t)used < size ? size - (size_t)used : 0);
+}
+
+/* the time of sample k where the loop is */
+static double context_time(const piezo_sup_context *ctx, uint64_t k)
+{
+    return ctx->t0 + (double)(int64_t)k * ctx->h;
+}
+
+int piezo_controller_explain_reset(const piezo_controller *c, int refusal, const piezo_controller_input *in,
+                                   uint64_t k, const piezo_sup_context *ctx, char *text, size_t size)
+{
+    double now, y_ref = in ? in->y_ref : 0.0, y_meas = in ? in->y_meas : 0.0;
+    if (text != NULL && size > 0) text[0] = '\0';
+    if (c == NULL || ctx == NULL) return 0;
+    now = context_time(ctx, k);
+    switch (refusal) {
+    case PIEZO_RESET_ACCEPTED:
+        /* c has restarted: its fault is gone, its count says how many times */
+        return snprintf(text, size, "sup.reset accepted at t = %.9g s (reset %llu): the loop leaves its safe state "
+                        "and restarts from the nominal model, its parameters kept, from the stage at rest at "
+                        "y_meas = %.6g um: the law's reference ramps from there to y_d over sup.ramp_time = %g s, so "
+                        "v ramps from 0 V; the estimates and the supervision start anew (sup.status 0 until it "
+                        "verifies the loop again), the loop delay chosen and the sensor's measured noise are kept. "
+                        "A fault of the response (inverted, gain, delay, unstable) cannot be seen at rest: if it "
+                        "persists, the supervision stops the loop again once the stage moves",
+                        now, (unsigned long long)c->n_resets, y_meas, c->sup.ramp_time);
+    case PIEZO_RESET_NO_FAULT:
+        return snprintf(text, size, "sup.reset raised at t = %.9g s while the loop runs (sup.fault = 0): there is "
+                        "no safe state to leave, nothing was done", now);
+    case PIEZO_RESET_RAMPING:
+        return snprintf(text, size, "sup.reset refused at t = %.9g s: v is still ramping to 0 V (sup.ramp_time = "
+                        "%g s, until t = %.9g s); the loop stays in its safe state (sup.fault = %d). Lower sup.reset "
+                        "and raise it again once v is at 0 V", now, c->sup.ramp_time,
+                        context_time(ctx, c->k_fault + c->sup.ramp_samples), c->fault);
+    case PIEZO_RESET_INPUTS:
+        return snprintf(text, size, "sup.reset refused at t = %.9g s: y_ref = %g um or y_meas = %g um is not "
+                        "finite; the loop stays in its safe state (sup.fault = %d)", now, y_ref, y_meas, c->fault);
+    case PIEZO_RESET_STUCK:
+        return snprintf(text, size, "sup.reset refused at t = %.9g s: the cause persists. y_meas still reads "
+                        "%.9g um, to the bit what it read at the verdict (t = %.9g s), although v went from %g V to "
+                        "0 V since: the sensor is still frozen, or v still does not reach the stage (sup.fault = "
+                        "%d, %s). Check the sensor, its cable and the amplifier, then lower sup.reset and raise "
+                        "it again", now, y_meas, context_time(ctx, c->k_fault), c->v_fault, c->fault,
+                        piezo_supervisor_fault_name(c->fault));
+    case PIEZO_RESET_OUT_OF_REACH:
+        return snprintf(text, size, "sup.reset refused at t = %.9g s: the cause persists. The reference y_ref = "
+                        "%.6g um is still beyond what the stage reached with v held at %g V (y_meas = %.6g um), by "
+                        "more than sup.clip_error = %g um: restarted, the loop would be held at the rail again "
+                        "(sup.fault = %d, %s). Bring the reference within reach, or widen sat.v_min..sat.v_max, "
+                        "then lower sup.reset and raise it again", now, y_ref, c->v_fault, c->y_fault,
+                        c->sup.clip_error, c->fault, piezo_supervisor_fault_name(c->fault));
+    default:
+        return 0;
+    }
 }
 
 const char *piezo_controller_check_params(const piezo_controller *c, const piezo_controller_params *q)

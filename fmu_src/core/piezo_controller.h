@@ -267,6 +267,13 @@ typedef struct {
     int fault;                   /* 0: running; else the fault code (piezo_sup_fault) */
     uint64_t k_fault;            /* the sample whose verdict it was (the loop's state is of then) */
     double v_fault;              /* v when it came (the ramp's start) [V] */
+    double y_fault;              /* y_meas of the verdict's sample [um] */
+    int y_moved;                 /* y_meas has read another value since (sup.reset's test of a stuck sensor) */
+    /* sup.reset (piezo_controller_restart): the loop restarted from the safe state */
+    uint64_t k_start;            /* the sample the loop (re)started at: 0, or the last accepted reset's */
+    uint64_t k_ramp_end;         /* the law's reference ramps from y_start to y_d until this sample (0: none) */
+    double y_start;              /* y_meas where the stage rested at the restart [um] */
+    uint64_t n_resets;           /* resets accepted */
     /* estimates with guarantees (robust update): the admissible set, computed at init from the
      * nominal model and rls.zero_min, rls.pole_min, sup.gain_min (gain_lo), sup.gain_max (gain_hi), as
      * rows adm_c^T theta <= adm_d */
@@ -437,6 +444,39 @@ double piezo_controller_probe_snr(void);
 /* NULL when a controller runs on `params` (valid, and the copies piezo_controller_init keeps
  * of them equal them), else a static text saying which does not hold. */
 const char *piezo_controller_check_params(const piezo_controller *ctrl, const piezo_controller_params *params);
+
+/*
+ * sup.reset, a drive's fault reset (docs/robustness.md, "Leaving the safe state"): why a reset
+ * raised now, with the inputs of the sample it would restart at, is refused (PIEZO_RESET_*), or
+ * PIEZO_RESET_ACCEPTED. Only the causes the safe state can see are judged: inputs not finite, v
+ * still ramping to 0 V, a y_meas that has not left the verdict's reading (a frozen or silent
+ * sensor), a reference still beyond what the stage reached at the rail. A fault of the
+ * response (inverted, gain, delay, unstable) shows only in a moving loop: the restarted
+ * supervision judges it again, as at the start.
+ */
+typedef enum {
+    PIEZO_RESET_ACCEPTED = 0,
+    PIEZO_RESET_NO_FAULT = 1,    /* not in the safe state: nothing to reset */
+    PIEZO_RESET_RAMPING = 2,     /* v has not reached 0 V yet (sup.ramp_time) */
+    PIEZO_RESET_INPUTS = 3,      /* y_ref or y_meas not finite */
+    PIEZO_RESET_STUCK = 4,       /* y_meas still reads what it read at the verdict, to the bit */
+    PIEZO_RESET_OUT_OF_REACH = 5 /* the reference is still beyond the reading at the rail */
+} piezo_reset_refusal;
+int piezo_controller_reset_refusal(const piezo_controller *ctrl, const piezo_controller_input *in);
+/*
+ * Leave the safe state (sup.reset accepted): the loop restarts at sample ctrl->k from its nominal
+ * model, with its parameters, as a fresh controller would (estimates, covariance, delay
+ * detection, supervision, integral action), but from where the stage rests: y_meas(k) as its past
+ * readings, the hysteresis model's operators after v = 0 V, and the law's reference ramping from
+ * there to y_d over sup.ramp_time, so that v ramps from 0 V. The counts of the run (clipping, outliers, fallbacks,
+ * detections) go on. PIEZO_ERR_PARAM when ctrl is not in the safe state or y_meas is not finite.
+ */
+piezo_status piezo_controller_restart(piezo_controller *ctrl, double y_meas);
+/* Why a reset raised at sample k with inputs in was refused (refusal from
+ * piezo_controller_reset_refusal), or that it was accepted (ctrl restarted since), in words, into
+ * text (at most size bytes); the length it wanted. */
+int piezo_controller_explain_reset(const piezo_controller *ctrl, int refusal, const piezo_controller_input *in,
+                                   uint64_t k, const piezo_sup_context *context, char *text, size_t size);
 
 /* Diophantine 1 = A E + z^-d Gd for A = 1 + a1 z^-1 + a2 z^-2, 1 <= d <= 9:
  * e[0..d-1] (e[0] = 1), g[0..1]. */

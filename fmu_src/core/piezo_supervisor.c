@@ -125,6 +125,20 @@ void piezo_supervisor_reset(piezo_supervisor *s)
     s->bridged_run = 0;
 }
 
+/* A stage at rest at y: A(1) y = B(1) q in the model, so z = A(1) y for every past sample, and
+ * the model's own prediction rests at w / A(1) */
+void piezo_supervisor_restart(piezo_supervisor *s, double y, double w)
+{
+    double a;
+    if (!s) return;
+    a = 1.0 + s->a1 + s->a2;
+    piezo_supervisor_reset(s);
+    s->y1 = s->y2 = s->r1 = s->r2 = y;
+    s->z1 = s->zr1 = a * y;
+    s->w1 = w;
+    s->yhat1 = s->yhat2 = w / a;
+}
+
 /* Sww_d(k) = Sww_1(k - d + 1): the new one for d = 1, the kept ones for d >= 2 */
 static double sww_of(const piezo_supervisor *s, const piezo_supervisor_next *n, int d)
 {

@@ -335,6 +335,9 @@ piezo_status piezo_supervisor_init(piezo_supervisor *sup, const piezo_supervisor
                                    double a1, double a2, double b1, double b2, double h,
                                    piezo_diag *diag);
 void piezo_supervisor_reset(piezo_supervisor *sup);
+/* Reset, for a loop that restarts from rest (sup.reset): the stage at y [um] with the model's
+ * B q at w, its past readings, references and predictions those of a stage at rest there. */
+void piezo_supervisor_restart(piezo_supervisor *sup, double y, double w);
 /* The statistics and the verdict of sample k (sup->k) into *next; *sup unchanged.
  * Disabled (sup.enabled = false): nothing computed, next->fault 0 (the rest of
  * next is not set), no verdict. */
