@@ -176,7 +176,7 @@ def _variables(fmi):
             runs.setdefault(m.group(1), []).append(vr)
     for vr, source, name, kind in table:
         m = _ELEMENT.match(name)
-        causality = ("input" if kind == "INPUT" else
+        causality = ("input" if kind.startswith("INPUT") else
                      "output" if kind.startswith("OUT") else "parameter")
         c_type = ("Boolean" if kind.endswith("BOOL") else
                   "Integer" if kind.endswith("INT") else "Real")

@@ -16,7 +16,7 @@ from conftest import assert_refused, assert_reset_to_start_values, start_value
 
 OUTPUTS = ["v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error"]   # the Real outputs of the law
 TIMING = ["loop_delay", "loop_delay_time", "preview_lead", "meas_offset"]   # what it detected
-INPUTS = ["y_ref", "y_meas", "y_preview", "t_preview", "t_meas"]
+INPUTS = ["y_ref", "y_meas", "y_preview", "t_preview", "t_meas", "sup.reset"]
 H = 0.0005
 # The direct-feedthrough option (d = 1): v at t_k from the inputs set at t_k.
 FEEDTHROUGH = {"mv.feedthrough": True, "mv.delay": 0}

@@ -94,6 +94,7 @@ typedef enum {
     vr_rls_fallback_ratio,  /* the fallback to the nominal model */
     vr_rls_fallback_window, /* [s] */
     vr_est_fallbacks,       /* output Integer: fallbacks to the nominal model so far */
+    vr_sup_reset,           /* input Boolean: the fault reset (its rising edge leaves the safe state) */
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -105,6 +106,7 @@ typedef struct {
     double y_preview;
     double t_preview;
     double t_meas;
+    int sup_reset;                  /* input sup.reset (fmu_controller_reset_input) */
     double t0;                      /* start time [s] */
     double last_t_preview;          /* the stamps of the last committed sample: a stamp is */
     double last_t_meas;             /* trusted when it advanced by h since (connected) */

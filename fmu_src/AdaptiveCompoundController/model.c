@@ -130,6 +130,7 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_rls_fallback_ratio] = PARAM_REAL("rls.fallback_ratio", rls_fallback_ratio),
     [vr_rls_fallback_window] = PARAM_REAL("rls.fallback_window", rls_fallback_window),
     [vr_est_fallbacks] = MODEL_OUTPUT_INT("est.fallbacks", fallbacks),
+    [vr_sup_reset] = { "sup.reset", MODEL_BOOLEAN, MODEL_INPUT, offsetof(ModelData, sup_reset) },
 };
 
 void model_set_start_values(ModelData *data)
@@ -140,6 +141,7 @@ void model_set_start_values(ModelData *data)
     data->y_preview = INPUT_START;
     data->t_preview = INPUT_START;
     data->t_meas = INPUT_START;
+    data->sup_reset = 0;
 }
 
 /* t_k of the model's own t0 and h (fmu_sample_time, as the glue) */
@@ -288,17 +290,24 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
     stamps_seen seen;
     piezo_controller_input in;
     piezo_status st;
+    int read_ahead = outputs_current && data->params.mv_feedthrough;
     note_loop_inputs(data);
     in = sample_input(data, &meas_offset, &seen);
+    /* sup.reset: before this sample; with mv.feedthrough, whose outputs of this sample were read
+     * before the step, after it (the restart takes effect at the next sample) */
+    if (!read_ahead)
+        fmu_controller_reset_input(&data->track, &data->ctrl, data->sup_reset, &in);
     /* mv.feedthrough: the sample the outputs were read from is committed as is
      * (computed once, from these inputs); the commit refuses it if it is not
      * this sample's */
-    if (outputs_current && data->params.mv_feedthrough)
+    if (read_ahead)
         st = piezo_controller_commit(&data->ctrl, &data->pending, NULL);
     else
         st = piezo_controller_step_input(&data->ctrl, &in, history, history_capacity, NULL);
     if (st == PIEZO_OK)
         after_commit(data, &in, meas_offset, &seen);
+    if (st == PIEZO_OK && read_ahead)
+        fmu_controller_reset_input(&data->track, &data->ctrl, data->sup_reset, &in);
     return st;
 }
 

@@ -139,6 +139,7 @@ typedef enum {
     vr_rls_fallback_ratio,  /* the fallback to the nominal model */
     vr_rls_fallback_window, /* [s] */
     vr_est_fallbacks,       /* output Integer: fallbacks to the nominal model so far */
+    vr_sup_reset,           /* input Boolean: the controller's fault reset */
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -155,6 +156,7 @@ typedef struct {
     int y_d_lead;                       /* samples the input y_d leads the stage's time by */
     /* input, held over the communication step */
     double y_d;
+    int sup_reset;                      /* input sup.reset (fmu_controller_reset_input) */
     /* model_latch_inputs: sample k reads y_d at its instant t_k; when a step ended between
      * t_k and t_(k+1), the y_d held at t_k is kept for it here */
     double y_d_latched;

@@ -56,6 +56,7 @@
 #define CTRL_REAL(name, field) { name, MODEL_REAL, MODEL_PARAMETER, offsetof(ModelData, control.field) }
 #define CTRL_INT(name, field) { name, MODEL_INTEGER, MODEL_PARAMETER, offsetof(ModelData, control.field) }
 #define CTRL_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_PARAMETER, offsetof(ModelData, control.field) }
+#define CTRL_INPUT_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_INPUT, offsetof(ModelData, field) }
 #define CTRL_OUT(name, field) { name, MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, ctrl.out.field) }
 #define CTRL_OUT_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_OUTPUT, offsetof(ModelData, ctrl.out.field) }
 #define CTRL_OUT_REAL(name, field) { name, MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, field) }
@@ -219,6 +220,7 @@ const model_variable model_variables[MODEL_N_VARIABLES] = {
     [vr_rls_fallback_ratio] = CTRL_REAL("rls.fallback_ratio", rls_fallback_ratio),
     [vr_rls_fallback_window] = CTRL_REAL("rls.fallback_window", rls_fallback_window),
     [vr_est_fallbacks] = CTRL_OUT_INT("est.fallbacks", fallbacks),
+    [vr_sup_reset] = CTRL_INPUT_BOOL("sup.reset", sup_reset),
 };
 
 /* ModelData.refused_by: which block refused the last refused sample (for its message), or
@@ -240,6 +242,7 @@ void model_set_start_values(ModelData *data)
     data->use_internal_reference = 1;
     data->y_d_lead = 0;
     data->y_d = 0.0;
+    data->sup_reset = 0;
 }
 
 /* t_k of the model's own t0 and h (fmu_sample_time, as the glue) */
@@ -358,6 +361,7 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
         in.y_ref = in.y_preview = sampled_y_d(data);
     }
     in.preview_lead = preview_lead(data);
+    fmu_controller_reset_input(&data->track, &data->ctrl, data->sup_reset, &in);
     st = piezo_controller_evaluate(&data->ctrl, &in, exact ? NULL : history, exact ? 0 : history_capacity, &cs);
     if (st != PIEZO_OK)
         return refused(data, REFUSED_CONTROLLER, st);

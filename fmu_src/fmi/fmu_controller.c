@@ -3,6 +3,7 @@
  */
 #include <math.h>
 #include <stdio.h>
+#include <string.h>
 
 #include "fmu_controller.h"
 #include "fmu_model.h"
@@ -20,6 +21,50 @@ void fmu_controller_track_init(fmu_controller_track *t, const piezo_controller *
     t->said_fault = 0;
     t->said_fallback = 0;
     t->said_wait = 0;
+    t->reset_input = 0;
+    t->reset_said = 0;
+    t->reset_k = 0;
+    t->reset_y_ref = t->reset_y_meas = 0.0;
+}
+
+int fmu_controller_reset_input(fmu_controller_track *t, piezo_controller *c, int raised,
+                               const piezo_controller_input *in)
+{
+    int edge = raised && !t->reset_input, refusal;
+    t->reset_input = raised ? 1 : 0;
+    if (!edge)
+        return 0;
+    refusal = piezo_controller_reset_refusal(c, in);
+    t->reset_said = 1 + refusal;
+    t->reset_k = c->k;
+    t->reset_y_ref = isfinite(in->y_ref) ? in->y_ref : 0.0;
+    t->reset_y_meas = isfinite(in->y_meas) ? in->y_meas : 0.0;
+    if (refusal != PIEZO_RESET_ACCEPTED || piezo_controller_restart(c, in->y_meas) != PIEZO_OK)
+        return 0;
+    /* a new safe state is said again; the restarted loop's verification and waits too */
+    t->said_fault = 0;
+    t->said_verified = 0;
+    t->said_wait = 0;
+    return 1;
+}
+
+/* the reset's message (t->reset_said), 1 if written: the event's (accepted, nothing to reset) when
+ * warning is 0, the Warning's (refused) when 1 */
+static int reset_message(fmu_controller_track *t, const piezo_controller *c, const piezo_sup_context *ctx,
+                         int warning, char *text, size_t size)
+{
+    piezo_controller_input in;
+    int refusal = t->reset_said - 1;
+    int is_warning = refusal != PIEZO_RESET_ACCEPTED && refusal != PIEZO_RESET_NO_FAULT;
+    if (t->reset_said == 0 || is_warning != warning)
+        return 0;
+    t->reset_said = 0;
+    in.y_ref = t->reset_y_ref;
+    in.y_meas = t->reset_y_meas;
+    in.y_preview = 0.0;
+    in.preview_lead = 0;
+    piezo_controller_explain_reset(c, refusal, &in, t->reset_k, ctx, text, size);
+    return 1;
 }
 
 void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller *c, double t0, double h)
@@ -33,6 +78,12 @@ void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller
 int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
                          char *text, size_t size)
 {
+    piezo_sup_context ctx;
+    memset(&ctx, 0, sizeof ctx);
+    ctx.t0 = t0;
+    ctx.h = h;
+    if (reset_message(t, c, &ctx, 0, text, size))
+        return 1;
     if (c->sup.status && !t->said_verified) {
         t->said_verified = 1;
         snprintf(text, size, "supervision: y_meas answers v as the model says (%.3g times its response, %d "
@@ -70,6 +121,8 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
                            char *text, size_t size)
 {
     double t0 = ctx->t0, h = ctx->h;
+    if (reset_message(t, c, ctx, 1, text, size))
+        return 1;
     if (c->fault && !t->said_fault) {
         /* the safe state: said once, with the verdict in the words of an Error */
         t->said_fault = 1;
@@ -192,8 +245,12 @@ const char *fmu_controller_track_check(const fmu_controller_track *t, int core_i
         || (t->said_saturated != 0 && t->said_saturated != 1)
         || (t->said_large_error != 0 && t->said_large_error != 1)
         || (t->said_outlier != 0 && t->said_outlier != 1) || (t->said_fault != 0 && t->said_fault != 1)
-        || (t->said_fallback != 0 && t->said_fallback != 1) || (t->said_wait != 0 && t->said_wait != 1))
+        || (t->said_fallback != 0 && t->said_fallback != 1) || (t->said_wait != 0 && t->said_wait != 1)
+        || (t->reset_input != 0 && t->reset_input != 1))
         return "warning flags are not 0 or 1";
+    if (t->reset_said < 0 || t->reset_said > 1 + PIEZO_RESET_OUT_OF_REACH || t->reset_k > k
+        || !isfinite(t->reset_y_ref) || !isfinite(t->reset_y_meas))
+        return "sup.reset's record out of range";
     if (!isfinite(t->delay_time))
         return "time stamps not finite";
     if (t->delay < 0 || t->delay > PIEZO_MV_MAX_D || t->said_delay < 0 || t->said_delay > PIEZO_MV_MAX_D)

@@ -31,6 +31,12 @@ typedef struct {
     int said_fault;             /* the safe state's warning was logged */
     int said_fallback;          /* the first fallback to the nominal model was logged */
     int said_wait;              /* the detection's first wait for the reference was logged as an event */
+    /* sup.reset: a rising edge of the input is acted on at a sample and said after the step */
+    int reset_input;            /* the input's value at the last sample (0 at initialization) */
+    int reset_said;             /* 0: nothing to say; else 1 + the last reset's verdict (piezo_reset_refusal) */
+    uint64_t reset_k;           /* the sample it was raised at */
+    double reset_y_ref;         /* that sample's inputs, for the message */
+    double reset_y_meas;
 } fmu_controller_track;
 
 /* At initialization (the controller just initialized, sample 0 at t0). */
@@ -38,6 +44,12 @@ void fmu_controller_track_init(fmu_controller_track *t, const piezo_controller *
 /* After a sample was committed (c->k is the next one). */
 void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller *c, double t0, double h);
 
+/* sup.reset at the sample about to be evaluated (c->k) with its inputs in: on the input's rising
+ * edge the controller leaves its safe state if the cause it can see is gone
+ * (piezo_controller_reset_refusal, piezo_controller_restart), and what happened is said after the
+ * step (an event when accepted or nothing to reset, a Warning when refused). 1 when it restarted. */
+int fmu_controller_reset_input(fmu_controller_track *t, piezo_controller *c, int raised,
+                               const piezo_controller_input *in);
 /* At most one event / one warning per call, each thing once: 1 with the text written, else 0.
  * ctx: where the loop is (its t0 and h, wired or inside one FMU: piezo_sup_context). */
 int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
