@@ -362,6 +362,10 @@ class ControllerRef:
         self.new_trial = False
         excited, offset = True, self.offset
         offset_before, noise_y_before, updated = self.offset, self.noise_y, False
+        # the monitor's bound (monitor_bound): monitor.pred_error_max, or 8 times the noise measured
+        # before this sample when larger, at most twice monitor.pred_error_max
+        bound = min(8.0 * self.noise_y2, 2.0 * self.pe_max) if self.robust else 0.0
+        bound = bound if bound > self.pe_max else self.pe_max
         if self.robust:
             r1 = self.r_last
             line = self.anchor + self.velocity
@@ -380,7 +384,10 @@ class ControllerRef:
         live = not self.buried() or (self.robust and excited)
         if was_detecting:
             offset = 0.0
+            buried = self.buried()
             pred_error = self.detect(y_meas, live)
+            if buried:      # the start-up law's own prediction: the nominal model's at d = START_D
+                pred_error = self.error(self.nominal, self.START_D, y_meas)
         elif self.robust:
             may = self.rls and not self.sat_hold > 0
             bound = self.trace_max
@@ -472,7 +479,7 @@ class ControllerRef:
             self.fwd.step(v)
             if self.sat_hold > 0:
                 self.sat_hold -= 1
-        self.run_large = self.run_large + 1 if abs(pred_error) > self.pe_max else 0
+        self.run_large = self.run_large + 1 if abs(pred_error) > bound else 0
         restart = (self.auto and not self.detecting and self.run_large >= self.REDETECT
                    and self.k + 1 - self.k_delay >= self.REDETECT)
         self.creep.s, self.creep.x = s_next, x_next

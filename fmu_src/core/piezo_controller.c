@@ -177,6 +177,8 @@ piezo_status piezo_diophantine_observer(double a1, double a2, double t, int d, d
     return PIEZO_OK;
 }
 
+static double monitor_bound(const piezo_controller *c);
+
 /* lambda of the monitor's window: 1 - 1/monitor.divergence_samples (0: off) */
 static double monitor_forgetting(int window)
 {
@@ -877,6 +879,11 @@ double piezo_controller_probe_snr(void)
     return PROBE_SNR;
 }
 
+double piezo_controller_monitor_bound(const piezo_controller *c)
+{
+    return c ? monitor_bound(c) : 0.0;
+}
+
 int piezo_controller_probes_buried(const piezo_controller *c)
 {
     return c->robust && c->k >= NOISE_SETTLE && PROBE_SNR * c->noise_y2 > c->probe_max * c->theta_nominal[2];
@@ -1174,6 +1181,21 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
     }
 }
 
+/* The monitor's bound on |pred_error|: monitor.pred_error_max, or PIEZO_MONITOR_NOISE times the
+ * measured noise of y_meas (robust update; from its second differences at rest) when that is
+ * larger, up to PIEZO_MONITOR_NOISE_CAP times monitor.pred_error_max. The nominal model's one-step
+ * prediction error carries a sensor's noise 1.75 times (sqrt(1 + a1^2 + a2^2) for the paper's
+ * model): a 200 nm sensor's passes 1 um in 0.4 % of the samples, each of which restarted the
+ * outlier test's quiet run (a dead sensor then went unbridged on 2 of 50 stages, 3.8 um off). The
+ * cap: "noise" beyond 250 nm rms is no sensor's but a fault's (y_meas alternating +-10 um measures
+ * as 23 um of noise, and uncapped the bound would have let it run) */
+static double monitor_bound(const piezo_controller *c)
+{
+    double b = PIEZO_MONITOR_NOISE * c->noise_y2, cap = PIEZO_MONITOR_NOISE_CAP * c->pred_error_max;
+    if (b > cap) b = cap;
+    return b > c->pred_error_max ? b : c->pred_error_max;
+}
+
 /* After a reset (sup.reset) the law's reference ramps from where the stage rested, y_start, to
  * y_d over sup.ramp_time's n samples: r(k) = y_start + (j + 1) / n (y_d(k + d) - y_start) for
  * j = k - k_start < n, so v ramps from 0 V as the law follows (a step of v would excite the
@@ -1194,7 +1216,7 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
                               double *history, size_t capacity, piezo_controller_sample *s)
 {
     double e[PIEZO_MV_MAX_D], g[2] = {0.0, 0.0}, f[PIEZO_MV_MAX_D + 1];
-    double pred_error, numerator, q, r, v, t, y_meas = in->y_meas;
+    double pred_error, numerator, q, r, v, t, bound, y_meas = in->y_meas;
     const double *theta;
     piezo_status st;
     int i, d, stamped, saturated = 0, operators_finite;
@@ -1251,6 +1273,12 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     if (c->detecting) {
         s->offset = 0.0;
         pred_error = detect_update(c, y_meas, s);
+        /* while the probes are buried the detection chooses nothing and the start-up law runs the
+         * nominal model: its own one-step prediction is what the monitor judges, not the best
+         * candidate's (which adapt on the noisy data while the reference moves: with a 200 nm
+         * sensor theirs wandered up to 26 um from y_meas while the stage tracked within 0.65 um,
+         * and the monitor stopped 51 of 1300 runs of the stage's day's quick slice) */
+        if (!s->clock) pred_error = rls_error(c, c->theta_nominal, PIEZO_DETECT_START_D, y_meas);
     } else {
         /* the loop model's a-priori error is the outlier test's (computed once), unless the
          * model's prediction stood in for y_meas */
@@ -1360,13 +1388,14 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
      * alternates, say) can predict it well: the monitor then also judges the
      * nominal model's prediction error, A y(k) - B q(k-d), which a working loop
      * keeps small while clipped (at most 0.13 um on the saturation family). */
-    s->large_error = fabs(pred_error) > c->pred_error_max;
+    bound = monitor_bound(c);
+    s->large_error = fabs(pred_error) > bound;
     if (c->sat_hold > 0 && !s->large_error) {
         /* A y(k) on the controller's own past (the supervisor's z, same operands and order,
          * but computed here: a switched-off supervisor computes nothing) */
         double a_y = y_meas + c->theta_nominal[0] * c->y_prev[0] + c->theta_nominal[1] * c->y_prev[1];
         s->large_error = fabs(a_y - (c->theta_nominal[2] * q_past(c, d) + c->theta_nominal[3] * q_past(c, d + 1)))
-                         > c->pred_error_max;
+                         > bound;
     }
     s->run_large_error = s->large_error ? c->run_large_error + 1 : 0;
     /* a chosen loop whose prediction error stays beyond the bound since the
@@ -1977,12 +2006,23 @@ int piezo_controller_explain_in(const piezo_controller *c, int st, const piezo_s
     if (st == PIEZO_ERR_UNSTABLE) {
         /* the share the refused sample would have made, of the whole window */
         double share = 100.0 * (c->mon_forgetting * c->mon_share + 1.0) / (double)c->divergence_samples;
+        double bound = monitor_bound(c);
+        char beyond[160];
+        if (bound >= PIEZO_MONITOR_NOISE_CAP * c->pred_error_max)
+            snprintf(beyond, sizeof beyond, "%.4g um (raised for the measured noise of y_meas, %.4g um rms, to its "
+                     "cap, %d times monitor.pred_error_max = %g um: noise that large is more than a sensor's)", bound,
+                     c->noise_y2, PIEZO_MONITOR_NOISE_CAP, c->pred_error_max);
+        else if (bound > c->pred_error_max)
+            snprintf(beyond, sizeof beyond, "%.4g um (%d times the measured noise of y_meas, %.4g um rms, above "
+                     "monitor.pred_error_max = %g um)", bound, PIEZO_MONITOR_NOISE, c->noise_y2, c->pred_error_max);
+        else
+            snprintf(beyond, sizeof beyond, "monitor.pred_error_max = %g um", c->pred_error_max);
         said(&used, snprintf(AT, LEFT, "the closed loop is unstable: |pred_error| was beyond "
-             "monitor.pred_error_max = %g um in %.0f %% of the monitor's window of %llu samples, %llu of them "
+             "%s in %.0f %% of the monitor's window of %llu samples, %llu of them "
              "in a row now (the loop is stopped at monitor.divergence_samples = %llu in a row, or at %d %% of "
              "the window, older samples counting less; where v was clipped the nominal model's prediction "
              "error counts too; largest |pred_error| so far %.6g um). ",
-             c->pred_error_max, share, (unsigned long long)c->divergence_samples,
+             beyond, share, (unsigned long long)c->divergence_samples,
              (unsigned long long)(c->run_large_error + 1),
              (unsigned long long)c->divergence_samples, PIEZO_MONITOR_SHARE_PERCENT, c->max_abs_pred_error));
         /* the supervisor's evidence: how far y_meas went against the model's expectation */

@@ -70,6 +70,8 @@
 #define PIEZO_MONITOR_DEFAULT_SAMPLES 200   /* default divergence window [samples] */
 #define PIEZO_MONITOR_SHARE_PERCENT 25      /* ... or this share of its samples beyond the bound */
 #define PIEZO_MONITOR_SHARE_MIN_SAMPLES 32  /* (judged from this sample on) */
+#define PIEZO_MONITOR_NOISE 8               /* the bound is at least this many times y_meas's measured noise */
+#define PIEZO_MONITOR_NOISE_CAP 2           /* ... up to this many times monitor.pred_error_max */
 #define PIEZO_MV_AUTO_DELAY -1   /* mv_delay: detect the loop delay */
 #define PIEZO_DETECT_N 3         /* candidates d = 1, 2, 3 */
 #define PIEZO_DETECT_THETA 12    /* PIEZO_DETECT_N * 4 */
@@ -436,6 +438,9 @@ piezo_status piezo_controller_fault_status(int fault);
  * piezo_gl_check_history(&ctrl->inv_creep, ...).
  */
 const char *piezo_controller_check(const piezo_controller *ctrl);
+/* The divergence monitor's bound on |pred_error| now: monitor.pred_error_max, or PIEZO_MONITOR_NOISE
+ * times the measured noise of y_meas when that is larger [um]. */
+double piezo_controller_monitor_bound(const piezo_controller *ctrl);
 /* 1: the delay probes are buried in the noise (the probe the measured noise of y_meas asks for is
  * beyond mv.probe_max): the detection waits, chooses nothing, and its watchdog stops. */
 int piezo_controller_probes_buried(const piezo_controller *ctrl);

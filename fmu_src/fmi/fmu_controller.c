@@ -175,7 +175,8 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
         return 1;
     }
     if (c->n_large_settled > 0 && !t->said_large_error) {
-        char consequence[192];
+        char consequence[192], bound[160];
+        double b = piezo_controller_monitor_bound(c);
         t->said_large_error = 1;
         /* monitor.divergence_samples = 0 switches the verdict off: say so, not "after 0 samples" */
         if (c->divergence_samples > 0)
@@ -186,10 +187,18 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
         else
             snprintf(consequence, sizeof consequence, "With monitor.divergence_samples = 0 the loop is never "
                      "declared unstable, however long it stays above");
-        snprintf(text, size, "|pred_error| exceeded monitor.pred_error_max = %g um, first at t = %.9g s "
+        if (b >= PIEZO_MONITOR_NOISE_CAP * c->pred_error_max)
+            snprintf(bound, sizeof bound, "%.4g um (raised for the measured noise of y_meas to its cap, %d times "
+                     "monitor.pred_error_max = %g um)", b, PIEZO_MONITOR_NOISE_CAP, c->pred_error_max);
+        else if (b > c->pred_error_max)
+            snprintf(bound, sizeof bound, "%.4g um (%d times the measured noise of y_meas, above "
+                     "monitor.pred_error_max = %g um)", b, PIEZO_MONITOR_NOISE, c->pred_error_max);
+        else
+            snprintf(bound, sizeof bound, "monitor.pred_error_max = %g um", c->pred_error_max);
+        snprintf(text, size, "|pred_error| exceeded %s, first at t = %.9g s "
                  "(not in the answer to a jump of the reference, which is counted but not logged): the model "
                  "of G no longer predicts the measurement. %s; further exceedances are counted, not logged",
-                 c->pred_error_max, fmu_sample_time(t0, c->k_first_large_settled, h), consequence);
+                 bound, fmu_sample_time(t0, c->k_first_large_settled, h), consequence);
         return 1;
     }
     return 0;
