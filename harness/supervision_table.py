@@ -966,6 +966,185 @@ def start_markdown(family):
                            "still detecting at the end", "chosen, median", "chosen, worst"], rows)
 
 
+# ---------------------------------------------------------------------------------------------
+# sup.reset: leaving the safe state (docs/robustness.md, "Leaving the safe state")
+# ---------------------------------------------------------------------------------------------
+RESET_SENSORS_NM = (5, 20, 100, 200)
+#: y_d: a 5 um hold, the fault at FAULT, a reset raised while the cause persists (EARLY: refused),
+#: the cause gone at CLEARED, a reset (LATE: accepted), a 10 um step at STEP, the end at END [s]
+RESET_TIMES = {"fault": 2.0, "early": 2.6, "cleared": 2.8, "late": 3.0, "step": 3.5, "end": 4.0}
+RESET_HOLD, RESET_STEP, RESET_FAR = 5.0, 15.0, 400.0
+
+
+@dataclass(frozen=True)
+class ResetCase:
+    """A fault the safe state catches, the reset while it persists and the one after it is gone.
+
+    ``kind``: "stuck" (y_meas holds its reading from the onset until ``cleared``), "dead" (it reads
+    0), "reach" (y_d jumps to 400 um, beyond any stage's reach, and returns to the hold at
+    ``cleared``: v held at a limit), "inverted" (the stage gets -v from the onset on, never
+    cleared: in the hold the loop runs to a rail, v held at a limit; the reset at ``late`` is
+    accepted, as the rail's reading, against the way v went, says nothing of the reach, and the
+    restarted supervision must stop the loop again). ``faults``: the first verdicts that name the
+    cause (a dead 200 nm sensor may be "no response", a reference out of reach with a noisy sensor
+    the monitor's "loop unstable" while v is at the rail), empty: any.
+    ``refusal``: the reason the early reset is refused (``piezo_reset_refusal``), None when the
+    cause cannot be seen at rest and the early reset is not raised."""
+    name: str
+    kind: str
+    faults: tuple
+    refusal: int | None
+
+
+RESET_CASES = (
+    ResetCase("sensor stuck, then back", "stuck", ("y_meas frozen", "no response"), 4),
+    ResetCase("sensor dead (reads 0), then back", "dead", ("y_meas frozen", "no response"), 4),
+    ResetCase("reference out of reach, then back", "reach", ("v held at a limit", "loop unstable"), 5),
+    ResetCase("amplifier inverted, never cleared", "inverted", (), None),
+)
+
+
+def _reset_profile(kind):
+    n = int(round(RESET_TIMES["end"] / H))
+    y_d = np.full(n, RESET_HOLD)
+    if kind == "reach":
+        y_d[int(round(RESET_TIMES["fault"] / H)):int(round(RESET_TIMES["cleared"] / H))] = RESET_FAR
+    y_d[int(round(RESET_TIMES["step"] / H)):] = RESET_STEP
+    return y_d
+
+
+def run_reset(case, plant, controller=None, keep=False):
+    """Run one :class:`ResetCase` on the C core (stepped as a master that exchanges at communication
+    points), ``sup.reaction`` = 1, raising ``sup.reset`` as the FMUs act on its rising edge
+    (``Controller.fault_reset``). Returns a dict: ``fault`` (the first verdict's name), ``early``
+    (the early reset's outcome: None, or (accepted, message)), ``late`` (the same for the late
+    one), ``again`` (the name of a verdict after the late reset, "" for none), ``again_time``
+    (from the restart to it [s]) and ``again_excursion`` (the largest |y - y_d| from the restart
+    to it [um]; ``first_excursion`` the same from the onset to the first verdict), ``step`` (the largest |y - y_d| over the step's first 0.25 s [um]),
+    ``settled`` (over the last 0.25 s [um]), ``v_first`` (|v| at the first restarted sample [V]),
+    ``v_jump`` (the largest change of v from one sample to the next over the ramp after the
+    restart [V]). ``keep``: also ``trace`` (time, y_d, y, y_meas, v)."""
+    y_d = _reset_profile(case.kind)
+    n = len(y_d)
+    at = {k: int(round(v / H)) for k, v in RESET_TIMES.items()}
+    p = core.Plant(plant)
+    c = core.Controller(dict(SAFE, **(controller or {})))
+    v, held = 0.0, None
+    res = {"fault": "", "early": None, "late": None, "again": "", "again_time": float("nan"),
+           "again_excursion": float("nan"), "first_excursion": float("nan")}
+    y, ym, vs = np.empty(n), np.empty(n), np.empty(n)
+    k_restart = None
+    for k in range(n):
+        y[k] = p.output.y
+        meas = p.output.y_meas
+        if case.kind in ("stuck", "dead") and at["fault"] <= k < at["cleared"]:
+            if held is None:
+                held = 0.0 if case.kind == "dead" else meas
+            meas = held
+        ym[k] = meas
+        r = y_d[min(n - 1, k + 2)]
+        if case.kind == "none":
+            pass
+        elif k == at["early"] and case.refusal is not None:
+            res["early"] = c.fault_reset(r, meas)
+        elif k == at["late"]:
+            res["late"] = c.fault_reset(r, meas)
+            if res["late"][0]:
+                k_restart = k
+        before = c.raw.fault
+        out = c.step(r, meas)
+        if c.raw.fault and not before:
+            name = core.ffi.string(core.lib().piezo_supervisor_fault_name(c.raw.fault)).decode()
+            if k_restart is None:
+                if not res["fault"]:
+                    res["fault"] = name
+                    res["first_excursion"] = float(np.abs(y[at["fault"]:k + 1] - y_d[at["fault"]:k + 1]).max())
+            elif not res["again"]:
+                res["again"], res["again_time"] = name, (k - k_restart) * H
+                res["again_excursion"] = float(np.abs(y[k_restart:k + 1] - y_d[k_restart:k + 1]).max())
+        p.step(-v if case.kind == "inverted" and k >= at["fault"] else v)
+        v = out.v
+        vs[k] = v
+    err = np.abs(y - y_d)
+    q = int(round(0.25 / H))
+    res["step"] = float(err[at["step"]:at["step"] + q].max())
+    res["settled"] = float(err[-q:].max())
+    ramp = c.raw.sup.ramp_samples
+    res["v_first"] = float(abs(vs[k_restart])) if k_restart is not None else float("nan")
+    res["v_jump"] = (float(np.abs(np.diff(vs[k_restart - 1:k_restart + ramp + 1])).max())
+                     if k_restart is not None else float("nan"))
+    if keep:
+        res["trace"] = (np.arange(n) * H, y_d, y, ym, vs)
+    return res
+
+
+#: the same profile without a fault: the step the restarted loop's is compared with
+RESET_BASELINE = ResetCase("no fault", "none", (), None)
+
+
+def _run_reset_spec(spec):
+    i, nm, case_index = spec
+    plant = _day_plant(i, nm)
+    res = run_reset(RESET_CASES[case_index], plant)
+    res["step_ratio"] = res["step"] / run_reset(RESET_BASELINE, plant)["step"]
+    return spec, res
+
+
+def reset_family(stages=50, sensors=RESET_SENSORS_NM, cases=None, jobs=2, progress=None):
+    """Every :data:`RESET_CASES` case on the stage's day's stages with each sensor:
+    ``{(case, nm): [result, ...]}``."""
+    cases = range(len(RESET_CASES)) if cases is None else cases
+    specs = [(i, nm, c) for c in cases for nm in sensors for i in range(stages)]
+    return _per_key_and_sensor(specs, _run_reset_spec, jobs, progress)
+
+
+def reset_verdict(case, r):
+    """"" when a run did what :class:`ResetCase` says, else why not."""
+    if not r["fault"] or (case.faults and r["fault"] not in case.faults):
+        return f"first verdict {r['fault'] or 'none'!r}, not one of {case.faults}"
+    if case.refusal is not None and (r["early"] is None or r["early"][0]):
+        return "the reset raised while the cause persisted was accepted"
+    if r["late"] is None or not r["late"][0]:
+        return "the reset after the cause was gone was refused: " + (r["late"][1] if r["late"] else "")
+    if case.kind == "inverted":
+        return "" if r["again"] else "after the restart nothing stopped the inverted loop"
+    return f"a verdict after the restart: {r['again']}" if r["again"] else ""
+
+
+def reset_markdown(family):
+    """Per case and sensor: runs, those that did not do what the case says, the restart's first |v|
+    and largest change of v per sample over its ramp, the step's error after the restart (median,
+    worst) and the error over the last 0.25 s, and for the case never cleared the time from the
+    step to the second verdict."""
+    from .text_tables import markdown_table
+    rows = []
+    for (ci, nm), res in sorted(family.items()):
+        case = RESET_CASES[ci]
+        bad = [reset_verdict(case, r) for r in res]
+        fine = [r for r, b in zip(res, bad) if not b]
+        col = lambda key: np.array([r[key] for r in fine])        # noqa: E731
+        inverted = case.kind == "inverted"
+        if not fine:
+            rows.append([case.name, f"{nm:g}", str(len(res)), str(len(res))] + ["-"] * 4)
+            continue
+        if inverted:
+            again, exc, first = col("again_time"), col("again_excursion"), col("first_excursion")
+            after = (f"stopped again after {1e3 * np.median(again):.1f} / {1e3 * again.max():.1f} ms, "
+                     f"{np.median(exc):.3g} / {exc.max():.3g} um off (the fault itself: {np.median(first):.3g} / "
+                     f"{first.max():.3g} um)")
+        else:
+            ratio = col("step_ratio")
+            after = f"{np.median(ratio):.3f} / {ratio.max():.3f}"
+        rows.append([case.name, f"{nm:g}", str(len(res)), str(sum(bool(b) for b in bad)),
+                     f"{col('v_first').max():.3g} V", f"{col('v_jump').max():.3g} V",
+                     "-" if inverted else f"{col('settled').max():.3g}", after])
+    return markdown_table(["case", "sensor [nm rms]", "runs", "not as the case says",
+                           "first \\|v\\| after the reset, worst", "largest change of v a sample over the ramp, worst",
+                           "\\|y - y_d\\| over the last 0.25 s [um], worst",
+                           "the step after the reset against the same step without a fault (median / worst); "
+                           "inverted: the restarted loop stopped again (median / worst)"], rows)
+
+
 def main(argv=None):
     """``python -m harness.supervision_table``: the fault table or the family, in Markdown."""
     ap = argparse.ArgumentParser(prog="python -m harness.supervision_table",
@@ -989,14 +1168,20 @@ def main(argv=None):
     fm.add_argument("--jobs", type=int, default=2)
     fm.add_argument("--reactions", nargs="+", default=["error", "safe"], choices=list(REACTIONS),
                     help="sup.reaction of the runs (default: both, each run twice)")
-    for name, text in (("stuck", "a sensor that sticks, dies or sticks after a dropout, in holds and scans, on "
-                                  "the stage's day's stages with sensors of 0 to 200 nm rms"),
-                       ("start", "noisy sensors at start: the delay detection on the stage's day's stages at "
-                                 "rest from t = 0, sensors of 0 to 200 nm rms")):
+    for name, text, sensors in (
+            ("stuck", "a sensor that sticks, dies or sticks after a dropout, in holds and scans, on the stage's "
+                      "day's stages with sensors of 0 to 200 nm rms", STUCK_SENSORS_NM),
+            ("start", "noisy sensors at start: the delay detection on the stage's day's stages at rest from t = 0, "
+                      "sensors of 0 to 200 nm rms", STUCK_SENSORS_NM),
+            ("reset", "sup.reset: leaving the safe state after a stuck or dead sensor, a reference out of reach and "
+                      "an inverted amplifier, on the stage's day's stages with sensors of 5 to 200 nm rms (a "
+                      "quieter sensor stuck in a hold is not seen, so it has no safe state to leave)",
+             RESET_SENSORS_NM)):
         study = sub.add_parser(name, help=text)
         study.add_argument("--stages", type=int, default=50, help="stages of the stage's day's family (default 50)")
-        study.add_argument("--sensors", type=float, nargs="+", default=list(STUCK_SENSORS_NM),
-                           help="sensor noise [nm rms] on the 2 nm grid (default 0 1 5 20 100 200)")
+        study.add_argument("--sensors", type=float, nargs="+", default=list(sensors),
+                           help="sensor noise [nm rms] on the 2 nm grid (default "
+                                + " ".join(f"{s:g}" for s in sensors) + ")")
         study.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     fa_ = sub.add_parser("false-alarms", help="the no-false-alarm check of any family: a function "
                          "returning RunSpecs, as module:function (e.g. harness.supervision_table:family_specs)")
@@ -1033,6 +1218,16 @@ def main(argv=None):
         if early:
             print(f"{early} runs stopped where no fault was: false alarms", file=sys.stderr)
         return 1 if early else 0
+    if args.job == "reset":
+        family = reset_family(args.stages, tuple(args.sensors), jobs=args.jobs, progress=say)
+        print(reset_markdown(family))
+        bad = [(RESET_CASES[ci].name, nm, reset_verdict(RESET_CASES[ci], r))
+               for (ci, nm), res in family.items() for r in res if reset_verdict(RESET_CASES[ci], r)]
+        for name, nm, why in bad[:10]:
+            print(f"{name}, {nm:g} nm: {why[:300]}", file=sys.stderr)
+        if bad:
+            print(f"{len(bad)} runs did not do what their case says", file=sys.stderr)
+        return 1 if bad else 0
     if args.job == "start":
         family = start_family(args.stages, tuple(args.sensors), jobs=args.jobs, progress=say)
         print(start_markdown(family))

@@ -34,7 +34,8 @@ metric_window = [0.25, 0.5]
 FIGURES = {"headline", "tracking_error", "tracking_period", "control_voltage", "rls_estimates",
            "hysteresis", "creep", "user_tracking_error", "stage_use_stage_step10_hold60s",
            "stage_use_stage_scan10hz_dwell10s", "stage_use_stage_hold5um_100nm",
-           "stage_use_stage_staircase", "stage_day_frames", "stage_day_estimates", "sensor_faults"}
+           "stage_use_stage_staircase", "stage_day_frames", "stage_day_estimates", "sensor_faults",
+           "fault_reset"}
 
 
 @pytest.fixture(scope="module")
@@ -98,6 +99,25 @@ def test_report_states_each_condition(report):
     user = next(r for r in rows if r["scenario"] == "user_short")
     assert user["condition"] == "user" and user["paper_e_rms_um"] == ""
     assert float(body[0][1]) == pytest.approx(float(user["e_rms_um"]) * 1e3, rel=1e-3)
+
+
+def test_the_report_shows_the_fault_reset_refused_then_accepted(report):
+    """The report's section "Leaving the safe state (sup.reset)": one row per
+    harness.supervision_table.RESET_CASES case on the report's stage (20 nm); the sensor faults' and
+    the reach's early resets refused with their cause, every late one accepted, the restarted loop's
+    step within 5 % of the fault-free run's, the amplifier never cleared stopped again."""
+    _, _, md, _, _ = report
+    head, body = _md_table_after(md, "## Leaving the safe state (sup.reset)")
+    assert head == ["case", "verdict", "reset at 2.6 s (cause persists)", "reset at 3 s", "after the restart"]
+    rows = {r[0]: r for r in body}
+    assert rows["sensor stuck, then back"][2] == "refused: y_meas still reads the verdict's value"
+    assert rows["sensor dead (reads 0), then back"][2] == "refused: y_meas still reads the verdict's value"
+    assert rows["reference out of reach, then back"][2] == \
+        "refused: the reference still beyond the reading at the rail"
+    assert all(r[3] == "accepted" for r in body) and len(body) == 4
+    for name in ("sensor stuck, then back", "sensor dead (reads 0), then back", "reference out of reach, then back"):
+        assert float(rows[name][4].split()[1]) <= 1.05
+    assert rows["amplifier inverted, never cleared"][4].startswith("stopped again")
 
 
 def _png_dpi(path):

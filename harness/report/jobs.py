@@ -37,7 +37,8 @@ from .provenance import collect_provenance
 from .run import evaluate_tracking, evaluate_validation, parameter_defaults, validation_series
 from .stage_use import (HOLD_STEP, LAWS, STAGE_USE_NOTES, format_stage_use_table, run_stage_use,
                         stage_use_table_rows, write_stage_use_csv)
-from .sensor_faults import SENSOR_FAULT_NOTES, run_sensor_faults, sensor_fault_rows, sensor_faults_figure
+from .sensor_faults import (RESET_NOTES, SENSOR_FAULT_NOTES, reset_figure, reset_rows, run_resets, run_sensor_faults,
+                            sensor_fault_rows, sensor_faults_figure)
 from .stage_day import (DAY_LAWS, REPORT_PARTS, STAGE_DAY_NOTES, day_estimates_figure, day_frames_figure,
                         run_stage_day, stage_day_table_rows, write_stage_day_csv)
 
@@ -247,6 +248,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
                           keep_data=plots, progress=prog)
     day = run_stage_day(fmu_dir=fmu_dir, fmi_version=fmi_version, keep_data=plots, progress=prog)
     sensor_faults = run_sensor_faults()
+    resets = run_resets()
 
     files = []
     all_tracking = [r for c in conditions for r in tracking[c.key]]
@@ -270,7 +272,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
                                           plants={r.scenario: _effective(plant_def, r.spec.plant)
                                                   for r in stage})
         figures += [day_frames_figure(day, out), day_estimates_figure(day, out, _effective(ctrl_def, {})),
-                    sensor_faults_figure(sensor_faults, out)]
+                    sensor_faults_figure(sensor_faults, out), reset_figure(resets, out)]
         for f in figures:
             files += f.files
 
@@ -283,7 +285,7 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
     defaults_source = ("the start value in the modelDescription of the FMUs above"
                        if backend != "core" else "the C core's default")
     report = _main_document(conditions, tracking, validation, figures, prov, unique,
-                            defaults_source, plots, registry, stage, fmi_version, day, sensor_faults)
+                            defaults_source, plots, registry, stage, fmi_version, day, sensor_faults, resets)
     (out / "report.md").write_text(doc_.render_markdown(report), encoding="utf-8")
     (out / "report.html").write_text(doc_.render_html(report), encoding="utf-8")
     (out / "provenance.json").write_text(json.dumps(prov.as_dict(), indent=2) + "\n",
@@ -296,7 +298,8 @@ def run_all(out_dir="out", *, adaptation=None, preview=True, master="gauss-seide
                      f"({len(files)} files in {out}/)\n")
         stream.flush()
     return {"tracking": tracking, "validation": validation, "conditions": conditions,
-            "stage_use": stage, "stage_day": day, "sensor_faults": sensor_faults, "provenance": prov,
+            "stage_use": stage, "stage_day": day, "sensor_faults": sensor_faults, "resets": resets,
+            "provenance": prov,
             "figures": figures, "files": files}
 
 
@@ -384,7 +387,7 @@ def _add_section(doc, figures, title, text, table, notes, wanted):
 
 
 def _main_document(conditions, tracking, validation, figures, prov, scenarios, defaults_source,
-                   plots, registry=None, stage=(), fmi_version=2, day=(), sensor_faults=()):
+                   plots, registry=None, stage=(), fmi_version=2, day=(), sensor_faults=(), resets=()):
     D = doc_
     figs = {f.name: f for f in figures}
     head = next(c for c in conditions if c.role == "headline")
@@ -470,6 +473,13 @@ def _main_document(conditions, tracking, validation, figures, prov, scenarios, d
             "names it and how far the stage went. The whole family, sensors of 0 to 200 nm on 50 stages: "
             "docs/robustness.md (python -m harness.supervision_table stuck)."),
             sensor_fault_rows(sensor_faults), SENSOR_FAULT_NOTES, lambda f: f.name == "sensor_faults")
+    if resets:
+        _add_section(doc, figures, "Leaving the safe state (sup.reset)", (
+            "The report's stage with a 20 nm sensor in a 5 µm hold: a sensor that sticks or dies, a reference "
+            "beyond the stage's reach and an amplifier inverted for good put the loop in its safe state; the "
+            "fault reset sup.reset is raised while the cause persists and again after it is gone. The whole "
+            "family, sensors of 5 to 200 nm on 50 stages: docs/robustness.md (python -m harness.supervision_table "
+            "reset)."), reset_rows(resets), RESET_NOTES, lambda f: f.name == "fault_reset")
 
     doc.add(*_provenance_blocks(prov, scenarios, defaults_source))
     names = ["tracking.csv", "validation.csv"] + (["stage_use.csv"] if stage else [])

@@ -7,7 +7,11 @@ in an exchange (:func:`harness.supervision_table.run_stuck`) with ``sup.reaction
 run goes on in the safe state after the verdict (v ramps to 0 V). The cases
 (:data:`REPORT_CASES`): every :data:`harness.supervision_table.STUCK_CASES` case with the paper's
 sensor (1 nm rms) and with a 20 nm one. The figure (:func:`sensor_faults_figure`) shows two of them
-around their onset.
+around their onset. Leaving the safe state (:func:`run_resets`): every
+:data:`harness.supervision_table.RESET_CASES` case on the same stage with a 20 nm sensor, a reset
+raised while the cause persists and one after it is gone (docs/robustness.md, "Leaving the safe
+state"; the family: ``python -m harness.supervision_table reset``); the figure (:func:`reset_figure`)
+shows the stuck sensor's.
 """
 
 from __future__ import annotations
@@ -18,7 +22,8 @@ from .. import supervision_table as st
 from .stage_day import REPORT_STAGE
 
 __all__ = ["REPORT_SENSORS_NM", "REPORT_CASES", "FIGURE_CASES", "run_sensor_faults", "sensor_fault_rows",
-           "sensor_faults_figure", "SENSOR_FAULT_NOTES"]
+           "sensor_faults_figure", "SENSOR_FAULT_NOTES", "RESET_SENSOR_NM", "run_resets", "reset_rows",
+           "reset_figure", "RESET_NOTES"]
 
 #: the sensors [nm rms] of the report's cases
 REPORT_SENSORS_NM = (1, 20)
@@ -91,3 +96,84 @@ def sensor_faults_figure(runs, out_dir):
     caption = ("A sensor that stops answering on the report's stage: the verdict (red) comes within "
                "milliseconds; with sup.reaction = 1 v then ramps to 0 V and the stage relaxes.")
     return _save(plt, fig, out_dir, "sensor_faults", caption, title="A sensor that stops answering")
+
+
+#: the sensor [nm rms] of the reset cases (a 1 nm sensor stuck in a hold is not seen: no safe state)
+RESET_SENSOR_NM = 20
+RESET_NOTES = (
+    "sup.reaction = 1; sup.reset is raised at 2.6 s while the cause persists and at 3 s after it is "
+    "gone (2.8 s), as a system model's operator would, its rising edge acted on at that sample. "
+    "Step: the 10 µm step at 3.5 s, its largest |y_d − y| over 0.25 s against the same run's without "
+    "a fault.",
+    "A fault of the response (an amplifier still inverted) cannot be seen at rest: the reset is "
+    "accepted and the restarted supervision stops the loop again, as at a fresh start.",
+)
+
+
+#: the report's words for a refusal, by a phrase of its message (piezo_controller_explain_reset)
+REFUSALS = (("y_meas still reads", "y_meas still reads the verdict's value"),
+            ("is still beyond what the stage reached", "the reference still beyond the reading at the rail"),
+            ("still ramping", "v still ramping to 0 V"), ("is not finite", "an input not finite"))
+
+
+def run_resets(plant=None):
+    """Every reset case on the report's stage with the :data:`RESET_SENSOR_NM` sensor:
+    ``[(case, result, step of the same run without a fault), ...]`` (with their traces)."""
+    plant = plant or st._day_plant(REPORT_STAGE, RESET_SENSOR_NM)
+    base = st.run_reset(st.RESET_BASELINE, plant)["step"]
+    return [(case, st.run_reset(case, plant, keep=True), base) for case in st.RESET_CASES]
+
+
+def reset_rows(runs):
+    """The report's reset table: (head, rows)."""
+    def said(outcome):
+        if outcome is None:
+            return "-"
+        accepted, text = outcome
+        if accepted:
+            return "accepted"
+        why = next((w for key, w in REFUSALS if key in text), text)
+        return "refused: " + why
+    head = ["case", "verdict", "reset at 2.6 s (cause persists)", "reset at 3 s", "after the restart"]
+    rows = []
+    for case, r, base in runs:
+        after = (f"stopped again ({r['again']}) after {1e3 * r['again_time']:.1f} ms" if r["again"]
+                 else f"step {r['step'] / base:.3f} × the fault-free run's")
+        rows.append([case.name, r["fault"] or "none", said(r["early"]), said(r["late"]), after])
+    return head, rows
+
+
+def reset_figure(runs, out_dir):
+    """The stuck sensor's run: y_d, y and the y_meas received from before the fault to after the
+    step, the verdict and both resets marked, and v below."""
+    from .figures import _pyplot, _save
+    plt = _pyplot()
+    case, r, _ = runs[0]
+    t, y_d, y, ym, v = r["trace"]
+    sel = t >= st.RESET_TIMES["fault"] - 0.1
+    fig, (ax, axv) = plt.subplots(2, 1, figsize=(9.0, 5.0), sharex=True, gridspec_kw={"height_ratios": (2, 1)})
+    ax.plot(t[sel], y_d[sel], "k--", lw=1, label="y_d")
+    ax.plot(t[sel], y[sel], "-", lw=1.2, label="y (the stage)")
+    ax.plot(t[sel], ym[sel], ":", lw=1.2, label="y_meas received")
+    axv.plot(t[sel], v[sel], "-", lw=1)
+    marks = ((st.RESET_TIMES["fault"], f"sensor stuck ({r['fault']})", "r"),
+             (st.RESET_TIMES["early"], "sup.reset: refused", "tab:orange"),
+             (st.RESET_TIMES["cleared"], "sensor back", "0.4"),
+             (st.RESET_TIMES["late"], "sup.reset: accepted", "g"))
+    top = float(np.max(y_d[sel]))
+    for at, label, color in marks:
+        for a in (ax, axv):
+            a.axvline(at, color=color, lw=0.8)
+        ax.annotate(label, (at, top), fontsize=7, color=color, rotation=90, xytext=(3, -4),
+                    textcoords="offset points", va="top")
+    ax.set_title(f"{case.name}, {RESET_SENSOR_NM} nm sensor, sup.reaction = 1", fontsize=9)
+    ax.set_ylabel("[µm]")
+    axv.set_ylabel("v [V]")
+    axv.set_xlabel("time [s]")
+    for a in (ax, axv):
+        a.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc="center right")
+    caption = ("Leaving the safe state: the stuck sensor's verdict ramps v to 0 V; a reset while the reading "
+               "is still stuck is refused; once the sensor is back a reset restarts the loop from the stage's "
+               "rest, v ramping from 0 V, and the step after it is the fault-free run's.")
+    return _save(plt, fig, out_dir, "fault_reset", caption, title="Leaving the safe state (sup.reset)")
