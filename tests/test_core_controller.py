@@ -875,7 +875,7 @@ def test_monitor_stops_a_loop_beyond_the_bound_in_a_quarter_of_its_window():
 
 # (sample at which the monitor stops the alternating drive, run of large errors then), by law
 # and y_ref (measured; the paper's law's are those of 36bec57)
-ALTERNATING_STOP = {("robust", 0.0): (126, 34), ("robust", 5.0): (155, 55), ("robust", 10.0): (76, 53),
+ALTERNATING_STOP = {("robust", 0.0): (124, 32), ("robust", 5.0): (154, 54), ("robust", 10.0): (76, 53),
                     ("paper", 0.0): (97, 3), ("paper", 5.0): (172, 0), ("paper", 10.0): (81, 23)}
 
 
@@ -892,14 +892,14 @@ def test_an_alternating_measurement_stops_within_the_monitor_window(y_ref, super
     exact (ALTERNATING_STOP). With the robust update and y_ref = 0 its noise (second
     differences of 40 um) buries the delay probes: the detection's candidates no longer score
     the samples at rest, the start-up law meets the alternation and the monitor stops it at
-    sample 126 (before, the candidates learned it, the detection restarted 4 times and only
+    sample 124 (before, the candidates learned it, the detection restarted 4 times and only
     the supervision's sup.detect_time stopped it, at sample 999; without supervision nothing
     did in 10 s). While the probes are buried the monitor judges the start-up law's own
     prediction (the nominal model's), whose errors on the alternation are large at once: with
-    y_ref = 5 it stops at sample 155 (302 when it judged the best candidate's, which had adapted
-    to the alternation). Its bound, raised with the measured noise, is capped at 2 um (twice
-    monitor.pred_error_max): the alternation measures as 23 um of noise, and uncapped the bound
-    (185 um) let it run; capped, y_ref = 0 stops at 126 instead of 124."""
+    y_ref = 5 it stops at sample 154 (302 when it judged the best candidate's, which had adapted
+    to the alternation). Its bound, raised with the noise measured from sample 100 on, is capped
+    at 2 um (twice monitor.pred_error_max): the alternation measures as 23 um of noise, and
+    uncapped the bound (185 um) let it run."""
     c = core.Controller({"sup.enabled": supervision, **(ref.PAPER_LAW if law == "paper" else {})})
     window = int(core.default_controller_params()["monitor.divergence_samples"])
     with pytest.raises(core.CoreUnstableError, match="of the monitor's window of 200 samples"):

@@ -364,7 +364,7 @@ class ControllerRef:
         offset_before, noise_y_before, updated = self.offset, self.noise_y, False
         # the monitor's bound (monitor_bound): monitor.pred_error_max, or 8 times the noise measured
         # before this sample when larger, at most twice monitor.pred_error_max
-        bound = min(8.0 * self.noise_y2, 2.0 * self.pe_max) if self.robust else 0.0
+        bound = min(8.0 * self.noise_y2, 2.0 * self.pe_max) if self.robust and self.k >= self.NOISE_SETTLE else 0.0
         bound = bound if bound > self.pe_max else self.pe_max
         if self.robust:
             r1 = self.r_last

@@ -1188,10 +1188,13 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
  * model): a 200 nm sensor's passes 1 um in 0.4 % of the samples, each of which restarted the
  * outlier test's quiet run (a dead sensor then went unbridged on 2 of 50 stages, 3.8 um off). The
  * cap: "noise" beyond 250 nm rms is no sensor's but a fault's (y_meas alternating +-10 um measures
- * as 23 um of noise, and uncapped the bound would have let it run) */
+ * as 23 um of noise, and uncapped the bound would have let it run). From sample NOISE_SETTLE on, as
+ * the probes' burial: the measurement starts at the first difference, which a reading that jumps
+ * from 0 (a stage held at 5 um from the start, say) makes micrometres */
 static double monitor_bound(const piezo_controller *c)
 {
     double b = PIEZO_MONITOR_NOISE * c->noise_y2, cap = PIEZO_MONITOR_NOISE_CAP * c->pred_error_max;
+    if (c->k < NOISE_SETTLE) return c->pred_error_max;
     if (b > cap) b = cap;
     return b > c->pred_error_max ? b : c->pred_error_max;
 }
@@ -2007,14 +2010,13 @@ int piezo_controller_explain_in(const piezo_controller *c, int st, const piezo_s
         /* the share the refused sample would have made, of the whole window */
         double share = 100.0 * (c->mon_forgetting * c->mon_share + 1.0) / (double)c->divergence_samples;
         double bound = monitor_bound(c);
-        char beyond[160];
+        char beyond[256];
         if (bound >= PIEZO_MONITOR_NOISE_CAP * c->pred_error_max)
-            snprintf(beyond, sizeof beyond, "%.4g um (raised for the measured noise of y_meas, %.4g um rms, to its "
-                     "cap, %d times monitor.pred_error_max = %g um: noise that large is more than a sensor's)", bound,
-                     c->noise_y2, PIEZO_MONITOR_NOISE_CAP, c->pred_error_max);
+            snprintf(beyond, sizeof beyond, "%.4g um (monitor.pred_error_max = %g um raised for y_meas's noise, "
+                     "%.4g um rms, to its cap)", bound, c->pred_error_max, c->noise_y2);
         else if (bound > c->pred_error_max)
-            snprintf(beyond, sizeof beyond, "%.4g um (%d times the measured noise of y_meas, %.4g um rms, above "
-                     "monitor.pred_error_max = %g um)", bound, PIEZO_MONITOR_NOISE, c->noise_y2, c->pred_error_max);
+            snprintf(beyond, sizeof beyond, "%.4g um (monitor.pred_error_max = %g um raised to %d times y_meas's "
+                     "noise, %.4g um rms)", bound, c->pred_error_max, PIEZO_MONITOR_NOISE, c->noise_y2);
         else
             snprintf(beyond, sizeof beyond, "monitor.pred_error_max = %g um", c->pred_error_max);
         said(&used, snprintf(AT, LEFT, "the closed loop is unstable: |pred_error| was beyond "

@@ -175,7 +175,7 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
         return 1;
     }
     if (c->n_large_settled > 0 && !t->said_large_error) {
-        char consequence[192], bound[160];
+        char consequence[192], bound[256];
         double b = piezo_controller_monitor_bound(c);
         t->said_large_error = 1;
         /* monitor.divergence_samples = 0 switches the verdict off: say so, not "after 0 samples" */
