@@ -316,7 +316,7 @@ class ControllerRef:
 
     def detect(self, y, live=True):
         """One sample of the detection; returns the leader's a-priori error."""
-        update = self.rls and not self.sat_hold > 0 and (live or self.r_last != self.r_last2)
+        update = self.rls and not self.sat_hold > 0 and not self.buried() and (live or self.r_last != self.r_last2)
         errs, scores = [], []
         for i in range(self.N):
             e, self.det_theta[i], self.det_P[i] = self.rls_step(
@@ -592,9 +592,9 @@ def test_a_detection_that_waits_for_the_reference_equals_scalar_transcription_bi
     """Reference: ControllerRef and PlantRef as above, behind a 150 nm rms sensor with probes of at
     most 50 nm: 0.3 s at rest (the probes buried in the noise from sample 100: the detection waits,
     no candidate scores), then 10 um steps every 50 ms (the candidates score on the reference's
-    excitations and adapt while it moves; a leader would have to lead 40 samples, longer than a
-    trial of 20, so none is chosen: the start-up law runs). Bit identity at every sample; the wait
-    must happen, the run end still detecting with the start-up law's d = 2."""
+    excitations; they do not adapt while the probes are buried; a leader would have to lead 40
+    samples, longer than a trial of 20, so none is chosen: the start-up law runs). Bit identity at
+    every sample; the wait must happen, the run end still detecting with the start-up law's d = 2."""
     y_d = np.concatenate([np.zeros(600)] + [np.full(100, 10.0 * (j % 2 == 0)) for j in range(30)])
     n = len(y_d) - 2
     buried = []

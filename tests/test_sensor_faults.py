@@ -125,3 +125,26 @@ def test_a_dead_200_nm_sensor_is_bridged_where_the_monitor_bound_matters():
         r = st.run_stuck(case("dead (reads 0) in a hold"), plant(i, 200))
         assert r["fault"] == "y_meas frozen" and r["time"] == pytest.approx(0.0015), (i, r["time"])
         assert r["excursion"] < 0.4, (i, r["excursion"])
+
+
+def test_the_waiting_detection_stays_finite_on_a_noisy_hour():
+    """The stage's day's random hour of stage 6 with a 200 nm sensor, its first 18 s through the C
+    core in an exchange. Behind probes buried in the noise the delay candidates do not adapt: when
+    they did, as the reference moved, the d = 3 candidate's estimates grew to 1e153 and its score
+    overflowed at 17.29 s (sample 34580), and the loop was refused as diverged. Now the run goes
+    past it, still waiting with the start-up law (d = 2), every candidate's estimates within 10 of
+    the nominal model's."""
+    import numpy as np
+    from harness import core, stage_day as sd
+    from harness.scenarios import profile_signal
+    sig = profile_signal(sd.hour_part(6).segments, step=sd.H)
+    n = int(18.0 / sd.H)
+    y_d = sig.evaluate(np.arange(n + 2) * sd.H)
+    p, c = core.Plant(plant(6, 200)), core.Controller({})
+    v = 0.0
+    for k in range(n):
+        out = c.step(y_d[k + 2], p.output.y_meas)
+        p.step(v)
+        v = out.v
+    assert c.raw.detecting and c.raw.d == 2
+    assert max(abs(c.raw.det_theta[j]) for j in range(12)) < 10.0
