@@ -148,3 +148,27 @@ def test_the_waiting_detection_stays_finite_on_a_noisy_hour():
         v = out.v
     assert c.raw.detecting and c.raw.d == 2
     assert max(abs(c.raw.det_theta[j]) for j in range(12)) < 10.0
+
+
+@pytest.mark.parametrize("noise,words", [
+    (0.05, "monitor.pred_error_max = 1 um"),
+    (0.2, "1.6 um (monitor.pred_error_max = 1 um raised to 8 times y_meas's noise, 0.2 um rms)"),
+    (0.3, "2 um (monitor.pred_error_max = 1 um raised for y_meas's noise, 0.3 um rms, to its cap)"),
+])
+def test_the_monitor_bound_is_said_as_it_is_computed(noise, words):
+    """piezo_controller_explain_bound, the one wording of the monitor's bound that the unstable
+    loop's Error and the FMU's large-error Warning both use, for a controller at its defaults
+    (monitor.pred_error_max = 1 um) once the noise has settled (sample 100): below 1/8 um of noise
+    the bound is monitor.pred_error_max, at 0.2 um it is 8 times the noise (1.6 um,
+    piezo_controller_monitor_bound), at 0.3 um its cap of 2 um. Before sample 100 the noise counts
+    for nothing."""
+    from harness import core
+    c = core.Controller({})
+    c.raw.noise_y2 = noise
+    text = core.ffi.new("char[256]")
+    lib = core.lib()
+    for k, want in ((99, "monitor.pred_error_max = 1 um"), (100, words)):
+        c.raw.k = k
+        n = lib.piezo_controller_explain_bound(c.raw, text, 256)
+        assert core.ffi.string(text).decode() == want and n == len(want)
+    assert lib.piezo_controller_monitor_bound(c.raw) == pytest.approx(min(max(8 * noise, 1.0), 2.0), rel=1e-15)

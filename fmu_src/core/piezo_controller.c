@@ -179,6 +179,14 @@ piezo_status piezo_diophantine_observer(double a1, double a2, double t, int d, d
 
 static double monitor_bound(const piezo_controller *c);
 
+/* Whether the measured noise of y_meas has settled (from sample NOISE_SETTLE on): its measurement
+ * starts at the first difference, which a reading that jumps from 0 (a stage held at 5 um from the
+ * start, say) makes micrometres */
+static int noise_settled(const piezo_controller *c)
+{
+    return c->k >= NOISE_SETTLE;
+}
+
 /* lambda of the monitor's window: 1 - 1/monitor.divergence_samples (0: off) */
 static double monitor_forgetting(int window)
 {
@@ -809,7 +817,7 @@ static void rls_update(const piezo_controller *c, double e, piezo_controller_sam
      * after a 5 Hz tone erred 18.5 um against 0.9 um fresh); a 20 nm sensor, whose measured noise
      * passes 30 nm at times, adapts as before */
     s->rls_updated = may && s->excited
-                     && !(c->k >= NOISE_SETTLE && PROBE_SNR * c->noise_y2 > 2.0 * c->probe_max * c->theta_nominal[2]);
+                     && !(noise_settled(c) && PROBE_SNR * c->noise_y2 > 2.0 * c->probe_max * c->theta_nominal[2]);
     if (s->rls_updated) {
         rls_gain(c, c->theta, c->P, c->d, e, c->forgetting, c->inv_forgetting, bound, s->theta, s->P);
         s->projected = admissible_project(c, s->P, s->theta);
@@ -884,12 +892,36 @@ double piezo_controller_monitor_bound(const piezo_controller *c)
     return c ? monitor_bound(c) : 0.0;
 }
 
+int piezo_controller_explain_bound(const piezo_controller *c, char *text, size_t size)
+{
+    double bound;
+    if (c == NULL) return 0;
+    bound = monitor_bound(c);
+    if (bound >= PIEZO_MONITOR_NOISE_CAP * c->pred_error_max)
+        return snprintf(text, size, "%.4g um (monitor.pred_error_max = %g um raised for y_meas's noise, %.4g um "
+                        "rms, to its cap)", bound, c->pred_error_max, c->noise_y2);
+    if (bound > c->pred_error_max)
+        return snprintf(text, size, "%.4g um (monitor.pred_error_max = %g um raised to %d times y_meas's noise, "
+                        "%.4g um rms)", bound, c->pred_error_max, PIEZO_MONITOR_NOISE, c->noise_y2);
+    return snprintf(text, size, "monitor.pred_error_max = %g um", c->pred_error_max);
+}
+
 int piezo_controller_probes_buried(const piezo_controller *c)
 {
-    return c->robust && c->k >= NOISE_SETTLE && PROBE_SNR * c->noise_y2 > c->probe_max * c->theta_nominal[2];
+    return c->robust && noise_settled(c) && PROBE_SNR * c->noise_y2 > c->probe_max * c->theta_nominal[2];
 }
 
 static void detect_carry(const piezo_controller *c, piezo_controller_sample *s);
+
+/* The one-step error the monitor judges while the detection runs, given its best candidate's: that
+ * one's, but while the probes are buried the start-up law's own, the nominal model's at
+ * PIEZO_DETECT_START_D (the candidates adapt while the reference moves, and on noisy data wander:
+ * with a 200 nm sensor theirs wandered up to 26 um from y_meas while the stage tracked within
+ * 0.65 um, and the monitor stopped 51 of 1300 runs of the stage's day's quick slice) */
+static double detect_error(const piezo_controller *c, const piezo_controller_sample *s, double y, double best)
+{
+    return s->clock ? best : rls_error(c, c->theta_nominal, PIEZO_DETECT_START_D, y);
+}
 
 /*
  * Delay detection, one sample (docs/cosimulation.md): each candidate
@@ -932,7 +964,7 @@ static double detect_update(const piezo_controller *c, double y, piezo_controlle
         detect_carry(c, s);
         memcpy(s->det_score, c->det_score, sizeof s->det_score);
         s->rls_updated = 0;
-        return err[PIEZO_DETECT_START_D - 1];
+        return detect_error(c, s, y, err[PIEZO_DETECT_START_D - 1]);
     }
     for (i = 1; i < PIEZO_DETECT_N; ++i)
         if (s->det_score[order[i]] < s->det_score[best]) best = order[i];
@@ -985,7 +1017,7 @@ static double detect_update(const piezo_controller *c, double y, piezo_controlle
             memcpy(s->P, &s->det_P[16 * best], sizeof s->P);
         }
     }
-    return err[best];
+    return detect_error(c, s, y, err[best]);
 }
 
 /* The detection state of k+1 when nothing is detected this sample (the
@@ -1192,13 +1224,12 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
  * model): a 200 nm sensor's passes 1 um in 0.4 % of the samples, each of which restarted the
  * outlier test's quiet run (a dead sensor then went unbridged on 2 of 50 stages, 3.8 um off). The
  * cap: "noise" beyond 250 nm rms is no sensor's but a fault's (y_meas alternating +-10 um measures
- * as 23 um of noise, and uncapped the bound would have let it run). From sample NOISE_SETTLE on, as
- * the probes' burial: the measurement starts at the first difference, which a reading that jumps
- * from 0 (a stage held at 5 um from the start, say) makes micrometres */
+ * as 23 um of noise, and uncapped the bound would have let it run). Once the noise has settled
+ * (noise_settled), as for the probes' burial. */
 static double monitor_bound(const piezo_controller *c)
 {
     double b = PIEZO_MONITOR_NOISE * c->noise_y2, cap = PIEZO_MONITOR_NOISE_CAP * c->pred_error_max;
-    if (c->k < NOISE_SETTLE) return c->pred_error_max;
+    if (!noise_settled(c)) return c->pred_error_max;
     if (b > cap) b = cap;
     return b > c->pred_error_max ? b : c->pred_error_max;
 }
@@ -1280,12 +1311,6 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     if (c->detecting) {
         s->offset = 0.0;
         pred_error = detect_update(c, y_meas, s);
-        /* while the probes are buried the detection chooses nothing and the start-up law runs the
-         * nominal model: its own one-step prediction is what the monitor judges, not the best
-         * candidate's (which adapt on the noisy data while the reference moves: with a 200 nm
-         * sensor theirs wandered up to 26 um from y_meas while the stage tracked within 0.65 um,
-         * and the monitor stopped 51 of 1300 runs of the stage's day's quick slice) */
-        if (!s->clock) pred_error = rls_error(c, c->theta_nominal, PIEZO_DETECT_START_D, y_meas);
     } else {
         /* the loop model's a-priori error is the outlier test's (computed once), unless the
          * model's prediction stood in for y_meas */
@@ -2013,16 +2038,8 @@ int piezo_controller_explain_in(const piezo_controller *c, int st, const piezo_s
     if (st == PIEZO_ERR_UNSTABLE) {
         /* the share the refused sample would have made, of the whole window */
         double share = 100.0 * (c->mon_forgetting * c->mon_share + 1.0) / (double)c->divergence_samples;
-        double bound = monitor_bound(c);
         char beyond[256];
-        if (bound >= PIEZO_MONITOR_NOISE_CAP * c->pred_error_max)
-            snprintf(beyond, sizeof beyond, "%.4g um (monitor.pred_error_max = %g um raised for y_meas's noise, "
-                     "%.4g um rms, to its cap)", bound, c->pred_error_max, c->noise_y2);
-        else if (bound > c->pred_error_max)
-            snprintf(beyond, sizeof beyond, "%.4g um (monitor.pred_error_max = %g um raised to %d times y_meas's "
-                     "noise, %.4g um rms)", bound, c->pred_error_max, PIEZO_MONITOR_NOISE, c->noise_y2);
-        else
-            snprintf(beyond, sizeof beyond, "monitor.pred_error_max = %g um", c->pred_error_max);
+        piezo_controller_explain_bound(c, beyond, sizeof beyond);
         said(&used, snprintf(AT, LEFT, "the closed loop is unstable: |pred_error| was beyond "
              "%s in %.0f %% of the monitor's window of %llu samples, %llu of them "
              "in a row now (the loop is stopped at monitor.divergence_samples = %llu in a row, or at %d %% of "

@@ -441,6 +441,9 @@ const char *piezo_controller_check(const piezo_controller *ctrl);
 /* The divergence monitor's bound on |pred_error| now: monitor.pred_error_max, or PIEZO_MONITOR_NOISE
  * times the measured noise of y_meas when that is larger [um]. */
 double piezo_controller_monitor_bound(const piezo_controller *ctrl);
+/* The monitor's bound now in words, into text (snprintf's contract: the length it needed): "monitor.pred_error_max
+ * = 1 um", or the bound it was raised to for y_meas's noise (to that noise's multiple, or to the cap). */
+int piezo_controller_explain_bound(const piezo_controller *ctrl, char *text, size_t size);
 /* 1: the delay probes are buried in the noise (the probe the measured noise of y_meas asks for is
  * beyond mv.probe_max): the detection waits, chooses nothing, and its watchdog stops. */
 int piezo_controller_probes_buried(const piezo_controller *ctrl);
