@@ -290,11 +290,13 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
     stamps_seen seen;
     piezo_controller_input in;
     piezo_status st;
+    fmu_controller_reset_backup undo;   /* a refused sample commits nothing, sup.reset's restart included */
     int read_ahead = outputs_current && data->params.mv_feedthrough;
     note_loop_inputs(data);
     in = sample_input(data, &meas_offset, &seen);
     /* sup.reset: before this sample; with mv.feedthrough, whose outputs of this sample were read
      * before the step, after it (the restart takes effect at the next sample) */
+    fmu_controller_reset_keep(&undo, &data->track, &data->ctrl, data->sup_reset && !read_ahead);
     if (!read_ahead)
         fmu_controller_reset_input(&data->track, &data->ctrl, data->sup_reset, &in);
     /* mv.feedthrough: the sample the outputs were read from is committed as is
@@ -306,6 +308,8 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
         st = piezo_controller_step_input(&data->ctrl, &in, history, history_capacity, NULL);
     if (st == PIEZO_OK)
         after_commit(data, &in, meas_offset, &seen);
+    else
+        fmu_controller_reset_undo(&undo, &data->track, &data->ctrl);
     if (st == PIEZO_OK && read_ahead)
         fmu_controller_reset_input(&data->track, &data->ctrl, data->sup_reset, &in);
     return st;

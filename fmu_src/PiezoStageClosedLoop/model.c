@@ -234,6 +234,14 @@ static piezo_status refused(ModelData *data, int block, piezo_status st)
     return st;
 }
 
+/* A refusal in model_step: sup.reset's restart at this sample undone too */
+static piezo_status refused_undo(ModelData *data, const fmu_controller_reset_backup *undo, int block,
+                                 piezo_status st)
+{
+    fmu_controller_reset_undo(undo, &data->track, &data->ctrl);
+    return refused(data, block, st);
+}
+
 void model_set_start_values(ModelData *data)
 {
     piezo_plant_default_params(&data->stage);
@@ -348,6 +356,7 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
     piezo_controller_sample cs;
     piezo_plant_sample ps;
     piezo_reference ref = data->ref;
+    fmu_controller_reset_backup undo;   /* a refused sample commits nothing, sup.reset's restart included */
     int exact = stage_exact(data);
     double v, v_applied;
     piezo_status st;
@@ -361,10 +370,11 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
         in.y_ref = in.y_preview = sampled_y_d(data);
     }
     in.preview_lead = preview_lead(data);
+    fmu_controller_reset_keep(&undo, &data->track, &data->ctrl, data->sup_reset);
     fmu_controller_reset_input(&data->track, &data->ctrl, data->sup_reset, &in);
     st = piezo_controller_evaluate(&data->ctrl, &in, exact ? NULL : history, exact ? 0 : history_capacity, &cs);
     if (st != PIEZO_OK)
-        return refused(data, REFUSED_CONTROLLER, st);
+        return refused_undo(data, &undo, REFUSED_CONTROLLER, st);
     /* the stage applies the controller's v of the sample before (with mv.feedthrough: this
      * sample's), clamped to its rated range as PiezoStage applies it */
     v = data->control.mv_feedthrough ? cs.out.v : data->ctrl.out.v;
@@ -372,16 +382,16 @@ piezo_status model_step(ModelData *data, double *history, size_t history_capacit
     st = piezo_plant_evaluate(&data->plant, v_applied, exact ? history : NULL,
                               exact ? history_capacity : 0, &ps);
     if (st != PIEZO_OK)
-        return refused(data, REFUSED_STAGE, st);
+        return refused_undo(data, &undo, REFUSED_STAGE, st);
     if (data->use_internal_reference) {
         st = piezo_reference_step(&ref);
         if (st != PIEZO_OK)
-            return refused(data, REFUSED_REFERENCE, st);
+            return refused_undo(data, &undo, REFUSED_REFERENCE, st);
     }
     /* everything evaluated: the controller's commit is the last that may refuse */
     st = piezo_controller_commit(&data->ctrl, &cs, NULL);
     if (st != PIEZO_OK)
-        return refused(data, REFUSED_CONTROLLER, st);
+        return refused_undo(data, &undo, REFUSED_CONTROLLER, st);
     piezo_plant_commit(&data->plant, &ps);
     if (data->use_internal_reference)
         data->ref = ref;

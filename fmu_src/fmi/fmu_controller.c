@@ -48,6 +48,26 @@ int fmu_controller_reset_input(fmu_controller_track *t, piezo_controller *c, int
     return 1;
 }
 
+void fmu_controller_reset_keep(fmu_controller_reset_backup *u, const fmu_controller_track *t,
+                               const piezo_controller *c, int raised)
+{
+    u->edge = raised && !t->reset_input;
+    if (u->edge) {
+        u->ctrl = *c;
+        u->track = *t;
+    }
+}
+
+void fmu_controller_reset_undo(const fmu_controller_reset_backup *u, fmu_controller_track *t, piezo_controller *c)
+{
+    piezo_sup_verdict why;
+    if (!u->edge) return;
+    why = c->verdict;
+    *c = u->ctrl;
+    c->verdict = why;
+    *t = u->track;
+}
+
 /* the reset's message (t->reset_said), 1 if written: the event's (accepted, nothing to reset) when
  * warning is 0, the Warning's (refused) when 1 */
 static int reset_message(fmu_controller_track *t, const piezo_controller *c, const piezo_sup_context *ctx,
@@ -176,7 +196,6 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
     }
     if (c->n_large_settled > 0 && !t->said_large_error) {
         char consequence[192], bound[256];
-        double b = piezo_controller_monitor_bound(c);
         t->said_large_error = 1;
         /* monitor.divergence_samples = 0 switches the verdict off: say so, not "after 0 samples" */
         if (c->divergence_samples > 0)
@@ -187,14 +206,7 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
         else
             snprintf(consequence, sizeof consequence, "With monitor.divergence_samples = 0 the loop is never "
                      "declared unstable, however long it stays above");
-        if (b >= PIEZO_MONITOR_NOISE_CAP * c->pred_error_max)
-            snprintf(bound, sizeof bound, "%.4g um (raised for the measured noise of y_meas to its cap, %d times "
-                     "monitor.pred_error_max = %g um)", b, PIEZO_MONITOR_NOISE_CAP, c->pred_error_max);
-        else if (b > c->pred_error_max)
-            snprintf(bound, sizeof bound, "%.4g um (%d times the measured noise of y_meas, above "
-                     "monitor.pred_error_max = %g um)", b, PIEZO_MONITOR_NOISE, c->pred_error_max);
-        else
-            snprintf(bound, sizeof bound, "monitor.pred_error_max = %g um", c->pred_error_max);
+        piezo_controller_explain_bound(c, bound, sizeof bound);
         snprintf(text, size, "|pred_error| exceeded %s, first at t = %.9g s "
                  "(not in the answer to a jump of the reference, which is counted but not logged): the model "
                  "of G no longer predicts the measurement. %s; further exceedances are counted, not logged",

@@ -50,6 +50,18 @@ void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller
  * step (an event when accepted or nothing to reset, a Warning when refused). 1 when it restarted. */
 int fmu_controller_reset_input(fmu_controller_track *t, piezo_controller *c, int raised,
                                const piezo_controller_input *in);
+/* What sup.reset's edge changes, kept so that a sample refused after it commits nothing, the
+ * restart included: fmu_controller_reset_keep before fmu_controller_reset_input (it copies only
+ * on the rising edge), fmu_controller_reset_undo on the refusal (the controller and its track as
+ * they were, with the refused sample's verdict, which its message explains). */
+typedef struct {
+    int edge;
+    piezo_controller ctrl;
+    fmu_controller_track track;
+} fmu_controller_reset_backup;
+void fmu_controller_reset_keep(fmu_controller_reset_backup *u, const fmu_controller_track *t,
+                               const piezo_controller *c, int raised);
+void fmu_controller_reset_undo(const fmu_controller_reset_backup *u, fmu_controller_track *t, piezo_controller *c);
 /* At most one event / one warning per call, each thing once: 1 with the text written, else 0.
  * ctx: where the loop is (its t0 and h, wired or inside one FMU: piezo_sup_context). */
 int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
