@@ -419,7 +419,10 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         n->fault = PIEZO_SUP_CLIPPED;
     else if (in->detecting_for >= s->detect_samples && !s->open_loop)
         n->fault = PIEZO_SUP_UNDETECTED;
-    else {
+    else if (n->y_same > 0) {
+        /* each of these needs y_meas unchanged since the sample before at least (held_outlier 3
+         * samples, frozen PIEZO_SUP_STUCK_SAME, stuck the loop's delay): a reading that changed
+         * skips their calls, n->stuck_move staying 0 */
         double share, step_rms, repeat_share, bound;
         if (held_outlier(n) || frozen(s, n, &share, &step_rms, &repeat_share))
             n->fault = PIEZO_SUP_FROZEN;
