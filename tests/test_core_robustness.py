@@ -98,6 +98,16 @@ def test_plant_check_accepts_runs_and_names_tampered_fields():
     assert "mirror" in (check_text(lib.piezo_plant_check(raw)) or "")
     raw.creep.x_ring[17 + 3] = raw.creep.x_ring[3]
     assert check_text(lib.piezo_plant_check(raw)) is None
+    # the SOE decays e^{-s} lie in (0, 1]; a restored one beyond made the next advance NaN, a state
+    # the check then refused (CI's fuzzer, tests/c/fuzz_crashes/fuzz_deserialize_PiezoStage)
+    assert 0.0 < min(raw.creep.soe_decay[i] for i in range(raw.creep.n_terms)) \
+        and max(raw.creep.soe_decay[i] for i in range(raw.creep.n_terms)) <= 1.0
+    for value in (1.5, 0.0, -0.5):
+        old = raw.creep.soe_decay[2]
+        raw.creep.soe_decay[2] = value
+        assert "SOE decay outside (0, 1]" in (check_text(lib.piezo_plant_check(raw)) or ""), value
+        raw.creep.soe_decay[2] = old
+    assert check_text(lib.piezo_plant_check(raw)) is None
     raw.out.y_meas = math.nan
     assert "not finite" in check_text(lib.piezo_plant_check(raw))
 

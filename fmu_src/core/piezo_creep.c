@@ -150,9 +150,14 @@ const char *piezo_gl_check(const piezo_gl *gl)
         || !all_finite(gl->soe_inject, PIEZO_GL_MAX_TERMS))
         return "creep SOE values not finite";
     /* the states may have overflowed to +-Inf in an advance (piezo_creep.h), never NaN:
-     * finite decay * (finite or +-Inf) + finite inject * finite input */
-    for (i = 0; i < PIEZO_GL_MAX_TERMS; ++i)
+     * decay * (finite or +-Inf) + finite inject * finite input, with the decay e^{-s} in (0, 1]
+     * (a restored decay outside it made a later advance NaN, a state this check then refused:
+     * found by CI's fuzzer, tests/c/fuzz_crashes/fuzz_deserialize_PiezoStage) */
+    for (i = 0; i < PIEZO_GL_MAX_TERMS; ++i) {
         if (isnan(gl->soe_state[i])) return "creep SOE state is NaN";
+        if (i < gl->n_terms && !(gl->soe_decay[i] > 0.0 && gl->soe_decay[i] <= 1.0))
+            return "creep SOE decay outside (0, 1]";
+    }
     return NULL;
 }
 
