@@ -101,7 +101,8 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
     Returns
     -------
     dict of ndarray
-        ``szz``, ``szw`` and ``sww`` (one row per delay 1..9), ``travel_model``,
+        ``szz``, ``szw`` and ``sww`` (one row per delay 1..9), ``travel_model``, ``yhat_slow``
+        (the model's yhat averaged with the time constant ``PIEZO_SUP_CREEP_SAMPLES``),
         ``travel_meas``, ``weight``, ``reversals`` (samples where y_meas reversed its direction,
         the last change kept over equal samples), ``steps2`` (its squared sample-to-sample
         changes), ``big_steps`` (its reversals by more than ``PIEZO_SUP_BIG_STEP_PERCENT`` % of the
@@ -140,6 +141,7 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
             prev = dy[i]
             low = abs(dy[i]) if low == 0.0 else min(low, abs(dy[i]))
     big_step = core.lib().PIEZO_SUP_BIG_STEP_PERCENT
+    creep = core.lib().PIEZO_SUP_CREEP_SAMPLES
     same = np.zeros(n, dtype=np.int64)
     for i in range(1, n):
         same[i] = same[i - 1] + 1 if y[i] == y[i - 1] else 0
@@ -147,6 +149,7 @@ def statistics(y_meas, q, pred_error, nominal, window, error_bound, monitor_wind
     return {
         "szz": _ew(dz * dz, lam), "szw": szw, "sww": sww,
         "travel_model": _ew(np.abs(np.diff(yhat, prepend=0.0)), lam),
+        "yhat_slow": lfilter([1.0 / creep], [1.0, 1.0 / creep - 1.0], yhat),
         "travel_meas": _ew(np.abs(np.diff(y, prepend=0.0)), lam),
         "weight": _ew(np.ones(n), lam),
         "reversals": _ew((dy * last < 0.0).astype(float), lam), "steps2": _ew(dy * dy, lam), "y_same": same,

@@ -127,6 +127,34 @@ def test_a_dead_200_nm_sensor_is_bridged_where_the_monitor_bound_matters():
         assert r["excursion"] < 0.4, (i, r["excursion"])
 
 
+@pytest.mark.parametrize("stage,seconds,stopped,held", [(4, 44.48, 44.473, 255), (47, 0.95, 0.888, 461)])
+def test_a_quiet_reading_held_after_a_long_move_is_not_taken_for_stuck(stage, seconds, stopped, held):
+    """The stage's day's random hours of stages 4 and 47 with the noise-free sensor (0 nm on the
+    2 nm grid), their first seconds through the C core in an exchange. After a 30 um move the law
+    holds the stage to the nanometre against its creep and hysteresis by pushing q on, 0.2-0.4 um
+    of the supervisor's model in 0.1-0.2 s while the reading stays on one grid step; the stuck test
+    took that for a stuck y_meas ("no response") at 44.473 s and 0.888 s, after 255 and 461 equal
+    readings. It now allows the model
+    PIEZO_SUP_STUCK_CREEP_PERMILLE per mille of how far its yhat is from where it has been over the
+    last second, and the runs go past those times with no verdict and as long a run of equal
+    readings, the stage still within 2 nm of the hold (the grid's step)."""
+    import numpy as np
+    from harness import core, stage_day as sd
+    from harness.scenarios import profile_signal
+    sig = profile_signal(sd.hour_part(stage).segments, step=sd.H)
+    n = int(seconds / sd.H)
+    y_d = sig.evaluate(np.arange(n + 2) * sd.H)
+    p, c = core.Plant(plant(stage, 0)), core.Controller({})
+    v, same = 0.0, 0
+    for k in range(n):
+        out = c.step(y_d[k + 2], p.output.y_meas)
+        p.step(v)
+        v = out.v
+        same = max(same, c.raw.sup.y_same)
+    assert n * sd.H > stopped and same + 1 >= held
+    assert abs(p.output.y - y_d[n + 1]) < 0.002
+
+
 def test_the_waiting_detection_stays_finite_on_a_noisy_hour():
     """The stage's day's random hour of stage 6 with a 200 nm sensor, its first 18 s through the C
     core in an exchange. Behind probes buried in the noise the delay candidates do not adapt: when

@@ -120,6 +120,7 @@ void piezo_supervisor_reset(piezo_supervisor *s)
     s->min_step = s->big_steps = s->repeats = 0.0;
     memset(s->yhat_frozen, 0, sizeof s->yhat_frozen);
     memset(s->yhat_turned, 0, sizeof s->yhat_turned);
+    s->yhat_slow = 0.0;
     s->v2 = 0.0;
     s->v_dir = 0;
     s->bridged_run = 0;
@@ -270,23 +271,27 @@ static int held_outlier(const piezo_supervisor_next *n)
  * readings answer, |yhat(k - d + 1) - yhat(f - d + 1)| (yhat is the model's y_meas of a loop of
  * delay 1), so far that even sup.gain_min of that move is beyond two of the reading's steps and
  * PIEZO_SUP_STUCK_NOISE times its measured noise: a stage that moved that much shows it, whatever its
- * gain within the supervision's band. 0 before y_meas ever changed (the "no response" verdict's
- * case). The move is returned in *move, 0 when not judged. */
+ * gain within the supervision's band. Both moves are taken less PIEZO_SUP_STUCK_CREEP_PERMILLE per
+ * mille of |yhat - yhat_slow|, the distance from where the model's stage has been over the last
+ * second: after a move the law goes on pushing q to hold the stage against its creep and
+ * hysteresis, a move the model shows and the stage does not. 0 before y_meas ever changed (the "no
+ * response" verdict's case). The move is returned in *move, 0 when not judged. */
 static int stuck(const piezo_supervisor *s, const piezo_supervisor_input *in, const piezo_supervisor_next *n,
                  double *move, double *bound)
 {
     int d = in->loop_delay > 0 ? in->loop_delay : in->law_delay;   /* detecting: the start-up law's 2 (a
                                         loop of 1 or 3 shifts the move by one sample, within the margin of
                                         PIEZO_SUP_STUCK_SPEED samples of the model's speed) */
-    double now, near, far, floor = 2.0 * s->min_step + PIEZO_SUP_STUCK_NOISE * in->noise;
+    double now, near, far, creep, floor = 2.0 * s->min_step + PIEZO_SUP_STUCK_NOISE * in->noise;
     *move = *bound = 0.0;
     if (d < 1 || d > 3 || n->y_same < (uint64_t)d || !(s->min_step > 0.0) || s->open_loop)
         return 0;
     now = d == 1 ? n->yhat : (d == 2 ? s->yhat1 : s->yhat2);
     /* less PIEZO_SUP_STUCK_SPEED samples of the model's mean speed over the window: its transient
      * after a fast move errs in proportion to the move */
-    near = fabs(now - n->yhat_turned[d - 1]) - PIEZO_SUP_STUCK_SPEED * n->travel_model / n->weight;
-    far = fabs(now - n->yhat_frozen[d - 1]) - PIEZO_SUP_STUCK_SPEED * n->travel_model / n->weight;
+    creep = PIEZO_SUP_STUCK_CREEP_PERMILLE * 1e-3 * fabs(now - n->yhat_slow);
+    near = fabs(now - n->yhat_turned[d - 1]) - PIEZO_SUP_STUCK_SPEED * n->travel_model / n->weight - creep;
+    far = fabs(now - n->yhat_frozen[d - 1]) - PIEZO_SUP_STUCK_SPEED * n->travel_model / n->weight - creep;
     *bound = floor > PIEZO_SUP_STUCK_MOVE_NM * 1e-3 ? floor : PIEZO_SUP_STUCK_MOVE_NM * 1e-3;
     if (near * s->gain_min > *bound) {
         *move = near;
@@ -334,6 +339,7 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     n->weight = lam * s->weight + 1.0;
     n->travel_model = lam * s->travel_model + fabs(n->yhat - s->yhat1);
     n->travel_meas = lam * s->travel_meas + fabs(in->y_meas - s->y1);
+    n->yhat_slow = s->yhat_slow + (n->yhat - s->yhat_slow) * (1.0 / PIEZO_SUP_CREEP_SAMPLES);
     /* a live measurement's noise: its reversals of direction (the last change kept over equal
      * samples, so a quantised reading's up, equal, down counts) and its steps */
     {
@@ -485,6 +491,7 @@ void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *
     s->repeats = n->repeats;
     memcpy(s->yhat_frozen, n->yhat_frozen, sizeof s->yhat_frozen);
     memcpy(s->yhat_turned, n->yhat_turned, sizeof s->yhat_turned);
+    s->yhat_slow = n->yhat_slow;
     s->v2 = in->v1;
     s->v_dir = n->v_dir;
     s->bridged_run = n->bridged_run;
@@ -892,7 +899,7 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
                         s->weight, s->travel_model, s->travel_meas, s->followed_gain, s->reversals,
                         s->steps2, s->dy1, s->min_step, s->big_steps, s->repeats, s->yhat_frozen[0],
                         s->yhat_frozen[1], s->yhat_frozen[2], s->yhat_turned[0], s->yhat_turned[1],
-                        s->yhat_turned[2], s->v2 };
+                        s->yhat_turned[2], s->yhat_slow, s->v2 };
         if (!finite_all(sc, (int)(sizeof sc / sizeof sc[0]))) return "supervisor values not finite";
     }
     if (s->szz < 0.0 || s->srr < 0.0 || s->clip_error_sum < 0.0 || s->travel_model < 0.0 || s->travel_meas < 0.0

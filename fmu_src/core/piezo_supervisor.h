@@ -72,7 +72,9 @@
  *   far that sup.gain_min of the move is beyond two of the reading's steps, four times
  *   its measured noise and PIEZO_SUP_STUCK_MOVE_NM (since v last reversed; or
  *   PIEZO_SUP_STUCK_FAR_NM whatever v did), less PIEZO_SUP_STUCK_SPEED samples of the
- *   model's mean speed (its transient after a fast move);
+ *   model's mean speed (its transient after a fast move) and less PIEZO_SUP_STUCK_CREEP_PERMILLE
+ *   per mille of how far the model's yhat is from its mean over the last second (the creep
+ *   and hysteresis the law holds the stage against after a move, which the model lacks);
  * - by its noise: y_meas exactly constant for m samples although, over the window
  *   before, it reversed its direction from one sample to the next in
  *   PIEZO_SUP_FROZEN_PERCENT % of the samples or more and stepped by more than
@@ -135,6 +137,14 @@
                                         reading stood still) */
 #define PIEZO_SUP_STUCK_SPEED 2     /* ... beyond this many samples of the model's mean speed (its tail
                                         after the stop of a 50 Hz, 10 um scan: 207 nm) */
+#define PIEZO_SUP_STUCK_CREEP_PERMILLE 40   /* ... and beyond this share [per mille] of the distance from
+                                        the model's yhat to its mean over the last PIEZO_SUP_CREEP_SAMPLES:
+                                        after a move the law pushes q on to hold the stage against its
+                                        creep and hysteresis, which the model does not have (after 30 um
+                                        down, 0.2-0.4 um of the model's move in 0.17 s while a noise-free
+                                        reading stood still; 7 false stops in the stage's day's hours at
+                                        0 nm, which need 1-2.5 %) */
+#define PIEZO_SUP_CREEP_SAMPLES 2000 /* ... that mean's time constant [samples] (1 s) */
 #define PIEZO_SUP_STUCK_FAR_NM 250   /* ... or at least this move [nm] whatever v did: right after a reversal
                                         a stage answers by its hysteresis' initial slope, far below the
                                         model's (the end of a 50 Hz scan: 207 nm by the model, none by the
@@ -305,6 +315,8 @@ typedef struct {
     double yhat_frozen[3];       /* the model's yhat at the last sample y_meas changed, and at the one
                                     and two before it (the loop delays 1, 2, 3) */
     double yhat_turned[3];       /* the same at the last sample y_meas changed or v reversed */
+    double yhat_slow;            /* the model's yhat averaged over PIEZO_SUP_CREEP_SAMPLES: where the
+                                    stage has been, for the creep the stuck test allows */
     double v2;                   /* v(k-2) [V] */
     uint64_t bridged_run;        /* consecutive samples the model's prediction stood in for y_meas */
     int v_dir;                   /* the direction v last moved in: +1, -1 (0: not yet) */
@@ -317,7 +329,7 @@ typedef struct {
     double srw[PIEZO_SUP_DEFAULT_DETECTABLE];
     double weight, travel_model, travel_meas;
     double followed_gain, reversals, steps2, dy1, min_step, big_steps, repeats;
-    double yhat_frozen[3], yhat_turned[3];
+    double yhat_frozen[3], yhat_turned[3], yhat_slow;
     double stuck_move;           /* FROZEN against the model: the move since y_meas froze, by the model [um] */
     double clip_error_sum;       /* the last double: z .. clip_error_sum are the doubles checked finite */
     uint64_t y_same;
