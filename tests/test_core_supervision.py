@@ -274,3 +274,18 @@ def test_the_state_check_names_a_tampered_supervisor():
         assert fragment in text, (field, text)
         setattr(s, field, old)
     assert lib.piezo_controller_check(c.raw) == core.ffi.NULL
+
+
+def test_a_restart_puts_the_model_s_mean_where_the_model_rests():
+    """piezo_supervisor_restart (sup.reset) starts the supervisor from a stage at rest at y with
+    the model's input w: the model's output rests at w / A(1), and its mean over the last second
+    (the stuck test's creep allowance, PIEZO_SUP_STUCK_CREEP_PERMILLE of the distance from it)
+    starts there too, not at 0: a restart at 20 um allows no creep it has not seen."""
+    lib = core.lib()
+    kept = {}
+    _, exc, _ = loop(300, keep=kept)
+    s = kept["controller"].raw.sup
+    a = 1.0 + s.a1 + s.a2
+    lib.piezo_supervisor_restart(core.ffi.addressof(s), 20.0, 16.0 * a)
+    assert s.yhat1 == s.yhat2 == s.yhat_slow == pytest.approx(16.0, rel=1e-12)
+    assert s.k == 0 and s.y1 == 20.0

@@ -137,7 +137,7 @@ void piezo_supervisor_restart(piezo_supervisor *s, double y, double w)
     s->y1 = s->y2 = s->r1 = s->r2 = y;
     s->z1 = s->zr1 = a * y;
     s->w1 = w;
-    s->yhat1 = s->yhat2 = w / a;
+    s->yhat1 = s->yhat2 = s->yhat_slow = w / a;
 }
 
 /* Sww_d(k) = Sww_1(k - d + 1): the new one for d = 1, the kept ones for d >= 2 */
