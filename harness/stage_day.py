@@ -84,7 +84,7 @@ TARGETS = {"growth": 1.5, "fixed": 1.5, "frame": 1.0, "tone": 1.25, "set": 0, "s
 #: the worst measured over the whole family by this command, as docs/stage_day.md documents it: a
 #: larger value is a regression (exit 1). Measured at bf67d8d (issue 44's supervision): 27.79,
 #: 2066.6, 2.244 um, 3.594, 0 samples, 44 runs stopped.
-DOCUMENTED = {"growth": 27.8, "fixed": 2070.0, "frame": 2.25, "tone": 3.6, "set": 0, "supervision": 37}
+DOCUMENTED = {"growth": 27.8, "fixed": 2070.0, "frame": 2.25, "tone": 3.6, "set": 0, "supervision": 35}
 #: the laws each part runs with
 LAWS = ("ours", "fixed")
 MASTER_EXCHANGE = "native exchange"

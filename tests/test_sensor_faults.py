@@ -155,6 +155,31 @@ def test_a_quiet_reading_held_after_a_long_move_is_not_taken_for_stuck(stage, se
     assert abs(p.output.y - y_d[n + 1]) < 0.002
 
 
+def test_a_noise_free_reading_that_stops_chattering_is_not_taken_for_frozen():
+    """The stage-use family's stage 23 (harness.stage_use_table, seed of its family) with the
+    noise-free sensor on a 1 Hz triangle scan with 10 s dwells, its first 8 s through the C core
+    in an exchange. In the dwell the loop chatters on the 2 nm grid, the reading stepping up and
+    down as the stage itself moves (which the model explains), then settles on one step. The noise
+    test took that for a sensor whose noise stopped ("y_meas frozen" at 7.53 s, 39 equal readings).
+    It now asks that the model's best fit leave of the reading's changes more than
+    PIEZO_SUP_FROZEN_FLOOR times the grid's quantisation floor: the run goes on, hundreds of equal
+    readings later (972), with no verdict."""
+    import numpy as np
+    from harness import core, stage_use_table as su
+    task = next(t for t in su.family_tasks(sensors=[0], laws=("ours",))
+                if t.stage == 23 and t.profile.name == "triangle scan 1 Hz, 10 s dwell")
+    sig = task.profile.scenario(task.plant, task.controller).signal
+    n = int(8.0 / su.H)
+    y_d = sig.evaluate(np.arange(n + 2) * su.H)
+    p, c = core.Plant(dict(task.plant)), core.Controller(dict(task.controller))
+    v = 0.0
+    for k in range(n):
+        out = c.step(y_d[k + 2], p.output.y_meas)
+        p.step(v)
+        v = out.v
+    assert c.raw.sup.y_same == n - 1 - round(7.5135 / su.H)     # equal since 7.5135 s, as then
+
+
 def test_the_waiting_detection_stays_finite_on_a_noisy_hour():
     """The stage's day's random hour of stage 6 with a 200 nm sensor, its first 18 s through the C
     core in an exchange. Behind probes buried in the noise the delay candidates do not adapt: when

@@ -170,6 +170,15 @@ static int best_delay(const piezo_supervisor *s, const piezo_supervisor_next *n)
     return best;
 }
 
+/* The quantisation floor of dz's energy over the window: a reading on a grid of step q (its
+ * smallest step seen) hides up to q^2/12 of dz's energy a sample, times sum c_i^2 of
+ * Delta A = (1, a1 - 1, a2 - a1, -a2) (0 before y_meas ever stepped) */
+static double quantisation_floor(const piezo_supervisor *s, const piezo_supervisor_next *n)
+{
+    double c1 = s->a1 - 1.0, c2 = s->a2 - s->a1;
+    return n->weight * s->min_step * s->min_step / 12.0 * (1.0 + c1 * c1 + c2 * c2 + s->a2 * s->a2);
+}
+
 /* The response verdict of the evaluated statistics: a fault kind, 0 for a
  * verified loop, -1 without strong evidence. *gain, *delay: the best fit. */
 static int response_kind(const piezo_supervisor *s, const piezo_supervisor_input *in,
@@ -183,12 +192,9 @@ static int response_kind(const piezo_supervisor *s, const piezo_supervisor_input
     sww = sww_of(s, n, b);
     g = n->szw[b - 1] / sww;
     e_best = n->szz - n->szw[b - 1] * g;
-    /* the quantisation floor: a reading on a grid of step q (its smallest step seen) hides up to
-     * q^2/12 of dz's energy a sample, times sum c_i^2 of Delta A = (1, a1 - 1, a2 - a1, -a2):
-     * a response smaller than the grid is not evidence of none (0 before y_meas ever stepped) */
+    /* a response smaller than the grid is not evidence of none */
     {
-        double c1 = s->a1 - 1.0, c2 = s->a2 - s->a1;
-        double floor_q = n->weight * s->min_step * s->min_step / 12.0 * (1.0 + c1 * c1 + c2 * c2 + s->a2 * s->a2);
+        double floor_q = quantisation_floor(s, n);
         if (e_best < floor_q) e_best = floor_q;
     }
     /* the response the fit explains, or the one the model expects when that is larger */
@@ -237,6 +243,7 @@ static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, dou
                   double *repeat_share)
 {
     double lam = s->forgetting, stretch, before, p, m;
+    int b;
     if (n->y_same < PIEZO_SUP_STUCK_SAME)
         return 0;
     stretch = (1.0 - pow(lam, (double)n->y_same)) / (1.0 - lam);
@@ -249,11 +256,15 @@ static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, dou
     *repeat_share = p > 0.0 ? p : 0.0;
     if (!(*share * 100.0 >= PIEZO_SUP_FROZEN_PERCENT && n->big_steps * 1000.0 >= PIEZO_SUP_FROZEN_BIG_PERMILLE * before))
         return 0;
-    if (n->y_same >= s->window)
-        return 1;
     /* m ln p <= -L, p at least 1e-3 (a stretch of PIEZO_SUP_STUCK_SAME does not rest on one share) */
     m = (double)n->y_same;
-    return m * log(p > 1e-3 ? p : 1e-3) <= -(double)PIEZO_SUP_STUCK_LOG_ODDS;
+    if (n->y_same < s->window && m * log(p > 1e-3 ? p : 1e-3) > -(double)PIEZO_SUP_STUCK_LOG_ODDS)
+        return 0;
+    /* ... and the changes were noise: what the model's best fit leaves of dz beyond
+     * PIEZO_SUP_FROZEN_FLOOR times the quantisation floor (a loop that chattered on a noise-free
+     * reading, moving the stage itself, leaves no more than the grid's share: then it settles) */
+    b = best_delay(s, n);
+    return b > 0 && unexplained(s, n, b) > PIEZO_SUP_FROZEN_FLOOR * quantisation_floor(s, n);
 }
 
 /* y_meas held on an outlier: the reading jumped away from the model's prediction (an outlier, for

@@ -125,6 +125,11 @@
 #define PIEZO_SUP_FROZEN_PERCENT 30  /* share of reversals of y_meas before a frozen stretch */
 #define PIEZO_SUP_BIG_STEP_PERCENT 150   /* a step of y_meas beyond this share of its smallest is noise's */
 #define PIEZO_SUP_FROZEN_BIG_PERMILLE 400 /* share of such steps before a frozen stretch [per mille] */
+#define PIEZO_SUP_FROZEN_FLOOR 4     /* ... and what the model's best fit leaves of those changes beyond this many
+                                        times the reading's quantisation floor (the noise-free sensor on the
+                                        stage's day: 0.4 and 1.3 times where the loop chattered and then
+                                        settled; 20 still names every 5 nm sensor stuck in a hold of the
+                                        stuck family, 60 misses 14 of 100) */
 #define PIEZO_SUP_STUCK_SAME 4       /* a frozen y_meas: at least this many equal samples (held on an outlier,
                                         or by its noise) */
 #define PIEZO_SUP_STUCK_LOG_ODDS 28  /* ... and as many as its share of equal samples before makes a chance
