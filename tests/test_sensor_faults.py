@@ -12,6 +12,7 @@ whole families' figures of docs/robustness.md."""
 import pytest
 
 from harness import supervision_table as st
+from harness.stage_day import H
 
 STAGES = 3
 
@@ -127,6 +128,32 @@ def test_a_dead_200_nm_sensor_is_bridged_where_the_monitor_bound_matters():
         assert r["excursion"] < 0.4, (i, r["excursion"])
 
 
+def exchange(signal, plant_params, seconds, controller=None, each=None):
+    """Run the C core's plant and controller as the native exchange does (y_ref two samples ahead,
+    v applied over the next sample) on ``signal`` for ``seconds``: (plant, controller, y_d), y_d
+    up to the last reference taken. ``each(c)`` after every sample."""
+    import numpy as np
+    from harness import core
+    n = int(seconds / H)
+    y_d = signal.evaluate(np.arange(n + 2) * H)
+    p, c = core.Plant(dict(plant_params)), core.Controller(dict(controller or {}))
+    v = 0.0
+    for k in range(n):
+        out = c.step(y_d[k + 2], p.output.y_meas)
+        p.step(v)
+        v = out.v
+        if each is not None:
+            each(c)
+    return p, c, y_d
+
+
+def hour(stage):
+    """The stage's day's random hour of ``stage`` as a signal on the 0.5 ms grid."""
+    from harness import stage_day as sd
+    from harness.scenarios import profile_signal
+    return profile_signal(sd.hour_part(stage).segments, step=H)
+
+
 @pytest.mark.parametrize("stage,seconds,stopped,held", [(4, 44.48, 44.473, 255), (47, 0.95, 0.888, 461)])
 def test_a_quiet_reading_held_after_a_long_move_is_not_taken_for_stuck(stage, seconds, stopped, held):
     """The stage's day's random hours of stages 4 and 47 with the noise-free sensor (0 nm on the
@@ -138,21 +165,11 @@ def test_a_quiet_reading_held_after_a_long_move_is_not_taken_for_stuck(stage, se
     PIEZO_SUP_STUCK_CREEP_PERMILLE per mille of how far its yhat is from where it has been over the
     last second, and the runs go past those times with no verdict and as long a run of equal
     readings, the stage still within 2 nm of the hold (the grid's step)."""
-    import numpy as np
-    from harness import core, stage_day as sd
-    from harness.scenarios import profile_signal
-    sig = profile_signal(sd.hour_part(stage).segments, step=sd.H)
-    n = int(seconds / sd.H)
-    y_d = sig.evaluate(np.arange(n + 2) * sd.H)
-    p, c = core.Plant(plant(stage, 0)), core.Controller({})
-    v, same = 0.0, 0
-    for k in range(n):
-        out = c.step(y_d[k + 2], p.output.y_meas)
-        p.step(v)
-        v = out.v
-        same = max(same, c.raw.sup.y_same)
-    assert n * sd.H > stopped and same + 1 >= held
-    assert abs(p.output.y - y_d[n + 1]) < 0.002
+    same = [0]
+    p, c, y_d = exchange(hour(stage), plant(stage, 0), seconds,
+                         each=lambda c: same.__setitem__(0, max(same[0], c.raw.sup.y_same)))
+    assert seconds > stopped and same[0] + 1 >= held
+    assert abs(p.output.y - y_d[-1]) < 0.002
 
 
 def test_a_noise_free_reading_that_stops_chattering_is_not_taken_for_frozen():
@@ -164,20 +181,13 @@ def test_a_noise_free_reading_that_stops_chattering_is_not_taken_for_frozen():
     It now asks that the model's best fit leave of the reading's changes more than
     PIEZO_SUP_FROZEN_FLOOR times the grid's quantisation floor: the run goes on, hundreds of equal
     readings later (972), with no verdict."""
-    import numpy as np
-    from harness import core, stage_use_table as su
+    from harness import stage_use_table as su
     task = next(t for t in su.family_tasks(sensors=[0], laws=("ours",))
                 if t.stage == 23 and t.profile.name == "triangle scan 1 Hz, 10 s dwell")
-    sig = task.profile.scenario(task.plant, task.controller).signal
-    n = int(8.0 / su.H)
-    y_d = sig.evaluate(np.arange(n + 2) * su.H)
-    p, c = core.Plant(dict(task.plant)), core.Controller(dict(task.controller))
-    v = 0.0
-    for k in range(n):
-        out = c.step(y_d[k + 2], p.output.y_meas)
-        p.step(v)
-        v = out.v
-    assert c.raw.sup.y_same == n - 1 - round(7.5135 / su.H)     # equal since 7.5135 s, as then
+    n = int(8.0 / H)
+    _, c, _ = exchange(task.profile.scenario(task.plant, task.controller).signal, task.plant, 8.0,
+                       task.controller)
+    assert c.raw.sup.y_same == n - 1 - round(7.5135 / H)     # equal since 7.5135 s, as then
 
 
 def test_the_waiting_detection_stays_finite_on_a_noisy_hour():
@@ -187,18 +197,7 @@ def test_the_waiting_detection_stays_finite_on_a_noisy_hour():
     overflowed at 17.29 s (sample 34580), and the loop was refused as diverged. Now the run goes
     past it, still waiting with the start-up law (d = 2), every candidate's estimates within 10 of
     the nominal model's."""
-    import numpy as np
-    from harness import core, stage_day as sd
-    from harness.scenarios import profile_signal
-    sig = profile_signal(sd.hour_part(6).segments, step=sd.H)
-    n = int(18.0 / sd.H)
-    y_d = sig.evaluate(np.arange(n + 2) * sd.H)
-    p, c = core.Plant(plant(6, 200)), core.Controller({})
-    v = 0.0
-    for k in range(n):
-        out = c.step(y_d[k + 2], p.output.y_meas)
-        p.step(v)
-        v = out.v
+    _, c, _ = exchange(hour(6), plant(6, 200), 18.0)
     assert c.raw.detecting and c.raw.d == 2
     assert max(abs(c.raw.det_theta[j]) for j in range(12)) < 10.0
 
