@@ -217,7 +217,7 @@ def admissible_rows(controller_params=None, margin=1e-4, radius=0.999):
     guarantees") as ``(C, d)``, ``C theta <= d``, from the controller's parameters (its nominal
     model ``tf.*``, ``rls.zero_min`` or the nominal zero ``-tf.b2/tf.b1`` where that is lower,
     ``rls.pole_min`` and the supervision's ``sup.gain_min``, ``sup.gain_max``), each row computed
-    with the core's operations in the core's order (``admissible_rows`` in piezo_controller.c), so
+    with the core's operations in the core's order (``piezo_ctl_admissible_rows`` in piezo_controller_setup.c), so
     that :func:`outside_admissible` gives the core's verdict bit for bit."""
     from .core import default_controller_params
     p = {**default_controller_params(), **(controller_params or {})}

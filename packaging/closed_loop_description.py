@@ -35,9 +35,11 @@ CONFIG_H = REPO / "fmu_src" / MODEL / "config.h"
 CONTROLLER_PREFIX = "controller."
 SOURCE_OF = {"STAGE": "PiezoStage", "CTRL": "AdaptiveCompoundController", "REF": "ReferenceSignal"}
 #: the C files of the binary (FMI 2.0 lists them; CMakeLists.txt checks the list)
-C_FILES = ("fmi2_glue.c", "fmu_controller.c", "fmu_glue_core.c", "fmu_start_values.c", "model.c",
-           "piezo_controller.c", "piezo_creep.c", "piezo_hysteresis.c", "piezo_plant.c",
-           "piezo_reference.c", "piezo_status.c", "piezo_supervisor.c", "piezo_tf.c")
+C_FILES = ("fmi2_glue.c", "fmu_controller.c", "fmu_glue_core.c", "fmu_glue_state.c", "fmu_start_values.c",
+           "model.c", "piezo_controller.c", "piezo_controller_check.c", "piezo_controller_detect.c",
+           "piezo_controller_explain.c", "piezo_controller_setup.c", "piezo_creep.c",
+           "piezo_hysteresis.c", "piezo_plant.c", "piezo_reference.c", "piezo_status.c",
+           "piezo_supervisor.c", "piezo_supervisor_explain.c", "piezo_tf.c")
 
 DESCRIPTION = (
     "The piezoelectric-actuated positioning stage under its adaptive compound controller, after "

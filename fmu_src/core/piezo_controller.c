@@ -1,49 +1,15 @@
 /* piezo_controller.c - adaptive compound controller. See piezo_controller.h. */
 #include <math.h>
-#include <stdio.h>
 #include <string.h>
-#include "piezo_controller.h"
+#include "piezo_controller_internal.h"
 #include "piezo_plant.h"
 
-/* Projection bounds (docs/model.md, controller): b1 stays positive, the zero of B
- * stays inside the unit circle so that MV, which inverts B, stays stable. */
-#define B1_FLOOR_FRACTION 1e-3  /* b1 >= 1e-3 * nominal b1 */
-#define ZERO_RADIUS_MAX 0.999   /* |b2 / b1| <= 0.999 */
-/* The estimated A stays stable with a margin: A(1) = 1 + a1 + a2 >= m,
- * A(-1) = 1 - a1 + a2 >= m, |a2| <= 1 - m. Without it a single tone lets
- * (a1, a2) wander along the unexcited directions; with the documented -10 % PI
- * weights the loop then diverged (a1, a2 -> 1e12 within 0.6 s). m is 50x
- * below the nominal A(1) = 0.0049, so every plausible stage fits inside. */
-#define A_STABILITY_MARGIN 1e-4
-/* Observer pole t of T = 1 - t z^-1 (docs/model.md, controller): the
- * measurement noise reaches y through Gd / T, whose norm falls from 1.6 (t = 0)
- * to 0.96 (t = 0.4) for d = 2. With the paper's update, measured on the mismatch
- * case (six scenarios, d = 1, 2, 3, four sensor seeds), t = 0.4 had the lowest
- * median e_rms and t = 0.5 raised the worst case (2.83 nm against 2.65). With the
- * robust update (six scenarios, d = 2 and 3, four seeds: 48 runs) t = 0.4, 0.5,
- * 0.6 give medians 0.81, 0.69, 0.59 nm and worst cases 2.03, 1.98, 2.06 nm:
- * 0.5 has the lowest worst case. The paper's law keeps 0.4. */
-#define DEFAULT_OBSERVER 0.5
 /* The start-up law while the delay is detected: the nominal model, d = 2 and
  * t = 0.9. Its closed loop is stable for a loop delay of 1, 2 or 3 samples,
  * also with the mismatch case's plant and gains from 0.6 to 1.5 times the
  * model's (roots in docs/cosimulation.md); t = 0 (plain MV) is unstable for
  * every wrong d. */
 #define START_OBSERVER 0.9
-/* A candidate is chosen when its sum of squared a-priori errors is at most
- * DETECT_RATIO times every other candidate's, for PIEZO_DETECT_CONFIRM
- * consecutive samples. */
-#define DETECT_RATIO (1.0 / PIEZO_DETECT_RATIO_INV)
-/* A trial of PIEZO_DETECT_TRIAL samples that chooses nothing is followed by
- * one that starts with a probe: the doublet +p, -p added to q on its first two
- * samples. Its first response, b1 p, is PROBE_SNR times the rms a-priori
- * error of the best candidate in the trial before (noise and model error),
- * p within [PROBE_MIN, mv.probe_max] um (default 1 um; 0: no probe); each
- * further trial doubles it. After PIEZO_DETECT_PROBES probes a detection
- * probes no more (a measurement that never answers, e.g. a controller driven
- * open loop): its trials go on, and a kink of the reference can still decide. */
-#define PROBE_SNR 20.0
-#define PROBE_MIN 1e-3
 /* Robust adaptation (rls.robust; docs/model.md, adaptation). The measured noise of a signal
  * x is the median of |x(k) - x(k-1)|, scaled to the rms of a white x: a multiplicative
  * quantile tracker that steps up by NOISE_STEP when |x(k) - x(k-1)| NOISE_SCALE is above it
@@ -57,9 +23,6 @@
 #define NOISE_SCALE (1.0 / (0.6744897501960817 * 1.4142135623730951))  /* 1 / (median |N(0,1)| sqrt 2) */
 #define NOISE_FLOOR 1e-9          /* [um] */
 #define INV_SQRT3 0.57735026918962576
-/* samples the measured noise takes to forget the start: a loop's first samples (a tone from t = 0,
- * its transient) start the tracker far above the sensor's noise, and it steps down by NOISE_STEP */
-#define NOISE_SETTLE 100
 /* While the estimates are held (no excitation), the estimator's offset c follows its
  * prediction error: c += OFFSET_GAIN e, a time constant of 1 / OFFSET_GAIN = 100 samples.
  * Creep and the integral action move the stage's operating point while it holds still; c
@@ -67,14 +30,6 @@
  * next move do not teach theta the offset the hold built up (measured: a 30 um S-curve after
  * 600 s at 10 um, 7x the error after 0.2 s without c, 1.2x with it). */
 #define OFFSET_GAIN 0.01
-/* With the robust update the delay candidates keep the tuning the detection was designed and
- * measured with (docs/cosimulation.md): forgetting 0.995, trace bound 100 (the loop's own
- * rls.forgetting and rls.trace_max are the robust update's; with the paper's update the
- * candidates use them, as before). With the loop's 0.99 and 1000 the candidates learn a
- * measurement that alternates +-10 um whatever v does so well that the divergence monitor
- * no longer stops it (measured: not within 3000 samples; 86 with 0.995 and 100). */
-#define DETECT_FORGETTING 0.995
-#define DETECT_TRACE_MAX 100.0
 /* The admissible set's projection (docs/model.md, "Estimates with guarantees"): sweeps of
  * P-metric half-space projections over the violated rows, then a radial step towards the
  * nominal model (inside the set) that ends inside it whatever the sweeps left. */
@@ -89,66 +44,6 @@
 typedef char assert_max_delay[(PIEZO_MV_MAX_EXTRA_DELAY == PIEZO_MV_MAX_D - 1
                                && PIEZO_MV_Q_RING == PIEZO_MV_MAX_D + 1
                                && PIEZO_SUP_REF_RING >= PIEZO_MV_MAX_D) ? 1 : -1];
-
-void piezo_controller_default_params(piezo_controller_params *p)
-{
-    piezo_plant_params plant;
-    if (!p) return;
-    memset(p, 0, sizeof *p);
-    /* The nominal model is the plant's default parameter set: one source. */
-    piezo_plant_default_params(&plant);
-    p->pi = plant.pi;
-    p->tf_a1 = plant.tf.a1;
-    p->tf_a2 = plant.tf.a2;
-    p->tf_b1 = plant.tf.b1;
-    p->tf_b2 = plant.tf.b2;
-    p->creep_k_c = plant.creep_k_c;
-    p->creep_alpha = plant.creep_alpha;
-    p->creep_exact = plant.creep_exact;
-    p->h = plant.h;
-    /* No direct feedthrough by default: the control computed from the inputs
-     * of sample k is published at t_(k+1), so the loop delay is d = 2. */
-    p->mv_delay = PIEZO_MV_AUTO_DELAY;   /* detected: 2 in a master that exchanges at
-                                            communication points, 1 in true Gauss-Seidel */
-    p->mv_feedthrough = 0;
-    p->mv_lambda_u = 0.0;
-    p->mv_observer = DEFAULT_OBSERVER;
-    /* RLS tuning of the robust update (docs/model.md, adaptation): forgetting 0.99 and a
-     * trace bound of 100 (a bound of 1000 tracked the mismatch case's tones 2-3 times better
-     * but burst on 10 of 200 tone runs of drawn stages, up to 68 um; 300 on 5, 100 on none);
-     * the noise-scaled bound rls.variance_max keeps a noisy sensor from driving the estimates. */
-    p->rls_enabled = 1;
-    p->rls_forgetting = 0.99;
-    p->rls_p0 = 1.0;
-    p->rls_trace_max = 100.0;
-    /* robust adaptation and integral action, measured on the stage-use family and the
-     * paper's scenarios (docs/model.md, adaptation); the paper's law is rls.robust = false,
-     * rls.forgetting = 0.995, mv.integral = 0, mv.observer = 0.4 */
-    p->rls_robust = 1;
-    p->rls_excitation = 3.0;
-    p->rls_excitation_time = 0.05;
-    p->rls_variance_max = 0.004;
-    p->rls_p0_loop = 0.01;
-    p->mv_integral = 0.01;
-    p->sat_enabled = 1;
-    p->sat_v_min = -PIEZO_SAT_DEFAULT_V;
-    p->sat_v_max = PIEZO_SAT_DEFAULT_V;
-    p->monitor_pred_error_max = PIEZO_MONITOR_DEFAULT_ERROR;
-    p->monitor_divergence_samples = PIEZO_MONITOR_DEFAULT_SAMPLES;
-    piezo_supervisor_default_params(&p->sup);
-    p->mv_probe_max = PIEZO_DETECT_PROBE_MAX;
-    /* estimates with guarantees (docs/model.md): measured on the stage family's days and the
-     * paper's scenarios. The zero of B at 0.5 or above (a drift to -0.3 rang +-44 um; the
-     * paper's tones move it to 0.66-0.95), poles of A in the hull of real poles in [0, 1) (a
-     * fast pole driven to -0.3 by a 1 Hz tone overshot a step by 8.5 um); b1 and the static
-     * gain are kept within the supervision's sup.gain_min .. sup.gain_max times the nominal
-     * model's (piezo_supervisor.h); the fallback at twice the nominal model's squared errors
-     * over 0.5 s */
-    p->rls_zero_min = 0.75;
-    p->rls_pole_min = 0.0;
-    p->rls_fallback_ratio = 2.0;
-    p->rls_fallback_window = 0.5;
-}
 
 piezo_status piezo_diophantine(double a1, double a2, int d, double *e, double *g)
 {
@@ -187,70 +82,6 @@ static int noise_settled(const piezo_controller *c)
     return c->k >= NOISE_SETTLE;
 }
 
-/* lambda of the monitor's window: 1 - 1/monitor.divergence_samples (0: off) */
-static double monitor_forgetting(int window)
-{
-    return window > 0 ? 1.0 - 1.0 / (double)window : 0.0;
-}
-
-/* samples of a duration t at h, rounded to the nearest, saturated far below 2^63 (a tiny h with a
- * long duration must not overflow the conversion, as the fuzzer found) */
-static uint64_t rounded_samples(double t, double h)
-{
-    double n = floor(t / h + 0.5);
-    if (!(n >= 0.0)) return 0;
-    if (n > 9.0e15) return (uint64_t)9.0e15;
-    return (uint64_t)n;
-}
-
-/* The admissible set's lowest zero of B: rls.zero_min, or the nominal zero -tf.b2/tf.b1 when that
- * is lower (the set always holds the nominal model; a stage identified with a lower zero keeps
- * the default) */
-static double admissible_zero_min(const piezo_controller_params *p)
-{
-    double nominal_zero = -p->tf_b2 / p->tf_b1;
-    return p->rls_zero_min < nominal_zero ? p->rls_zero_min : nominal_zero;
-}
-
-/*
- * The admissible set of the robust update's estimates theta = [a1, a2, b1, b2] (docs/model.md,
- * "Estimates with guarantees"), as rows c^T theta <= d, from the nominal model n, the lowest
- * zero z (admissible_zero_min), the lowest pole p (rls.pole_min) and the supervision's range of a working
- * loop's response gain [g_lo, g_hi] (sup.gain_min, sup.gain_max: a gain the supervision takes for
- * a working loop the estimates can follow, and one beyond it the supervision stops);
- * A(x) = 1 + a1 x^-1 + a2 x^-2, so A(1) = 1 + a1 + a2, and m = A_STABILITY_MARGIN:
- *   A's poles in the convex hull of {real poles in [p, 1)}, the triangle of
- *     A(1) >= m                    (no pole at 1 or beyond):   -a1 - a2 <= 1 - m
- *     p^2 + a1 p + a2 >= 0         (both poles on one side of p): -p a1 - a2 <= p^2
- *     a2 + (1 + p)/2 a1 <= -p - m  (the chord from the double pole at p to the one at 1: complex
- *                                   poles only where they are damped as real ones between)
- *   B's zero -b2/b1 in [z, 0.999] (b1 > 0):  -0.999 b1 - b2 <= 0,  z b1 + b2 <= 0
- *   b1 within [g_lo n_b1, g_hi n_b1]:        b1 <= g_hi n_b1,  -b1 <= -g_lo n_b1
- *   B(1)/A(1) within [g_lo K, g_hi K], K the nominal's (A(1) > 0 by the first row):
- *     b1 + b2 - g_hi K (1 + a1 + a2) <= 0,   g_lo K (1 + a1 + a2) - b1 - b2 <= 0.
- * Every row is linear in theta: the set is a convex polytope (the hull, not the real-pole set
- * itself, which is not convex).
- */
-static void admissible_rows(const double *n, double z, double p, double g_lo, double g_hi, double rows[][4],
-                            double *d)
-{
-    const double m = A_STABILITY_MARGIN;
-    const double gain = (n[2] + n[3]) / (1.0 + n[0] + n[1]);
-    int r = 0;
-#define ADMISSIBLE_ROW(x0, x1, x2, x3, bound) \
-    do { rows[r][0] = (x0); rows[r][1] = (x1); rows[r][2] = (x2); rows[r][3] = (x3); d[r] = (bound); ++r; } while (0)
-    ADMISSIBLE_ROW(-1.0, -1.0, 0.0, 0.0, 1.0 - m);
-    ADMISSIBLE_ROW(-p, -1.0, 0.0, 0.0, p * p);
-    ADMISSIBLE_ROW((1.0 + p) / 2.0, 1.0, 0.0, 0.0, -p - m);
-    ADMISSIBLE_ROW(0.0, 0.0, -ZERO_RADIUS_MAX, -1.0, 0.0);
-    ADMISSIBLE_ROW(0.0, 0.0, z, 1.0, 0.0);
-    ADMISSIBLE_ROW(0.0, 0.0, 1.0, 0.0, g_hi * n[2]);
-    ADMISSIBLE_ROW(0.0, 0.0, -1.0, 0.0, -g_lo * n[2]);
-    ADMISSIBLE_ROW(-g_hi * gain, -g_hi * gain, 1.0, 1.0, g_hi * gain);
-    ADMISSIBLE_ROW(g_lo * gain, g_lo * gain, -1.0, -1.0, -g_lo * gain);
-#undef ADMISSIBLE_ROW
-}
-
 /* c^T theta - d of one row (> 0: theta violates it), in one fixed order */
 static double admissible_excess(const double *row, double d, const double *th)
 {
@@ -271,344 +102,6 @@ static int admissible_violated(const piezo_controller *c, const double *th)
            | (r[6][2] * b1 - d[6] > 0.0)
            | ((((r[7][0] * a1 + r[7][1] * a2) + r[7][2] * b1) + r[7][3] * b2) - d[7] > 0.0)
            | ((((r[8][0] * a1 + r[8][1] * a2) + r[8][2] * b1) + r[8][3] * b2) - d[8] > 0.0);
-}
-
-piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_params *p, piezo_diag *diag)
-{
-    piezo_pi_params pi_params;
-    piezo_tf tf_check;
-    piezo_tf_params tf_params;
-    piezo_status st;
-    if (!c || !p) return PIEZO_ERR_NULL;
-    if (!(isfinite(p->h) && p->h > 0.0)) return piezo_refuse(diag, "h", "(0, inf) s", p->h);
-    if (!(isfinite(p->creep_k_c) && p->creep_k_c > 0.0))
-        return piezo_refuse(diag, "creep.k_c", "(0, inf)", p->creep_k_c);
-    if (!(isfinite(p->creep_alpha) && p->creep_alpha >= -1.0 && p->creep_alpha <= 1.0))
-        return piezo_refuse(diag, "creep.alpha", "[-1, 1]", p->creep_alpha);
-    /* the nominal G must be a valid plant model (stable A) ... */
-    tf_params.a1 = p->tf_a1;
-    tf_params.a2 = p->tf_a2;
-    tf_params.b1 = p->tf_b1;
-    tf_params.b2 = p->tf_b2;
-    tf_params.delay = 0;
-    st = piezo_tf_init(&tf_check, &tf_params, diag);
-    if (st != PIEZO_OK) return st;
-    /* ... and invertible by MV: positive gain, zero inside the projection radius */
-    if (!(p->tf_b1 > 0.0)) return piezo_refuse(diag, "tf.b1", "(0, inf) (MV divides by b1)", p->tf_b1);
-    if (!(fabs(p->tf_b2) <= ZERO_RADIUS_MAX * p->tf_b1))
-        return piezo_refuse(diag, "tf.b2", "|tf.b2| <= 0.999 tf.b1 (zero of B inside the unit circle)", p->tf_b2);
-    if (p->mv_delay < PIEZO_MV_AUTO_DELAY || p->mv_delay > PIEZO_MV_MAX_EXTRA_DELAY)
-        return piezo_refuse(diag, "mv.delay", "-1 (detect d in 1..3) or 0..8 samples (d = 1 + mv.delay)",
-                            (double)p->mv_delay);
-    if (p->mv_feedthrough != 0 && p->mv_feedthrough != 1)
-        return piezo_refuse(diag, "mv.feedthrough", "false or true", (double)p->mv_feedthrough);
-    if (p->mv_hold_inputs != 0 && p->mv_hold_inputs != 1)
-        return piezo_refuse(diag, "mv.hold_inputs", "false or true", (double)p->mv_hold_inputs);
-    if (!(isfinite(p->mv_lambda_u) && p->mv_lambda_u >= 0.0))
-        return piezo_refuse(diag, "mv.lambda_u", "[0, inf)", p->mv_lambda_u);
-    if (!(isfinite(p->mv_observer) && p->mv_observer >= 0.0 && p->mv_observer < 1.0))
-        return piezo_refuse(diag, "mv.observer", "[0, 1) (pole of the observer polynomial T)", p->mv_observer);
-    if (!(isfinite(p->rls_forgetting) && p->rls_forgetting > 0.0 && p->rls_forgetting <= 1.0))
-        return piezo_refuse(diag, "rls.forgetting", "(0, 1]", p->rls_forgetting);
-    if (!(isfinite(p->rls_p0) && p->rls_p0 > 0.0))
-        return piezo_refuse(diag, "rls.p0", "(0, inf)", p->rls_p0);
-    if (!(isfinite(p->rls_trace_max) && p->rls_trace_max >= 4.0 * p->rls_p0))
-        return piezo_refuse(diag, "rls.trace_max", "[4 rls.p0, inf) (trace of the initial covariance)", p->rls_trace_max);
-    if (p->rls_robust != 0 && p->rls_robust != 1)
-        return piezo_refuse(diag, "rls.robust", "false or true", (double)p->rls_robust);
-    if (!(isfinite(p->rls_excitation) && p->rls_excitation >= 0.0))
-        return piezo_refuse(diag, "rls.excitation", "[0, inf) (times the measured noise of y_meas)", p->rls_excitation);
-    if (!(isfinite(p->rls_excitation_time) && p->rls_excitation_time >= 0.0
-          && p->rls_excitation_time <= 3600.0 && p->rls_excitation_time / p->h <= 9007199254740992.0))
-        return piezo_refuse(diag, "rls.excitation_time", "[0, 3600] s (and at most 2^53 samples of h)",
-                            p->rls_excitation_time);
-    if (!(isfinite(p->rls_variance_max) && p->rls_variance_max > 0.0))
-        return piezo_refuse(diag, "rls.variance_max", "(0, inf) (bound on trace(P) times the measured noise squared)",
-                            p->rls_variance_max);
-    if (!(isfinite(p->rls_p0_loop) && p->rls_p0_loop > 0.0 && 4.0 * p->rls_p0_loop <= p->rls_trace_max))
-        return piezo_refuse(diag, "rls.p0_loop", "(0, rls.trace_max / 4]", p->rls_p0_loop);
-    if (!(isfinite(p->mv_integral) && p->mv_integral >= 0.0 && p->mv_integral < 1.0))
-        return piezo_refuse(diag, "mv.integral", "[0, 1) (gain of the integral action per sample)", p->mv_integral);
-    if (p->sat_enabled) {
-        if (!isfinite(p->sat_v_min)) return piezo_refuse(diag, "sat.v_min", "finite, < sat.v_max", p->sat_v_min);
-        if (!(isfinite(p->sat_v_max) && p->sat_v_max > p->sat_v_min))
-            return piezo_refuse(diag, "sat.v_max", "finite, > sat.v_min", p->sat_v_max);
-    }
-    if (!(isfinite(p->monitor_pred_error_max) && p->monitor_pred_error_max > 0.0))
-        return piezo_refuse(diag, "monitor.pred_error_max", "(0, inf) um", p->monitor_pred_error_max);
-    if (p->monitor_divergence_samples < 0)
-        return piezo_refuse(diag, "monitor.divergence_samples", "0..2147483647 samples (0: never)",
-                            (double)p->monitor_divergence_samples);
-    if (!(isfinite(p->mv_probe_max) && p->mv_probe_max >= 0.0))
-        return piezo_refuse(diag, "mv.probe_max", "[0, inf) um (0: no delay probe)", p->mv_probe_max);
-    /* the admissible set must hold the nominal model: the estimates start there, and the fallback
-     * returns there (tf.b1 > 0 and |tf.b2| <= 0.999 tf.b1 are checked above). A nominal zero below
-     * rls.zero_min lowers the bound to it (admissible_zero_min), so the default suits any
-     * identified stage */
-    if (!(isfinite(p->rls_zero_min) && p->rls_zero_min >= -ZERO_RADIUS_MAX && p->rls_zero_min <= ZERO_RADIUS_MAX))
-        return piezo_refuse(diag, "rls.zero_min", "[-0.999, 0.999] (lowest zero of B the estimates may have; "
-                            "the nominal zero -tf.b2/tf.b1 when that is lower)", p->rls_zero_min);
-    if (!(isfinite(p->rls_pole_min) && p->rls_pole_min >= -1.0 && p->rls_pole_min < 1.0))
-        return piezo_refuse(diag, "rls.pole_min", "[-1, 1) (the poles of A in the hull of real poles in "
-                            "[rls.pole_min, 1))", p->rls_pole_min);
-    {
-        /* the nominal model inside the set, row by row (the parameter that draws each row) */
-        static const char *const who[PIEZO_ADMISSIBLE_ROWS] = {
-            "rls.pole_min", "rls.pole_min", "rls.pole_min", "rls.zero_min", "rls.zero_min",
-            "sup.gain_min", "sup.gain_min", "sup.gain_max", "sup.gain_min" };
-        double rows[PIEZO_ADMISSIBLE_ROWS][4], bounds[PIEZO_ADMISSIBLE_ROWS], nominal[4];
-        int i;
-        nominal[0] = p->tf_a1;
-        nominal[1] = p->tf_a2;
-        nominal[2] = p->tf_b1;
-        nominal[3] = p->tf_b2;
-        if (!(isfinite(p->sup.gain_min) && p->sup.gain_min > 0.0 && p->sup.gain_min < 1.0))
-            return piezo_refuse(diag, "sup.gain_min", "(0, 1) (times the model's response)", p->sup.gain_min);
-        if (!(isfinite(p->sup.gain_max) && p->sup.gain_max > 1.0))
-            return piezo_refuse(diag, "sup.gain_max", "(1, inf) (times the model's response)", p->sup.gain_max);
-        admissible_rows(nominal, admissible_zero_min(p), p->rls_pole_min, p->sup.gain_min, p->sup.gain_max, rows, bounds);
-        for (i = 0; i < PIEZO_ADMISSIBLE_ROWS; ++i)
-            if (admissible_excess(rows[i], bounds[i], nominal) > 0.0)
-                return piezo_refuse(diag, who[i], i < 3 ? "a value below both nominal poles (tf.a1, tf.a2: real "
-                                    "poles in [rls.pole_min, 1 - 1e-4], or complex ones inside their hull)"
-                                    : "a set that holds the nominal model", i < 3 ? p->rls_pole_min
-                                    : (i < 5 ? p->rls_zero_min : (i == 5 || i == 7 ? p->sup.gain_max
-                                                                                    : p->sup.gain_min)));
-    }
-    if (!(isfinite(p->rls_fallback_ratio) && p->rls_fallback_ratio >= 0.0))
-        return piezo_refuse(diag, "rls.fallback_ratio", "[0, inf) (times the nominal model's squared prediction "
-                            "errors; 0: no prediction test)", p->rls_fallback_ratio);
-    if (!(isfinite(p->rls_fallback_window) && p->rls_fallback_window > 0.0 && p->rls_fallback_window <= 3600.0))
-        return piezo_refuse(diag, "rls.fallback_window", "(0, 3600] s (window of the prediction test, at least "
-                            "one sample)", p->rls_fallback_window);
-
-    memset(c, 0, sizeof *c);
-    pi_params = p->pi;
-    st = piezo_pi_init(&c->fwd_pi, &pi_params, diag);
-    if (st != PIEZO_OK) return st;
-    /* eq 29: inverse creep = G-L of order -alpha, gain h^alpha / k_c */
-    st = piezo_gl_init(&c->inv_creep, -p->creep_alpha, pow(p->h, p->creep_alpha) / p->creep_k_c,
-                       p->creep_exact, diag);
-    if (st != PIEZO_OK) return st;
-    c->auto_delay = p->mv_delay == PIEZO_MV_AUTO_DELAY;
-    c->d = c->auto_delay ? PIEZO_DETECT_START_D : 1 + p->mv_delay;
-    c->lambda_u = p->mv_lambda_u;
-    c->observer = p->mv_observer;
-    c->rls_enabled = p->rls_enabled ? 1 : 0;
-    c->forgetting = p->rls_forgetting;
-    c->inv_forgetting = 1.0 / p->rls_forgetting;
-    c->p0 = p->rls_p0;
-    c->trace_max = p->rls_trace_max;
-    c->robust = p->rls_robust;
-    c->excitation = p->rls_excitation;
-    c->excitation_samples = rounded_samples(p->rls_excitation_time, p->h);
-    c->variance_max = p->rls_variance_max;
-    c->p0_loop = p->rls_p0_loop;
-    c->integral_gain = p->mv_integral;
-    c->sat_enabled = p->sat_enabled ? 1 : 0;
-    c->sat_v_min = p->sat_v_min;
-    c->sat_v_max = p->sat_v_max;
-    c->pred_error_max = p->monitor_pred_error_max;
-    c->divergence_samples = (uint64_t)p->monitor_divergence_samples;
-    c->mon_forgetting = monitor_forgetting(p->monitor_divergence_samples);
-    c->theta_nominal[0] = p->tf_a1;
-    c->theta_nominal[1] = p->tf_a2;
-    c->theta_nominal[2] = p->tf_b1;
-    c->theta_nominal[3] = p->tf_b2;
-    c->probe_max = p->mv_probe_max;
-    c->zero_min = admissible_zero_min(p);
-    c->pole_min = p->rls_pole_min;
-    c->gain_lo = p->sup.gain_min;
-    c->gain_hi = p->sup.gain_max;
-    admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_lo, c->gain_hi, c->adm_c, c->adm_d);
-    c->fallback_ratio = p->rls_fallback_ratio;
-    c->fallback_samples = rounded_samples(p->rls_fallback_window, p->h);
-    if (c->fallback_samples < 1) c->fallback_samples = 1;
-    c->fallback_forgetting = 1.0 - 1.0 / (double)c->fallback_samples;
-    /* the supervisor judges the loop by the nominal model */
-    st = piezo_supervisor_init(&c->sup, &p->sup, p->tf_a1, p->tf_a2, p->tf_b1, p->tf_b2, p->h, diag);
-    if (st != PIEZO_OK) return st;
-    piezo_controller_reset(c);
-    /* The inverse PI must exist in doubles: its thresholds grow like
-     * (w0 + sum w_j) v_max, its weights like 1/w0 (and 1/w0^2 inside eq 27). */
-    {
-        int i, thresholds_ok = 1, weights_ok = isfinite(c->inv_pi.w0);
-        for (i = 0; i < PIEZO_PI_MAX_OPERATORS; ++i) {
-            thresholds_ok = thresholds_ok && isfinite(c->inv_pi.r[i]);
-            weights_ok = weights_ok && isfinite(c->inv_pi.w[i]);
-        }
-        if (!thresholds_ok)
-            return piezo_refuse(diag, "pi.v_max",
-                                "(0, inf) V with (pi.w0 + sum of pi.w[j]) pi.v_max finite (thresholds of the inverse PI)",
-                                p->pi.v_max);
-        if (!weights_ok)
-            return piezo_refuse(diag, "pi.w0", "(0, inf) with 1/pi.w0^2 finite (weights of the inverse PI)", p->pi.w0);
-        if (piezo_pi_inverse_check(&c->inv_pi) != NULL)
-            return piezo_refuse(diag, "pi.w0", "(0, inf) with a finite inverse PI (pi.w0, pi.w[j], pi.v_max)", p->pi.w0);
-    }
-    return PIEZO_OK;
-}
-
-/* (Re)start delay detection: every candidate from the nominal model and the
- * initial covariance, sums at 0, the start-up law. */
-static void detection_start(piezo_controller *c)
-{
-    int i, j;
-    c->detecting = 1;
-    c->d = PIEZO_DETECT_START_D;
-    c->det_leader = -1;
-    c->det_run = 0;
-    c->det_trial = c->k;
-    c->det_probe = 0.0;
-    c->det_probes = 0;
-    c->n_detections += 1;
-    for (i = 0; i < PIEZO_DETECT_N; ++i) {
-        c->det_score[i] = 0.0;
-        memcpy(&c->det_theta[4 * i], c->theta_nominal, 4 * sizeof(double));
-        for (j = 0; j < 16; ++j) c->det_P[16 * i + j] = j % 5 == 0 ? c->p0 : 0.0;
-    }
-}
-
-/* The loop's states as a fresh controller's at sample c->k (c->k_start): the nominal model, its
- * covariance, the delay detection, the supervision, every sum of the loop; the hysteresis model and
- * the inverse creep are the caller's (reset: zero states; restart: the stage's after 0 V). The
- * counts of the run are not touched. */
-static void loop_start(piezo_controller *c)
-{
-    int i;
-    memcpy(c->theta, c->theta_nominal, sizeof c->theta);
-    memset(c->P, 0, sizeof c->P);
-    for (i = 0; i < 4; ++i) c->P[5 * i] = c->robust ? c->p0_loop : c->p0;
-    c->y_prev[0] = c->y_prev[1] = 0.0;
-    memset(c->q_ring, 0, sizeof c->q_ring);
-    c->head = 0;
-    c->r_prev = 0.0;
-    c->noise_y = c->noise_y2 = c->noise_e = c->r_anchor = c->offset = c->integral = c->r_last = c->r_last2 = c->r_velocity = 0.0;
-    c->excite_left = c->jump_left = 0;
-    memset(c->yd_value, 0, sizeof c->yd_value);
-    memset(c->yd_tag, 0, sizeof c->yd_tag);
-    memset(c->preview_value, 0, sizeof c->preview_value);
-    memset(c->preview_tag, 0, sizeof c->preview_tag);
-    c->k_delay = c->k;
-    c->k_search = c->k;
-    c->det_clock = 0;
-    c->detecting = 0;
-    if (c->auto_delay)
-        detection_start(c);
-    c->sat_hold = 0;
-    c->run_saturated = c->run_large_error = 0;
-    c->mon_share = c->mon_weight = 0.0;
-    memset(&c->out, 0, sizeof c->out);
-    memcpy(c->out.theta, c->theta, sizeof c->theta);
-    piezo_supervisor_reset(&c->sup);
-    memset(&c->verdict, 0, sizeof c->verdict);
-    c->det_noise = 0.0;
-    c->err_sum = c->err_weight = c->outlier_sum = 0.0;
-    c->quiet = 0;
-    c->suspect = 0;
-    c->suspect_y = c->suspect_error = 0.0;
-    c->fault = 0;
-    c->k_fault = 0;
-    c->v_fault = 0.0;
-    c->y_fault = 0.0;
-    c->y_moved = 0;
-    c->fb_adapted = c->fb_nominal = c->learned_rate = 0.0;
-}
-
-void piezo_controller_reset(piezo_controller *c)
-{
-    if (!c) return;
-    piezo_pi_reset(&c->fwd_pi);
-    piezo_pi_inverse_init(&c->inv_pi, &c->fwd_pi);   /* consistent with zero states */
-    piezo_gl_reset(&c->inv_creep);
-    c->k = 0;
-    c->k_start = c->k_ramp_end = c->n_resets = 0;
-    c->y_start = 0.0;
-    c->n_detections = 0;
-    loop_start(c);
-    c->n_saturated = c->n_large_error = 0;
-    c->k_first_saturated = c->k_first_large_error = 0;
-    c->n_large_settled = c->k_first_large_settled = 0;
-    c->max_abs_pred_error = 0.0;
-    c->n_outliers = c->k_first_outlier = 0;
-    c->first_outlier = c->first_outlier_error = 0.0;
-    c->n_projections = 0;
-    c->n_fallbacks = c->k_first_fallback = 0;
-    c->first_fallback = PIEZO_FALLBACK_NONE;
-    c->first_fallback_value = c->first_fallback_other = 0.0;
-}
-
-int piezo_controller_reset_refusal(const piezo_controller *c, const piezo_controller_input *in)
-{
-    double rail;
-    if (!c || !c->fault) return PIEZO_RESET_NO_FAULT;
-    if (c->k - c->k_fault < c->sup.ramp_samples) return PIEZO_RESET_RAMPING;
-    if (!in || !isfinite(in->y_ref) || !isfinite(in->y_meas)) return PIEZO_RESET_INPUTS;
-    /* a reading that never left the verdict's: the frozen or silent sensor is still there (a
-     * sensor that came back reads the stage, which moved as v went to 0 V) */
-    if ((c->fault == PIEZO_SUP_FROZEN || c->fault == PIEZO_SUP_NO_RESPONSE || c->fault == PIEZO_SUP_CLIPPED)
-        && !c->y_moved && in->y_meas == c->y_fault)
-        return PIEZO_RESET_STUCK;
-    /* the rail the loop was held at (the clipping watchdog's verdict, or another one while v was at
-     * a rail: the monitor's, say), and the reading it reached there: a reference still beyond
-     * it by more than the watchdog's bound would clip again. Only where the stage answered the rail
-     * the right way round, its reading falling back from there as v went to 0 V: an inverted
-     * amplifier or sensor also holds v at a rail, and its reading there says nothing of the reach
-     * (the restarted supervision judges that loop) */
-    rail = c->v_fault >= 0.0 ? 1.0 : -1.0;
-    if ((c->fault == PIEZO_SUP_CLIPPED || (c->sat_enabled && (c->v_fault == c->sat_v_max || c->v_fault == c->sat_v_min)))
-        && (c->y_fault - in->y_meas) * rail > 0.0
-        && (in->y_ref - c->y_fault) * rail > c->sup.clip_error)
-        return PIEZO_RESET_OUT_OF_REACH;
-    return PIEZO_RESET_ACCEPTED;
-}
-
-/*
- * The restart from rest at y = y_meas(k) after v went to 0 V: the forward PI's operators take
- * v = 0 (a play operator is rate independent, so the ramp's monotone path ends where a jump to 0
- * does) and the inverse is rebuilt consistent with them (eq 28); the inverse creep starts anew;
- * the law's past is that of a stage at rest there, q(k-i) = q0 = P[0] / gain of the inverse creep
- * (what 0 V gives the model) and y(k-i) = y, and its reference starts from y: the reference then
- * comes as a step.
- */
-piezo_status piezo_controller_restart(piezo_controller *c, double y)
-{
-    double r0, q0, w, noise_y, noise_y2, noise_e;
-    int i, d, keep_d;
-    if (!c) return PIEZO_ERR_NULL;
-    if (!c->fault || !isfinite(y)) return PIEZO_ERR_PARAM;
-    piezo_pi_eval(&c->fwd_pi, 0.0, c->fwd_pi.z, &r0);     /* the operators after 0 V, committed */
-    piezo_pi_inverse_init(&c->inv_pi, &c->fwd_pi);
-    piezo_gl_reset(&c->inv_creep);
-    c->k_start = c->k;
-    c->k_ramp_end = c->k + c->sup.ramp_samples;
-    c->n_resets += 1;
-    /* what the loop learned of its wiring and its sensor, not of the stage's model, stays: the
-     * loop delay chosen (unless the verdict was about the delay), the measured noise (a restart that
-     * measured it anew would probe behind a 200 nm sensor, which it had found buries the probes) */
-    keep_d = c->auto_delay && !c->detecting && c->fault != PIEZO_SUP_DELAY && c->fault != PIEZO_SUP_UNDETECTED;
-    d = c->d;
-    noise_y = c->noise_y;
-    noise_y2 = c->noise_y2;
-    noise_e = c->noise_e;
-    loop_start(c);
-    c->noise_y = noise_y;
-    c->noise_y2 = noise_y2;
-    c->noise_e = noise_e;
-    if (keep_d) {
-        c->detecting = 0;
-        c->d = d;
-        c->n_detections -= 1;
-    }
-    q0 = r0 / c->inv_creep.gain;
-    if (!isfinite(q0)) q0 = 0.0;
-    for (i = 0; i < PIEZO_MV_Q_RING; ++i) c->q_ring[i] = q0;
-    c->y_prev[0] = c->y_prev[1] = y;
-    c->r_prev = c->r_last = c->r_last2 = c->r_anchor = y;
-    c->y_start = y;
-    w = (c->theta_nominal[2] + c->theta_nominal[3]) * q0;
-    piezo_supervisor_restart(&c->sup, y, w);
-    return PIEZO_OK;
 }
 
 size_t piezo_controller_history_needed(const piezo_controller *c)
@@ -717,18 +210,6 @@ static void rls_gain(const piezo_controller *c, const double *theta_in, const do
     P_new[4] = n01;  P_new[5] = n11;  P_new[6] = n12;  P_new[7] = n13;
     P_new[8] = n02;  P_new[9] = n12;  P_new[10] = n22; P_new[11] = n23;
     P_new[12] = n03; P_new[13] = n13; P_new[14] = n23; P_new[15] = n33;
-}
-
-/* The a-priori error of (theta_in, P) under delay d and, with update set, the update with the
- * paper's projection (the delay candidates, the paper's update). */
-static double rls_step(const piezo_controller *c, const double *theta_in, const double *P, int d, double y,
-                       int update, double lambda, double inv_lambda, double trace_max, double *theta, double *P_new)
-{
-    double e = rls_error(c, theta_in, d, y);
-    if (!update) return e;
-    rls_gain(c, theta_in, P, d, e, lambda, inv_lambda, trace_max, theta, P_new);
-    project(c, theta);
-    return e;
 }
 
 /*
@@ -882,143 +363,13 @@ static void excitation_next(const piezo_controller *c, double y_meas, piezo_cont
  * those hold the model's error too, and a stage far from the model would wait where its probes
  * decide within 62 ms.
  */
-double piezo_controller_probe_snr(void)
-{
-    return PROBE_SNR;
-}
-
-double piezo_controller_monitor_bound(const piezo_controller *c)
-{
-    return c ? monitor_bound(c) : 0.0;
-}
-
-int piezo_controller_explain_bound(const piezo_controller *c, char *text, size_t size)
-{
-    double bound;
-    if (c == NULL) return 0;
-    bound = monitor_bound(c);
-    if (bound >= PIEZO_MONITOR_NOISE_CAP * c->pred_error_max)
-        return snprintf(text, size, "%.4g um (monitor.pred_error_max = %g um raised for y_meas's noise, %.4g um "
-                        "rms, to its cap)", bound, c->pred_error_max, c->noise_y2);
-    if (bound > c->pred_error_max)
-        return snprintf(text, size, "%.4g um (monitor.pred_error_max = %g um raised to %d times y_meas's noise, "
-                        "%.4g um rms)", bound, c->pred_error_max, PIEZO_MONITOR_NOISE, c->noise_y2);
-    return snprintf(text, size, "monitor.pred_error_max = %g um", c->pred_error_max);
-}
-
 int piezo_controller_probes_buried(const piezo_controller *c)
 {
     return c->robust && noise_settled(c) && PROBE_SNR * c->noise_y2 > c->probe_max * c->theta_nominal[2];
 }
 
-static void detect_carry(const piezo_controller *c, piezo_controller_sample *s);
-
-/* The one-step error the monitor judges while the detection runs, given its best candidate's: that
- * one's, but while the probes are buried the start-up law's own, the nominal model's at
- * PIEZO_DETECT_START_D (the candidates adapt while the reference moves, and on noisy data wander:
- * with a 200 nm sensor theirs wandered up to 26 um from y_meas while the stage tracked within
- * 0.65 um, and the monitor stopped 51 of 1300 runs of the stage's day's quick slice) */
-static double detect_error(const piezo_controller *c, const piezo_controller_sample *s, double y, double best)
-{
-    return s->clock ? best : rls_error(c, c->theta_nominal, PIEZO_DETECT_START_D, y);
-}
-
-/*
- * Delay detection, one sample (docs/cosimulation.md): each candidate
- * d = i + 1 predicts y(k) with its own RLS, adds its squared a-priori error to
- * its sum, and adapts. The candidate with the smallest sum leads clearly when
- * that sum is at most DETECT_RATIO times every other candidate's; it is chosen
- * after leading clearly for PIEZO_DETECT_CONFIRM consecutive samples, and its
- * estimates and covariance become the loop's (s->theta, s->P, s->rls_updated).
- * Returns the a-priori error of the leader by sum (ties: the start-up law's d).
- */
-static double detect_update(const piezo_controller *c, double y, piezo_controller_sample *s)
-{
-    static const int order[PIEZO_DETECT_N] = { PIEZO_DETECT_START_D - 1, 0, 2 };
-    double err[PIEZO_DETECT_N];
-    /* the candidates adapt while the reference moves or the sample can teach them, and score only on
-     * the samples that can; not at all while the probes are buried in the noise (nothing can be chosen
-     * then, and the monitor judges the nominal model): adapting on 200 nm data as the reference moved,
-     * the d = 3 candidate's estimates grew without bound (1e153 after 17 s of the stage's day's hour
-     * on stage 6) until its score overflowed and the loop was refused as diverged, in 18 of the 1700
-     * robust runs of the day with 100 and 200 nm sensors */
-    int i, best = order[0], second = -1, update = c->rls_enabled && !(c->sat_hold > 0) && !s->outlier
-                                                  && s->clock && (s->live || c->r_last != c->r_last2);
-    for (i = 0; i < PIEZO_DETECT_N; ++i) {
-        err[i] = rls_step(c, &c->det_theta[4 * i], &c->det_P[16 * i], i + 1, y, update,
-                          c->robust ? DETECT_FORGETTING : c->forgetting,
-                          c->robust ? 1.0 / DETECT_FORGETTING : c->inv_forgetting,
-                          c->robust ? DETECT_TRACE_MAX : c->trace_max, &s->det_theta[4 * i], &s->det_P[16 * i]);
-        if (!update) {
-            memcpy(&s->det_theta[4 * i], &c->det_theta[4 * i], 4 * sizeof(double));
-            memcpy(&s->det_P[16 * i], &c->det_P[16 * i], 16 * sizeof(double));
-        }
-        s->det_score[i] = c->det_score[i] + err[i] * err[i];
-    }
-    if (!s->live) {
-        /* a sample the detection cannot learn from: none scores or leads (in closed loop at rest the
-         * law's own answer to the noise favours one delay: the candidate of d = 3 led clearly within
-         * 62 ms on a stage with a 200 nm sensor; candidates that adapt to the noise at rest wander
-         * until the monitor stops the loop, and candidates that do not adapt along a slow ramp err
-         * beyond its bound) */
-        detect_carry(c, s);
-        memcpy(s->det_score, c->det_score, sizeof s->det_score);
-        s->rls_updated = 0;
-        return detect_error(c, s, y, err[PIEZO_DETECT_START_D - 1]);
-    }
-    for (i = 1; i < PIEZO_DETECT_N; ++i)
-        if (s->det_score[order[i]] < s->det_score[best]) best = order[i];
-    for (i = 0; i < PIEZO_DETECT_N; ++i)
-        if (i != best && (second < 0 || s->det_score[i] < s->det_score[second])) second = i;
-    if (s->det_score[second] > 0.0 && s->det_score[best] <= DETECT_RATIO * s->det_score[second]) {
-        s->det_run = c->det_leader == best ? c->det_run + 1 : 1;
-        s->det_leader = best;
-    } else {
-        s->det_run = 0;
-        s->det_leader = -1;
-    }
-    /* a leader of noise-buried probes must lead a run of PIEZO_DETECT_CONFIRM_BURIED, longer than a
-     * trial (PIEZO_DETECT_TRIAL), whose start resets the run: in effect none is chosen while the noise
-     * buries the probes, and the start-up law runs on (on the stage's day's quick slice with 100 and
-     * 200 nm sensors, 1300 runs: leading 10 samples, two wrong choices of d = 3 after waits of 25 and
-     * 49 s swung the stage 5.6 um before the restart; 20, 4.2 and 5.3 um; 40, none, the frames within
-     * 2.2 um) */
-    s->detecting = s->det_run < (!s->clock ? PIEZO_DETECT_CONFIRM_BURIED
-                                                                               : PIEZO_DETECT_CONFIRM);
-    /* a trial that chose nothing: the next starts with a probe */
-    s->new_trial = s->detecting && c->k + 1 - c->det_trial >= PIEZO_DETECT_TRIAL;
-    s->next_noise = c->det_noise;
-    if (s->new_trial) {
-        double p, lo = PROBE_MIN < c->probe_max ? PROBE_MIN : c->probe_max;
-        s->next_noise = sqrt(s->det_score[best] / PIEZO_DETECT_TRIAL);
-        p = PROBE_SNR * s->next_noise / c->theta_nominal[2];
-        if (p < 2.0 * c->det_probe) p = 2.0 * c->det_probe;
-        s->next_probe = c->det_probes >= PIEZO_DETECT_PROBES ? 0.0
-                        : p < lo ? lo : (p > c->probe_max ? c->probe_max : p);
-    }
-    s->d = s->detecting ? PIEZO_DETECT_START_D : best + 1;
-    s->k_delay = s->detecting ? c->k_delay : c->k;
-    s->rls_updated = !s->detecting;
-    if (!s->detecting) {
-        memcpy(s->theta, c->robust ? c->theta_nominal : &s->det_theta[4 * best], sizeof s->theta);
-        if (c->robust) {
-            /* the robust update starts the loop from the nominal model and rls.p0_loop I (after a
-             * restart too: estimates fitted under another delay are no start for this one); the
-             * candidates' estimates and covariance are sized to
-             * tell the delays apart within milliseconds. Their estimates, fitted to the
-             * detection's few samples of sensor noise and probes, moved b1 from 0.595 to 0.526
-             * on a stage with a 20 nm sensor (its 10 um step then erred 2.23 um, 0.076 with the
-             * estimates fixed); and the first large move of a loop that keeps their covariance
-             * fits its estimates to that one move (a 50 um S-curve: b1 driven to its floor,
-             * errors of 2-12 um) */
-            int j;
-            for (j = 0; j < 16; ++j) s->P[j] = j % 5 == 0 ? c->p0_loop : 0.0;
-        } else {
-            memcpy(s->P, &s->det_P[16 * best], sizeof s->P);
-        }
-    }
-    return detect_error(c, s, y, err[best]);
-}
+double piezo_controller_probe_snr(void) { return PROBE_SNR; }
+double piezo_controller_monitor_bound(const piezo_controller *c) { return c ? monitor_bound(c) : 0.0; }
 
 /* The detection state of k+1 when nothing is detected this sample (the
  * candidates' sums, estimates and covariances are not used then: neither
@@ -1310,7 +661,7 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     s->live = s->clock || s->excited;
     if (c->detecting) {
         s->offset = 0.0;
-        pred_error = detect_update(c, y_meas, s);
+        pred_error = piezo_ctl_detect_update(c, y_meas, s);
     } else {
         /* the loop model's a-priori error is the outlier test's (computed once), unless the
          * model's prediction stood in for y_meas */
@@ -1682,7 +1033,7 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
             c->k_search = c->k;
             c->det_clock = 0;
         }
-        detection_start(c);
+        piezo_ctl_detection_start(c);
         c->k_delay = c->k;
     }
 }
@@ -1821,368 +1172,24 @@ piezo_status piezo_controller_peek(const piezo_controller *c, double y_ref, doub
     return st;
 }
 
-
-const char *piezo_controller_check(const piezo_controller *c)
+/* The sample's helpers for the controller's other files (piezo_controller_internal.h) */
+double piezo_ctl_rls_error(const piezo_controller *c, const double *theta, int d, double y)
 {
-    const char *fault;
-    const piezo_controller_output *o;
-    int i, j, m;
-    uint64_t k_loop;
-    if (!c) return "controller missing";
-    /* the safe state: its fault, the verdict's sample (the loop's state is of then), the ramp */
-    if (c->fault < 0 || c->fault > PIEZO_SUP_FAULT_MAX) return "safe state's fault code out of range";
-    if (c->fault ? (c->sup.reaction != PIEZO_SUP_REACT_SAFE || c->k_fault >= c->k || !isfinite(c->v_fault)
-                    || (c->fault <= PIEZO_SUP_FROZEN && c->verdict.fault != c->fault)
-                    || (c->sat_enabled && (c->v_fault > c->sat_v_max || c->v_fault < c->sat_v_min)))
-                 : c->k_fault != 0 || c->v_fault != 0.0)
-        return "safe state inconsistent (reaction, sample, start of the ramp or verdict)";
-    if (!isfinite(c->y_fault) || (c->y_moved != 0 && c->y_moved != 1)
-        || (!c->fault && (c->y_fault != 0.0 || c->y_moved)))
-        return "safe state's reading at the verdict inconsistent";
-    k_loop = c->fault ? c->k_fault : c->k;
-    /* sup.reset: the loop restarted at k_start (>= 1, a safe state came before), v ramping until
-     * k_ramp_end; the loop's counters run from k_start */
-    if (c->k_start > k_loop || c->n_resets > c->k || !isfinite(c->y_start)
-        || (c->n_resets == 0 ? c->k_start != 0 || c->k_ramp_end != 0
-                             : c->k_start == 0 || c->k_ramp_end != c->k_start + c->sup.ramp_samples))
-        return "restart (sup.reset) sample, ramp or count inconsistent";
-    if ((fault = piezo_pi_check(&c->fwd_pi)) != NULL) return fault;
-    if ((fault = piezo_pi_inverse_check(&c->inv_pi)) != NULL) return fault;
-    if (c->inv_pi.m != c->fwd_pi.m) return "inverse PI and forward PI differ in m";
-    if ((fault = piezo_gl_check(&c->inv_creep)) != NULL) return fault;
-    if (c->inv_creep.k != k_loop - c->k_start) return "inverse creep sample counter differs from the controller's";
-    if (c->d < 1 || c->d > PIEZO_MV_MAX_D) return "loop delay d outside 1..9";
-    if (c->head < 0 || c->head >= PIEZO_MV_Q_RING) return "q ring index out of range";
-    if (c->sat_hold < 0 || c->sat_hold > (c->d > PIEZO_DETECT_N ? c->d : PIEZO_DETECT_N) + 1)
-        return "adaptation pause outside 0..max(d, 3)+1";
-    if ((c->auto_delay != 0 && c->auto_delay != 1) || (c->detecting != 0 && c->detecting != 1)
-        || (c->detecting && !c->auto_delay) || (c->auto_delay && c->d > PIEZO_DETECT_N)
-        || (c->detecting && c->d != PIEZO_DETECT_START_D))
-        return "delay detection flags or d inconsistent";
-    /* a choice leaves its leader with a run of PIEZO_DETECT_CONFIRM (PIEZO_DETECT_CONFIRM_BURIED
-     * while the probes are buried in the noise) */
-    if (c->det_leader < -1 || c->det_leader >= PIEZO_DETECT_N || c->det_run < 0
-        || c->det_run > (PIEZO_DETECT_CONFIRM > PIEZO_DETECT_CONFIRM_BURIED ? PIEZO_DETECT_CONFIRM
-                                                                             : PIEZO_DETECT_CONFIRM_BURIED)
-        || (c->detecting && c->det_run >= (piezo_controller_probes_buried(c) ? PIEZO_DETECT_CONFIRM_BURIED
-                                                                              : PIEZO_DETECT_CONFIRM))
-        || (c->det_leader < 0 && c->det_run != 0))
-        return "delay detection leader out of range";
-    if (!(isfinite(c->probe_max) && c->probe_max >= 0.0) || !(isfinite(c->det_noise) && c->det_noise >= 0.0))
-        return "mv.probe_max or the detection's noise out of range";
-    if (c->det_trial > c->k || !(isfinite(c->det_probe) && c->det_probe >= 0.0 && c->det_probe <= c->probe_max)
-        || c->det_probes < 0 || c->det_probes > PIEZO_DETECT_PROBES)
-        return "delay detection trial out of range";
-    if (c->k_delay > c->k || c->k_search > c->k_delay || c->det_clock > c->k - c->k_search
-        || (c->auto_delay && (c->n_detections < 1 || c->n_detections > c->k + 1))
-        || (!c->auto_delay && c->n_detections != 0))
-        return "delay detection counters out of range";
-    if (!all_finite(c->det_theta, PIEZO_DETECT_THETA) || !all_finite(c->det_P, PIEZO_DETECT_P)
-        || !all_finite(c->det_score, PIEZO_DETECT_N) || !isfinite(c->r_prev)
-        || !all_finite(c->preview_value, PIEZO_PREVIEW_RING))
-        return "delay detection or preview values not finite";
-    if (!(isfinite(c->observer) && c->observer >= 0.0 && c->observer < 1.0)) return "mv.observer out of range";
-    if ((c->rls_enabled != 0 && c->rls_enabled != 1) || (c->sat_enabled != 0 && c->sat_enabled != 1))
-        return "rls.enabled or sat.enabled is not 0 or 1";
-    if (!(isfinite(c->lambda_u) && c->lambda_u >= 0.0)) return "mv.lambda_u out of range";
-    if (!(isfinite(c->forgetting) && c->forgetting > 0.0 && c->forgetting <= 1.0)) return "rls.forgetting out of range";
-    if (c->inv_forgetting != 1.0 / c->forgetting) return "the reciprocal of rls.forgetting kept from init does not match rls.forgetting";
-    if (!(isfinite(c->p0) && c->p0 > 0.0 && isfinite(c->trace_max) && c->trace_max >= 4.0 * c->p0))
-        return "rls.p0 or rls.trace_max out of range";
-    if (!(isfinite(c->sat_v_min) && isfinite(c->sat_v_max) && (!c->sat_enabled || c->sat_v_max > c->sat_v_min)))
-        return "sat.v_min or sat.v_max out of range";
-    if ((c->robust != 0 && c->robust != 1) || !(isfinite(c->excitation) && c->excitation >= 0.0)
-        || c->excitation_samples > 9007199254740992ULL
-        || !(isfinite(c->variance_max) && c->variance_max > 0.0)
-        || !(isfinite(c->p0_loop) && c->p0_loop > 0.0 && 4.0 * c->p0_loop <= c->trace_max)
-        || !(isfinite(c->integral_gain) && c->integral_gain >= 0.0 && c->integral_gain < 1.0))
-        return "rls.robust, rls.excitation*, rls.variance_max, rls.p0_loop or mv.integral out of range";
-    if (!(isfinite(c->noise_y) && c->noise_y >= 0.0 && isfinite(c->noise_y2) && c->noise_y2 >= 0.0
-          && isfinite(c->noise_e) && c->noise_e >= 0.0
-          && isfinite(c->r_anchor) && isfinite(c->offset) && isfinite(c->integral) && isfinite(c->r_last)
-          && isfinite(c->r_last2) && isfinite(c->r_velocity)
-          && all_finite(c->yd_value, PIEZO_MV_Q_RING)) || c->excite_left > c->excitation_samples || c->jump_left > 2 * (PIEZO_MV_MAX_D + 2)
-        || (!c->robust && (c->noise_y != 0.0 || c->noise_y2 != 0.0 || c->noise_e != 0.0 || c->offset != 0.0 || c->excite_left != 0
-                           || c->r_anchor != 0.0 || c->r_velocity != 0.0))
-        || (c->integral_gain == 0.0 && c->integral != 0.0))
-        return "robust adaptation or integral action state out of range";
-    for (i = 0; i < PIEZO_MV_Q_RING; ++i)
-        if (c->yd_tag[i] != 0 && (c->yd_tag[i] > c->k + PIEZO_MV_Q_RING || (c->yd_tag[i] - 1) % PIEZO_MV_Q_RING != (uint64_t)i))
-            return "a kept reference's sample is not its slot's or too far ahead";
-    if (!(isfinite(c->pred_error_max) && c->pred_error_max > 0.0)) return "monitor.pred_error_max out of range";
-    if (c->divergence_samples > 2147483647u) return "monitor.divergence_samples out of range";
-    if (c->mon_forgetting != monitor_forgetting((int)c->divergence_samples))
-        return "the monitor's window kept from init does not match monitor.divergence_samples";
-    if (!(isfinite(c->mon_share) && isfinite(c->mon_weight) && c->mon_share >= 0.0 && c->mon_share <= c->mon_weight
-          && c->mon_weight <= (double)c->k))
-        return "monitor share out of range";
-    if (!(all_finite(c->theta_nominal, 4) && c->theta_nominal[2] > 0.0)) return "nominal model not finite or b1 <= 0";
-    if (!all_finite(c->theta, 4) || !all_finite(c->P, 16) || !all_finite(c->y_prev, 2)
-        || !all_finite(c->q_ring, PIEZO_MV_Q_RING))
-        return "estimates, covariance or past values not finite";
-    /* the loop's covariance and each candidate's stay bitwise symmetric (rls_step) */
-    for (m = 0; m <= PIEZO_DETECT_N; ++m) {
-        const double *P = m == 0 ? c->P : &c->det_P[16 * (m - 1)];
-        for (i = 0; i < 4; ++i)
-            for (j = 0; j < i; ++j)
-                if (memcmp(&P[4 * i + j], &P[4 * j + i], sizeof P[0]) != 0)
-                    return m == 0 ? "covariance not symmetric" : "a delay candidate's covariance not symmetric";
-    }
-    if (!(isfinite(c->max_abs_pred_error) && c->max_abs_pred_error >= 0.0)) return "largest |pred_error| not finite";
-    if (c->n_saturated > c->k || c->n_large_error > c->k || c->run_saturated > c->n_saturated
-        || c->run_large_error > c->n_large_error || c->n_large_settled > c->n_large_error
-        || (c->n_large_settled > 0 ? c->k_first_large_settled >= c->k || c->k_first_large_settled
-                                     < c->k_first_large_error : c->k_first_large_settled != 0))
-        return "monitor counts exceed the sample count";
-    if ((c->n_saturated > 0 && c->k_first_saturated >= c->k) || (c->n_large_error > 0 && c->k_first_large_error >= c->k))
-        return "monitor first-sample index beyond the sample count";
-    /* a run reaching the window, or a share reaching its quarter, would have been refused */
-    if (c->divergence_samples > 0 && c->run_large_error >= c->divergence_samples)
-        return "monitor run at or beyond the divergence window";
-    if (c->divergence_samples > 0 && k_loop - c->k_start > PIEZO_MONITOR_SHARE_MIN_SAMPLES
-        && c->mon_share * 100.0 >= PIEZO_MONITOR_SHARE_PERCENT * (double)c->divergence_samples)
-        return "monitor share at or beyond its bound";
-    if ((fault = piezo_supervisor_check(&c->sup)) != NULL) return fault;
-    if (c->sup.k != k_loop - c->k_start) return "supervisor sample counter differs from the controller's";
-    if (c->verdict.fault < PIEZO_SUP_NONE || c->verdict.fault > PIEZO_SUP_FROZEN)
-        return "supervision verdict out of range";
-    /* outliers: sums within their weights, counts within the samples */
-    if (!(isfinite(c->err_sum) && isfinite(c->err_weight) && isfinite(c->outlier_sum) && c->err_sum >= 0.0
-          && c->err_weight >= 0.0 && c->err_weight <= (double)c->k && c->outlier_sum >= 0.0
-          && c->outlier_sum <= (double)c->k && isfinite(c->first_outlier) && isfinite(c->first_outlier_error))
-        || c->quiet > c->k || c->n_outliers > c->k || (c->suspect != 0 && c->suspect != 1)
-        || (c->suspect && c->k == 0) || !isfinite(c->suspect_y) || !isfinite(c->suspect_error)
-        || (!c->suspect && (c->suspect_y != 0.0 || c->suspect_error != 0.0))
-        || (c->n_outliers > 0 ? c->k_first_outlier >= c->k
-                              : c->k_first_outlier != 0 || c->first_outlier != 0.0 || c->first_outlier_error != 0.0))
-        return "outlier sums or counts out of range";
-    /* estimates with guarantees: the set is the one its parameters draw around the nominal model,
-     * and the loop's estimates are in it; the fallback's window and counts in range */
-    {
-        double rows[PIEZO_ADMISSIBLE_ROWS][4], bounds[PIEZO_ADMISSIBLE_ROWS];
-        if (!(isfinite(c->zero_min) && isfinite(c->pole_min) && isfinite(c->gain_lo) && isfinite(c->gain_hi)
-              && c->gain_lo > 0.0 && c->gain_lo < 1.0 && c->gain_hi > 1.0))
-            return "rls.zero_min, rls.pole_min or the admissible gain range out of range";
-        admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_lo, c->gain_hi, rows, bounds);
-        if (memcmp(rows, c->adm_c, sizeof rows) != 0 || memcmp(bounds, c->adm_d, sizeof bounds) != 0)
-            return "the admissible set differs from the one rls.zero_min, rls.pole_min and the gain range draw";
-        if (admissible_violated(c, c->theta_nominal) || (c->robust && admissible_violated(c, c->theta)))
-            return "the estimates (or the nominal model) outside the admissible set";
-    }
-    if (!(isfinite(c->fallback_ratio) && c->fallback_ratio >= 0.0)
-        || c->fallback_samples < 1 || c->fallback_forgetting != 1.0 - 1.0 / (double)c->fallback_samples
-        || !(isfinite(c->fb_adapted) && c->fb_adapted >= 0.0 && isfinite(c->fb_nominal) && c->fb_nominal >= 0.0
-             && isfinite(c->learned_rate) && c->learned_rate >= 0.0)
-        || c->n_projections > c->k || c->n_fallbacks > c->k
-        || (c->n_fallbacks > 0 ? (c->k_first_fallback >= c->k || c->first_fallback < PIEZO_FALLBACK_JUMP
-                                  || c->first_fallback > PIEZO_FALLBACK_PREDICTION)
-                               : (c->k_first_fallback != 0 || c->first_fallback != PIEZO_FALLBACK_NONE
-                                  || c->first_fallback_value != 0.0 || c->first_fallback_other != 0.0))
-        || !(isfinite(c->first_fallback_value) && isfinite(c->first_fallback_other))
-        || (!c->robust && (c->fb_adapted != 0.0 || c->fb_nominal != 0.0 || c->learned_rate != 0.0
-                           || c->n_projections != 0 || c->n_fallbacks != 0)))
-        return "the fallback's window, learned rate or counts out of range";
-    o = &c->out;
-    if (!(isfinite(o->v) && isfinite(o->q) && isfinite(o->pred_error) && all_finite(o->theta, 4)))
-        return "controller outputs not finite";
-    if (o->saturated != 0 && o->saturated != 1) return "saturated output is not 0 or 1";
-    if (o->adapting != 0 && o->adapting != 1) return "adapting output is not 0 or 1";
-    if (o->fallback < PIEZO_FALLBACK_NONE || o->fallback > PIEZO_FALLBACK_PREDICTION
-        || (o->fallback != PIEZO_FALLBACK_NONE && !c->robust))
-        return "fallback output out of range";
-    if (!(isfinite(o->noise) && o->noise >= 0.0)) return "noise output not finite or negative";
-    if (o->delay < 0 || o->delay > PIEZO_MV_MAX_D || (o->preview != 0 && o->preview != 1))
-        return "delay or preview output out of range";
-    if (c->fault && (o->v != safe_v(c, c->v_fault, c->k - 1 - c->k_fault) || o->q != 0.0 || o->pred_error != 0.0
-                     || o->saturated || o->preview || o->adapting || memcmp(o->theta, c->theta, sizeof o->theta) != 0))
-        return "safe state's outputs differ from its ramp";
-    return NULL;
+    return rls_error(c, theta, d, y);
 }
 
-/* the running length of a text written piece by piece (what it wanted) */
-static void said(int *used, int w)
+void piezo_ctl_rls_gain(const piezo_controller *c, const double *theta_in, const double *P, int d, double e,
+                        double lambda, double inv_lambda, double trace_max, double *theta, double *P_new)
 {
-    if (w > 0) *used += w;
+    rls_gain(c, theta_in, P, d, e, lambda, inv_lambda, trace_max, theta, P_new);
 }
 
-piezo_status piezo_controller_fault_status(int fault)
+void piezo_ctl_project(const piezo_controller *c, double *th) { project(c, th); }
+void piezo_ctl_detect_carry(const piezo_controller *c, piezo_controller_sample *s) { detect_carry(c, s); }
+int piezo_ctl_all_finite(const double *x, int n) { return all_finite(x, n); }
+double piezo_ctl_admissible_excess(const double *row, double d, const double *th)
 {
-    if (fault == PIEZO_SUP_UNSTABLE) return PIEZO_ERR_UNSTABLE;
-    if (fault == PIEZO_SUP_DIVERGED) return PIEZO_ERR_DIVERGED;
-    return fault > 0 && fault <= PIEZO_SUP_FAULT_MAX ? PIEZO_ERR_FAULT : PIEZO_OK;
+    return admissible_excess(row, d, th);
 }
-
-int piezo_controller_explain(const piezo_controller *c, int st, char *text, size_t size)
-{
-    piezo_sup_context ctx;
-    memset(&ctx, 0, sizeof ctx);
-    ctx.h = c != NULL ? c->sup.h : 0.0;
-    return piezo_controller_explain_in(c, st, &ctx, text, size);
-}
-
-int piezo_controller_explain_in(const piezo_controller *c, int st, const piezo_sup_context *ctx,
-                                char *text, size_t size)
-{
-    int used = 0;
-#define AT (used >= 0 && (size_t)used < size ? text + used : NULL)
-#define LEFT (used >= 0 && (size_t)used < size ? size - (size_t)used : 0)
-    if (text != NULL && size > 0) text[0] = '\0';
-    if (c == NULL || ctx == NULL) return 0;
-    if (st == PIEZO_ERR_FAULT) {
-        /* the words harness/fmu.py LOOP_FAILURES knows this Error by */
-        said(&used, snprintf(AT, LEFT, "supervision stopped the loop (%s): ",
-                                         piezo_supervisor_fault_name(c->verdict.fault)));
-        said(&used, piezo_supervisor_explain_in(&c->verdict, ctx, AT, LEFT));
-        return used;
-    }
-    if (st == PIEZO_ERR_UNSTABLE) {
-        /* the share the refused sample would have made, of the whole window */
-        double share = 100.0 * (c->mon_forgetting * c->mon_share + 1.0) / (double)c->divergence_samples;
-        char beyond[256];
-        piezo_controller_explain_bound(c, beyond, sizeof beyond);
-        said(&used, snprintf(AT, LEFT, "the closed loop is unstable: |pred_error| was beyond "
-             "%s in %.0f %% of the monitor's window of %llu samples, %llu of them "
-             "in a row now (the loop is stopped at monitor.divergence_samples = %llu in a row, or at %d %% of "
-             "the window, older samples counting less; where v was clipped the nominal model's prediction "
-             "error counts too; largest |pred_error| so far %.6g um). ",
-             beyond, share, (unsigned long long)c->divergence_samples,
-             (unsigned long long)(c->run_large_error + 1),
-             (unsigned long long)c->divergence_samples, PIEZO_MONITOR_SHARE_PERCENT, c->max_abs_pred_error));
-        /* the supervisor's evidence: how far y_meas went against the model's expectation */
-        if (c->sup.enabled && c->sup.travel_model > 0.0 && c->sup.travel_meas > 2.0 * c->sup.travel_model)
-            said(&used, snprintf(AT, LEFT, "y_meas travelled %.3g times as far as the model "
-                 "expects (%.4g um against %.4g um over about the last %llu samples): the loop's gain is far "
-                 "above the model's. %s", c->sup.travel_meas / c->sup.travel_model, c->sup.travel_meas,
-                 c->sup.travel_model, (unsigned long long)c->sup.weight,
-                 ctx->internal ? "Compare the stage's parameters (pi.w0, pi.w[j], tf.*, creep.*) with the "
-                 "controller's model (controller.pi.w0, controller.pi.w[j], controller.tf.*, controller.creep.*)"
-                 : "Check the amplifier's gain, the units of v (V) and y_meas (um), and that the controller's "
-                 "model (pi.*, tf.*, creep.*) is this stage's"));
-        else if (ctx->internal)
-            said(&used, snprintf(AT, LEFT, "Usual causes: the controller's loop delay d = %d %s does not match "
-                 "this loop's, tf.delay + %d = %d (the stage's input delay tf.delay = %d, mv.feedthrough = %s), or "
-                 "the stage's parameters (pi.w0, pi.w[j], tf.*, creep.*) far from the controller's model "
-                 "(controller.pi.w0, controller.pi.w[j], controller.tf.*, controller.creep.*)", c->d,
-                 !c->auto_delay ? "(1 + mv.delay, set)"
-                 : c->detecting ? "(the start-up law's, still detecting)" : "(detected)",
-                 ctx->feedthrough ? 1 : 2, ctx->stage_delay + (ctx->feedthrough ? 1 : 2), ctx->stage_delay,
-                 ctx->feedthrough ? "true" : "false"));
-        else
-            said(&used, snprintf(AT, LEFT, "Usual causes: the controller's loop delay d = %d %s "
-                 "does not match the loop (a master that hands the plant the controller's post-step output "
-                 "removes a sample, as does mv.feedthrough; an extra plant or actuation delay adds one), a gain of "
-                 "the sensor or amplifier far from the model's, or a plant far from the nominal model", c->d,
-                 !c->auto_delay ? "(1 + mv.delay, set)"
-                 : c->detecting ? "(the start-up law's, still detecting)" : "(detected)"));
-        return used;
-    }
-    if (st == PIEZO_ERR_DIVERGED) {
-        said(&used, snprintf(AT, LEFT, "the closed loop diverged: a value computed by the controller "
-             "is not finite although its inputs are (loop delay d = %d%s; check it against %s)", c->d,
-             c->auto_delay ? ", mv.delay = -1: detected" : " = 1 + mv.delay",
-             ctx->internal ? "the stage's tf.delay and its parameters" : "the master and the plant"));
-        return used;
-    }
-#undef AT
-#undef LEFT
-    return 0;
-}
-
-int piezo_controller_explain_safe_state(const piezo_controller *c, const piezo_sup_context *ctx,
-                                        char *text, size_t size)
-{
-    int used;
-    if (text != NULL && size > 0) text[0] = '\0';
-    if (c == NULL || ctx == NULL || !c->fault) return 0;
-    /* the words harness/fmu.py SAFE_STATE_WORDS knows this Warning by */
-    used = snprintf(text, size, "sup.reaction = safe: from t = %.9g s the loop is held in its safe state "
-                    "(sup.fault = %d): v ramps to 0 V over sup.ramp_time = %g s and stays there, adaptation "
-                    "is frozen, the simulation goes on. Why: ", ctx->t0 + (double)(int64_t)c->k_fault * ctx->h,
-                    c->fault, c->sup.ramp_time);
-    if (used < 0) return 0;
-    return used + piezo_controller_explain_in(c, piezo_controller_fault_status(c->fault), ctx,
-                                              (size_t)used < size ? text + used : NULL,
-                                              (size_t)used < size ? size - (size_t)used : 0);
-}
-
-/* the time of sample k where the loop is */
-static double context_time(const piezo_sup_context *ctx, uint64_t k)
-{
-    return ctx->t0 + (double)(int64_t)k * ctx->h;
-}
-
-int piezo_controller_explain_reset(const piezo_controller *c, int refusal, const piezo_controller_input *in,
-                                   uint64_t k, const piezo_sup_context *ctx, char *text, size_t size)
-{
-    double now, y_ref = in ? in->y_ref : 0.0, y_meas = in ? in->y_meas : 0.0;
-    if (text != NULL && size > 0) text[0] = '\0';
-    if (c == NULL || ctx == NULL) return 0;
-    now = context_time(ctx, k);
-    switch (refusal) {
-    case PIEZO_RESET_ACCEPTED:
-        /* c has restarted: its fault is gone, its count says how many times */
-        return snprintf(text, size, "sup.reset accepted at t = %.9g s (reset %llu): the loop leaves its safe state "
-                        "and restarts from the nominal model, its parameters kept, from the stage at rest at "
-                        "y_meas = %.6g um: the law's reference ramps from there to y_d over sup.ramp_time = %g s, so "
-                        "v ramps from 0 V; the estimates and the supervision start anew (sup.status 0 until it "
-                        "verifies the loop again), the loop delay chosen and the sensor's measured noise are kept. "
-                        "A fault of the response (inverted, gain, delay, unstable) cannot be seen at rest: if it "
-                        "persists, the supervision stops the loop again once the stage moves",
-                        now, (unsigned long long)c->n_resets, y_meas, c->sup.ramp_time);
-    case PIEZO_RESET_NO_FAULT:
-        return snprintf(text, size, "sup.reset raised at t = %.9g s while the loop runs (sup.fault = 0): there is "
-                        "no safe state to leave, nothing was done", now);
-    case PIEZO_RESET_RAMPING:
-        return snprintf(text, size, "sup.reset refused at t = %.9g s: v is still ramping to 0 V (sup.ramp_time = "
-                        "%g s, until t = %.9g s); the loop stays in its safe state (sup.fault = %d). Lower sup.reset "
-                        "and raise it again once v is at 0 V", now, c->sup.ramp_time,
-                        context_time(ctx, c->k_fault + c->sup.ramp_samples), c->fault);
-    case PIEZO_RESET_INPUTS:
-        return snprintf(text, size, "sup.reset refused at t = %.9g s: y_ref = %g um or y_meas = %g um is not "
-                        "finite; the loop stays in its safe state (sup.fault = %d)", now, y_ref, y_meas, c->fault);
-    case PIEZO_RESET_STUCK:
-        return snprintf(text, size, "sup.reset refused at t = %.9g s: the cause persists. y_meas still reads "
-                        "%.9g um, to the bit what it read at the verdict (t = %.9g s), although v went from %g V to "
-                        "0 V since: the sensor is still frozen, or v still does not reach the stage (sup.fault = "
-                        "%d, %s). Check the sensor, its cable and the amplifier, then lower sup.reset and raise "
-                        "it again", now, y_meas, context_time(ctx, c->k_fault), c->v_fault, c->fault,
-                        piezo_supervisor_fault_name(c->fault));
-    case PIEZO_RESET_OUT_OF_REACH:
-        return snprintf(text, size, "sup.reset refused at t = %.9g s: the cause persists. The reference y_ref = "
-                        "%.6g um is still beyond what the stage reached with v held at %g V (y_meas = %.6g um), by "
-                        "more than sup.clip_error = %g um: restarted, the loop would be held at the rail again "
-                        "(sup.fault = %d, %s). Bring the reference within reach, or widen sat.v_min..sat.v_max, "
-                        "then lower sup.reset and raise it again", now, y_ref, c->v_fault, c->y_fault,
-                        c->sup.clip_error, c->fault, piezo_supervisor_fault_name(c->fault));
-    default:
-        return 0;
-    }
-}
-
-const char *piezo_controller_check_params(const piezo_controller *c, const piezo_controller_params *q)
-{
-    piezo_controller scratch;
-    if (!c || !q) return "controller missing";
-    if (piezo_controller_init(&scratch, q, NULL) != PIEZO_OK) return "parameters out of range";
-    if ((q->mv_delay == PIEZO_MV_AUTO_DELAY) != c->auto_delay || (!c->auto_delay && c->d != 1 + q->mv_delay)
-        || c->observer != q->mv_observer || c->fwd_pi.m != q->pi.m || c->inv_creep.exact != (q->creep_exact ? 1 : 0)
-        || c->inv_creep.alpha != -q->creep_alpha || c->lambda_u != q->mv_lambda_u
-        || c->rls_enabled != (q->rls_enabled ? 1 : 0) || c->sat_enabled != (q->sat_enabled ? 1 : 0)
-        || c->forgetting != q->rls_forgetting || c->p0 != q->rls_p0 || c->trace_max != q->rls_trace_max
-        || c->robust != q->rls_robust || c->excitation != q->rls_excitation
-        || c->excitation_samples != scratch.excitation_samples || c->variance_max != q->rls_variance_max
-        || c->p0_loop != q->rls_p0_loop || c->integral_gain != q->mv_integral
-        || c->pred_error_max != q->monitor_pred_error_max
-        || c->divergence_samples != (uint64_t)q->monitor_divergence_samples
-        || (c->sat_enabled && (c->sat_v_min != q->sat_v_min || c->sat_v_max != q->sat_v_max))
-        || c->sup.enabled != q->sup.enabled || c->sup.gain_min != q->sup.gain_min
-        || c->sup.gain_max != q->sup.gain_max || c->sup.forgetting != scratch.sup.forgetting
-        || c->sup.clip_samples != scratch.sup.clip_samples || c->sup.detect_samples != scratch.sup.detect_samples
-        || c->sup.window != scratch.sup.window || c->sup.clip_error != q->sup.clip_error
-        || c->sup.reaction != q->sup.reaction || c->sup.ramp_time != q->sup.ramp_time
-        || c->sup.ramp_samples != scratch.sup.ramp_samples || c->probe_max != q->mv_probe_max
-        || c->zero_min != scratch.zero_min || c->pole_min != q->rls_pole_min || c->gain_lo != q->sup.gain_min || c->gain_hi != q->sup.gain_max
-        || c->fallback_ratio != q->rls_fallback_ratio || c->fallback_samples != scratch.fallback_samples)
-        return "controller state does not match its parameters";
-    return NULL;
-}
+int piezo_ctl_admissible_violated(const piezo_controller *c, const double *th) { return admissible_violated(c, th); }
+double piezo_ctl_safe_v(const piezo_controller *c, double v0, uint64_t j) { return safe_v(c, v0, j); }

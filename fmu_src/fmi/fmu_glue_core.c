@@ -1,7 +1,7 @@
 /*
  * fmu_glue_core.c - the FMI layer without the FMI version (see fmu_glue_core.h
- * for what lives here, fmi2_glue.c for the modes and calls, the time grid and
- * the serialized-state format, which both versions share).
+ * for what lives here, fmi2_glue.c for the modes and calls and the time grid,
+ * fmu_glue_state.c for FMU states and fmu_state_format.h for their serialized form).
  */
 #include <math.h>
 #include <stdarg.h>
@@ -16,16 +16,12 @@
 /* Instance                                                                  */
 
 #define INSTANCE_MAGIC 0x50494e53u   /* "PINS" */
-#define STATE_MAGIC    0x50535441u   /* "PSTA" */
 
 /* Which FMU an instance belongs to: the address of this binary's copy of its
  * GUID. Every FMU binary has its own copy, so one FMU's functions refuse another
  * FMU's instance (same glue, same magic) even when both are loaded in one
  * process; the check costs one comparison, no hashing per call. */
 static const char model_guid[] = MODEL_GUID;
-
-/* Most samples since t0: (double)k stays exact and t0 + k h keeps its meaning. */
-#define MAX_SAMPLES 9007199254740992ull     /* 2^53 */
 
 /*
  * The work one doStep may do. A host must never wait long in one call, so a
@@ -40,24 +36,6 @@ static const char model_guid[] = MODEL_GUID;
 #define MAX_STEP_CREEP_TERMS 1000000000ull      /* from t0: 44720 samples, 22 s at h = 0.5 ms */
 
 enum { CAT_EVENTS = 1, CAT_WARNING = 2, CAT_ERROR = 4, CAT_ALL = 7 };
-
-/* An FMU state: a copy of everything that defines the instance's future. It
- * belongs to the instance that made it (get or deserialize) and sits in that
- * instance's list until freed. */
-struct glue_state {
-    uint32_t magic;
-    const glue_instance *owner;
-    glue_state *prev, *next;    /* the owner's list */
-    int mode;
-    double t0;
-    uint64_t k;
-    double h;
-    double t_off;
-    ModelData data;
-    size_t n_history;
-    size_t history_capacity;
-    double *history;
-};
 
 /* ------------------------------------------------------------------------ */
 /* Logging                                                                   */
@@ -129,7 +107,7 @@ void glue_log_event(const glue_instance *inst, const char *fmt, ...)
     va_end(ap);
 }
 
-static const char *mode_name(const glue_instance *inst, int mode)
+const char *glue_mode_name(const glue_instance *inst, int mode)
 {
     switch (mode) {
     case GLUE_MODE_INSTANTIATED: return inst->version->mode_names[0];
@@ -149,7 +127,7 @@ static void mask_names(const glue_instance *inst, int mask, char *buf, size_t si
     buf[0] = '\0';
     for (i = 0; i < sizeof modes / sizeof modes[0]; i++) {
         if (mask & modes[i]) {
-            int w = snprintf(buf + used, size - used, "%s%s", used ? ", " : "", mode_name(inst, modes[i]));
+            int w = snprintf(buf + used, size - used, "%s%s", used ? ", " : "", glue_mode_name(inst, modes[i]));
             if (w < 0 || (size_t)w >= size - used)
                 return;
             used += (size_t)w;
@@ -208,7 +186,7 @@ static GLUE_NOINLINE void log_illegal_sequence(const glue_instance *inst, const 
     char allowed[128];
     mask_names(inst, mask, allowed, sizeof allowed);
     glue_log_error(inst, "%s: illegal call sequence: the FMU is in state %s (allowed in: %s)",
-                   fname, mode_name(inst, inst->mode), allowed);
+                   fname, glue_mode_name(inst, inst->mode), allowed);
 }
 
 glue_instance *glue_instance_of(void *c, const char *fname, int mask)
@@ -232,20 +210,8 @@ int glue_null_arg(const glue_instance *inst, const char *fname, const char *arg,
     return 0;
 }
 
-static uint64_t fnv1a(const unsigned char *p, size_t n, uint64_t h)
-{
-    size_t i;
-    for (i = 0; i < n; i++) {
-        h ^= p[i];
-        h *= 0x100000001b3ull;
-    }
-    return h;
-}
-
-#define FNV_OFFSET 0xcbf29ce484222325ull
-
 /* Make room for `needed` doubles of history (doubling), keeping the content. */
-static int ensure_history(glue_instance *inst, size_t needed, const char *fname)
+int glue_ensure_history(glue_instance *inst, size_t needed, const char *fname)
 {
     size_t cap;
     double *p;
@@ -343,7 +309,7 @@ static int refresh_outputs(glue_instance *inst, const char *fname)
             return 0;
         }
     }
-    if (!ensure_history(inst, model_history_needed(&inst->data), fname))
+    if (!glue_ensure_history(inst, model_history_needed(&inst->data), fname))
         return 0;
     st = model_update_outputs(&inst->data, inst->history, inst->history_capacity);
     if (st != PIEZO_OK) {
@@ -529,7 +495,6 @@ glue_instance *glue_instantiate(const glue_host *host, const glue_version *versi
     return inst;
 }
 
-static void state_free(glue_instance *inst, glue_state *st);
 
 void glue_free_instance(void *c, const char *fname)
 {
@@ -540,7 +505,7 @@ void glue_free_instance(void *c, const char *fname)
     glue_log_event(inst, "%s", fname);
     /* FMU states the host did not free die with their instance */
     while (inst->states != NULL)
-        state_free(inst, inst->states);
+        glue_state_free(inst, inst->states);
     release = inst->host.release;
     if (inst->history != NULL)
         release(inst->history);
@@ -691,7 +656,7 @@ glue_status glue_reset(void *c, const char *fname)
     inst->stop_time = 0.0;
     inst->outputs_valid = 0;
     inst->outputs_read = 0;
-    glue_log_event(inst, "%s: back to %s with the start values", fname, mode_name(inst, GLUE_MODE_INSTANTIATED));
+    glue_log_event(inst, "%s: back to %s with the start values", fname, glue_mode_name(inst, GLUE_MODE_INSTANTIATED));
     return GLUE_OK;
 }
 
@@ -795,7 +760,7 @@ static GLUE_NOINLINE glue_status set_checked(glue_instance *inst, const char *fn
         if (var->causality == MODEL_PARAMETER && inst->mode == GLUE_MODE_STEP) {
             glue_log_error(inst, "%s: illegal call sequence: %s is a fixed parameter, settable only "
                            "before %s (the FMU is in state %s)",
-                           fname, var->name, inst->version->exit_init, mode_name(inst, inst->mode));
+                           fname, var->name, inst->version->exit_init, glue_mode_name(inst, inst->mode));
             return GLUE_ERROR;
         }
         for (e = 0; e < inst->n_values[vr[i]]; e++, j++) {
@@ -1117,7 +1082,7 @@ static glue_status do_step(glue_instance *inst, const char *fname, double curren
         piezo_status st;
         /* grow the exact-mode history (by doubling) before the core needs it */
         needed = model_history_needed(&inst->data);
-        if (needed > inst->history_capacity && !ensure_history(inst, needed, fname)) {
+        if (needed > inst->history_capacity && !glue_ensure_history(inst, needed, fname)) {
             if (i > 0)
                 memcpy(&inst->data, &inst->backup, sizeof inst->data);
             return GLUE_ERROR;
@@ -1164,494 +1129,6 @@ glue_status glue_do_step(void *c, const char *fname, double t, double H, double 
 
 /* ------------------------------------------------------------------------ */
 /* FMU states                                                                */
-
-static glue_state *checked_state(const glue_instance *inst, const char *fname, void *s)
-{
-    glue_state *st = (glue_state *)s;
-    if (st == NULL) {
-        glue_log_error(inst, "%s: the FMU state is NULL", fname);
-        return NULL;
-    }
-    if (st->magic != STATE_MAGIC || st->owner != inst) {
-        glue_log_error(inst, "%s: not an FMU state of this %s instance (a state belongs to the instance "
-                       "that made it with %s or %s)", fname, MODEL_IDENTIFIER_STRING,
-                       inst->version->get_fmu_state, inst->version->deserialize);
-        return NULL;
-    }
-    return st;
-}
-
-/* A state to fill: *slot if it is one of ours, else a new one in the list. */
-static glue_state *state_slot(glue_instance *inst, const char *fname, void **slot)
-{
-    glue_state *st = (glue_state *)*slot;
-    if (st != NULL)
-        return checked_state(inst, fname, st);
-    st = (glue_state *)inst->host.alloc(1, sizeof(glue_state));
-    if (st == NULL) {
-        glue_log_error(inst, "%s: out of memory", fname);
-        return NULL;
-    }
-    memset(st, 0, sizeof *st);
-    st->magic = STATE_MAGIC;
-    st->owner = inst;
-    st->next = inst->states;
-    if (inst->states != NULL)
-        inst->states->prev = st;
-    inst->states = st;
-    return st;
-}
-
-/* Unlink st from its owner's list and free it. */
-static void state_free(glue_instance *inst, glue_state *st)
-{
-    if (st->prev != NULL)
-        st->prev->next = st->next;
-    else
-        inst->states = st->next;
-    if (st->next != NULL)
-        st->next->prev = st->prev;
-    if (st->history != NULL)
-        inst->host.release(st->history);
-    st->magic = 0;
-    st->owner = NULL;
-    inst->host.release(st);
-}
-
-static int state_reserve_history(glue_instance *inst, const char *fname, glue_state *st, size_t n)
-{
-    double *p;
-    if (n <= st->history_capacity)
-        return 1;
-    p = (double *)inst->host.alloc(n, sizeof(double));
-    if (p == NULL) {
-        glue_log_error(inst, "%s: out of memory for %llu history samples", fname, (unsigned long long)n);
-        return 0;
-    }
-    if (st->history != NULL)
-        inst->host.release(st->history);
-    st->history = p;
-    st->history_capacity = n;
-    return 1;
-}
-
-/* After a failure: a state made by this call goes, a reused one stays. */
-static void state_release(glue_instance *inst, glue_state *st, int was_new)
-{
-    if (was_new)
-        state_free(inst, st);
-}
-
-glue_status glue_get_state(void *c, const char *fname, void **state)
-{
-    /* allowed in Error too: a host may keep the failed state for debugging */
-    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
-    glue_state *st;
-    size_t n_hist = 0;
-    int was_new;
-    if (inst == NULL || glue_null_arg(inst, fname, "FMUstate", state))
-        return GLUE_ERROR;
-    was_new = *state == NULL;
-    st = state_slot(inst, fname, state);
-    if (st == NULL)
-        return GLUE_ERROR;
-    if (inst->mode & GLUE_MODE_CORE_READY) {
-        /* the whole buffer the next step needs (slots not yet written are
-         * rewritten before they are read) */
-        n_hist = model_history_needed(&inst->data);
-        if (!ensure_history(inst, n_hist, fname)) {
-            state_release(inst, st, was_new);
-            return GLUE_ERROR;
-        }
-    }
-    if (!state_reserve_history(inst, fname, st, n_hist)) {
-        state_release(inst, st, was_new);
-        return GLUE_ERROR;
-    }
-    st->mode = inst->mode;
-    st->t0 = inst->t0;
-    st->k = inst->k;
-    st->h = inst->h;
-    st->t_off = inst->t_off;
-    memcpy(&st->data, &inst->data, sizeof st->data);
-    if (n_hist > 0)
-        memcpy(st->history, inst->history, n_hist * sizeof(double));
-    st->n_history = n_hist;
-    *state = st;
-    return GLUE_OK;
-}
-
-glue_status glue_set_state(void *c, const char *fname, void *state)
-{
-    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
-    glue_state *st;
-    if (inst == NULL)
-        return GLUE_ERROR;
-    st = checked_state(inst, fname, state);
-    if (st == NULL)
-        return GLUE_ERROR;
-    if (!ensure_history(inst, st->n_history, fname))
-        return GLUE_ERROR;
-    if (st->n_history > 0)
-        memcpy(inst->history, st->history, st->n_history * sizeof(double));
-    memcpy(&inst->data, &st->data, sizeof inst->data);
-    inst->mode = st->mode;
-    inst->t0 = st->t0;
-    inst->k = st->k;
-    inst->h = st->h;
-    inst->t_off = st->t_off;
-    inst->outputs_valid = 0;
-    glue_log_event(inst, "%s: restored a state in %s at t = %.16g", fname, mode_name(inst, inst->mode),
-                   glue_time(inst));
-    return GLUE_OK;
-}
-
-glue_status glue_free_state(void *c, const char *fname, void **state)
-{
-    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
-    glue_state *st;
-    if (inst == NULL)
-        return GLUE_ERROR;
-    /* "If a null pointer is provided, the call is ignored" (FMI 2.0 and 3.0):
-     * no handle, or a handle holding no state */
-    if (state == NULL || *state == NULL) {
-        glue_log_event(inst, "%s: no FMU state given: nothing to free", fname);
-        return GLUE_OK;
-    }
-    st = checked_state(inst, fname, *state);
-    if (st == NULL)
-        return GLUE_ERROR;
-    state_free(inst, st);
-    *state = NULL;
-    return GLUE_OK;
-}
-
-/*
- * Serialized FMU state (format version 2), the same in both FMI versions.
- * Version 2: the creep's SOE states are kept advanced to the next sample
- * (piezo_creep.h); a version 1 image holds them one sample behind, so it is
- * refused rather than restored one sample off.
- * Header integers and doubles are little-endian whatever the host; the
- * ModelData image is the host's native layout, guarded by its size and a
- * byte-order marker.
- *
- *   offset  size  field
- *        0     8  magic "PZFMUST1"
- *        8     4  format version (2)
- *       12     4  header size (128)
- *       16     8  total size of the blob, checksum included
- *       24    48  model GUID (the FMI 3.0 instantiationToken is the same string), NUL padded
- *       72     8  sizeof(ModelData)
- *       80     4  byte-order marker 0x01020304 written natively
- *       84     4  FMU mode (1 Instantiated, 2 InitializationMode, 4 StepComplete/StepMode,
- *                 8 Terminated, 16 Error)
- *       88     8  t0 (IEEE double)
- *       96     8  k, samples since t0
- *      104     8  h (IEEE double)
- *      112     8  n_history, doubles of exact-mode history
- *      120     8  t_off (IEEE double): 0 on the grid (every FMU but PiezoStageClosedLoop: always
- *                 0, as when this field was reserved); a model that takes steps of any size
- *                 (MODEL_ANY_STEP) may have its time past t0 + k h, 0 < t_off < h
- *      128     .  ModelData image (sizeof(ModelData) bytes)
- *        .     .  n_history doubles (IEEE, little-endian)
- *    end-8     8  FNV-1a 64 checksum of every preceding byte
- *
- * Because the modes, the GUID and the model data are the same, a state
- * serialized by the FMI 2.0 edition of a model restores in its FMI 3.0 edition
- * and the other way round.
- *
- * A blob is untrusted input: deserialization reads nothing it has not bounded
- * (sizes compared without arithmetic that can wrap) and accepts only what
- * a live instance could have saved: the exact GUID field, a known mode, the
- * time fields of that mode (before initialization k = 0 and h = 0; after it
- * h = the model's h, k <= 2^53, t0 + k h finite), t_off = 0 (a MODEL_ANY_STEP
- * model in a mode after initialization: 0 <= t_off < h), finite Reals
- * and 0/1 Booleans in every variable, and the model's own invariants
- * (model_check_data: indices, counts, flags, sample counters against k and the
- * history). Anything else is refused and nothing is changed.
- */
-#define BLOB_MAGIC "PZFMUST1"
-#define BLOB_VERSION 2u
-#define BLOB_HEADER 128u
-#define BLOB_GUID_LEN 48u
-#define BLOB_BOM 0x01020304u
-
-static void put_u32(unsigned char *p, uint32_t v)
-{
-    int i;
-    for (i = 0; i < 4; i++)
-        p[i] = (unsigned char)(v >> (8 * i));
-}
-
-static void put_u64(unsigned char *p, uint64_t v)
-{
-    int i;
-    for (i = 0; i < 8; i++)
-        p[i] = (unsigned char)(v >> (8 * i));
-}
-
-static uint32_t get_u32(const unsigned char *p)
-{
-    uint32_t v = 0;
-    int i;
-    for (i = 3; i >= 0; i--)
-        v = (v << 8) | p[i];
-    return v;
-}
-
-static uint64_t get_u64(const unsigned char *p)
-{
-    uint64_t v = 0;
-    int i;
-    for (i = 7; i >= 0; i--)
-        v = (v << 8) | p[i];
-    return v;
-}
-
-static void put_f64(unsigned char *p, double d)
-{
-    uint64_t v;
-    memcpy(&v, &d, sizeof v);
-    put_u64(p, v);
-}
-
-static double get_f64(const unsigned char *p)
-{
-    uint64_t v = get_u64(p);
-    double d;
-    memcpy(&d, &v, sizeof d);
-    return d;
-}
-
-#define BLOB_MIN_SIZE (BLOB_HEADER + sizeof(ModelData) + 8u)   /* no history */
-
-static size_t blob_size(size_t n_history)
-{
-    return BLOB_MIN_SIZE + n_history * sizeof(double);
-}
-
-glue_status glue_state_size(void *c, const char *fname, void *state, size_t *size)
-{
-    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
-    glue_state *st;
-    if (inst == NULL || glue_null_arg(inst, fname, "size", size))
-        return GLUE_ERROR;
-    st = checked_state(inst, fname, state);
-    if (st == NULL)
-        return GLUE_ERROR;
-    *size = blob_size(st->n_history);
-    return GLUE_OK;
-}
-
-glue_status glue_serialize(void *c, const char *fname, void *state, unsigned char *b, size_t size)
-{
-    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
-    glue_state *st;
-    uint32_t bom = BLOB_BOM;
-    size_t total, i, off;
-    if (inst == NULL || glue_null_arg(inst, fname, "serializedState", b))
-        return GLUE_ERROR;
-    st = checked_state(inst, fname, state);
-    if (st == NULL)
-        return GLUE_ERROR;
-    total = blob_size(st->n_history);
-    if (size < total) {
-        glue_log_error(inst, "%s: buffer of %llu bytes is too small: the state needs %llu (%s)",
-                       fname, (unsigned long long)size, (unsigned long long)total,
-                       inst->version->serialized_size);
-        return GLUE_ERROR;
-    }
-    memset(b, 0, total);
-    memcpy(b, BLOB_MAGIC, 8);
-    put_u32(b + 8, BLOB_VERSION);
-    put_u32(b + 12, BLOB_HEADER);
-    put_u64(b + 16, (uint64_t)total);
-    memcpy(b + 24, MODEL_GUID, strlen(MODEL_GUID) < BLOB_GUID_LEN ? strlen(MODEL_GUID) : BLOB_GUID_LEN - 1);
-    put_u64(b + 72, (uint64_t)sizeof(ModelData));
-    memcpy(b + 80, &bom, 4);
-    put_u32(b + 84, (uint32_t)st->mode);
-    put_f64(b + 88, st->t0);
-    put_u64(b + 96, st->k);
-    put_f64(b + 104, st->h);
-    put_u64(b + 112, (uint64_t)st->n_history);
-    put_f64(b + 120, st->t_off);
-    memcpy(b + BLOB_HEADER, &st->data, sizeof(ModelData));
-    off = BLOB_HEADER + sizeof(ModelData);
-    for (i = 0; i < st->n_history; i++, off += 8)
-        put_f64(b + off, st->history[i]);
-    put_u64(b + off, fnv1a(b, off, FNV_OFFSET));
-    return GLUE_OK;
-}
-
-/* The first variable whose value a live instance could not hold (a non-finite
- * Real, a Boolean other than 0 or 1), or -1. Outputs count only once the core
- * is initialized (before that they are recomputed when read). */
-static int invalid_variable(const ModelData *data, int core_ready)
-{
-    int vr;
-    for (vr = 0; vr < (int)MODEL_N_VARIABLES; vr++) {
-        const model_variable *var = &model_variables[vr];
-        const char *p = (const char *)data + var->offset;
-        if (var->causality == MODEL_OUTPUT && !core_ready)
-            continue;
-        if (var->type == MODEL_REAL && !isfinite(*(const double *)p))
-            return vr;
-        if (var->type == MODEL_BOOLEAN && *(const int *)p != 0 && *(const int *)p != 1)
-            return vr;
-    }
-    return -1;
-}
-
-glue_status glue_deserialize(void *c, const char *fname, const unsigned char *b, size_t size, void **state)
-{
-    glue_instance *inst = glue_instance_of(c, fname, GLUE_MODE_ALL);
-    char guid[BLOB_GUID_LEN], expected_guid[BLOB_GUID_LEN];
-    char t1[GLUE_REAL_TEXT_SIZE], t2[GLUE_REAL_TEXT_SIZE];
-    uint32_t bom = BLOB_BOM;
-    uint64_t total, n_hist64, k;
-    size_t n_hist, i, off;
-    int mode, core_ready, bad_vr;
-    double t0, h, t_off, *history = NULL;
-    const char *fault;
-    glue_state *st;
-    ModelData *data;
-
-    if (inst == NULL || glue_null_arg(inst, fname, "serializedState", b)
-        || glue_null_arg(inst, fname, "FMUstate", state))
-        return GLUE_ERROR;
-    if (size < BLOB_HEADER + 8u || memcmp(b, BLOB_MAGIC, 8) != 0) {
-        glue_log_error(inst, "%s: refused: not a serialized %s state (bad magic or %llu bytes only)",
-                       fname, MODEL_IDENTIFIER_STRING, (unsigned long long)size);
-        return GLUE_ERROR;
-    }
-    if (get_u32(b + 8) != BLOB_VERSION || get_u32(b + 12) != BLOB_HEADER) {
-        glue_log_error(inst, "%s: refused: format version %u (header %u bytes) is not the supported version %u",
-                       fname, (unsigned)get_u32(b + 8), (unsigned)get_u32(b + 12), (unsigned)BLOB_VERSION);
-        return GLUE_ERROR;
-    }
-    total = get_u64(b + 16);
-    if (total != (uint64_t)size) {
-        glue_log_error(inst, "%s: refused: the blob says %llu bytes but %llu were given (truncated or padded)",
-                       fname, (unsigned long long)total, (unsigned long long)size);
-        return GLUE_ERROR;
-    }
-    /* the whole field, padding included: serialization writes exactly this */
-    memset(expected_guid, 0, sizeof expected_guid);
-    memcpy(expected_guid, MODEL_GUID, strlen(MODEL_GUID) < BLOB_GUID_LEN ? strlen(MODEL_GUID) : BLOB_GUID_LEN - 1);
-    if (memcmp(b + 24, expected_guid, BLOB_GUID_LEN) != 0) {
-        memcpy(guid, b + 24, BLOB_GUID_LEN);
-        guid[BLOB_GUID_LEN - 1] = '\0';
-        for (i = 0; guid[i] != '\0'; i++)
-            if ((unsigned char)guid[i] < 0x20 || (unsigned char)guid[i] > 0x7e)
-                guid[i] = '?';
-        glue_log_error(inst, "%s: refused: the state belongs to %s %s, not %s %s",
-                       fname, inst->version->token_name, guid, MODEL_IDENTIFIER_STRING, MODEL_GUID);
-        return GLUE_ERROR;
-    }
-    if (get_u64(b + 72) != (uint64_t)sizeof(ModelData) || memcmp(b + 80, &bom, 4) != 0) {
-        glue_log_error(inst, "%s: refused: model data layout differs (size %llu vs %llu, or byte order): "
-                       "the state comes from another build or platform",
-                       fname, (unsigned long long)get_u64(b + 72), (unsigned long long)sizeof(ModelData));
-        return GLUE_ERROR;
-    }
-    /* total = BLOB_MIN_SIZE + 8 n_history, compared without arithmetic that can wrap */
-    n_hist64 = get_u64(b + 112);
-    if (total < (uint64_t)BLOB_MIN_SIZE || (total - BLOB_MIN_SIZE) % 8u != 0
-        || (total - BLOB_MIN_SIZE) / 8u != n_hist64) {
-        glue_log_error(inst, "%s: refused: history length %llu does not match the blob size %llu",
-                       fname, (unsigned long long)n_hist64, (unsigned long long)total);
-        return GLUE_ERROR;
-    }
-    n_hist = (size_t)n_hist64;  /* < size, so it fits */
-    off = (size_t)total - 8u;
-    if (fnv1a(b, off, FNV_OFFSET) != get_u64(b + off)) {
-        glue_log_error(inst, "%s: refused: checksum mismatch (the blob is corrupted)", fname);
-        return GLUE_ERROR;
-    }
-    mode = (int)get_u32(b + 84);
-    t_off = get_f64(b + 120);
-    /* all bits 0 (not -0), or a part of a sample past t0 + k h of a model that takes any step */
-    if (get_u64(b + 120) != 0
-        && !(MODEL_ANY_STEP && (mode & GLUE_MODE_CORE_READY) && t_off > 0.0 && t_off < get_f64(b + 104))) {
-        glue_log_error(inst, "%s: refused: the time past the last sample t_off = %s is not %s", fname,
-                       glue_real_text(t1, t_off), MODEL_ANY_STEP ? "0 or in (0, h) after initialization" : "0");
-        return GLUE_ERROR;
-    }
-    t0 = get_f64(b + 88);
-    k = get_u64(b + 96);
-    h = get_f64(b + 104);
-    if (mode != GLUE_MODE_INSTANTIATED && mode != GLUE_MODE_INIT && mode != GLUE_MODE_STEP
-        && mode != GLUE_MODE_TERMINATED && mode != GLUE_MODE_ERROR) {
-        glue_log_error(inst, "%s: refused: invalid FMU mode %d", fname, mode);
-        return GLUE_ERROR;
-    }
-    core_ready = (mode & GLUE_MODE_CORE_READY) != 0;
-    data = &inst->backup;   /* the instance's scratch copy (used by the doStep only) */
-    memcpy(data, b + BLOB_HEADER, sizeof *data);
-    /* time: before initialization nothing has run (k = 0, h not yet fixed);
-     * after it h is the model's, and t0 + k h is a time on the grid */
-    if (!isfinite(t0)
-        || (!core_ready && (k != 0 || h != 0.0))
-        || (core_ready && !(h > 0.0 && h == model_sample_period(data) && k <= MAX_SAMPLES
-                            && isfinite(t0 + (double)k * h + t_off)))) {
-        glue_log_error(inst, "%s: refused: invalid time fields for state %s: t0 = %s, k = %llu, h = %s",
-                       fname, mode_name(inst, mode), glue_real_text(t1, t0), (unsigned long long)k,
-                       glue_real_text(t2, h));
-        return GLUE_ERROR;
-    }
-    bad_vr = invalid_variable(data, core_ready);
-    if (bad_vr >= 0) {
-        glue_log_error(inst, "%s: refused: variable %s holds a value no instance can have (%s)", fname,
-                       model_variables[bad_vr].name,
-                       model_variables[bad_vr].type == MODEL_REAL ? "not finite" : "Boolean other than 0 or 1");
-        return GLUE_ERROR;
-    }
-    if (core_ready ? n_hist != model_history_needed(data) : n_hist != 0) {
-        glue_log_error(inst, "%s: refused: %llu history samples stored, the model needs %llu", fname,
-                       (unsigned long long)n_hist, (unsigned long long)(core_ready ? model_history_needed(data) : 0));
-        return GLUE_ERROR;
-    }
-    if (n_hist > 0) {
-        history = (double *)inst->host.alloc(n_hist, sizeof(double));
-        if (history == NULL) {
-            glue_log_error(inst, "%s: out of memory for %llu history samples", fname, (unsigned long long)n_hist);
-            return GLUE_ERROR;
-        }
-        off = BLOB_HEADER + sizeof(ModelData);
-        for (i = 0; i < n_hist; i++, off += 8)
-            history[i] = get_f64(b + off);
-    }
-    fault = model_check_data(data, core_ready, t0, k, history, n_hist);
-    if (fault != NULL) {
-        glue_log_error(inst, "%s: refused: invalid model data (%s)", fname, fault);
-        if (history != NULL)
-            inst->host.release(history);
-        return GLUE_ERROR;
-    }
-
-    st = state_slot(inst, fname, state);
-    if (st == NULL) {
-        if (history != NULL)
-            inst->host.release(history);
-        return GLUE_ERROR;
-    }
-    if (st->history != NULL)
-        inst->host.release(st->history);
-    st->history = history;
-    st->history_capacity = n_hist;
-    st->n_history = n_hist;
-    st->mode = mode;
-    st->t0 = t0;
-    st->k = k;
-    st->h = h;
-    st->t_off = t_off;
-    memcpy(&st->data, data, sizeof *data);
-    *state = st;
-    return GLUE_OK;
-}
-
-/* ------------------------------------------------------------------------ */
-/* Refusals                                                                  */
 
 glue_status glue_unsupported(void *c, const char *fname, const char *why)
 {

@@ -9,7 +9,7 @@
  * through the model, time (t0 + k h, the step-size check, stopTime), stepping
  * with roll-back, the model's warnings, logging through a version-neutral
  * sink, FMU states, and the serialized-state format with its validation of
- * untrusted blobs. A glue maps its version's functions onto these: it checks
+ * untrusted blobs (fmu_glue_state.c, fmu_state_format.h). A glue maps its version's functions onto these: it checks
  * what only its version has (fmuType, GUID or instantiation token argument,
  * event-mode flags, the memory callbacks), converts statuses and value types,
  * and says how its version names things (glue_version).
@@ -224,6 +224,38 @@ glue_status glue_state_size(void *c, const char *fname, void *state, size_t *siz
 glue_status glue_serialize(void *c, const char *fname, void *state, unsigned char *blob, size_t size);
 glue_status glue_deserialize(void *c, const char *fname, const unsigned char *blob, size_t size,
                              void **state);
+
+/* ------------------------------------------------------------------------ */
+/* between the glue's own files (fmu_glue_core.c, fmu_glue_state.c)          */
+
+#define STATE_MAGIC 0x50535441u                 /* "PSTA" */
+/* Most samples since t0: (double)k stays exact and t0 + k h keeps its meaning. */
+#define MAX_SAMPLES 9007199254740992ull         /* 2^53 */
+
+/* An FMU state: a copy of everything that defines the instance's future. It
+ * belongs to the instance that made it (get or deserialize) and sits in that
+ * instance's list until freed. */
+struct glue_state {
+    uint32_t magic;
+    const glue_instance *owner;
+    glue_state *prev, *next;    /* the owner's list */
+    int mode;
+    double t0;
+    uint64_t k;
+    double h;
+    double t_off;
+    ModelData data;
+    size_t n_history;
+    size_t history_capacity;
+    double *history;
+};
+
+/* The name the instance's FMI version gives mode (messages). */
+const char *glue_mode_name(const glue_instance *inst, int mode);
+/* Room for `needed` doubles of exact-mode history (doubling, content kept); 0 (logged) if none. */
+int glue_ensure_history(glue_instance *inst, size_t needed, const char *fname);
+/* Unlinks st from its owner's list and frees it. */
+void glue_state_free(glue_instance *inst, glue_state *st);
 
 /* ------------------------------------------------------------------------ */
 /* refusals                                                                  */

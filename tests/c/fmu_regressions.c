@@ -216,7 +216,7 @@ static void defect2_header_and_counters(const host_fmu *f, int exact)
     check(deserialize_tampered(f, &log, blob, size, BLOB_OFF_T0, bytes, 8) == HOST_ERROR,
           "defect 2 %s: t0 = NaN is refused (%s)", f->id, log.last_error);
     blob_put_u64(bytes, 1);
-    check(deserialize_tampered(f, &log, blob, size, BLOB_OFF_RESERVED, bytes, 8) == HOST_ERROR,
+    check(deserialize_tampered(f, &log, blob, size, BLOB_OFF_T_OFF, bytes, 8) == HOST_ERROR,
           "defect 2 %s: a non-zero reserved field is refused (%s)", f->id, log.last_error);
     bytes[0] = 32; bytes[1] = bytes[2] = bytes[3] = 0;
     check(deserialize_tampered(f, &log, blob, size, BLOB_OFF_MODE, bytes, 4) == HOST_ERROR,
