@@ -82,3 +82,17 @@ def test_readme_starts_with_prerequisites_and_the_two_commands():
     assert block == ["pip install . && python -m harness",
                      "pip install '.[test]' && python -m pytest -q"]
     assert "## For someone receiving the FMUs" in lines
+
+
+#: the longest C file of fmu_src/ (issue 45: each file one job; the sample's code apart from
+#: its setup, checks and messages)
+C_FILE_MAX_LINES = 1200
+
+
+def test_no_c_file_of_the_fmus_is_over_1200_lines():
+    """Reference: the line count of every tracked .c file under fmu_src/ (wc -l)."""
+    sizes = {p.relative_to(REPO).as_posix(): len(p.read_text().splitlines())
+             for p in _tracked() if p.suffix == ".c" and p.parts[len(REPO.parts)] == "fmu_src"}
+    assert "fmu_src/core/piezo_controller.c" in sizes and len(sizes) >= 20, sorted(sizes)
+    over = {name: n for name, n in sizes.items() if n > C_FILE_MAX_LINES}
+    assert not over, over
