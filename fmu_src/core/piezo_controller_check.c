@@ -91,6 +91,12 @@ const char *piezo_controller_check(const piezo_controller *c)
     for (i = 0; i < PIEZO_MV_Q_RING; ++i)
         if (c->yd_tag[i] != 0 && (c->yd_tag[i] > c->k + PIEZO_MV_Q_RING || (c->yd_tag[i] - 1) % PIEZO_MV_Q_RING != (uint64_t)i))
             return "a kept reference's sample is not its slot's or too far ahead";
+    /* a stamped preview is kept for its sample at + 1 <= k - 1 + PIEZO_PREVIEW_RING - 1 + 1 (the commit
+     * of sample k - 1 stamps at most PIEZO_PREVIEW_RING - 1 ahead), in slot at % PIEZO_PREVIEW_RING */
+    for (i = 0; i < PIEZO_PREVIEW_RING; ++i)
+        if (c->preview_tag[i] != 0 && (c->preview_tag[i] > c->k + PIEZO_PREVIEW_RING - 1
+                                       || (c->preview_tag[i] - 1) % PIEZO_PREVIEW_RING != (uint64_t)i))
+            return "a stamped preview's sample is not its slot's or too far ahead";
     if (!(isfinite(c->pred_error_max) && c->pred_error_max > 0.0)) return "monitor.pred_error_max out of range";
     if (c->divergence_samples > 2147483647u) return "monitor.divergence_samples out of range";
     if (c->mon_forgetting != piezo_ctl_monitor_forgetting((int)c->divergence_samples))
@@ -116,7 +122,8 @@ const char *piezo_controller_check(const piezo_controller *c)
         || (c->n_large_settled > 0 ? c->k_first_large_settled >= c->k || c->k_first_large_settled
                                      < c->k_first_large_error : c->k_first_large_settled != 0))
         return "monitor counts exceed the sample count";
-    if ((c->n_saturated > 0 && c->k_first_saturated >= c->k) || (c->n_large_error > 0 && c->k_first_large_error >= c->k))
+    if ((c->n_saturated > 0 ? c->k_first_saturated >= c->k : c->k_first_saturated != 0)
+        || (c->n_large_error > 0 ? c->k_first_large_error >= c->k : c->k_first_large_error != 0))
         return "monitor first-sample index beyond the sample count";
     /* a run reaching the window, or a share reaching its quarter, would have been refused */
     if (c->divergence_samples > 0 && c->run_large_error >= c->divergence_samples)

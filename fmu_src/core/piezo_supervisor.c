@@ -595,7 +595,7 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
         || s->candidate_run >= PIEZO_SUP_CONFIRM || (s->candidate == 0 && s->candidate_run != 0)
         || s->delay < 0 || s->delay > PIEZO_MV_MAX_D)
         return "supervisor verdict state out of range";
-    if (s->y_same > s->k || (s->status && s->k_verified >= s->k) || s->followed_n > s->k
+    if (s->y_same > s->k || (s->status ? s->k_verified >= s->k : s->k_verified != 0) || s->followed_n > s->k
         || (s->followed_n == 0) != (s->followed_gain == 0.0))
         return "supervisor counters exceed the sample count";
     if (!finite_all(s->dw, PIEZO_MV_MAX_D) || !finite_all(s->sww, PIEZO_MV_MAX_D)
