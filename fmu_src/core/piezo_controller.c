@@ -39,6 +39,12 @@
  * not told apart. */
 #define FALLBACK_NOISE 3.0
 
+/* The sample's checked block holds PIEZO_SAMPLE_CHECKED doubles and nothing else (sample_state_finite) */
+typedef char assert_sample_block[offsetof(piezo_controller_sample, learned_rate) + sizeof(double)
+                                 - offsetof(piezo_controller_sample, noise_y) == PIEZO_SAMPLE_CHECKED * sizeof(double)
+                                 ? 1 : -1];
+typedef char assert_sample_unroll[PIEZO_SAMPLE_CHECKED == 12 ? 1 : -1];    /* sample_state_finite's pragma */
+
 /* The loop delay's one home is PIEZO_MV_MAX_D (piezo_supervisor.h); the literals the
  * binding reads beside it follow from it. */
 typedef char assert_max_delay[(PIEZO_MV_MAX_EXTRA_DELAY == PIEZO_MV_MAX_D - 1
@@ -446,19 +452,25 @@ static int sample_state_finite(const piezo_controller *c, const piezo_controller
      * its gain szw / sww overflows where sww is tiny and szw huge (a restored state) */
     enum { SUP_DOUBLES = (offsetof(piezo_supervisor_next, clip_error_sum) - offsetof(piezo_supervisor_next, z))
                          / sizeof(double) + 1 };
-    /* the robust update's and the outlier test's next doubles: a square or a difference of
-     * finite values overflows (e^2 of a huge a-priori error, y(k) - y(k-1)). x * 0 is 0 for a
-     * finite x and NaN otherwise (all_finite's test, here without building an array on the
-     * sample's path). Not checked, since they cannot overflow: the weights err_weight and
-     * outlier_sum, and the monitor's sums (at most 1 / (1 - lambda)); the raw a-priori error
-     * (finite when err_sum is, or, for an outlier, when the y_meas it left is) */
-    const double robust_zero = s->noise_y * 0.0 + s->noise_y2 * 0.0 + s->noise_e * 0.0 + s->r_anchor * 0.0 + s->offset * 0.0
-                               + s->integral * 0.0 + s->r_velocity * 0.0 + s->r_plain * 0.0 + s->y_meas * 0.0
-                               + s->err_sum * 0.0 + (s->outlier ? s->y_meas + s->raw_error : 0.0) * 0.0
-                               + s->fb_adapted * 0.0 + s->fb_nominal * 0.0 + s->learned_rate * 0.0;
+    /* the block of the sample's doubles that a square or a difference of finite values overflows
+     * (e^2 of a huge a-priori error, y(k) - y(k-1)), noise_y .. learned_rate, and y_meas (and, for an
+     * outlier, the y_meas it left). x * 0 is 0 for a finite x and NaN otherwise (all_finite's test,
+     * here without a call on the sample's path). Not checked, since they cannot overflow: the
+     * weights err_weight and outlier_sum, and the monitor's sums (at most 1 / (1 - lambda)); the raw
+     * a-priori error (finite when err_sum is, or, for an outlier, when the y_meas it left is) */
+    const double *block = &s->noise_y;
+    double robust_zero = s->y_meas * 0.0 + (s->outlier ? s->y_meas + s->raw_error : 0.0) * 0.0;
     /* the estimates the law used, the same way (four values: no call) */
     const double theta_zero = s->out.theta[0] * 0.0 + s->out.theta[1] * 0.0 + s->out.theta[2] * 0.0
                               + s->out.theta[3] * 0.0;
+    int i;
+    /* unrolled where the compiler can (a short fixed loop on the sample's path: as cheap as the sum
+     * written out) */
+#if defined(__GNUC__) && (__GNUC__ >= 8 || defined(__clang__))
+#pragma GCC unroll 12   /* PIEZO_SAMPLE_CHECKED: a pragma takes no macro (asserted at the top) */
+#endif
+    for (i = 0; i < PIEZO_SAMPLE_CHECKED; ++i)
+        robust_zero += block[i] * 0.0;
     return robust_zero + theta_zero == 0.0
            && (!c->sup.enabled || (all_finite(&s->sup.z, SUP_DOUBLES) && isfinite(s->sup.gain)))
            && (!s->rls_updated || all_finite(s->P, 16))

@@ -313,12 +313,16 @@ typedef struct {
     piezo_controller_output out; /* its outputs */
     double theta[4], P[16];      /* RLS result (valid when rls_updated) */
     int rls_updated;
-    /* robust adaptation and integral action: the states of k+1 */
+    /* The doubles of k+1 that a finite sample can overflow, one block from noise_y to learned_rate
+     * (PIEZO_SAMPLE_CHECKED doubles; sample_state_finite checks them in a loop): robust adaptation
+     * and integral action, the law's reference, the outlier test's sum, the fallback's sums */
     double noise_y, noise_y2, noise_e, r_anchor, offset, integral, r_velocity;
+    double r_plain;              /* the reference of the law without z */
+    double err_sum;              /* the outlier test's sum of squared errors of k+1 */
+    double fb_adapted, fb_nominal, learned_rate;    /* the fallback's states of k+1 */
     uint64_t excite_left;
     uint64_t jump_left;
     int excited;                 /* the reference excites the loop at k */
-    double r_plain;              /* the reference of the law without z */
     double inv_z[PIEZO_PI_MAX_OPERATORS];    /* inverse PI play states of k+1 */
     double fwd_z[PIEZO_PI_MAX_OPERATORS];    /* forward PI play states of k+1 */
     int sat_hold;
@@ -344,14 +348,17 @@ typedef struct {
     int held;                    /* y_meas has not changed for PIEZO_SUP_STUCK_SAME samples: integral and
                                     offset hold */
     double raw_error;            /* the a-priori error of y_meas as received [um] */
-    double err_sum, err_weight, outlier_sum;    /* the outlier sums of k+1 */
+    double err_weight, outlier_sum;    /* the outlier test's weights of k+1 (with err_sum) */
     int fault;                   /* the safe state's fault code after this sample (0: none) */
     /* estimates with guarantees: the states of k+1 */
     int projected;               /* the update was projected into the admissible set */
-    double fb_adapted, fb_nominal, learned_rate;
     double fallback_value;       /* a fallback's jump [um], or the adapted model's rms a-priori error */
     double fallback_other;       /* ... and the largest change learned [um], or the nominal model's */
 } piezo_controller_sample;
+
+/* doubles in the sample's checked block, noise_y .. learned_rate (a static assertion in
+ * piezo_controller.c holds the block to it: a field added inside it must be counted here) */
+#define PIEZO_SAMPLE_CHECKED 12
 
 /* Defaults of docs/fmus.md (nominal plant model). */
 void piezo_controller_default_params(piezo_controller_params *params);
