@@ -36,6 +36,14 @@ FMU_DIR = BUILD_DIR / "fmus"
 FMU3_DIR = FMU_DIR / "fmi3"
 
 
+def state_format():
+    """The serialized FMU state's integer constants (BLOB_HEADER, BLOB_OFF_*, ...) as declared
+    once, in fmu_src/fmi/fmu_state_format.h, which the glue and the C tests compile."""
+    import re
+    text = (REPO / "fmu_src" / "fmi" / "fmu_state_format.h").read_text()
+    return {name: int(value) for name, value in re.findall(r"^#define (BLOB_\w+) (\d+)u$", text, re.M)}
+
+
 def _cmake_list(path, name):
     """The words of ``set(NAME ...)`` in a CMake file (the list's one home)."""
     import re

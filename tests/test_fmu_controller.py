@@ -12,7 +12,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from harness import core
-from conftest import assert_refused, assert_reset_to_start_values, start_value
+from conftest import assert_refused, assert_reset_to_start_values, start_value, state_format
 
 OUTPUTS = ["v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error"]   # the Real outputs of the law
 TIMING = ["loop_delay", "loop_delay_time", "preview_lead", "meas_offset"]   # what it detected
@@ -654,11 +654,13 @@ def test_a_refused_sample_rolls_the_whole_step_back(controller, make_fmu, exact)
     twin_blob = twin.slave.serializeFMUstate(twin_state)
     twin.slave.freeFMUstate(twin_state)
     twin.slave.freeFMUstate(restored)
-    # the same model data bytes (sizeof(ModelData) at offset 72, the image from offset 128;
-    # the mode at offset 84 differs: Error 16 vs StepComplete 4). The exact-mode history slots
-    # of the refused samples are written but not committed; the next step rewrites them.
-    size = int.from_bytes(blob[72:80], "little")
-    assert blob[128:128 + size] == twin_blob[128:128 + size]
+    # the same model data bytes (sizeof(ModelData) at BLOB_OFF_DATA_SIZE, the image from
+    # BLOB_HEADER; the mode at BLOB_OFF_MODE differs: Error 16 vs StepComplete 4). The exact-mode
+    # history slots of the refused samples are written but not committed; the next step rewrites them.
+    f = state_format()
+    size = int.from_bytes(blob[f["BLOB_OFF_DATA_SIZE"]:f["BLOB_OFF_DATA_SIZE"] + 8], "little")
+    assert blob[f["BLOB_OFF_MODE"]] == 16 and twin_blob[f["BLOB_OFF_MODE"]] == 4
+    assert blob[f["BLOB_HEADER"]:f["BLOB_HEADER"] + size] == twin_blob[f["BLOB_HEADER"]:f["BLOB_HEADER"] + size]
 
 
 # ---------------------------------------------------------------------------- timing (issue 21)

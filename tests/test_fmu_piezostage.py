@@ -11,7 +11,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 import numpy_reference as ref
-from conftest import assert_refused, assert_reset_to_start_values, start_value
+from conftest import assert_refused, assert_reset_to_start_values, start_value, state_format
 
 OUTPUTS = ["y", "y_meas", "u", "x"]
 H = 0.0005
@@ -348,7 +348,7 @@ def test_deserialize_refuses_garbage(piezo_stage, controller, make_fmu):
     corrupted = bytearray(blob)
     corrupted[len(blob) // 2] ^= 0x40
     bad_version = bytearray(blob)
-    bad_version[8] = 7
+    bad_version[state_format()["BLOB_OFF_VERSION"]] = 7
     cases = {
         "empty": (b"", "not a serialized"),
         "garbage": (bytes(range(256)) * 8, "not a serialized"),
