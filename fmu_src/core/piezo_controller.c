@@ -39,11 +39,10 @@
  * not told apart. */
 #define FALLBACK_NOISE 3.0
 
-/* The sample's checked block holds PIEZO_SAMPLE_CHECKED doubles and nothing else (sample_state_finite) */
+/* The sample's checked block holds PIEZO_SAMPLE_CHECKED = 12 doubles and nothing else (sample_state_finite) */
 typedef char assert_sample_block[offsetof(piezo_controller_sample, learned_rate) + sizeof(double)
                                  - offsetof(piezo_controller_sample, noise_y) == PIEZO_SAMPLE_CHECKED * sizeof(double)
-                                 ? 1 : -1];
-typedef char assert_sample_unroll[PIEZO_SAMPLE_CHECKED == 12 ? 1 : -1];    /* sample_state_finite's pragma */
+                                 && PIEZO_SAMPLE_CHECKED == 12 ? 1 : -1];
 
 /* The loop delay's one home is PIEZO_MV_MAX_D (piezo_supervisor.h); the literals the
  * binding reads beside it follow from it. */
@@ -108,11 +107,6 @@ static int admissible_violated(const piezo_controller *c, const double *th)
            | (r[6][2] * b1 - d[6] > 0.0)
            | ((((r[7][0] * a1 + r[7][1] * a2) + r[7][2] * b1) + r[7][3] * b2) - d[7] > 0.0)
            | ((((r[8][0] * a1 + r[8][1] * a2) + r[8][2] * b1) + r[8][3] * b2) - d[8] > 0.0);
-}
-
-size_t piezo_controller_history_needed(const piezo_controller *c)
-{
-    return c ? piezo_gl_history_needed(&c->inv_creep) : 0;
 }
 
 /* q(k-i), i >= 1 */
@@ -453,24 +447,20 @@ static int sample_state_finite(const piezo_controller *c, const piezo_controller
     enum { SUP_DOUBLES = (offsetof(piezo_supervisor_next, clip_error_sum) - offsetof(piezo_supervisor_next, z))
                          / sizeof(double) + 1 };
     /* the block of the sample's doubles that a square or a difference of finite values overflows
-     * (e^2 of a huge a-priori error, y(k) - y(k-1)), noise_y .. learned_rate, and y_meas (and, for an
-     * outlier, the y_meas it left). x * 0 is 0 for a finite x and NaN otherwise (all_finite's test,
-     * here without a call on the sample's path). Not checked, since they cannot overflow: the
-     * weights err_weight and outlier_sum, and the monitor's sums (at most 1 / (1 - lambda)); the raw
-     * a-priori error (finite when err_sum is, or, for an outlier, when the y_meas it left is) */
-    const double *block = &s->noise_y;
+     * (e^2 of a huge a-priori error, y(k) - y(k-1)), y_meas (for an outlier, the one it left) and the
+     * estimates the law used: x * 0 is 0 for a finite x, NaN otherwise (all_finite's test, no call).
+     * Not checked, since they cannot overflow: the weights err_weight and outlier_sum, the monitor's
+     * sums (at most 1 / (1 - lambda)), the raw a-priori error (finite when err_sum is, or, for an
+     * outlier, when the y_meas it left is) */
     double robust_zero = s->y_meas * 0.0 + (s->outlier ? s->y_meas + s->raw_error : 0.0) * 0.0;
-    /* the estimates the law used, the same way (four values: no call) */
     const double theta_zero = s->out.theta[0] * 0.0 + s->out.theta[1] * 0.0 + s->out.theta[2] * 0.0
                               + s->out.theta[3] * 0.0;
     int i;
-    /* unrolled where the compiler can (a short fixed loop on the sample's path: as cheap as the sum
-     * written out) */
 #if defined(__GNUC__) && (__GNUC__ >= 8 || defined(__clang__))
-#pragma GCC unroll 12   /* PIEZO_SAMPLE_CHECKED: a pragma takes no macro (asserted at the top) */
+#pragma GCC unroll 12   /* PIEZO_SAMPLE_CHECKED (asserted at the top: a pragma takes no macro) */
 #endif
     for (i = 0; i < PIEZO_SAMPLE_CHECKED; ++i)
-        robust_zero += block[i] * 0.0;
+        robust_zero += (&s->noise_y)[i] * 0.0;
     return robust_zero + theta_zero == 0.0
            && (!c->sup.enabled || (all_finite(&s->sup.z, SUP_DOUBLES) && isfinite(s->sup.gain)))
            && (!s->rls_updated || all_finite(s->P, 16))

@@ -457,3 +457,7 @@ piezo_status piezo_controller_restart(piezo_controller *c, double y)
     return PIEZO_OK;
 }
 
+size_t piezo_controller_history_needed(const piezo_controller *c)
+{
+    return c ? piezo_gl_history_needed(&c->inv_creep) : 0;
+}
