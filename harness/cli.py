@@ -1,4 +1,5 @@
-"""Command line: ``python -m harness [all|run|list|identify|export] [options]`` (or ``piezo-harness``).
+"""Command line: ``python -m harness [all|run|list|identify|export|bench|sweep|STUDY] [options]`` (or
+``piezo-harness``).
 
 * ``all`` (the default when no subcommand is given): every tracking condition
   and the validation inputs; the headline table next to the paper's, a report
@@ -13,6 +14,8 @@
 * ``bench``: speed and memory figures (:mod:`harness.bench`).
 * ``sweep SCENARIO... --vary KEY=SPEC``: Monte Carlo robustness sweeps on Dask
   (:mod:`harness.sweep`).
+* the studies, each with its own options (:data:`STUDIES`): ``timing``, ``supervision``,
+  ``stage-use``, ``stage-day``: they measure a documented family and write its page's table.
 
 ``--backend`` of ``all`` and ``run``: ``auto`` (default) runs long closed loops
 (``harness.masters.LONG_RUN_SAMPLES``) on the native C master and the rest with
@@ -346,8 +349,36 @@ def _cmd_sweep(args, command):
 
 
 #: The subcommands, in --help order: each adds its parser and sets its handler.
+#: The studies: each measures a documented family and writes its page's table; each keeps its own
+#: options (``python -m harness STUDY --help``), so its arguments go to its module's ``main``
+#: untouched. Name: (module under harness, what it measures).
+STUDIES = {
+    "timing": ("timing_table", "what the FMUs detect under each master (docs/cosimulation.md)"),
+    "supervision": ("supervision_table", "the controller's supervision: fault tables, families, "
+                                         "stuck and noisy sensors, sup.reset (docs/robustness.md)"),
+    "stage-use": ("stage_use_table", "issue 35's stage-use targets on the family of stages "
+                                     "(docs/stage_use.md)"),
+    "stage-day": ("stage_day", "issue 43's targets over a stage's day on the stage family "
+                               "(docs/stage_day.md)"),
+}
+
+
+def _add_study_parsers(sub):
+    # listed in --help; main() hands their arguments to the study before this parser sees them
+    for name, (_, text) in STUDIES.items():
+        sub.add_parser(name, help=f"study: {text}", add_help=False)
+
+
+def _run_study(name, argv, prog):
+    """The study's own command line: its module's main(argv, prog), imported when used."""
+    import importlib
+    module = importlib.import_module(f"{__package__}.{STUDIES[name][0]}")
+    code = module.main(argv, prog=f"{prog} {name}")
+    return EXIT_OK if code is None else code
+
+
 SUBCOMMANDS = (_add_all_parser, _add_run_parser, _add_list_parser, _add_identify_parser,
-               _add_export_parser, _add_bench_parser, _add_sweep_parser)
+               _add_export_parser, _add_bench_parser, _add_sweep_parser, _add_study_parsers)
 
 
 def build_parser(prog=MODULE_PROG):
@@ -445,6 +476,11 @@ def main(argv=None, prog=None):
             stream.reconfigure(errors="replace")
         except (AttributeError, ValueError):
             pass
+    if argv and argv[0] in STUDIES:
+        try:
+            return _run_study(argv[0], argv[1:], prog)
+        except SystemExit as exc:                # the study's --help or its argparse's refusal
+            return exc.code if isinstance(exc.code, int) else EXIT_OK
     parser = build_parser(prog)
     try:
         argv = _with_default_command(argv, parser)

@@ -2,9 +2,9 @@
 
 ::
 
-    python -m harness.stage_day                              # the family, Markdown on stdout
-    python -m harness.stage_day --write docs/stage_day.md    # into the page, between its markers
-    python -m harness.stage_day --stages 2 --quick           # a slice, in minutes
+    python -m harness stage-day                              # the family, Markdown on stdout
+    python -m harness stage-day --write docs/stage_day.md    # into the page, between its markers
+    python -m harness stage-day --stages 2 --quick           # a slice, in minutes
 
 **The family** (:func:`family_tasks`): the stages :func:`harness.identify.family.draw_stage` draws
 (seed 2026), each with a sensor of 0, 1, 5, 20, 100 and 200 nm rms noise on the 2 nm grid
@@ -652,8 +652,8 @@ def write_into(path, text, name="stage_day"):
     p.write_text(head + begin + "\n" + text + end + tail, encoding="utf-8")
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m harness.stage_day",
+def main(argv=None, prog=None):
+    ap = argparse.ArgumentParser(prog=prog or "python -m harness stage-day",
                                  description="Issue 43's targets over a stage's day on the stage family "
                                              "(docs/stage_day.md).")
     ap.add_argument("--stages", type=int, default=50, help="stages of the family (default 50)")

@@ -2,9 +2,9 @@
 
 ::
 
-    python -m harness.stage_use_table                            # the family, Markdown on stdout
-    python -m harness.stage_use_table --write docs/stage_use.md  # into the page, between its markers
-    python -m harness.stage_use_table --stages 3 --quick         # a slice, in a minute
+    python -m harness stage-use                            # the family, Markdown on stdout
+    python -m harness stage-use --write docs/stage_use.md  # into the page, between its markers
+    python -m harness stage-use --stages 3 --quick         # a slice, in a minute
 
 **The family** (:func:`family_tasks`): the stages :func:`harness.identify.family.draw_stage`
 draws (seed 2026), each with a sensor of 0, 1, 5 and 20 nm rms noise on the 2 nm grid
@@ -685,10 +685,10 @@ def write_into(path, text):
     Path(path).write_text(f"{head}{BEGIN}\n{text}\n{END}{tail}", encoding="utf-8")
 
 
-def main(argv=None):
-    """``python -m harness.stage_use_table``: the family's table, PASS/FAIL per target; exit 1 on
+def main(argv=None, prog=None):
+    """``python -m harness stage-use``: the family's table, PASS/FAIL per target; exit 1 on
     a regression beyond the documented numbers."""
-    ap = argparse.ArgumentParser(prog="python -m harness.stage_use_table",
+    ap = argparse.ArgumentParser(prog=prog or "python -m harness stage-use",
                                  description="Issue 35's stage-use targets on the family of stages "
                                              "(docs/stage_use.md).")
     ap.add_argument("--stages", type=int, default=50)
@@ -707,7 +707,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     say = lambda text: print(text, file=sys.stderr, flush=True)   # noqa: E731
     if not native.native_available():
-        print(f"python -m harness.stage_use_table: {native.missing_runner_message()}", file=sys.stderr)
+        print(f"{prog or 'python -m harness stage-use'}: {native.missing_runner_message()}", file=sys.stderr)
         return 2
     sensors = tuple(int(s) if float(s).is_integer() else s for s in args.sensors)
     if REFERENCE_NM not in sensors:

@@ -3,13 +3,13 @@ validation family (no false alarm, and how close the legitimate runs came to eac
 
 ::
 
-    python -m harness.supervision_table faults                # the fault table, in Markdown
-    python -m harness.supervision_table fault-family          # every fault on 50 drawn stages
-    python -m harness.supervision_table family --stages 50    # the legitimate family and its margins
-    python -m harness.supervision_table family --stages 50 --duration 120 --scenarios 1hz 20hz
-    python -m harness.supervision_table false-alarms --specs module:function   # any family of RunSpecs
-    python -m harness.supervision_table stuck                 # a sensor that stops answering (issue 44)
-    python -m harness.supervision_table start                 # noisy sensors at start (issue 44)
+    python -m harness supervision faults                # the fault table, in Markdown
+    python -m harness supervision fault-family          # every fault on 50 drawn stages
+    python -m harness supervision family --stages 50    # the legitimate family and its margins
+    python -m harness supervision family --stages 50 --duration 120 --scenarios 1hz 20hz
+    python -m harness supervision false-alarms --specs module:function   # any family of RunSpecs
+    python -m harness supervision stuck                 # a sensor that stops answering (issue 44)
+    python -m harness supervision start                 # noisy sensors at start (issue 44)
 
 **Faults** (:data:`FAULTS`): each is a wiring or rig fault a user can make, run on the three
 FMUs wired by hand (:mod:`harness.masters.wired`) in both FMI editions, in a master that
@@ -1145,9 +1145,9 @@ def reset_markdown(family):
                            "inverted: the restarted loop stopped again (median / worst)"], rows)
 
 
-def main(argv=None):
-    """``python -m harness.supervision_table``: the fault table or the family, in Markdown."""
-    ap = argparse.ArgumentParser(prog="python -m harness.supervision_table",
+def main(argv=None, prog=None):
+    """``python -m harness supervision``: the fault table or the family, in Markdown."""
+    ap = argparse.ArgumentParser(prog=prog or "python -m harness supervision",
                                  description="The controller's supervision, measured (docs/robustness.md).")
     sub = ap.add_subparsers(dest="job", required=True)
     fa = sub.add_parser("faults", help="the fault table")

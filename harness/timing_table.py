@@ -6,8 +6,8 @@ defaults, with the plant as specified and with one more sample of input delay
 the end (``loop_delay``, ``preview_lead``, ``meas_offset``), when it chose its delay (the
 latest ``loop_delay_time`` of the six runs) and the e_rms of each scenario over [1, 3) s::
 
-    python -m harness.timing_table                  # the table, in Markdown
-    python -m harness.timing_table --seeds 1 2 3 4  # the family: e_rms and choice times over seeds
+    python -m harness timing                  # the table, in Markdown
+    python -m harness timing --seeds 1 2 3 4  # the family: e_rms and choice times over seeds
 
 The masters (their schedules: docs/cosimulation.md, section 2), each asked of the registry
 :mod:`harness.masters`: our Gauss-Seidel in both doStep orders and our Jacobi (``fmpy``),
@@ -170,9 +170,9 @@ def family_summary(runs):
     return "\n".join(lines)
 
 
-def main(argv=None):
-    """``python -m harness.timing_table [--seeds N ...] [--master NAME ...] [--scenario NAME ...]``."""
-    p = argparse.ArgumentParser(prog="python -m harness.timing_table",
+def main(argv=None, prog=None):
+    """``python -m harness timing [--seeds N ...] [--master NAME ...] [--scenario NAME ...]``."""
+    p = argparse.ArgumentParser(prog=prog or "python -m harness timing",
                                 description="What the FMUs detect under each master (docs/cosimulation.md).")
     p.add_argument("--seeds", type=int, nargs="*", default=None,
                    help="sensor seeds: print the family's distribution instead of the table")

@@ -319,3 +319,20 @@ def test_the_report_names_the_platforms_and_says_linux_only(fmu_paths, fmu3_path
                                  if (f := p.folder(2)) in platforms[0]))
             assert "win64" in built and platforms == [built, built]
             assert f"| {', '.join(built)} |" in text
+
+
+@pytest.mark.parametrize("study, words", [
+    ("timing", "--master"), ("supervision", "fault-family"), ("stage-use", "--quick"), ("stage-day", "--frames"),
+])
+def test_every_study_answers_help_under_python_m_harness(study, words):
+    """Reference: harness.cli.STUDIES and each study's own parser. ``python -m harness STUDY --help``
+    is the study's own help under that name (exit 0, an option only it has), the top-level help
+    lists the study, and a command line the study does not take is refused by it (exit 2, its
+    error line naming the program as the user called it)."""
+    from harness.cli import STUDIES
+    assert study in STUDIES
+    proc = run_harness(study, "--help", check=True, timeout=120)
+    assert proc.stdout.startswith(f"usage: python -m harness {study} ") and words in proc.stdout
+    assert f"  {study}" in run_harness("--help", check=True, timeout=120).stdout
+    bad = run_harness(study, "--no-such-option", timeout=120)
+    assert bad.returncode == 2 and f"python -m harness {study}: error: " in bad.stderr, bad.stderr

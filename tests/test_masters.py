@@ -154,7 +154,7 @@ def test_sequential_container_in_every_order_tracks_with_the_defaults(name, orde
     sample ahead when the plant is stepped before it, the stamped preview 4 + (1 if the
     reference is stepped before it) samples ahead of its time, and the loop tracks within
     3 nm; no run is stopped by the monitor (a stopped run raises). The figures are in the
-    table of docs/cosimulation.md (python -m harness.timing_table)."""
+    table of docs/cosimulation.md (python -m harness timing)."""
     sc = get_scenario(name)
     path = container.build_closed_loop_container(name, workdir / "seq.fmu", sequential=True, order=order,
                                                  plant_params={"tf.delay": tf_delay})

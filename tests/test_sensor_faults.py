@@ -2,7 +2,7 @@
 named within the targets and bridged, no legitimate run is stopped, a quiet sensor stuck at the
 set-point costs only the stage's own drift, and noisy sensors at start make the delay detection
 wait instead of failing. A small deterministic slice of the studies whose whole families
-docs/robustness.md shows (``python -m harness.supervision_table stuck`` and ``start``).
+docs/robustness.md shows (``python -m harness supervision stuck`` and ``start``).
 
 References: the faults by construction (harness.supervision_table.STUCK_CASES), the issue's
 targets (named within 20 ms in motion and 0.2 s in a hold; the stage within 2 um beyond the

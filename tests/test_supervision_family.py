@@ -142,7 +142,7 @@ def test_every_fault_on_drawn_stages_is_stopped_or_tracked(fmu_paths):
 def test_docs_robustness_holds_the_fault_table_as_measured(fault_results):
     """docs/robustness.md's fault table is the one harness.supervision_table writes (the
     message under each fault included): regenerate it with
-    ``python -m harness.supervision_table faults`` when it changes."""
+    ``python -m harness supervision faults`` when it changes."""
     doc = (REPO / "docs" / "robustness.md").read_text()
     want = st.fault_markdown(fault_results)
     assert want in doc, f"docs/robustness.md should hold:\n\n{want}\n"

@@ -1,5 +1,5 @@
 """docs/cosimulation.md, section 4: its table of what the FMUs detect under each master is the
-output of python -m harness.timing_table, not typed.
+output of python -m harness timing, not typed.
 
 Reference: the script itself (harness.timing_table.run_master), rerun here for the masters
 that are quick to run (ours and fmpy's SSP player, 48 runs) and for one sequential order of

@@ -463,7 +463,7 @@ def _main_document(conditions, tracking, validation, figures, prov, scenarios, d
             "issue 35 bursting on after a few raster frames), 1 nm sensor, through PiezoStageClosedLoop at "
             "10 ms communication steps while the reference holds: 60 raster frames with 0.5 s dwells, 60 s "
             "of a 1 Hz tone then a 10 µm step, and the fresh step. The whole family over a day of "
-            "rasters, tones and a random hour: docs/stage_day.md (python -m harness.stage_day)."),
+            "rasters, tones and a random hour: docs/stage_day.md (python -m harness stage-day)."),
             stage_day_table_rows(day), STAGE_DAY_NOTES, lambda f: f.name.startswith("stage_day_"))
 
     if sensor_faults:
@@ -471,14 +471,14 @@ def _main_document(conditions, tracking, validation, figures, prov, scenarios, d
             "The report's stage with a sensor that sticks where it was (or 2 nm off), dies (reads 0) or "
             "sticks after a dropout, in a 5 µm hold and mid-ramp of a 10 Hz raster: how soon the supervision "
             "names it and how far the stage went. The whole family, sensors of 0 to 200 nm on 50 stages: "
-            "docs/robustness.md (python -m harness.supervision_table stuck)."),
+            "docs/robustness.md (python -m harness supervision stuck)."),
             sensor_fault_rows(sensor_faults), SENSOR_FAULT_NOTES, lambda f: f.name == "sensor_faults")
     if resets:
         _add_section(doc, figures, "Leaving the safe state (sup.reset)", (
             "The report's stage with a 20 nm sensor in a 5 µm hold: a sensor that sticks or dies, a reference "
             "beyond the stage's reach and an amplifier inverted for good put the loop in its safe state; the "
             "fault reset sup.reset is raised while the cause persists and again after it is gone. The whole "
-            "family, sensors of 5 to 200 nm on 50 stages: docs/robustness.md (python -m harness.supervision_table "
+            "family, sensors of 5 to 200 nm on 50 stages: docs/robustness.md (python -m harness supervision "
             "reset)."), reset_rows(resets), RESET_NOTES, lambda f: f.name == "fault_reset")
 
     doc.add(*_provenance_blocks(prov, scenarios, defaults_source))

@@ -1,6 +1,6 @@
 """The report's sensor faults: a sensor that stops answering on the report's stage, how soon the
 supervision names it and what the stage does meanwhile and after (docs/robustness.md, "A sensor
-that stops answering"; the whole family: ``python -m harness.supervision_table stuck``).
+that stops answering"; the whole family: ``python -m harness supervision stuck``).
 
 The stage is the report's day's (:data:`harness.report.stage_day.REPORT_STAGE`), run on the C core
 in an exchange (:func:`harness.supervision_table.run_stuck`) with ``sup.reaction`` = 1, so that the
@@ -10,7 +10,7 @@ sensor (1 nm rms) and with a 20 nm one. The figure (:func:`sensor_faults_figure`
 around their onset. Leaving the safe state (:func:`run_resets`): every
 :data:`harness.supervision_table.RESET_CASES` case on the same stage with a 20 nm sensor, a reset
 raised while the cause persists and one after it is gone (docs/robustness.md, "Leaving the safe
-state"; the family: ``python -m harness.supervision_table reset``); the figure (:func:`reset_figure`)
+state"; the family: ``python -m harness supervision reset``); the figure (:func:`reset_figure`)
 shows the stuck sensor's.
 """
 

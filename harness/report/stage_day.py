@@ -1,6 +1,6 @@
 """The report's stage day: one stage's day of use under the controller's defaults, with its
 estimates fixed at the nominal model, and under the paper's law, through PiezoStageClosedLoop at a
-variable communication step (docs/stage_day.md; the whole family: ``python -m harness.stage_day``).
+variable communication step (docs/stage_day.md; the whole family: ``python -m harness stage-day``).
 
 The stage is the fourth the identification family draws (``harness.stage_day``'s family, seed
 2026), with the paper's sensor (1 nm rms on the 2 nm grid): the one on which issue 43 found the
