@@ -4,6 +4,16 @@
 #include <string.h>
 #include "piezo_controller_internal.h"
 
+/* A ring of values tagged 1 + the sample each is for (0: empty): each tag in its slot,
+ * (tag - 1) % ring, and at most `last` */
+static int ring_tags_valid(const uint64_t *tag, int ring, uint64_t last)
+{
+    int i;
+    for (i = 0; i < ring; ++i)
+        if (tag[i] != 0 && (tag[i] > last || (tag[i] - 1) % (uint64_t)ring != (uint64_t)i)) return 0;
+    return 1;
+}
+
 const char *piezo_controller_check(const piezo_controller *c)
 {
     const char *fault;
@@ -88,15 +98,12 @@ const char *piezo_controller_check(const piezo_controller *c)
                            || c->r_anchor != 0.0 || c->r_velocity != 0.0))
         || (c->integral_gain == 0.0 && c->integral != 0.0))
         return "robust adaptation or integral action state out of range";
-    for (i = 0; i < PIEZO_MV_Q_RING; ++i)
-        if (c->yd_tag[i] != 0 && (c->yd_tag[i] > c->k + PIEZO_MV_Q_RING || (c->yd_tag[i] - 1) % PIEZO_MV_Q_RING != (uint64_t)i))
-            return "a kept reference's sample is not its slot's or too far ahead";
+    if (!ring_tags_valid(c->yd_tag, PIEZO_MV_Q_RING, c->k + PIEZO_MV_Q_RING))
+        return "a kept reference's sample is not its slot's or too far ahead";
     /* a stamped preview is kept for its sample at + 1 <= k - 1 + PIEZO_PREVIEW_RING - 1 + 1 (the commit
-     * of sample k - 1 stamps at most PIEZO_PREVIEW_RING - 1 ahead), in slot at % PIEZO_PREVIEW_RING */
-    for (i = 0; i < PIEZO_PREVIEW_RING; ++i)
-        if (c->preview_tag[i] != 0 && (c->preview_tag[i] > c->k + PIEZO_PREVIEW_RING - 1
-                                       || (c->preview_tag[i] - 1) % PIEZO_PREVIEW_RING != (uint64_t)i))
-            return "a stamped preview's sample is not its slot's or too far ahead";
+     * of sample k - 1 stamps at most PIEZO_PREVIEW_RING - 1 ahead) */
+    if (!ring_tags_valid(c->preview_tag, PIEZO_PREVIEW_RING, c->k + PIEZO_PREVIEW_RING - 1))
+        return "a stamped preview's sample is not its slot's or too far ahead";
     if (!(isfinite(c->pred_error_max) && c->pred_error_max > 0.0)) return "monitor.pred_error_max out of range";
     if (c->divergence_samples > 2147483647u) return "monitor.divergence_samples out of range";
     if (c->mon_forgetting != piezo_ctl_monitor_forgetting((int)c->divergence_samples))
