@@ -30,6 +30,7 @@ import numpy as np
 from cffi import FFI
 
 from . import paths
+from .fmu_variables import PARAMETERS
 
 __all__ = [
     "CoreParameterError", "CoreInputError", "CoreDivergedError", "CoreUnstableError",
@@ -236,82 +237,11 @@ def _raise_step(status: int, what: str, inputs: dict) -> None:
 
 
 # --------------------------------------------------------------------------
-# parameter tables (FMU name -> struct field path, kind)
+# parameter tables (FMU name -> struct field path, kind), generated from the FMUs'
+# declarations (fmu_src/<Model>/variables.toml) into fmu_variables.py
 # --------------------------------------------------------------------------
-_MAX_OPS = 16
-
-
-def _pi_table(prefix=("pi",)):
-    t = {"pi.m": (prefix + ("m",), "int"),
-         "pi.v_max": (prefix + ("v_max",), "float"),
-         "pi.w0": (prefix + ("w0",), "float")}
-    for j in range(1, _MAX_OPS + 1):
-        t[f"pi.w[{j}]"] = (prefix + ("w", j - 1), "float")
-    return t
-
-
-_PLANT_TABLE = {
-    **_pi_table(),
-    "tf.a1": (("tf", "a1"), "float"),
-    "tf.a2": (("tf", "a2"), "float"),
-    "tf.b1": (("tf", "b1"), "float"),
-    "tf.b2": (("tf", "b2"), "float"),
-    "tf.delay": (("tf", "delay"), "int"),
-    "creep.enabled": (("creep_enabled",), "bool"),
-    "creep.k_c": (("creep_k_c",), "float"),
-    "creep.alpha": (("creep_alpha",), "float"),
-    "creep.exact": (("creep_exact",), "bool"),
-    "sensor.resolution": (("sensor_resolution",), "float"),
-    "sensor.noise_rms": (("sensor_noise_rms",), "float"),
-    "sensor.seed": (("sensor_seed",), "int"),
-    "h": (("h",), "float"),
-}
-
-_CONTROLLER_TABLE = {
-    **_pi_table(),
-    "tf.a1": (("tf_a1",), "float"),
-    "tf.a2": (("tf_a2",), "float"),
-    "tf.b1": (("tf_b1",), "float"),
-    "tf.b2": (("tf_b2",), "float"),
-    "creep.k_c": (("creep_k_c",), "float"),
-    "creep.alpha": (("creep_alpha",), "float"),
-    "creep.exact": (("creep_exact",), "bool"),
-    "h": (("h",), "float"),
-    "mv.delay": (("mv_delay",), "int"),
-    "mv.feedthrough": (("mv_feedthrough",), "bool"),
-    "mv.hold_inputs": (("mv_hold_inputs",), "bool"),
-    "mv.lambda_u": (("mv_lambda_u",), "float"),
-    "mv.observer": (("mv_observer",), "float"),
-    "mv.integral": (("mv_integral",), "float"),
-    "rls.enabled": (("rls_enabled",), "bool"),
-    "rls.forgetting": (("rls_forgetting",), "float"),
-    "rls.p0": (("rls_p0",), "float"),
-    "rls.trace_max": (("rls_trace_max",), "float"),
-    "rls.robust": (("rls_robust",), "bool"),
-    "rls.excitation": (("rls_excitation",), "float"),
-    "rls.excitation_time": (("rls_excitation_time",), "float"),
-    "rls.variance_max": (("rls_variance_max",), "float"),
-    "rls.p0_loop": (("rls_p0_loop",), "float"),
-    "sat.enabled": (("sat_enabled",), "bool"),
-    "sat.v_min": (("sat_v_min",), "float"),
-    "sat.v_max": (("sat_v_max",), "float"),
-    "monitor.pred_error_max": (("monitor_pred_error_max",), "float"),
-    "monitor.divergence_samples": (("monitor_divergence_samples",), "int"),
-    "sup.enabled": (("sup", "enabled"), "bool"),
-    "sup.gain_min": (("sup", "gain_min"), "float"),
-    "sup.gain_max": (("sup", "gain_max"), "float"),
-    "sup.window": (("sup", "window"), "int"),
-    "sup.clip_time": (("sup", "clip_time"), "float"),
-    "sup.detect_time": (("sup", "detect_time"), "float"),
-    "sup.reaction": (("sup", "reaction"), "int"),
-    "sup.ramp_time": (("sup", "ramp_time"), "float"),
-    "sup.clip_error": (("sup", "clip_error"), "float"),
-    "mv.probe_max": (("mv_probe_max",), "float"),
-    "rls.zero_min": (("rls_zero_min",), "float"),
-    "rls.pole_min": (("rls_pole_min",), "float"),
-    "rls.fallback_ratio": (("rls_fallback_ratio",), "float"),
-    "rls.fallback_window": (("rls_fallback_window",), "float"),
-}
+_PLANT_TABLE = PARAMETERS["PiezoStage"]
+_CONTROLLER_TABLE = PARAMETERS["AdaptiveCompoundController"]
 
 PLANT_PARAMETER_NAMES = tuple(_PLANT_TABLE)
 CONTROLLER_PARAMETER_NAMES = tuple(_CONTROLLER_TABLE)
@@ -827,7 +757,7 @@ class PIModel:
     def __init__(self, params: dict | None = None):
         p = ffi.new("piezo_plant_params *")
         lib().piezo_plant_default_params(p)
-        _apply(_pi_table(), p, params, "PI")
+        _apply({k: v for k, v in _PLANT_TABLE.items() if k.startswith("pi.")}, p, params, "PI")
         self.raw = ffi.new("piezo_pi *")
         diag = ffi.new("piezo_diag *")
         _raise_init(lib().piezo_pi_init(self.raw, ffi.addressof(p, "pi"), diag), "piezo_pi_init", diag)

@@ -1,12 +1,12 @@
-"""One source of truth for the variables: the C table of each model, and everything checked against it.
+"""The variables as the binaries serve them: each model's C table, and everything checked against it.
 
-A variable of an FMU is written in the C table ``model_variables`` of ``fmu_src/<Model>/model.c``
-(indexed by the value references of its ``config.h``), which is what the binaries serve, and again
-in the two model descriptions, in ``harness/core.py``'s parameter tables and in the docs. The C
-table is the reference here, read from the C code itself: ``tests/model_table/model_table.c`` is
-compiled against each model's ``config.h`` and ``model.c`` (and the core, for the start values) and
-prints the table as JSON. Nothing below lists a variable by hand, so variables added later are
-covered as they come.
+Each FMU's variables are declared once, in ``fmu_src/<Model>/variables.toml``; the generator
+(``packaging/fmu_interface.py``, checked in ``test_fmu_interface.py``) writes from it the C table's
+entries (``variables.h``) and both model descriptions. This file checks the results against the
+binaries' own view, independently of the generator: ``tests/model_table/model_table.c`` is
+compiled against each model's ``config.h`` and ``model.c`` (and the core, for the start values)
+and prints the table ``model_variables`` as JSON. Nothing below lists a variable by hand, so
+variables added later are covered as they come.
 
 (a) the C table itself: an entry at every value reference, names and offsets unique, every
     offset inside ``ModelData``, and a run ``name[1..n]`` (an FMI 3.0 array) laid out as one C
@@ -18,7 +18,7 @@ covered as they come.
     value reference after the table. Ranges (min/max) are not in the C table; they are checked
     against what the core refuses in ``test_fmu_packaging.py``;
 (c) the checks can fail: a scratch copy with two value references swapped (in a model
-    description, in ``model.c``) or two array elements swapped is caught, naming them;
+    description, in the C table) or two array elements swapped is caught, naming them;
 (d) ``harness/core.py``'s parameter tables: the same names, each mapped to the C field the FMU
     writes (offset and C type through cffi), its default equal to the C start value;
 (e) the docs: the Interfaces table of ``docs/fmus.md`` is the one this file renders from the FMI 2.0
@@ -64,15 +64,16 @@ def model_parts(model: str) -> list[Path]:
     return [REPO / "fmu_src" / "fmi" / f"fmu_{part}.c" for part in (m.group(1).split() if m else [])]
 
 
-def compile_table(model: str, out_dir: Path, model_c: Path | None = None) -> dict:
-    """Compile model_table.c against fmu_src/<model> (or another model.c) and return its JSON."""
+def compile_table(model: str, out_dir: Path, source_dir: Path | None = None) -> dict:
+    """Compile model_table.c against fmu_src/<model> (or a scratch copy of its config.h, model.c
+    and variables.h in ``source_dir``) and return its JSON."""
     cc = shutil.which("cc") or shutil.which("gcc")
     assert cc, "a C compiler is needed (the FMUs are built with one)"
-    model_dir = REPO / "fmu_src" / model
+    model_dir = source_dir or REPO / "fmu_src" / model
     exe = out_dir / f"model_table_{model}"
     subprocess.run([cc, "-std=c99", "-O0", "-Wall", "-Wextra", "-Wpedantic", "-Werror",
                     "-I", str(model_dir), "-I", str(REPO / "fmu_src" / "fmi"), "-I", str(CORE_DIR),
-                    str(TABLE_SOURCE), str(model_c or model_dir / "model.c"),
+                    str(TABLE_SOURCE), str(model_dir / "model.c"),
                     *(str(p) for p in model_parts(model)),
                     *sorted(str(p) for p in CORE_DIR.glob("*.c")), "-lm", "-o", str(exe)], check=True)
     return json.loads(subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout)
@@ -287,19 +288,23 @@ def _exchange(text: str, a: str, b: str) -> str:
     return re.sub("|".join(map(re.escape, (a, b))), lambda m: b if m.group(0) == a else a, text)
 
 
-def test_swapped_entries_in_model_c_are_caught(tmp_path, tables):
-    """Reference: scratch copies of fmu_src/PiezoStage/model.c. (1) pi.w[4] and pi.w[5] under each
-    other's value reference: both model descriptions disagree at vr 11 and 12. (2) the names kept
-    but the C fields exchanged (pi.w[4] -> w[4], pi.w[5] -> w[3]): no model description can see it
-    (both start at 0), the array layout check and core.py's offsets do."""
-    source = (REPO / "fmu_src" / "PiezoStage" / "model.c").read_text()
+def test_swapped_entries_in_the_c_table_are_caught(tmp_path, tables):
+    """Reference: scratch copies of fmu_src/PiezoStage (its table's entries are in the generated
+    variables.h). (1) pi.w[4] and pi.w[5] under each other's value reference: both model
+    descriptions disagree at vr 11 and 12. (2) the names kept but the C fields exchanged
+    (pi.w[4] -> w[4], pi.w[5] -> w[3]): no model description can see it (both start at 0), the
+    array layout check and core.py's offsets do."""
+    model_dir = REPO / "fmu_src" / "PiezoStage"
+    source = (model_dir / "variables.h").read_text()
     scratch = {"vr": _exchange(source, "[vr_pi_w4] =", "[vr_pi_w5] ="),
-               "field": _exchange(source, "pi.w[3]),", "pi.w[4]),")}
+               "field": _exchange(source, "pi.w[3]) }", "pi.w[4]) }")}
     table = {}
     for case, text in scratch.items():
         (tmp_path / case).mkdir()
-        (tmp_path / case / "model.c").write_text(text)
-        table[case] = compile_table("PiezoStage", tmp_path / case, tmp_path / case / "model.c")
+        for name in ("config.h", "model.c"):
+            shutil.copy(model_dir / name, tmp_path / case / name)
+        (tmp_path / case / "variables.h").write_text(text)
+        table[case] = compile_table("PiezoStage", tmp_path / case, tmp_path / case)
     for path in model_description_paths("PiezoStage").values():
         md = read_model_description(path.read_text())
         found = mismatches(table["vr"], md)

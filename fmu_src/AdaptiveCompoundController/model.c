@@ -26,13 +26,6 @@
 #include <stddef.h>
 #include "fmu_model.h"
 
-#define PARAM_REAL(name, field) { name, MODEL_REAL, MODEL_PARAMETER, offsetof(ModelData, params.field) }
-#define PARAM_INT(name, field) { name, MODEL_INTEGER, MODEL_PARAMETER, offsetof(ModelData, params.field) }
-#define PARAM_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_PARAMETER, offsetof(ModelData, params.field) }
-#define OUTPUT_REAL(name, field) { name, MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, out.field) }
-#define OUTPUT_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_OUTPUT, offsetof(ModelData, out.field) }
-#define INPUT_REAL(name, field) { name, MODEL_REAL, MODEL_INPUT, offsetof(ModelData, field) }
-#define MODEL_OUTPUT_INT(name, field) { name, MODEL_INTEGER, MODEL_OUTPUT, offsetof(ModelData, field) }
 
 /* the start value of every input (the model descriptions'): a controller whose y_meas
  * and t_meas kept it since its start was never connected */
@@ -43,95 +36,7 @@
  * stamp counts from the second sample it advanced, a player's first inputs are zeros) */
 #define STAMP_WARN_SAMPLES 10
 
-const model_variable model_variables[MODEL_N_VARIABLES] = {
-    [vr_y_ref] = { "y_ref", MODEL_REAL, MODEL_INPUT, offsetof(ModelData, y_ref) },
-    [vr_y_meas] = { "y_meas", MODEL_REAL, MODEL_INPUT, offsetof(ModelData, y_meas) },
-    [vr_v] = OUTPUT_REAL("v", v),
-    [vr_q] = OUTPUT_REAL("q", q),
-    [vr_est_a1] = OUTPUT_REAL("est.a1", theta[0]),
-    [vr_est_a2] = OUTPUT_REAL("est.a2", theta[1]),
-    [vr_est_b1] = OUTPUT_REAL("est.b1", theta[2]),
-    [vr_est_b2] = OUTPUT_REAL("est.b2", theta[3]),
-    [vr_pred_error] = OUTPUT_REAL("pred_error", pred_error),
-    [vr_saturated] = OUTPUT_BOOL("saturated", saturated),
-    [vr_pi_m] = PARAM_INT("pi.m", pi.m),
-    [vr_pi_v_max] = PARAM_REAL("pi.v_max", pi.v_max),
-    [vr_pi_w0] = PARAM_REAL("pi.w0", pi.w0),
-    [vr_pi_w1] = PARAM_REAL("pi.w[1]", pi.w[0]),
-    [vr_pi_w2] = PARAM_REAL("pi.w[2]", pi.w[1]),
-    [vr_pi_w3] = PARAM_REAL("pi.w[3]", pi.w[2]),
-    [vr_pi_w4] = PARAM_REAL("pi.w[4]", pi.w[3]),
-    [vr_pi_w5] = PARAM_REAL("pi.w[5]", pi.w[4]),
-    [vr_pi_w6] = PARAM_REAL("pi.w[6]", pi.w[5]),
-    [vr_pi_w7] = PARAM_REAL("pi.w[7]", pi.w[6]),
-    [vr_pi_w8] = PARAM_REAL("pi.w[8]", pi.w[7]),
-    [vr_pi_w9] = PARAM_REAL("pi.w[9]", pi.w[8]),
-    [vr_pi_w10] = PARAM_REAL("pi.w[10]", pi.w[9]),
-    [vr_pi_w11] = PARAM_REAL("pi.w[11]", pi.w[10]),
-    [vr_pi_w12] = PARAM_REAL("pi.w[12]", pi.w[11]),
-    [vr_pi_w13] = PARAM_REAL("pi.w[13]", pi.w[12]),
-    [vr_pi_w14] = PARAM_REAL("pi.w[14]", pi.w[13]),
-    [vr_pi_w15] = PARAM_REAL("pi.w[15]", pi.w[14]),
-    [vr_pi_w16] = PARAM_REAL("pi.w[16]", pi.w[15]),
-    [vr_tf_a1] = PARAM_REAL("tf.a1", tf_a1),
-    [vr_tf_a2] = PARAM_REAL("tf.a2", tf_a2),
-    [vr_tf_b1] = PARAM_REAL("tf.b1", tf_b1),
-    [vr_tf_b2] = PARAM_REAL("tf.b2", tf_b2),
-    [vr_creep_k_c] = PARAM_REAL("creep.k_c", creep_k_c),
-    [vr_creep_alpha] = PARAM_REAL("creep.alpha", creep_alpha),
-    [vr_creep_exact] = PARAM_BOOL("creep.exact", creep_exact),
-    [vr_h] = PARAM_REAL("h", h),
-    [vr_mv_delay] = PARAM_INT("mv.delay", mv_delay),
-    [vr_mv_feedthrough] = PARAM_BOOL("mv.feedthrough", mv_feedthrough),
-    [vr_mv_lambda_u] = PARAM_REAL("mv.lambda_u", mv_lambda_u),
-    [vr_rls_enabled] = PARAM_BOOL("rls.enabled", rls_enabled),
-    [vr_rls_forgetting] = PARAM_REAL("rls.forgetting", rls_forgetting),
-    [vr_rls_p0] = PARAM_REAL("rls.p0", rls_p0),
-    [vr_rls_trace_max] = PARAM_REAL("rls.trace_max", rls_trace_max),
-    [vr_sat_enabled] = PARAM_BOOL("sat.enabled", sat_enabled),
-    [vr_sat_v_min] = PARAM_REAL("sat.v_min", sat_v_min),
-    [vr_sat_v_max] = PARAM_REAL("sat.v_max", sat_v_max),
-    [vr_monitor_pred_error_max] = PARAM_REAL("monitor.pred_error_max", monitor_pred_error_max),
-    [vr_monitor_divergence_samples] = PARAM_INT("monitor.divergence_samples", monitor_divergence_samples),
-    [vr_y_preview] = INPUT_REAL("y_preview", y_preview),
-    [vr_t_preview] = INPUT_REAL("t_preview", t_preview),
-    [vr_t_meas] = INPUT_REAL("t_meas", t_meas),
-    [vr_loop_delay] = MODEL_OUTPUT_INT("loop_delay", loop_delay),
-    [vr_loop_delay_time] = { "loop_delay_time", MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, loop_delay_time) },
-    [vr_preview_lead] = MODEL_OUTPUT_INT("preview_lead", preview_lead),
-    [vr_meas_offset] = MODEL_OUTPUT_INT("meas_offset", meas_offset),
-    [vr_mv_observer] = PARAM_REAL("mv.observer", mv_observer),
-    [vr_mv_hold_inputs] = PARAM_BOOL("mv.hold_inputs", mv_hold_inputs),
-    [vr_sup_enabled] = PARAM_BOOL("sup.enabled", sup.enabled),
-    [vr_sup_gain_min] = PARAM_REAL("sup.gain_min", sup.gain_min),
-    [vr_sup_gain_max] = PARAM_REAL("sup.gain_max", sup.gain_max),
-    [vr_sup_window] = PARAM_INT("sup.window", sup.window),
-    [vr_sup_clip_time] = PARAM_REAL("sup.clip_time", sup.clip_time),
-    [vr_sup_detect_time] = PARAM_REAL("sup.detect_time", sup.detect_time),
-    [vr_sup_status] = MODEL_OUTPUT_INT("sup.status", sup_status),
-    [vr_sup_gain] = { "sup.gain", MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, sup_gain) },
-    [vr_sup_delay] = MODEL_OUTPUT_INT("sup.delay", sup_delay),
-    [vr_rls_robust] = PARAM_BOOL("rls.robust", rls_robust),
-    [vr_rls_excitation] = PARAM_REAL("rls.excitation", rls_excitation),
-    [vr_rls_excitation_time] = PARAM_REAL("rls.excitation_time", rls_excitation_time),
-    [vr_rls_variance_max] = PARAM_REAL("rls.variance_max", rls_variance_max),
-    [vr_rls_p0_loop] = PARAM_REAL("rls.p0_loop", rls_p0_loop),
-    [vr_mv_integral] = PARAM_REAL("mv.integral", mv_integral),
-    [vr_est_adapting] = OUTPUT_BOOL("est.adapting", adapting),
-    [vr_est_noise] = OUTPUT_REAL("est.noise", noise),
-    [vr_sup_reaction] = PARAM_INT("sup.reaction", sup.reaction),
-    [vr_sup_ramp_time] = PARAM_REAL("sup.ramp_time", sup.ramp_time),
-    [vr_sup_clip_error] = PARAM_REAL("sup.clip_error", sup.clip_error),
-    [vr_mv_probe_max] = PARAM_REAL("mv.probe_max", mv_probe_max),
-    [vr_sup_fault] = MODEL_OUTPUT_INT("sup.fault", sup_fault),
-    [vr_sup_fault_time] = { "sup.fault_time", MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, sup_fault_time) },
-    [vr_rls_zero_min] = PARAM_REAL("rls.zero_min", rls_zero_min),
-    [vr_rls_pole_min] = PARAM_REAL("rls.pole_min", rls_pole_min),
-    [vr_rls_fallback_ratio] = PARAM_REAL("rls.fallback_ratio", rls_fallback_ratio),
-    [vr_rls_fallback_window] = PARAM_REAL("rls.fallback_window", rls_fallback_window),
-    [vr_est_fallbacks] = MODEL_OUTPUT_INT("est.fallbacks", fallbacks),
-    [vr_sup_reset] = { "sup.reset", MODEL_BOOLEAN, MODEL_INPUT, offsetof(ModelData, sup_reset) },
-};
+const model_variable model_variables[MODEL_N_VARIABLES] = { MODEL_VARIABLE_TABLE };
 
 void model_set_start_values(ModelData *data)
 {

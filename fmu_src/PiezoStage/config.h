@@ -1,9 +1,9 @@
 /*
  * PiezoStage/config.h - identity, value references and flat data of the
- * PiezoStage FMU (docs/fmus.md). The value references follow the
- * order of modelDescription/PiezoStage.xml (value reference = position - 1).
- * The FMI 3.0 edition (modelDescription/fmi3/) uses the same numbers: its
- * array pi.w has the value reference of its first element, vr_pi_w1.
+ * PiezoStage FMU (docs/fmus.md). The value references are declared in
+ * variables.toml (value reference = position, an array taking one per element)
+ * and generated into variables.h; the FMI 3.0 edition's array pi.w has the
+ * value reference of its first element, vr_pi_w1.
  */
 #ifndef PIEZOSTAGE_CONFIG_H
 #define PIEZOSTAGE_CONFIG_H
@@ -21,33 +21,9 @@
 #define PIEZOSTAGE_V_MIN (-(double)PIEZO_PLANT_V_RATED)
 #define PIEZOSTAGE_V_MAX ((double)PIEZO_PLANT_V_RATED)
 
-typedef enum {
-    vr_v = 0,               /* input  [V] */
-    vr_y,                   /* output [um] true displacement */
-    vr_y_meas,              /* output [um] sensor reading */
-    vr_u,                   /* output [um] hysteresis output u(k-1) */
-    vr_x,                   /* output [um] Hammerstein output */
-    vr_pi_m,                /* Integer, 1..16 */
-    vr_pi_v_max,
-    vr_pi_w0,
-    vr_pi_w1, vr_pi_w2, vr_pi_w3, vr_pi_w4, vr_pi_w5, vr_pi_w6, vr_pi_w7, vr_pi_w8,
-    vr_pi_w9, vr_pi_w10, vr_pi_w11, vr_pi_w12, vr_pi_w13, vr_pi_w14, vr_pi_w15, vr_pi_w16,
-    vr_tf_a1,
-    vr_tf_a2,
-    vr_tf_b1,
-    vr_tf_b2,
-    vr_tf_delay,            /* Integer */
-    vr_creep_enabled,       /* Boolean */
-    vr_creep_k_c,
-    vr_creep_alpha,
-    vr_creep_exact,         /* Boolean */
-    vr_sensor_resolution,
-    vr_sensor_noise_rms,
-    vr_sensor_seed,         /* Integer */
-    vr_h,
-    vr_t_meas,              /* output [s] the time of the outputs, t0 + k h */
-    MODEL_N_VARIABLES
-} ValueReference;
+/* the value references, MODEL_N_VARIABLES and the variable table's entries, generated
+ * from variables.toml (the one declaration of this FMU's interface) */
+#include "variables.h"
 
 /* Flat and pointer-free: an FMU state is a copy of this plus the history. */
 typedef struct {

@@ -20,51 +20,8 @@
 #include <stddef.h>
 #include "fmu_model.h"
 
-#define PARAM_REAL(name, field) { name, MODEL_REAL, MODEL_PARAMETER, offsetof(ModelData, params.field) }
-#define PARAM_INT(name, field) { name, MODEL_INTEGER, MODEL_PARAMETER, offsetof(ModelData, params.field) }
-#define PARAM_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_PARAMETER, offsetof(ModelData, params.field) }
-#define OUTPUT_REAL(name, field) { name, MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, plant.out.field) }
 
-const model_variable model_variables[MODEL_N_VARIABLES] = {
-    [vr_v] = { "v", MODEL_REAL, MODEL_INPUT, offsetof(ModelData, v) },
-    [vr_y] = OUTPUT_REAL("y", y),
-    [vr_y_meas] = OUTPUT_REAL("y_meas", y_meas),
-    [vr_u] = OUTPUT_REAL("u", u),
-    [vr_x] = OUTPUT_REAL("x", x),
-    [vr_t_meas] = { "t_meas", MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, t_meas) },
-    [vr_pi_m] = PARAM_INT("pi.m", pi.m),
-    [vr_pi_v_max] = PARAM_REAL("pi.v_max", pi.v_max),
-    [vr_pi_w0] = PARAM_REAL("pi.w0", pi.w0),
-    [vr_pi_w1] = PARAM_REAL("pi.w[1]", pi.w[0]),
-    [vr_pi_w2] = PARAM_REAL("pi.w[2]", pi.w[1]),
-    [vr_pi_w3] = PARAM_REAL("pi.w[3]", pi.w[2]),
-    [vr_pi_w4] = PARAM_REAL("pi.w[4]", pi.w[3]),
-    [vr_pi_w5] = PARAM_REAL("pi.w[5]", pi.w[4]),
-    [vr_pi_w6] = PARAM_REAL("pi.w[6]", pi.w[5]),
-    [vr_pi_w7] = PARAM_REAL("pi.w[7]", pi.w[6]),
-    [vr_pi_w8] = PARAM_REAL("pi.w[8]", pi.w[7]),
-    [vr_pi_w9] = PARAM_REAL("pi.w[9]", pi.w[8]),
-    [vr_pi_w10] = PARAM_REAL("pi.w[10]", pi.w[9]),
-    [vr_pi_w11] = PARAM_REAL("pi.w[11]", pi.w[10]),
-    [vr_pi_w12] = PARAM_REAL("pi.w[12]", pi.w[11]),
-    [vr_pi_w13] = PARAM_REAL("pi.w[13]", pi.w[12]),
-    [vr_pi_w14] = PARAM_REAL("pi.w[14]", pi.w[13]),
-    [vr_pi_w15] = PARAM_REAL("pi.w[15]", pi.w[14]),
-    [vr_pi_w16] = PARAM_REAL("pi.w[16]", pi.w[15]),
-    [vr_tf_a1] = PARAM_REAL("tf.a1", tf.a1),
-    [vr_tf_a2] = PARAM_REAL("tf.a2", tf.a2),
-    [vr_tf_b1] = PARAM_REAL("tf.b1", tf.b1),
-    [vr_tf_b2] = PARAM_REAL("tf.b2", tf.b2),
-    [vr_tf_delay] = PARAM_INT("tf.delay", tf.delay),
-    [vr_creep_enabled] = PARAM_BOOL("creep.enabled", creep_enabled),
-    [vr_creep_k_c] = PARAM_REAL("creep.k_c", creep_k_c),
-    [vr_creep_alpha] = PARAM_REAL("creep.alpha", creep_alpha),
-    [vr_creep_exact] = PARAM_BOOL("creep.exact", creep_exact),
-    [vr_sensor_resolution] = PARAM_REAL("sensor.resolution", sensor_resolution),
-    [vr_sensor_noise_rms] = PARAM_REAL("sensor.noise_rms", sensor_noise_rms),
-    [vr_sensor_seed] = PARAM_INT("sensor.seed", sensor_seed),
-    [vr_h] = PARAM_REAL("h", h),
-};
+const model_variable model_variables[MODEL_N_VARIABLES] = { MODEL_VARIABLE_TABLE };
 
 void model_set_start_values(ModelData *data)
 {

@@ -1,10 +1,10 @@
 /*
  * PiezoStageClosedLoop/config.h - identity, value references and flat data of
  * the PiezoStageClosedLoop FMU: the stage under its controller, with the
- * reference inside (docs/fmus.md). The value references follow the order of
- * modelDescription/PiezoStageClosedLoop.xml (value reference = position - 1);
- * the FMI 3.0 edition keeps them, each array (pi.w, controller.pi.w,
- * amplitude, frequency, phase) at the value reference of its first element.
+ * reference inside (docs/fmus.md). The value references are declared in
+ * variables.toml, which composes the components' declarations, and generated
+ * into variables.h; each FMI 3.0 array (pi.w, controller.pi.w, amplitude,
+ * frequency, phase) has the value reference of its first element.
  *
  * Parameters: the stage's are PiezoStage's, under PiezoStage's names; the
  * controller's are AdaptiveCompoundController's under its names, but for its
@@ -32,116 +32,9 @@
  * controller keeps PIEZO_PREVIEW_RING - 1 samples of preview) */
 #define CLOSED_LOOP_MAX_LEAD (PIEZO_PREVIEW_RING - 1)
 
-typedef enum {
-    vr_y_d = 0,             /* input  [um] desired displacement (use_internal_reference = false) */
-    vr_y,                   /* output [um] true displacement y(k) */
-    vr_y_meas,              /* output [um] sensor reading */
-    vr_v,                   /* output [V] the controller's voltage */
-    vr_reference,           /* output [um] y_d(k), the displacement the stage tracks */
-    vr_error,               /* output [um] reference - y */
-    vr_u,                   /* output [um] the stage's hysteresis output u(k-1) */
-    vr_x,                   /* output [um] the stage's Hammerstein output x(k) */
-    vr_q,                   /* output [um] */
-    vr_est_a1,
-    vr_est_a2,
-    vr_est_b1,
-    vr_est_b2,
-    vr_pred_error,          /* output [um] */
-    vr_saturated,           /* output Boolean */
-    vr_loop_delay,          /* output Integer */
-    vr_loop_delay_time,     /* output [s] */
-    vr_preview_lead,        /* output Integer */
-    vr_sup_status,          /* output Integer */
-    vr_sup_gain,            /* output */
-    vr_sup_delay,           /* output Integer */
-    vr_use_internal_reference,  /* Boolean */
-    vr_y_d_lead,            /* Integer [samples] */
-    vr_h,
-    /* the stage (PiezoStage) */
-    vr_pi_m,
-    vr_pi_v_max,
-    vr_pi_w0,
-    vr_pi_w1, vr_pi_w2, vr_pi_w3, vr_pi_w4, vr_pi_w5, vr_pi_w6, vr_pi_w7, vr_pi_w8,
-    vr_pi_w9, vr_pi_w10, vr_pi_w11, vr_pi_w12, vr_pi_w13, vr_pi_w14, vr_pi_w15, vr_pi_w16,
-    vr_tf_a1,
-    vr_tf_a2,
-    vr_tf_b1,
-    vr_tf_b2,
-    vr_tf_delay,
-    vr_creep_enabled,
-    vr_creep_k_c,
-    vr_creep_alpha,
-    vr_creep_exact,
-    vr_sensor_resolution,
-    vr_sensor_noise_rms,
-    vr_sensor_seed,
-    /* the controller's nominal model (AdaptiveCompoundController's pi.*, tf.*, creep.*) */
-    vr_c_pi_m,
-    vr_c_pi_v_max,
-    vr_c_pi_w0,
-    vr_c_pi_w1, vr_c_pi_w2, vr_c_pi_w3, vr_c_pi_w4, vr_c_pi_w5, vr_c_pi_w6, vr_c_pi_w7, vr_c_pi_w8,
-    vr_c_pi_w9, vr_c_pi_w10, vr_c_pi_w11, vr_c_pi_w12, vr_c_pi_w13, vr_c_pi_w14, vr_c_pi_w15, vr_c_pi_w16,
-    vr_c_tf_a1,
-    vr_c_tf_a2,
-    vr_c_tf_b1,
-    vr_c_tf_b2,
-    vr_c_creep_k_c,
-    vr_c_creep_alpha,
-    vr_c_creep_exact,
-    /* the rest of the controller */
-    vr_mv_delay,
-    vr_mv_feedthrough,
-    vr_mv_lambda_u,
-    vr_mv_observer,
-    vr_rls_enabled,
-    vr_rls_forgetting,
-    vr_rls_p0,
-    vr_rls_trace_max,
-    vr_sat_enabled,
-    vr_sat_v_min,
-    vr_sat_v_max,
-    vr_monitor_pred_error_max,
-    vr_monitor_divergence_samples,
-    vr_sup_enabled,
-    vr_sup_gain_min,
-    vr_sup_gain_max,
-    vr_sup_window,
-    vr_sup_clip_time,
-    vr_sup_detect_time,
-    /* the reference (ReferenceSignal) */
-    vr_offset,
-    vr_amplitude1, vr_amplitude2, vr_amplitude3, vr_amplitude4,
-    vr_amplitude5, vr_amplitude6, vr_amplitude7, vr_amplitude8,
-    vr_frequency1, vr_frequency2, vr_frequency3, vr_frequency4,
-    vr_frequency5, vr_frequency6, vr_frequency7, vr_frequency8,
-    vr_phase1, vr_phase2, vr_phase3, vr_phase4,
-    vr_phase5, vr_phase6, vr_phase7, vr_phase8,
-    vr_lead,
-    vr_preview,
-    /* the controller's robust adaptation and integral action (added after the reference) */
-    vr_rls_robust,
-    vr_rls_excitation,
-    vr_rls_excitation_time,
-    vr_rls_variance_max,
-    vr_rls_p0_loop,
-    vr_mv_integral,
-    vr_est_adapting,        /* output Boolean */
-    vr_est_noise,           /* output [um] */
-    /* added with the safe state (issue 36): the controller's, appended to keep the references */
-    vr_sup_reaction,
-    vr_sup_ramp_time,
-    vr_sup_clip_error,
-    vr_mv_probe_max,
-    vr_sup_fault,           /* output Integer */
-    vr_sup_fault_time,      /* output [s] */
-    vr_rls_zero_min,        /* the admissible set of the estimates (piezo_controller.h) */
-    vr_rls_pole_min,
-    vr_rls_fallback_ratio,  /* the fallback to the nominal model */
-    vr_rls_fallback_window, /* [s] */
-    vr_est_fallbacks,       /* output Integer: fallbacks to the nominal model so far */
-    vr_sup_reset,           /* input Boolean: the controller's fault reset */
-    MODEL_N_VARIABLES
-} ValueReference;
+/* the value references, MODEL_N_VARIABLES and the variable table's entries, generated
+ * from variables.toml (the one declaration of this FMU's interface) */
+#include "variables.h"
 
 /* The core's parameter structs in ModelData (tests/model_table/model_table.c prints where). */
 #define MODEL_PARAM_STRUCTS X(stage) X(control) X(ref_params)

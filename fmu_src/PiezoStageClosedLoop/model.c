@@ -44,184 +44,11 @@
 #include <stddef.h>
 #include "fmu_model.h"
 
-/* Table entries by where their name, range and description come from (the model
- * descriptions are generated from the components': packaging/closed_loop_description.py
- * reads these macro names). STAGE_*: PiezoStage's variable of that name; CTRL_*:
- * AdaptiveCompoundController's (without the "controller." of its nominal model's
- * names); REF_*: ReferenceSignal's; LOOP_*: this FMU's own. */
-#define STAGE_REAL(name, field) { name, MODEL_REAL, MODEL_PARAMETER, offsetof(ModelData, stage.field) }
-#define STAGE_INT(name, field) { name, MODEL_INTEGER, MODEL_PARAMETER, offsetof(ModelData, stage.field) }
-#define STAGE_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_PARAMETER, offsetof(ModelData, stage.field) }
-#define STAGE_OUT(name, field) { name, MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, plant.out.field) }
-#define CTRL_REAL(name, field) { name, MODEL_REAL, MODEL_PARAMETER, offsetof(ModelData, control.field) }
-#define CTRL_INT(name, field) { name, MODEL_INTEGER, MODEL_PARAMETER, offsetof(ModelData, control.field) }
-#define CTRL_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_PARAMETER, offsetof(ModelData, control.field) }
-#define CTRL_INPUT_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_INPUT, offsetof(ModelData, field) }
-#define CTRL_OUT(name, field) { name, MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, ctrl.out.field) }
-#define CTRL_OUT_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_OUTPUT, offsetof(ModelData, ctrl.out.field) }
-#define CTRL_OUT_REAL(name, field) { name, MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, field) }
-#define CTRL_OUT_INT(name, field) { name, MODEL_INTEGER, MODEL_OUTPUT, offsetof(ModelData, field) }
-#define REF_REAL(name, field) { name, MODEL_REAL, MODEL_PARAMETER, offsetof(ModelData, ref_params.field) }
-#define REF_INT(name, field) { name, MODEL_INTEGER, MODEL_PARAMETER, offsetof(ModelData, ref_params.field) }
-#define LOOP_INPUT(name, field) { name, MODEL_REAL, MODEL_INPUT, offsetof(ModelData, field) }
-#define LOOP_OUT(name, field) { name, MODEL_REAL, MODEL_OUTPUT, offsetof(ModelData, field) }
-#define LOOP_OUT_INT(name, field) { name, MODEL_INTEGER, MODEL_OUTPUT, offsetof(ModelData, field) }
-#define LOOP_REAL(name, field) { name, MODEL_REAL, MODEL_PARAMETER, offsetof(ModelData, field) }
-#define LOOP_INT(name, field) { name, MODEL_INTEGER, MODEL_PARAMETER, offsetof(ModelData, field) }
-#define LOOP_BOOL(name, field) { name, MODEL_BOOLEAN, MODEL_PARAMETER, offsetof(ModelData, field) }
-
-/* the prefix of the controller's nominal model */
+/* The table is generated from variables.toml, which composes the components' declarations
+ * (packaging/fmu_interface.py). The prefix of the controller's nominal model's names there: */
 #define CONTROLLER_PREFIX "controller."
 
-const model_variable model_variables[MODEL_N_VARIABLES] = {
-    [vr_y_d] = LOOP_INPUT("y_d", y_d),
-    [vr_y] = STAGE_OUT("y", y),
-    [vr_y_meas] = STAGE_OUT("y_meas", y_meas),
-    [vr_v] = LOOP_OUT("v", ctrl.out.v),
-    [vr_reference] = LOOP_OUT("reference", reference),
-    [vr_error] = LOOP_OUT("error", error),
-    [vr_u] = STAGE_OUT("u", u),
-    [vr_x] = STAGE_OUT("x", x),
-    [vr_q] = CTRL_OUT("q", q),
-    [vr_est_a1] = CTRL_OUT("est.a1", theta[0]),
-    [vr_est_a2] = CTRL_OUT("est.a2", theta[1]),
-    [vr_est_b1] = CTRL_OUT("est.b1", theta[2]),
-    [vr_est_b2] = CTRL_OUT("est.b2", theta[3]),
-    [vr_pred_error] = CTRL_OUT("pred_error", pred_error),
-    [vr_saturated] = CTRL_OUT_BOOL("saturated", saturated),
-    [vr_loop_delay] = CTRL_OUT_INT("loop_delay", loop_delay),
-    [vr_loop_delay_time] = CTRL_OUT_REAL("loop_delay_time", loop_delay_time),
-    [vr_preview_lead] = LOOP_OUT_INT("preview_lead", preview_lead),
-    [vr_sup_status] = LOOP_OUT_INT("sup.status", sup_status),
-    [vr_sup_gain] = CTRL_OUT_REAL("sup.gain", sup_gain),
-    [vr_sup_delay] = CTRL_OUT_INT("sup.delay", sup_delay),
-    [vr_use_internal_reference] = LOOP_BOOL("use_internal_reference", use_internal_reference),
-    [vr_y_d_lead] = LOOP_INT("y_d_lead", y_d_lead),
-    [vr_h] = LOOP_REAL("h", stage.h),
-    [vr_pi_m] = STAGE_INT("pi.m", pi.m),
-    [vr_pi_v_max] = STAGE_REAL("pi.v_max", pi.v_max),
-    [vr_pi_w0] = STAGE_REAL("pi.w0", pi.w0),
-    [vr_pi_w1] = STAGE_REAL("pi.w[1]", pi.w[0]),
-    [vr_pi_w2] = STAGE_REAL("pi.w[2]", pi.w[1]),
-    [vr_pi_w3] = STAGE_REAL("pi.w[3]", pi.w[2]),
-    [vr_pi_w4] = STAGE_REAL("pi.w[4]", pi.w[3]),
-    [vr_pi_w5] = STAGE_REAL("pi.w[5]", pi.w[4]),
-    [vr_pi_w6] = STAGE_REAL("pi.w[6]", pi.w[5]),
-    [vr_pi_w7] = STAGE_REAL("pi.w[7]", pi.w[6]),
-    [vr_pi_w8] = STAGE_REAL("pi.w[8]", pi.w[7]),
-    [vr_pi_w9] = STAGE_REAL("pi.w[9]", pi.w[8]),
-    [vr_pi_w10] = STAGE_REAL("pi.w[10]", pi.w[9]),
-    [vr_pi_w11] = STAGE_REAL("pi.w[11]", pi.w[10]),
-    [vr_pi_w12] = STAGE_REAL("pi.w[12]", pi.w[11]),
-    [vr_pi_w13] = STAGE_REAL("pi.w[13]", pi.w[12]),
-    [vr_pi_w14] = STAGE_REAL("pi.w[14]", pi.w[13]),
-    [vr_pi_w15] = STAGE_REAL("pi.w[15]", pi.w[14]),
-    [vr_pi_w16] = STAGE_REAL("pi.w[16]", pi.w[15]),
-    [vr_tf_a1] = STAGE_REAL("tf.a1", tf.a1),
-    [vr_tf_a2] = STAGE_REAL("tf.a2", tf.a2),
-    [vr_tf_b1] = STAGE_REAL("tf.b1", tf.b1),
-    [vr_tf_b2] = STAGE_REAL("tf.b2", tf.b2),
-    [vr_tf_delay] = STAGE_INT("tf.delay", tf.delay),
-    [vr_creep_enabled] = STAGE_BOOL("creep.enabled", creep_enabled),
-    [vr_creep_k_c] = STAGE_REAL("creep.k_c", creep_k_c),
-    [vr_creep_alpha] = STAGE_REAL("creep.alpha", creep_alpha),
-    [vr_creep_exact] = STAGE_BOOL("creep.exact", creep_exact),
-    [vr_sensor_resolution] = STAGE_REAL("sensor.resolution", sensor_resolution),
-    [vr_sensor_noise_rms] = STAGE_REAL("sensor.noise_rms", sensor_noise_rms),
-    [vr_sensor_seed] = STAGE_INT("sensor.seed", sensor_seed),
-    [vr_c_pi_m] = CTRL_INT("controller.pi.m", pi.m),
-    [vr_c_pi_v_max] = CTRL_REAL("controller.pi.v_max", pi.v_max),
-    [vr_c_pi_w0] = CTRL_REAL("controller.pi.w0", pi.w0),
-    [vr_c_pi_w1] = CTRL_REAL("controller.pi.w[1]", pi.w[0]),
-    [vr_c_pi_w2] = CTRL_REAL("controller.pi.w[2]", pi.w[1]),
-    [vr_c_pi_w3] = CTRL_REAL("controller.pi.w[3]", pi.w[2]),
-    [vr_c_pi_w4] = CTRL_REAL("controller.pi.w[4]", pi.w[3]),
-    [vr_c_pi_w5] = CTRL_REAL("controller.pi.w[5]", pi.w[4]),
-    [vr_c_pi_w6] = CTRL_REAL("controller.pi.w[6]", pi.w[5]),
-    [vr_c_pi_w7] = CTRL_REAL("controller.pi.w[7]", pi.w[6]),
-    [vr_c_pi_w8] = CTRL_REAL("controller.pi.w[8]", pi.w[7]),
-    [vr_c_pi_w9] = CTRL_REAL("controller.pi.w[9]", pi.w[8]),
-    [vr_c_pi_w10] = CTRL_REAL("controller.pi.w[10]", pi.w[9]),
-    [vr_c_pi_w11] = CTRL_REAL("controller.pi.w[11]", pi.w[10]),
-    [vr_c_pi_w12] = CTRL_REAL("controller.pi.w[12]", pi.w[11]),
-    [vr_c_pi_w13] = CTRL_REAL("controller.pi.w[13]", pi.w[12]),
-    [vr_c_pi_w14] = CTRL_REAL("controller.pi.w[14]", pi.w[13]),
-    [vr_c_pi_w15] = CTRL_REAL("controller.pi.w[15]", pi.w[14]),
-    [vr_c_pi_w16] = CTRL_REAL("controller.pi.w[16]", pi.w[15]),
-    [vr_c_tf_a1] = CTRL_REAL("controller.tf.a1", tf_a1),
-    [vr_c_tf_a2] = CTRL_REAL("controller.tf.a2", tf_a2),
-    [vr_c_tf_b1] = CTRL_REAL("controller.tf.b1", tf_b1),
-    [vr_c_tf_b2] = CTRL_REAL("controller.tf.b2", tf_b2),
-    [vr_c_creep_k_c] = CTRL_REAL("controller.creep.k_c", creep_k_c),
-    [vr_c_creep_alpha] = CTRL_REAL("controller.creep.alpha", creep_alpha),
-    [vr_c_creep_exact] = CTRL_BOOL("controller.creep.exact", creep_exact),
-    [vr_mv_delay] = CTRL_INT("mv.delay", mv_delay),
-    [vr_mv_feedthrough] = CTRL_BOOL("mv.feedthrough", mv_feedthrough),
-    [vr_mv_lambda_u] = CTRL_REAL("mv.lambda_u", mv_lambda_u),
-    [vr_mv_observer] = CTRL_REAL("mv.observer", mv_observer),
-    [vr_rls_enabled] = CTRL_BOOL("rls.enabled", rls_enabled),
-    [vr_rls_forgetting] = CTRL_REAL("rls.forgetting", rls_forgetting),
-    [vr_rls_p0] = CTRL_REAL("rls.p0", rls_p0),
-    [vr_rls_trace_max] = CTRL_REAL("rls.trace_max", rls_trace_max),
-    [vr_sat_enabled] = CTRL_BOOL("sat.enabled", sat_enabled),
-    [vr_sat_v_min] = CTRL_REAL("sat.v_min", sat_v_min),
-    [vr_sat_v_max] = CTRL_REAL("sat.v_max", sat_v_max),
-    [vr_monitor_pred_error_max] = CTRL_REAL("monitor.pred_error_max", monitor_pred_error_max),
-    [vr_monitor_divergence_samples] = CTRL_INT("monitor.divergence_samples", monitor_divergence_samples),
-    [vr_sup_enabled] = CTRL_BOOL("sup.enabled", sup.enabled),
-    [vr_sup_gain_min] = CTRL_REAL("sup.gain_min", sup.gain_min),
-    [vr_sup_gain_max] = CTRL_REAL("sup.gain_max", sup.gain_max),
-    [vr_sup_window] = CTRL_INT("sup.window", sup.window),
-    [vr_sup_clip_time] = CTRL_REAL("sup.clip_time", sup.clip_time),
-    [vr_sup_detect_time] = CTRL_REAL("sup.detect_time", sup.detect_time),
-    [vr_offset] = REF_REAL("offset", offset),
-    [vr_amplitude1] = REF_REAL("amplitude[1]", amplitude[0]),
-    [vr_amplitude2] = REF_REAL("amplitude[2]", amplitude[1]),
-    [vr_amplitude3] = REF_REAL("amplitude[3]", amplitude[2]),
-    [vr_amplitude4] = REF_REAL("amplitude[4]", amplitude[3]),
-    [vr_amplitude5] = REF_REAL("amplitude[5]", amplitude[4]),
-    [vr_amplitude6] = REF_REAL("amplitude[6]", amplitude[5]),
-    [vr_amplitude7] = REF_REAL("amplitude[7]", amplitude[6]),
-    [vr_amplitude8] = REF_REAL("amplitude[8]", amplitude[7]),
-    [vr_frequency1] = REF_REAL("frequency[1]", frequency[0]),
-    [vr_frequency2] = REF_REAL("frequency[2]", frequency[1]),
-    [vr_frequency3] = REF_REAL("frequency[3]", frequency[2]),
-    [vr_frequency4] = REF_REAL("frequency[4]", frequency[3]),
-    [vr_frequency5] = REF_REAL("frequency[5]", frequency[4]),
-    [vr_frequency6] = REF_REAL("frequency[6]", frequency[5]),
-    [vr_frequency7] = REF_REAL("frequency[7]", frequency[6]),
-    [vr_frequency8] = REF_REAL("frequency[8]", frequency[7]),
-    [vr_phase1] = REF_REAL("phase[1]", phase[0]),
-    [vr_phase2] = REF_REAL("phase[2]", phase[1]),
-    [vr_phase3] = REF_REAL("phase[3]", phase[2]),
-    [vr_phase4] = REF_REAL("phase[4]", phase[3]),
-    [vr_phase5] = REF_REAL("phase[5]", phase[4]),
-    [vr_phase6] = REF_REAL("phase[6]", phase[5]),
-    [vr_phase7] = REF_REAL("phase[7]", phase[6]),
-    [vr_phase8] = REF_REAL("phase[8]", phase[7]),
-    [vr_lead] = REF_INT("lead", lead),
-    [vr_preview] = REF_INT("preview", preview),
-    [vr_rls_robust] = CTRL_BOOL("rls.robust", rls_robust),
-    [vr_rls_excitation] = CTRL_REAL("rls.excitation", rls_excitation),
-    [vr_rls_excitation_time] = CTRL_REAL("rls.excitation_time", rls_excitation_time),
-    [vr_rls_variance_max] = CTRL_REAL("rls.variance_max", rls_variance_max),
-    [vr_rls_p0_loop] = CTRL_REAL("rls.p0_loop", rls_p0_loop),
-    [vr_mv_integral] = CTRL_REAL("mv.integral", mv_integral),
-    [vr_est_adapting] = CTRL_OUT_BOOL("est.adapting", adapting),
-    [vr_est_noise] = CTRL_OUT("est.noise", noise),
-    [vr_sup_reaction] = CTRL_INT("sup.reaction", sup.reaction),
-    [vr_sup_ramp_time] = CTRL_REAL("sup.ramp_time", sup.ramp_time),
-    [vr_sup_clip_error] = CTRL_REAL("sup.clip_error", sup.clip_error),
-    [vr_mv_probe_max] = CTRL_REAL("mv.probe_max", mv_probe_max),
-    [vr_sup_fault] = CTRL_OUT_INT("sup.fault", sup_fault),
-    [vr_sup_fault_time] = CTRL_OUT_REAL("sup.fault_time", sup_fault_time),
-    [vr_rls_zero_min] = CTRL_REAL("rls.zero_min", rls_zero_min),
-    [vr_rls_pole_min] = CTRL_REAL("rls.pole_min", rls_pole_min),
-    [vr_rls_fallback_ratio] = CTRL_REAL("rls.fallback_ratio", rls_fallback_ratio),
-    [vr_rls_fallback_window] = CTRL_REAL("rls.fallback_window", rls_fallback_window),
-    [vr_est_fallbacks] = CTRL_OUT_INT("est.fallbacks", fallbacks),
-    [vr_sup_reset] = CTRL_INPUT_BOOL("sup.reset", sup_reset),
-};
+const model_variable model_variables[MODEL_N_VARIABLES] = { MODEL_VARIABLE_TABLE };
 
 /* ModelData.refused_by: which block refused the last refused sample (for its message), or
  * REFUSED_ERROR: the outputs' error = reference - y overflowed */
@@ -271,8 +98,9 @@ static void controller_name(piezo_diag *diag)
     int vr;
     if (diag == NULL || diag->parameter == NULL)
         return;
-    for (vr = vr_c_pi_m; vr <= vr_c_creep_exact; vr++)
-        if (strcmp(model_variables[vr].name + n, diag->parameter) == 0) {
+    for (vr = 0; vr < (int)MODEL_N_VARIABLES; vr++)
+        if (strncmp(model_variables[vr].name, CONTROLLER_PREFIX, n) == 0
+            && strcmp(model_variables[vr].name + n, diag->parameter) == 0) {
             diag->parameter = model_variables[vr].name;
             return;
         }

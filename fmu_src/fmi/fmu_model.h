@@ -10,9 +10,12 @@
  *   MODEL_IDENTIFIER_STRING  the modelIdentifier (e.g. "PiezoStage")
  *   MODEL_GUID               the guid of modelDescription.xml (FMI 3.0: its
  *                            instantiationToken, the same string)
- *   an enum of value references 0..MODEL_N_VARIABLES-1 in XML order (FMI 3.0:
- *                            scalars keep them; a run name[1]..name[n] is one
- *                            array variable with the reference of name[1])
+ *   an enum of value references 0..MODEL_N_VARIABLES-1 (FMI 3.0: scalars keep
+ *                            them; a run name[1]..name[n] is one array variable
+ *                            with the reference of name[1]) and the entries of
+ *                            model_variables (MODEL_VARIABLE_TABLE), both from
+ *                            variables.h, generated from the model's one
+ *                            declaration variables.toml (packaging/fmu_interface.py)
  *   ModelData                flat, pointer-free model data (parameters,
  *                            held inputs, core state, output values)
  *

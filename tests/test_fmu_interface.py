@@ -1,0 +1,190 @@
+"""Each FMU's interface is declared once (``fmu_src/<Model>/variables.toml``) and generated from there.
+
+Reference: ``packaging/fmu_interface.py``, which writes from the declarations each model's
+``variables.h`` (value references and the C table's entries) and its two model descriptions;
+PiezoStageClosedLoop's declaration composes its components'. What the binaries then serve is
+checked independently in ``test_variable_sources.py`` (the compiled C table against the model
+descriptions, harness/core.py and the docs).
+
+(a) the committed generated files are exactly what the declarations give, and say so in their
+    first lines;
+(b) one declaration reaches every FMU and edition: a parameter appended to the controller's
+    declaration (in a scratch copy) appears in its C table and both its model descriptions, in
+    PiezoStageClosedLoop's (through ``"controller:*"``) and in the harness's names, with the
+    start value the compiled model gives, while every other variable keeps its value reference
+    and text;
+(c) a declaration that cannot be generated stops with a message naming the file and variable
+    (a component's variable the loop neither takes nor lists, an unknown key, a name twice,
+    ``controller:*`` not last).
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+import pytest
+
+from conftest import FMU_NAMES, REPO
+
+sys.path.insert(0, str(REPO / "packaging"))
+import fmu_interface as fi  # noqa: E402
+
+CONTROLLER = "AdaptiveCompoundController"
+LOOP = "PiezoStageClosedLoop"
+#: a parameter added as the adaptation and supervision issues add theirs; it shares
+#: rls.fallback_window's C field so that the scratch model compiles without a core change
+NEW_PARAMETER = '''
+[[variable]]
+name = "rls.new_window"
+type = "Real"
+causality = "parameter"
+field = "params.rls_fallback_window"
+unit = "s"
+min = 0
+max = 3600
+description = "A new parameter, declared in this one place"
+'''
+
+
+def _scratch(tmp_path: Path) -> Path:
+    """A copy of what the generator reads: fmu_src, modelDescription, model_table.c, CMakeLists."""
+    root = tmp_path / "repo"
+    shutil.copytree(REPO / "fmu_src", root / "fmu_src",
+                    ignore=shutil.ignore_patterns("bench", "runner"))
+    shutil.copytree(REPO / "modelDescription", root / "modelDescription")
+    (root / "tests").mkdir()
+    shutil.copytree(REPO / "tests" / "model_table", root / "tests" / "model_table")
+    shutil.copy(REPO / "CMakeLists.txt", root / "CMakeLists.txt")
+    (root / "harness").mkdir()
+    return root
+
+
+def _variables(text: str) -> dict:
+    """{valueReference: (name, attributes but valueReference, type element's attributes)}."""
+    out = {}
+    for v in ET.fromstring(text.encode("utf-8")).find("ModelVariables"):
+        attrs = dict(v.attrib)
+        vr = int(attrs.pop("valueReference"))
+        typ = next((dict(c.attrib) for c in v if c.tag in ("Real", "Integer", "Boolean")), None)
+        out[vr] = (attrs.pop("name"), attrs, typ)
+    return out
+
+
+def test_the_generated_files_are_what_the_declarations_give():
+    """Reference: the generator run now; a hand edit of a generated file, or a declaration changed
+    without running ``python3 packaging/fmu_interface.py``, fails here naming the file."""
+    stale = fi.stale_files()
+    assert stale == [], f"out of date (run python3 packaging/fmu_interface.py): {stale}"
+    assert set(fi.MODELS) == set(FMU_NAMES)
+
+
+@pytest.mark.parametrize("model", FMU_NAMES)
+def test_each_generated_file_says_so_in_its_first_lines(model):
+    """Reference: the generator's header comments: they name the generator and the declaration."""
+    for path in (REPO / "fmu_src" / model / "variables.h", REPO / "modelDescription" / f"{model}.xml",
+                 REPO / "harness" / "fmu_variables.py",
+                 REPO / "modelDescription" / "fmi3" / f"{model}.xml"):
+        head = "\n".join(path.read_text(encoding="utf-8").splitlines()[:4])
+        assert "packaging/fmu_interface.py" in head, path
+        assert f"fmu_src/{model}/variables.toml" in head or "fmu_src/<Model>/variables.toml" in head, path
+
+
+def test_a_parameter_declared_once_reaches_every_fmu_and_edition(tmp_path):
+    """Reference: the committed files. Appending one [[variable]] to the controller's declaration
+    adds exactly that variable, after the last one, to the controller's and the closed loop's C
+    tables and both editions of their model descriptions, with rls.fallback_window's start value
+    0.5 s (the field it shares, read from the compiled model), and to the harness's names
+    (harness/fmu_variables.py, harness/core.py's parameter table); everything else is unchanged,
+    and the other two FMUs' files are identical."""
+    root = _scratch(tmp_path)
+    decl = root / "fmu_src" / CONTROLLER / "variables.toml"
+    decl.write_text(decl.read_text(encoding="utf-8") + NEW_PARAMETER, encoding="utf-8")
+    files = fi.generated_files(root)
+    changed = sorted(str(p.relative_to(root)) for p, text in files.items()
+                     if text != (REPO / p.relative_to(root)).read_text(encoding="utf-8"))
+    assert changed == sorted([f"fmu_src/{m}/variables.h" for m in (CONTROLLER, LOOP)]
+                             + [f"modelDescription/{m}.xml" for m in (CONTROLLER, LOOP)]
+                             + [f"modelDescription/fmi3/{m}.xml" for m in (CONTROLLER, LOOP)]
+                             + ["harness/fmu_variables.py"])
+    names = {}
+    exec(compile(files[root / "harness" / "fmu_variables.py"], "fmu_variables.py", "exec"), names)
+    assert names["PARAMETERS"][CONTROLLER]["rls.new_window"] == (("rls_fallback_window",), "float")
+    assert names["VARIABLES"][LOOP][147] == ("rls.new_window", "Real", "parameter")
+    expected_vr = {CONTROLLER: 87, LOOP: 147}
+    expected_field = {CONTROLLER: "params.rls_fallback_window", LOOP: "control.rls_fallback_window"}
+    for model, vr in expected_vr.items():
+        header = files[root / "fmu_src" / model / "variables.h"]
+        assert (f'[vr_rls_new_window] = {{ "rls.new_window", MODEL_REAL, MODEL_PARAMETER, '
+                f'offsetof(ModelData, {expected_field[model]}) }}') in header
+        for sub in ("", "fmi3"):
+            path = Path("modelDescription") / sub / f"{model}.xml"
+            old = _variables((REPO / path).read_text(encoding="utf-8"))
+            new = _variables(files[root / path])
+            name, attrs, typ = new[vr]
+            assert name == "rls.new_window" and attrs["causality"] == "parameter"
+            start = typ["start"] if typ else attrs["start"]
+            assert float(start) == 0.5
+            if sub:                     # FMI 3.0: time moves to the reference after the new one
+                assert old[vr][0] == "time" and new[vr + 1][0] == "time"
+                del old[vr], new[vr], new[vr + 1]
+            else:
+                del new[vr]
+            assert new == old, path
+
+
+def _write(root: Path, model: str, text: str, append: bool = True):
+    decl = root / "fmu_src" / model / "variables.toml"
+    decl.write_text((decl.read_text(encoding="utf-8") if append else "") + text, encoding="utf-8")
+
+
+def test_a_component_variable_the_loop_neither_takes_nor_lists_stops_the_generation(tmp_path):
+    """Reference: the rule of the loop's declaration: a stage parameter added without a place in
+    the loop is named, with where to put it."""
+    root = _scratch(tmp_path)
+    _write(root, "PiezoStage", NEW_PARAMETER.replace("rls.new_window", "sensor.new").replace(
+        "params.rls_fallback_window", "params.h"))
+    fi.load("PiezoStage", root)             # the stage's own declaration is fine
+    with pytest.raises(fi.InterfaceError, match=r"PiezoStage's variable 'sensor.new' is neither "
+                                                r"composed into the loop nor listed in "
+                                                r"\[component.stage\] not_composed"):
+        fi.load(LOOP, root)
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda t: t + '\n[[variable]]\nname = "x"\ntype = "Real"\ncausality = "parameter"\n'
+                   'field = "params.h"\ndescription = "d"\ncolour = "red"\n',
+     r"variable 'x': unknown keys \['colour'\]"),
+    (lambda t: t + '\n[[variable]]\nname = "h"\ntype = "Real"\ncausality = "parameter"\n'
+                   'field = "params.h"\ndescription = "d"\n',
+     r"declared twice: \['h'\]"),
+    (lambda t: t + '\n[[variable]]\nname = "x"\ntype = "Float"\ncausality = "parameter"\n'
+                   'field = "params.h"\ndescription = "d"\n',
+     r"variable 'x': type 'Float' not one of"),
+    (lambda t: t + '\n[[variable]]\nname = "x"\ntype = "Real"\ncausality = "parameter"\n'
+                   'field = "params.h"\nunit = "mm"\ndescription = "d"\n',
+     r"variable 'x': unit 'mm' not in"),
+])
+def test_a_bad_declaration_is_refused_naming_the_file_and_variable(tmp_path, edit, message):
+    """Reference: the generator's checks (fmu_interface._variable, load)."""
+    root = _scratch(tmp_path)
+    decl = root / "fmu_src" / "PiezoStage" / "variables.toml"
+    decl.write_text(edit(decl.read_text(encoding="utf-8")), encoding="utf-8")
+    with pytest.raises(fi.InterfaceError, match=message) as info:
+        fi.load("PiezoStage", root)
+    assert "PiezoStage/variables.toml" in str(info.value)
+
+
+def test_the_controller_wildcard_must_come_last(tmp_path):
+    """Reference: the value-reference rule: an entry after ``controller:*`` would move whenever
+    the controller grows, so the generator refuses it."""
+    root = _scratch(tmp_path)
+    decl = root / "fmu_src" / LOOP / "variables.toml"
+    text = decl.read_text(encoding="utf-8")
+    assert text.count('  "controller:*",\n') == 1
+    decl.write_text(text.replace('  "controller:*",\n', '  "controller:*",\n  "stage:sensor.seed",\n'),
+                    encoding="utf-8")
+    with pytest.raises(fi.InterfaceError, match=r"'controller:\*' must come last"):
+        fi.load(LOOP, root)
