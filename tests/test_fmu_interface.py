@@ -6,8 +6,8 @@ PiezoStageClosedLoop's declaration composes its components'. What the binaries t
 checked independently in ``test_variable_sources.py`` (the compiled C table against the model
 descriptions, harness/core.py and the docs).
 
-(a) the committed generated files are exactly what the declarations give, and say so in their
-    first lines;
+(a) the committed generated files (and the Interfaces table of docs/fmus.md) are exactly what
+    the declarations give, and say so in their first lines;
 (b) one declaration reaches every FMU and edition: a parameter appended to the controller's
     declaration (in a scratch copy) appears in its C table and both its model descriptions, in
     PiezoStageClosedLoop's (through ``"controller:*"``) and in the harness's names, with the
@@ -50,7 +50,8 @@ description = "A new parameter, declared in this one place"
 
 
 def _scratch(tmp_path: Path) -> Path:
-    """A copy of what the generator reads: fmu_src, modelDescription, model_table.c, CMakeLists."""
+    """A copy of what the generator reads: fmu_src, modelDescription, model_table.c, CMakeLists,
+    docs/fmus.md."""
     root = tmp_path / "repo"
     shutil.copytree(REPO / "fmu_src", root / "fmu_src",
                     ignore=shutil.ignore_patterns("bench", "runner"))
@@ -59,6 +60,8 @@ def _scratch(tmp_path: Path) -> Path:
     shutil.copytree(REPO / "tests" / "model_table", root / "tests" / "model_table")
     shutil.copy(REPO / "CMakeLists.txt", root / "CMakeLists.txt")
     (root / "harness").mkdir()
+    (root / "docs").mkdir()
+    shutil.copy(REPO / "docs" / "fmus.md", root / "docs" / "fmus.md")
     return root
 
 
@@ -98,7 +101,8 @@ def test_a_parameter_declared_once_reaches_every_fmu_and_edition(tmp_path):
     tables and both editions of their model descriptions, with rls.fallback_window's start value
     0.5 s (the field it shares, read from the compiled model), and to the harness's names
     (harness/fmu_variables.py, harness/core.py's parameter table); everything else is unchanged,
-    and the other two FMUs' files are identical."""
+    the other two FMUs' files are identical, and so is docs/fmus.md's Interfaces table (it lists
+    the controller's parameters as `rls.*`)."""
     root = _scratch(tmp_path)
     decl = root / "fmu_src" / CONTROLLER / "variables.toml"
     decl.write_text(decl.read_text(encoding="utf-8") + NEW_PARAMETER, encoding="utf-8")
@@ -138,6 +142,26 @@ def test_a_parameter_declared_once_reaches_every_fmu_and_edition(tmp_path):
 def _write(root: Path, model: str, text: str, append: bool = True):
     decl = root / "fmu_src" / model / "variables.toml"
     decl.write_text((decl.read_text(encoding="utf-8") if append else "") + text, encoding="utf-8")
+
+
+def test_a_new_parameter_group_shows_in_the_interfaces_table(tmp_path):
+    """Reference: the table's rule (a structured name's group, `name.*`): a stage parameter of a
+    new group ``mount.*`` adds `mount.*` to PiezoStage's parameters cell, and to the loop's
+    (which takes it), and nothing else in docs/fmus.md changes."""
+    root = _scratch(tmp_path)
+    _write(root, "PiezoStage", NEW_PARAMETER.replace("rls.new_window", "mount.tilt").replace(
+        "params.rls_fallback_window", "params.h"))
+    loop = root / "fmu_src" / LOOP / "variables.toml"
+    loop.write_text(loop.read_text(encoding="utf-8").replace(
+        '  "stage:sensor.seed",\n', '  "stage:sensor.seed",\n  "stage:mount.tilt",\n'), encoding="utf-8")
+    interfaces = [fi.load(m, root) for m in fi.MODELS]
+    old = (REPO / "docs" / "fmus.md").read_text(encoding="utf-8")
+    new = fi.doc_with_table(root / "docs" / "fmus.md", old, fi.interfaces_table(interfaces))
+    changed = [(a, b) for a, b in zip(old.splitlines(), new.splitlines()) if a != b]
+    assert len(old.splitlines()) == len(new.splitlines()) and len(changed) == 2
+    assert changed[0][1] == changed[0][0].replace("`sensor.*`, `h` |", "`sensor.*`, `h`, `mount.*` |")
+    assert changed[1][1] == changed[1][0].replace("`sensor.*`, `controller.*`",
+                                                  "`sensor.*`, `mount.*`, `controller.*`")
 
 
 def test_a_component_variable_the_loop_neither_takes_nor_lists_stops_the_generation(tmp_path):

@@ -21,9 +21,9 @@ variables added later are covered as they come.
     description, in the C table) or two array elements swapped is caught, naming them;
 (d) ``harness/core.py``'s parameter tables: the same names, each mapped to the C field the FMU
     writes (offset and C type through cffi), its default equal to the C start value;
-(e) the docs: the Interfaces table of ``docs/fmus.md`` is the one this file renders from the FMI 2.0
-    model descriptions (a failure prints the table to paste), and every variable named in a
-    "FMU variables" column of README.md or docs/ exists.
+(e) the docs: every variable named in a "FMU variables" column of README.md or docs/ exists (the
+    Interfaces table of ``docs/fmus.md`` is generated from the declarations:
+    ``test_fmu_interface.py``).
 """
 
 from __future__ import annotations
@@ -390,70 +390,6 @@ def _fmi2_variables(model: str) -> list[dict]:
         out.append({"name": var.get("name"), "causality": var.get("causality"), "unit": _unit(typed.attrib),
                     "vr": int(var.get("valueReference"))})
     return sorted(out, key=lambda v: v["vr"])
-
-
-def _signals_cell(variables: list[dict]) -> str:
-    """Inputs or outputs: the names in order, each run of one unit followed by [unit]."""
-    groups = []
-    for v in variables:
-        if groups and groups[-1][0] == v["unit"]:
-            groups[-1][1].append(v["name"])
-        else:
-            groups.append((v["unit"], [v["name"]]))
-    parts = [", ".join(f"`{n}`" for n in names) + (f" [{unit}]" if unit else "") for unit, names in groups]
-    return ", ".join(parts) or "none"
-
-
-def _parameters_cell(variables: list[dict]) -> str:
-    """Parameters: `group.*` for structured names, `name[1..n]` for arrays, else the name."""
-    out = []
-    for v in variables:
-        name = v["name"]
-        m = _ELEMENT.match(name)
-        if "." in name:
-            item = f"`{name.split('.')[0]}.*`"
-        elif m:
-            n = sum(1 for w in variables if re.fullmatch(re.escape(m.group(1)) + r"\[\d+\]", w["name"]))
-            item = f"`{m.group(1)}[1..{n}]`"
-        else:
-            item = f"`{name}`"
-        if item not in out:
-            out.append(item)
-    return ", ".join(out) or "none"
-
-
-def interfaces_table() -> str:
-    """The Interfaces table of docs/fmus.md, rendered from the FMI 2.0 model descriptions."""
-    rows = ["| FMU | inputs | outputs | parameters |", "|---|---|---|---|"]
-    for model in FMU_NAMES:
-        variables = _fmi2_variables(model)
-        of = {c: [v for v in variables if v["causality"] == c] for c in ("input", "output", "parameter")}
-        rows.append(f"| {model} | {_signals_cell(of['input'])} | {_signals_cell(of['output'])} | "
-                    f"{_parameters_cell(of['parameter'])} |")
-    return "\n".join(rows)
-
-
-def _tables_after(text: str, heading: str) -> list[str]:
-    """The Markdown tables (lines starting with '|') between heading and the next heading."""
-    section = text.split(f"\n{heading}\n", 1)[1]
-    section = re.split(r"\n#+ ", section, maxsplit=1)[0]
-    tables, current = [], []
-    for line in section.splitlines():
-        if line.startswith("|"):
-            current.append(line)
-        elif current:
-            tables.append("\n".join(current))
-            current = []
-    return tables + (["\n".join(current)] if current else [])
-
-
-def test_fmus_md_interfaces_table_is_rendered_from_the_model_descriptions():
-    """Reference: modelDescription/<id>.xml (causality, unit, displayUnit of every variable).
-    On a mismatch, the message holds the table to paste into docs/fmus.md."""
-    doc = (REPO / "docs" / "fmus.md").read_text()
-    want = interfaces_table()
-    got = _tables_after(doc, "## Interfaces")[0]
-    assert got == want, f"docs/fmus.md's Interfaces table should read:\n\n{want}\n"
 
 
 def _markdown_files():
