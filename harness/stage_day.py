@@ -386,7 +386,7 @@ def _warnings(lines):
 def run_part(task, keep_stride=0):
     """Run one :class:`Task` on the native runner's exchange, streaming: ``(PartMetrics, kept)``,
     kept the estimates and the error every ``keep_stride`` samples (when > 0)."""
-    from .masters import native
+    from .masters import NATIVE_CONTROLLER, native_loop
     sc = task.part.scenario(task.plant, task.controller)
     setup = prepare_closed_loop(sc, master="gauss-seidel")
     robust = task.law != "fixed" and bool(setup.controller_params.get("rls.robust", True)) \
@@ -394,14 +394,14 @@ def run_part(task, keep_stride=0):
     stream = _Streamer(sc.signal, setup.n, setup.controller_params, robust)
     if keep_stride > 0:
         stream.keep = (keep_stride, [])
-    loop = native.native_loop()
+    loop = native_loop()
     t0 = _time.perf_counter()
     error = ""
     try:
         loop.run_chunks(setup, stream)
     except FMUError as exc:
         error = str(exc)
-    lines = loop.log(native.CONTROLLER)
+    lines = loop.log(NATIVE_CONTROLLER)
     m = PartMetrics(MASTER_EXCHANGE, [float(x) for x in stream.worst], [w[2] for w in stream.windows],
                     [float(x) for x in stream.holds], stream.outside, _fallbacks(lines), _warnings(lines),
                     error, stream.samples, None, _time.perf_counter() - t0)
@@ -413,8 +413,7 @@ def _fmu_check(task, exchange):
     """The closed-loop FMU at 10 ms steps in holds against the exchange at its communication
     points: a PartMetrics whose ``equal`` says whether every row's bits agree."""
     from . import profiles
-    from .masters import native
-    from .masters.closed_loop_fmu import simulate_closed_loop_fmu_steps
+    from .masters import native_loop, simulate_closed_loop_fmu_steps
     sc = task.part.scenario(task.plant, task.controller)
     t0 = _time.perf_counter()
     log = []
@@ -431,7 +430,7 @@ def _fmu_check(task, exchange):
         if sel.size:
             want[first] = (sel, rows[sel - first])
     setup = prepare_closed_loop(sc, master="gauss-seidel")
-    native.native_loop().run_chunks(setup, sink)
+    native_loop().run_chunks(setup, sink)
     got = {name: steps[name] for name in names}
     equal = True
     pos = 0

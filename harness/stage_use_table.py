@@ -65,9 +65,8 @@ from . import profiles
 from .fmu import FMUError
 from .identify.family import draw_stage
 from .loop import prepare_closed_loop
-from .masters import native
-from .masters.closed_loop_fmu import simulate_closed_loop_fmu_steps
-from .masters.wired import simulate_wired
+from .masters import (NATIVE_CONTROLLER, missing_runner_message, native_available, native_loop,
+                      simulate_closed_loop_fmu_steps, simulate_wired)
 from .scenarios import PAPER_LAW_SET, Scenario, parameter_set, profile_signal
 from .text_tables import markdown_table
 
@@ -264,13 +263,13 @@ def _warnings(lines):
 
 def _native(sc, master):
     """(rows, warnings, error) of the native runner."""
-    loop = native.native_loop()
+    loop = native_loop()
     setup = prepare_closed_loop(sc, master=master)
     try:
         rows = loop.run(setup)
-        return rows, _warnings(loop.log(native.CONTROLLER)), ""
+        return rows, _warnings(loop.log(NATIVE_CONTROLLER)), ""
     except FMUError as exc:
-        return None, _warnings(loop.log(native.CONTROLLER)), str(exc)
+        return None, _warnings(loop.log(NATIVE_CONTROLLER)), str(exc)
 
 
 def run_task(task):
@@ -706,8 +705,8 @@ def main(argv=None, prog=None):
                                                   "the same options) instead of running them")
     args = ap.parse_args(argv)
     say = lambda text: print(text, file=sys.stderr, flush=True)   # noqa: E731
-    if not native.native_available():
-        print(f"{prog or 'python -m harness stage-use'}: {native.missing_runner_message()}", file=sys.stderr)
+    if not native_available():
+        print(f"{prog or 'python -m harness stage-use'}: {missing_runner_message()}", file=sys.stderr)
         return 2
     sensors = tuple(int(s) if float(s).is_integer() else s for s in args.sensors)
     if REFERENCE_NM not in sensors:

@@ -63,8 +63,8 @@ import numpy as np
 from . import core, masters
 from .fmu import SAFE_STATE_WORDS, FMUError, LoopFaultWarning
 from .identify.family import SENSOR, draw_stage
-from .masters.container import CONTAINER_ORDER, ContainerTerminateWarning
-from .masters.wired import SCHEDULES, Fault, schedule_name, simulate_wired
+from .masters import (CONTAINER_ORDER, SCHEDULES, ContainerTerminateWarning, Fault, schedule_name,
+                      simulate_wired)
 from .scenarios import MISMATCH_SCENARIOS, get_scenario
 from .supervision import controller_samples, margins, thresholds
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 from . import masters
 from .loop import EXCHANGE_LOOP_DELAY
-from .masters.container import CONTAINER_ORDER
+from .masters import CONTAINER_ORDER
 from .metrics import compute_metrics
 from .scenarios import MISMATCH_SCENARIOS, get_scenario, reference_label
 

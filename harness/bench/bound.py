@@ -18,7 +18,7 @@ import statistics
 
 import numpy as np
 
-from ..masters.native import NativeLoop
+from ..masters import NativeLoop
 from .measure import BLOCK
 
 __all__ = ["Bound", "INSTANCES", "RUN_SECONDS", "TIMED_SAMPLES", "measure_runner"]

@@ -18,11 +18,8 @@ from .. import core, masters
 from ..closed_loop import CLOSED_LOOP_MODEL
 from ..fmu import REFERENCE_MODEL, fmu_path
 from ..loop import prepare_closed_loop
-from ..masters.closed_loop_fmu import closed_loop_fmu_parameters
-from ..masters.fmpy import simulate_setup
-from ..masters.native import NativeLoop, live_bytes
-from ..masters.ssp import simulate_ssp_scenario
-from ..masters.wired import simulate_wired
+from ..masters import (NativeLoop, closed_loop_fmu_parameters, live_bytes, simulate_setup,
+                       simulate_ssp_scenario, simulate_wired)
 from ..paths import bench_include_dir, bench_library, where_to_get_it
 
 __all__ = ["CHECKPOINTS", "BLOCK", "SUPERVISION_OFF", "WINDOW", "EXACT_WINDOW", "CLOSED_LOOP_STEP",

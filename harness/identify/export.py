@@ -110,7 +110,7 @@ def _check_in_core(model, params, source, path=None):
     """Initialise the complete parameter set in the C core (the FMUs' own checks); the closed
     loop's in its FMU at ``path``, whose rules are more than its blocks'."""
     if model == CLOSED_LOOP_MODEL:
-        from ..masters.instance import Instance      # the closed loop's own rules live in its FMU
+        from ..masters import Instance      # the closed loop's own rules live in its FMU
         inst = None
         try:
             inst = Instance(load(path), "export")

@@ -17,12 +17,19 @@ name                      closed loop   open loop   FMI          needs
 ``closed-loop-fmu``       yes           (fmpy's)    2.0, 3.0     fmpy
 ``ssp-player``            yes           no          2.0          fmpy (its SSP player)
 ``container``             yes           no          2.0          fmu-manipulation-toolbox
+``wired``                 yes           no          2.0, 3.0     fmpy
 ========================  ============  ==========  ===========  =============================
 
 The first five are the command line's ``--backend`` (or ``--master``) choices:
 ``closed-loop-fmu`` runs the loop inside one FMU, PiezoStageClosedLoop, with the same result;
 ``ssp-player`` and ``container`` run the loop in other tools' schedules
-(docs/cosimulation.md) and are called by their own functions.
+(docs/cosimulation.md) and ``wired`` the three FMUs wired by hand under any schedule, with
+faults on the connections; they are called by their own functions.
+
+Those functions, and what the jobs need beside them (the native master's kept instances, the
+wired master's faults and schedules, the container's order), are this package's names
+(:data:`__all__`): the jobs import them from here, never from a master's module
+(``tests/test_harness_layout.py`` checks it).
 """
 
 from __future__ import annotations
@@ -33,11 +40,34 @@ import functools
 from ..closed_loop import CLOSED_LOOP_MODEL
 from ..fmu import CONTROLLER_MODEL, FMI_VERSIONS, PLANT_MODEL, REFERENCE_MODEL
 from ..scenarios import get_scenario
-from . import closed_loop_fmu, container, core, fmpy, native, ssp
+from . import closed_loop_fmu, container, core, fmpy, native, ssp, wired
+from .closed_loop_fmu import closed_loop_fmu_parameters, simulate_closed_loop_fmu_steps
+from .container import CONTAINER_ORDER, ContainerTerminateWarning
+from .fmpy import simulate_setup
+from .instance import Instance
+from .native import NativeLoop, live_bytes, missing_runner_message, native_available, native_loop
+from .ssp import simulate_ssp_scenario
+from .wired import SCHEDULES, Fault, WiredRun, schedule_name, simulate_wired
 
 __all__ = ["Master", "MASTERS", "BACKENDS", "OPEN_LOOP_BACKENDS", "SWEEP_BACKENDS",
            "LONG_RUN_SAMPLES", "get", "closed_loop", "open_loop", "prepared_loop", "prepared_batch",
-           "simulators", "simulate_closed_loop_auto", "check_sweep_backend"]
+           "simulators", "simulate_closed_loop_auto", "check_sweep_backend",
+           # closed-loop-fmu: a run of communication steps of any sizes, its parameters
+           "simulate_closed_loop_fmu_steps", "closed_loop_fmu_parameters",
+           # container: its schedules, the Warning it gives at terminate
+           "CONTAINER_ORDER", "ContainerTerminateWarning",
+           # fmpy: one prepared loop; ssp-player: a scenario through the SSP
+           "simulate_setup", "simulate_ssp_scenario",
+           # one FMU instance as the masters drive it
+           "Instance",
+           # native: the kept instances, whether the runner is built, the C heap in use
+           "NativeLoop", "native_loop", "native_available", "missing_runner_message", "live_bytes",
+           "NATIVE_PLANT", "NATIVE_CONTROLLER",
+           # wired: the loop wired by hand, under a schedule, with faults
+           "simulate_wired", "Fault", "WiredRun", "SCHEDULES", "schedule_name"]
+
+#: the native master's instance indices (:meth:`NativeLoop.log`)
+NATIVE_PLANT, NATIVE_CONTROLLER = native.PLANT, native.CONTROLLER
 
 
 @dataclass(frozen=True)
@@ -94,6 +124,9 @@ MASTERS = {m.name: m for m in (
            fmus=(PLANT_MODEL, CONTROLLER_MODEL, REFERENCE_MODEL)),
     Master("container", "an FMU container of fmu-manipulation-toolbox (parallel or sequential)",
            True, False, (2,), "fmu-manipulation-toolbox", backend=False),
+    Master("wired", "the three FMUs wired by hand under any schedule (exchange, player, "
+           "Gauss-Seidel in any order), faults on the connections", True, False, (2, 3), "fmpy",
+           backend=False, fmus=(PLANT_MODEL, CONTROLLER_MODEL, REFERENCE_MODEL)),
 )}
 
 #: ``--backend`` of ``all`` and ``run``
@@ -151,7 +184,8 @@ def closed_loop(name, fmi_version=2):
     progress, ...)`` (see :func:`harness.masters.fmpy.simulate_closed_loop`;
     ``closed-loop-fmu``: :func:`harness.masters.closed_loop_fmu.simulate_closed_loop_fmu`); ``ssp-player``:
     :func:`harness.masters.ssp.simulate_ssp_scenario`; ``container``:
-    :func:`harness.masters.container.simulate_closed_loop_container`.
+    :func:`harness.masters.container.simulate_closed_loop_container`; ``wired``:
+    :func:`harness.masters.wired.simulate_wired`.
 
     Raises
     ------
@@ -166,6 +200,8 @@ def closed_loop(name, fmi_version=2):
         return ssp.simulate_ssp_scenario
     if name == "container":
         return container.simulate_closed_loop_container
+    if name == "wired":
+        return functools.partial(wired.simulate_wired, fmi_version=fmi_version)
     if name == "closed-loop-fmu":
         return functools.partial(closed_loop_fmu.simulate_closed_loop_fmu, fmi_version=fmi_version)
     if fmi_version != 2:                 # fmpy (also for auto): the FMI 3.0 editions

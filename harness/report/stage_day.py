@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import stage_day as sd
 from ..fmu import FMUError
-from ..masters.closed_loop_fmu import simulate_closed_loop_fmu_steps
+from ..masters import simulate_closed_loop_fmu_steps
 from ..scenarios import PAPER_LAW_SET, parameter_set
 from ..text_tables import fmt
 

@@ -20,7 +20,7 @@ import time as _time
 import numpy as np
 
 from .. import profiles
-from ..masters.closed_loop_fmu import simulate_closed_loop_fmu_steps
+from ..masters import simulate_closed_loop_fmu_steps
 from ..scenarios import PAPER_LAW_SET, get_scenario, parameter_set, stage_use_scenarios
 from ..text_tables import fmt, num, titled_table
 
