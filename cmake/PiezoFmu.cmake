@@ -135,7 +135,7 @@ endfunction()
 
 # Reference results of the FMU (FMI-LS-REF): stimuli, parameters, reference outputs, the
 # experiments file and the manifest, computed on the C core (not through the FMU) by
-# harness/fmu_references.py into OUT_DIR; STAMP_VAR receives the file to depend on.
+# harness/buildtime/references.py into OUT_DIR; STAMP_VAR receives the file to depend on.
 function(piezo_fmu_reference_results id)
   cmake_parse_arguments(ARG "" "MODEL_DESCRIPTION;OUT_DIR;STAMP_VAR" "" ${ARGN})
   set(stamp "${ARG_OUT_DIR}.stamp")
@@ -145,11 +145,11 @@ function(piezo_fmu_reference_results id)
     OUTPUT "${stamp}"
     COMMAND "${CMAKE_COMMAND}" -E env
             "PIEZO_CORE_LIB=$<TARGET_FILE:piezo_core>" "PIEZO_CORE_INCLUDE=${CORE_DIR}"
-            "${PIEZO_PYTHON}" -m harness.fmu_references
+            "${PIEZO_PYTHON}" -m harness.buildtime.references
             --model "${id}" --model-description "${ARG_MODEL_DESCRIPTION}"
             --out "${ARG_OUT_DIR}" --stamp "${stamp}"
     WORKING_DIRECTORY "${CMAKE_SOURCE_DIR}"
-    DEPENDS piezo_core "${ARG_MODEL_DESCRIPTION}" "${CMAKE_SOURCE_DIR}/harness/fmu_references.py"
+    DEPENDS piezo_core "${ARG_MODEL_DESCRIPTION}" "${CMAKE_SOURCE_DIR}/harness/buildtime/references.py"
             ${harness_sources}
     COMMENT "Reference results of ${id}"
     VERBATIM)
@@ -199,9 +199,9 @@ function(piezo_fmu_package)
             ${ARG_SOURCES} ${ARG_HEADERS} "${ARG_ICON}" "${ARG_DOCUMENTATION}"
             "${CMAKE_SOURCE_DIR}/LICENSE" ${ARG_EXTRA_STAMP} "${date_file}" "${PIEZO_SOURCE_FILE}"
             piezo_commit_date "${CMAKE_SOURCE_DIR}/harness/_source.py"
-            "${PIEZO_PACKAGING_DIR}/assemble_fmu.py" "${CMAKE_SOURCE_DIR}/harness/fmu_documentation.py"
-            "${CMAKE_SOURCE_DIR}/harness/fmu_archive.py"
-            "${CMAKE_SOURCE_DIR}/harness/ssp.py"
+            "${PIEZO_PACKAGING_DIR}/assemble_fmu.py" "${CMAKE_SOURCE_DIR}/harness/buildtime/documentation.py"
+            "${CMAKE_SOURCE_DIR}/harness/buildtime/archive.py"
+            "${CMAKE_SOURCE_DIR}/harness/buildtime/ssp_file.py"
     COMMENT "Packaging ${ARG_ID}.fmu (FMI ${ARG_FMI_VERSION})"
     VERBATIM)
 endfunction()

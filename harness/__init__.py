@@ -31,11 +31,11 @@ on first use (the package imports with fmpy, cffi and numpy alone).
 import importlib
 
 #: where each public name lives (the package imports its modules when a name is first used, so
-#: that ``python -m harness.ssp`` and ``python -m harness.fmu_references``, the build's entry
+#: that ``python -m harness.buildtime.ssp_file`` and ``python -m harness.buildtime.references``, the build's entry
 #: points, do not import themselves twice, and ``import harness.scenarios`` stays light)
 _HOMES = {
     "fmu": ("FMUError", "FMUInitializationError", "UnknownParameterError"),
-    "masters.core": ("simulate_closed_loop_core", "simulate_open_loop_core"),
+    "masters.c_core": ("simulate_closed_loop_core", "simulate_open_loop_core"),
     "masters.fmpy": ("simulate_closed_loop", "simulate_open_loop"),
     "masters.native": ("simulate_closed_loop_native",),
     "identify": ("CoupledModel", "CoupledModelEstimate", "IdentificationInputError",

@@ -110,7 +110,7 @@ def _backend_options(p, closed_loop=False):
 
 def _scenario_file_option(p):
     p.add_argument("--scenario-file", action="append", default=[], metavar="FILE",
-                   help="TOML file of extra scenarios (repeatable; format: harness/scenarios.py)")
+                   help="TOML file of extra scenarios (repeatable; format: harness/scenarios/__init__.py)")
 
 
 def _loop_options(p, applies_to):
@@ -353,12 +353,12 @@ def _cmd_sweep(args, command):
 #: options (``python -m harness STUDY --help``), so its arguments go to its module's ``main``
 #: untouched. Name: (module under harness, what it measures).
 STUDIES = {
-    "timing": ("timing_table", "what the FMUs detect under each master (docs/cosimulation.md)"),
-    "supervision": ("supervision_table", "the controller's supervision: fault tables, families, "
+    "timing": ("studies.timing_table", "what the FMUs detect under each master (docs/cosimulation.md)"),
+    "supervision": ("studies.supervision_table", "the controller's supervision: fault tables, families, "
                                          "stuck and noisy sensors, sup.reset (docs/robustness.md)"),
-    "stage-use": ("stage_use_table", "issue 35's stage-use targets on the family of stages "
+    "stage-use": ("studies.stage_use_table", "issue 35's stage-use targets on the family of stages "
                                      "(docs/stage_use.md)"),
-    "stage-day": ("stage_day", "issue 43's targets over a stage's day on the stage family "
+    "stage-day": ("studies.stage_day_table", "issue 43's targets over a stage's day on the stage family "
                                "(docs/stage_day.md)"),
 }
 

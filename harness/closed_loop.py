@@ -9,7 +9,7 @@ of it (the loop inside exchanges every sample).
 
 :func:`closed_loop_parameters` maps parameters by the components' names to the closed-loop
 FMU's; the master ``closed-loop-fmu`` (:mod:`harness.masters.closed_loop_fmu`), the reference
-results (:mod:`harness.fmu_references`) and ``export`` (:mod:`harness.identify.export`) use it.
+results (:mod:`harness.buildtime.references`) and ``export`` (:mod:`harness.identify.export`) use it.
 """
 
 from __future__ import annotations

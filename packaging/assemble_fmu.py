@@ -19,7 +19,7 @@
     * ``sources/``: the C files and headers, flat, and ``buildDescription.xml`` (the
       FMI 3.0 build description, which FMI 2.0.4 adopts for source-code FMUs);
     * ``documentation/index.html`` (generated from the model description and the
-      hand-written part, see ``harness/fmu_documentation.py``), ``documentation/fmi-ls-ref.html``
+      hand-written part, see ``harness/buildtime/documentation.py``), ``documentation/fmi-ls-ref.html``
       and ``documentation/licenses/license.txt``;
     * ``extra/org.fmi-standard.fmi-ls-ref/``: the reference results (``--extra-dir``).
 
@@ -40,7 +40,7 @@ import sys
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-if str(REPO) not in sys.path:          # harness: fmu_documentation, fmu_archive, _source
+if str(REPO) not in sys.path:          # harness: buildtime.documentation, buildtime.archive, _source
     sys.path.insert(0, str(REPO))
 
 TOOL = "piezo_fmus"
@@ -174,8 +174,8 @@ DEFINE_DESCRIPTIONS = {
 # ---------------------------------------------------------------------------
 
 def write_zip(stage, out, epoch):
-    """Zip the folder `stage` to `out` reproducibly (harness.fmu_archive); return the entry names."""
-    from harness.fmu_archive import write_fmu_zip
+    """Zip the folder `stage` to `out` reproducibly (harness.buildtime.archive); return the entry names."""
+    from harness.buildtime.archive import write_fmu_zip
 
     stage = Path(stage)
     date = _dt.datetime.fromtimestamp(max(epoch, ZIP_EPOCH), _dt.timezone.utc).timetuple()[:6]
@@ -194,7 +194,7 @@ def _copy(src, dst):
 
 
 def assemble(args):
-    from harness import fmu_documentation
+    from harness.buildtime import documentation as fmu_documentation
 
     epoch = int(Path(args.date_file).read_text().split()[0]) if args.date_file else \
         commit_epoch(Path.cwd())

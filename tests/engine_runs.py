@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.ssp import SSP_COMPONENTS, SSP_CONNECTIONS
+from harness.buildtime.ssp_file import SSP_COMPONENTS, SSP_CONNECTIONS
 
 #: what is recorded: (field, component of the three-FMU loop, its variable)
 RECORD = (("y_d", "reference", "y_d"), ("y", "plant", "y"), ("y_meas", "plant", "y_meas"),

@@ -6,14 +6,14 @@ The loops are closed on the core itself (harness.core.Plant and Controller, cffi
 y_meas of sample k reaches the controller at its sample k, and the v it computes is applied
 over the next sample (a master that exchanges values at communication points: loop delay 2).
 A fault changes what one side receives. The independent references are named in each test:
-the loop's delay by construction, the fault's factor, the NumPy sums of harness.supervision.
+the loop's delay by construction, the fault's factor, the NumPy sums of harness.supervision_margins.
 """
 import math
 
 import numpy as np
 import pytest
 
-from harness import core, supervision
+from harness import core, supervision_margins
 from harness.scenarios import get_scenario
 
 H = 0.0005
@@ -57,7 +57,7 @@ def loop(n=2000, meas=None, act=None, plant=None, ctrl=None, amplitude=10.0, f=5
 
 @pytest.mark.parametrize("bound", [D["monitor.pred_error_max"], 0.014], ids=["default bound", "bound 0.014 um"])
 def test_statistics_equal_the_numpy_transcription(bound):
-    """Reference: harness.supervision.statistics, the sums of piezo_supervisor.c written again
+    """Reference: harness.supervision_margins.statistics, the sums of piezo_supervisor.c written again
     with scipy.signal.lfilter. After every sample of a 1 s mismatch loop, the C core's
     Szz, Szw_d (d = 1..9), Sww_d (from its ring), the travelled distances, the model's yhat averaged
     over the last second (the stuck test's creep allowance), the window's weight,
@@ -83,7 +83,7 @@ def test_statistics_equal_the_numpy_transcription(bound):
 
     rows, exc, _ = loop(2000, record=record, ctrl={"monitor.pred_error_max": bound})
     assert exc is None
-    want = supervision.statistics(rows["y_meas"], rows["q"], rows["pred_error"], NOMINAL,
+    want = supervision_margins.statistics(rows["y_meas"], rows["q"], rows["pred_error"], NOMINAL,
                                   D["sup.window"], bound, D["monitor.divergence_samples"])
     for name in ("szz", "travel_model", "travel_meas", "weight", "reversals", "steps2", "big_steps",
                  "mon_share", "mon_weight"):

@@ -23,7 +23,7 @@ from harness.loop import prepare_closed_loop
 from harness.masters.closed_loop_fmu import closed_loop_fmu_parameters
 from harness.masters.wired import COMPONENTS
 from harness.scenarios import get_scenario
-from harness.ssp import SSP_FILENAME, SSP_SCENARIO, component_values, parameter_set_for_scenario
+from harness.buildtime.ssp_file import SSP_FILENAME, SSP_SCENARIO, component_values, parameter_set_for_scenario
 
 from conftest import FMU3_DIR, FMU_DIR, need_engine
 import engine_runs as er

@@ -13,7 +13,7 @@ import pytest
 from fmpy.fmi3 import FMU3Slave
 
 from harness import core
-from harness import supervision_table as st
+from harness.studies import supervision_table as st
 
 H = 0.0005
 SAFE = {"sup.reaction": 1}

@@ -6,7 +6,7 @@
     min/max that match what the C core refuses (every bounded parameter is refused just
     outside its range, naming it);
 (c) documentation/index.html: its variable table equals the model description, row for
-    row; it has the equations, the loop connections of harness/ssp.py, the citation and the
+    row; it has the equations, the loop connections of harness/buildtime/ssp_file.py, the citation and the
     licence; documentation/licenses/license.txt is the repository's LICENSE; model.png is a
     200 x 200 PNG;
 (d) a second build tree, configured and built from scratch, zips byte-identical FMUs
@@ -310,7 +310,7 @@ def test_documentation_variable_table_is_the_model_description(fmu_paths, name):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_documentation_explains_model_loop_paper_and_licence(fmu_paths, name):
-    from harness.ssp import SSP_CONNECTIONS
+    from harness.buildtime.ssp_file import SSP_CONNECTIONS
     with zipfile.ZipFile(fmu_paths[name]) as zf:
         page = zf.read("documentation/index.html").decode("utf-8")
         licence = zf.read("documentation/licenses/license.txt")

@@ -60,7 +60,7 @@ from conftest import (BUILD_DIR, CROSS_PLATFORMS, FMU_NAMES, HOST_PLATFORM, cros
 from elf_versions import read_elf_needs
 from fmu_experiments import SSP_TYPE, load_experiment, start_values, unzip
 from harness.platforms import GLIBC_BASELINE, PLATFORMS
-from harness.ssp import SSP_COMPONENTS, SSP_CONNECTIONS, parameter_set_for_scenario
+from harness.buildtime.ssp_file import SSP_COMPONENTS, SSP_CONNECTIONS, parameter_set_for_scenario
 from conftest import REPO
 
 HOST_SOURCE = REPO / "tests" / "wine_host" / "fmu_host.c"

@@ -16,7 +16,7 @@ files; fmu_regressions on the three FMUs of the wired loop, the others on every 
   required, not only a passing run.
 - fmu_threads: 8 threads of instances give bitwise the sequential results.
 - fmu_xproc: a state serialized in one process continues bitwise in another.
-- fmu_supervision: every fault of the fault table (harness/supervision_table.py FAULTS, by name)
+- fmu_supervision: every fault of the fault table (harness/studies/supervision_table.py FAULTS, by name)
   on the three FMUs wired by hand, in the schedules of the table: the controller's Error with
   the table's diagnosis and advice, at the time docs/robustness.md's table gives (and with its
   message, for the exchanging master), the degraded stamps as one Warning, the sound loop
@@ -38,7 +38,7 @@ import zipfile
 import pytest
 
 from conftest import BUILD_DIR, FMU_NAMES, LOOP_FMUS, REPO, memcheck_clean, memcheck_prefix, mismatch_plant
-from harness.supervision_table import FAULTS
+from harness.studies.supervision_table import FAULTS
 
 HOSTS = BUILD_DIR / "tests"
 
@@ -225,7 +225,7 @@ HOST_FAULTS = FAULTS[:21]
 @pytest.mark.parametrize("host,edition", [("fmu_supervision", 2), ("fmu3_supervision", 3)])
 def test_every_fault_of_the_table_is_stopped_from_c_under_memcheck(hosts, fmu_args, fmu3_args, host, edition):
     """The C host of the fault table on the shipped FMUs of each edition, under valgrind: every
-    check passes, 0 memcheck errors, nothing lost. Reference: harness/supervision_table.py's
+    check passes, 0 memcheck errors, nothing lost. Reference: harness/studies/supervision_table.py's
     FAULTS and docs/robustness.md's table. Every fault of its first 21 rows (HOST_FAULTS) is a case of the host, in
     exactly the schedules the table runs it in; each Error comes as many ms after the fault's
     onset as the table says, and under the exchanging master with the table's message (up to

@@ -18,7 +18,7 @@ from harness import core
 from harness.bench.measure import timing_library
 from harness.loop import prepare_closed_loop
 from harness.masters import native
-from harness.masters.core import simulate_closed_loop_core
+from harness.masters.c_core import simulate_closed_loop_core
 from conftest import REPO
 
 
@@ -85,7 +85,7 @@ def test_bench_command_reports_every_loop(tmp_path):
 
 
 def test_bench_loops_run_the_closed_loop_trajectory():
-    """Reference: harness.masters.core.simulate_closed_loop_core (the core binding's loop with
+    """Reference: harness.masters.c_core.simulate_closed_loop_core (the core binding's loop with
     the FMUs' timing). piezo_bench_closed_loop records y_meas(k) and the applied v(k): both
     equal the reference's bit for bit; the plant timed alone on that v and the controller
     timed alone on those inputs run every sample (status PIEZO_OK)."""

@@ -11,7 +11,7 @@ import pytest
 from harness import core as core_binding
 from harness import fmu
 from harness.masters import fmpy as fmpy_master, instance
-from harness.masters.core import simulate_closed_loop_core, simulate_open_loop_core
+from harness.masters.c_core import simulate_closed_loop_core, simulate_open_loop_core
 from harness.metrics import compute_metrics
 from harness.scenarios import MISMATCH_SCENARIOS, TRACKING_SCENARIOS, Signal, get_scenario
 
@@ -36,7 +36,7 @@ def _metrics(name, data):
 
 @pytest.mark.parametrize("name", ["track_1hz", "track_1_10_20hz", "mismatch_1hz", "mismatch_1_5_10hz"])
 def test_fmpy_loop_equals_core_loop(name):
-    # Reference: the same closed loop on the C core through cffi (harness.masters.core);
+    # Reference: the same closed loop on the C core through cffi (harness.masters.c_core);
     # the FMI layer must not change a single sample (bound 1e-9 um, every field).
     fmu = _run(name)
     core = simulate_closed_loop_core(name)
@@ -115,7 +115,7 @@ def test_every_master_runs_the_published_at_end_loop(master, order):
     delay explicit: at sample k the plant applies the v the controller computed at k-1
     (0 at k = 0) from y_d(k-1+2) and y_meas(k-1); y_d = 10 sin(2 pi 10 t) computed here.
     The fmpy run of mismatch_10hz (3 s) under each master and doStep order must equal it
-    exactly (tolerance 0) in y_d, y, y_meas and v, and equal harness.masters.core's run exactly
+    exactly (tolerance 0) in y_d, y, y_meas and v, and equal harness.masters.c_core's run exactly
     in every field. Direct check of the delay: replaying the recorded v (the applied
     voltage) through an open-loop core plant reproduces y and y_meas exactly, while v
     shifted one sample earlier does not (differs by > 1 nm). Stability: e_rms <= 3 nm."""

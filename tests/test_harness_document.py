@@ -103,7 +103,7 @@ def test_report_states_each_condition(report):
 
 def test_the_report_shows_the_fault_reset_refused_then_accepted(report):
     """The report's section "Leaving the safe state (sup.reset)": one row per
-    harness.supervision_table.RESET_CASES case on the report's stage (20 nm); the sensor faults' and
+    harness.studies.supervision_table.RESET_CASES case on the report's stage (20 nm); the sensor faults' and
     the reach's early resets refused with their cause, every late one accepted, the restarted loop's
     step within 5 % of the fault-free run's, the amplifier never cleared stopped again."""
     _, _, md, _, _ = report

@@ -1,9 +1,10 @@
-"""The harness's layers: the jobs reach the masters through the registry package only.
+"""The harness's layers (docs/harness.md): each module imports only its own layer or those below,
+and the jobs reach the masters through the registry package only.
 
-Reference: harness/masters/__init__.py's promise (its docstring): the jobs and studies ask the
-registry (``MASTERS``, ``closed_loop`` ...) and the names it exports, never a master's module.
-Read from the source (ast), so a later import of a master's internals fails here naming the
-file and line.
+Reference: the layer diagram of docs/harness.md (:data:`LAYERS` below, top to bottom) and
+harness/masters/__init__.py's promise (its docstring): the jobs and studies ask the registry
+(``MASTERS``, ``closed_loop`` ...) and the names it exports, never a master's module. Read from
+the source (ast), so a later import that breaks either fails here naming the file and line.
 """
 
 from __future__ import annotations
@@ -15,6 +16,14 @@ import pytest
 from conftest import REPO
 
 HARNESS = REPO / "harness"
+#: docs/harness.md's layers, top to bottom: each harness module or package by its first name
+#: below ``harness``; a name not listed is ground (the lowest layer)
+LAYERS = (
+    ("cli", "__main__"),
+    ("report", "identify", "sweep", "bench", "studies"),
+    ("masters", "buildtime"),
+    ("loop", "fmu", "core", "fmu_variables", "closed_loop", "supervision_margins"),
+)
 
 
 def _resolve(path, node, repo):
@@ -49,6 +58,57 @@ def master_module_imports(root=HARNESS):
     return found
 
 
+def _layer(module):
+    """0 for the top layer, len(LAYERS) for ground; None for the package itself."""
+    parts = module.split(".")
+    if len(parts) < 2:
+        return None
+    for i, names in enumerate(LAYERS):
+        if parts[1] in names:
+            return i
+    return len(LAYERS)
+
+
+def upward_imports(root=HARNESS):
+    """["file:line module -> target"] of every import of a higher layer (outside a package's own)."""
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        parts = list(path.relative_to(root.parent).with_suffix("").parts)
+        me = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                module = _resolve(path, node, root.parent)
+                targets = [module] + [f"{module}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            else:
+                continue
+            for target in targets:
+                mine, theirs = _layer(me), _layer(target)
+                if (target.startswith("harness.") and mine is not None and theirs is not None
+                        and theirs < mine and target.split(".")[1] != me.split(".")[1]):
+                    found.append(f"{path.relative_to(root.parent)}:{node.lineno} {me} -> {target}")
+    return sorted(set(found))
+
+
+def test_no_module_imports_a_layer_above_its_own():
+    """Every harness module imports only modules of its own layer or below (docs/harness.md)."""
+    assert upward_imports() == []
+
+
+def test_the_layer_check_sees_an_upward_import(tmp_path):
+    """Reference: a scratch harness whose ground module imports a study and a master."""
+    (tmp_path / "harness" / "studies").mkdir(parents=True)
+    (tmp_path / "harness" / "studies" / "timing_table.py").write_text("from ..metrics import X\n")
+    (tmp_path / "harness" / "metrics.py").write_text(
+        "from .studies import timing_table\nfrom .masters import MASTERS\nX = 1\n")
+    assert upward_imports(tmp_path / "harness") == [
+        "harness/metrics.py:1 harness.metrics -> harness.studies",
+        "harness/metrics.py:1 harness.metrics -> harness.studies.timing_table",
+        "harness/metrics.py:2 harness.metrics -> harness.masters",
+        "harness/metrics.py:2 harness.metrics -> harness.masters.MASTERS"]
+
+
 def test_no_job_imports_a_masters_module():
     """Every harness module outside harness/masters imports the masters' names from the package."""
     assert master_module_imports() == []
@@ -79,7 +139,7 @@ def test_every_master_is_registered_and_every_exported_name_exists():
     run = masters.closed_loop("wired", fmi_version=3)
     assert run.func is masters.simulate_wired and run.keywords == {"fmi_version": 3}
     modules = {p.stem for p in (HARNESS / "masters").glob("*.py")} - {"__init__", "instance"}
-    module_of = {"auto": None, "fmpy": "fmpy", "native": "native", "core": "core",
+    module_of = {"auto": None, "fmpy": "fmpy", "native": "native", "core": "c_core",
                  "closed-loop-fmu": "closed_loop_fmu", "ssp-player": "ssp", "container": "container",
                  "wired": "wired"}
     assert set(masters.MASTERS) == set(module_of)

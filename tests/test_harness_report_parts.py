@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from harness.masters.core import simulate_closed_loop_core, simulate_open_loop_core
+from harness.masters.c_core import simulate_closed_loop_core, simulate_open_loop_core
 from harness.masters.fmpy import simulate_closed_loop, simulate_open_loop
 from harness.report import conditions, document, figures, run_scenario
 from harness.progress import Progress

@@ -197,7 +197,7 @@ def test_unknown_scenario_lists_known_names():
 
 
 # ---------------------------------------------------------------------------
-# rules a user file is checked against (harness/scenarios.py's docstring)
+# rules a user file is checked against (harness/scenarios/__init__.py's docstring)
 # ---------------------------------------------------------------------------
 
 def _one(tmp_path, body, name="s.toml"):

@@ -13,7 +13,7 @@ import pytest
 
 from harness.cli import main
 from conftest import error_lines, run_harness
-from harness.masters.core import simulate_open_loop_core
+from harness.masters.c_core import simulate_open_loop_core
 from harness.identify.data import write_record
 from harness.identify.demo import DEMO_PLANT, DEMO_SENSOR
 from harness.identify.params import read_params

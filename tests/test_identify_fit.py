@@ -7,7 +7,7 @@ Records come from the core plant (the same C code as the FMU), noise-free and sh
 import numpy as np
 import pytest
 
-from harness.masters.core import simulate_open_loop_core
+from harness.masters.c_core import simulate_open_loop_core
 from harness.identify.fit import CoupledModel, IdentificationInputError, fit_coupled_model
 from harness.identify.steps import IdentificationRecord
 

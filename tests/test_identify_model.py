@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from harness import core
-from harness.masters.core import simulate_open_loop_core
+from harness.masters.c_core import simulate_open_loop_core
 from harness.identify.fit import CoupledModel
 from harness.identify.model import (
     creep_output,

@@ -4,7 +4,7 @@ from a noise-free run of the core plant (creep disabled, i.e. the Hammerstein mo
 import numpy as np
 import pytest
 
-from harness.masters.core import simulate_open_loop_core
+from harness.masters.c_core import simulate_open_loop_core
 from harness.identify import (
     identify_pi,
     identify_transfer_function,

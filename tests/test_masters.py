@@ -189,7 +189,7 @@ def test_a_master_stepping_two_samples_is_refused_at_its_first_connected_step(mo
     gives every input 0, its start value: nothing connected yet, so the controller holds the
     inputs over the two samples (a standalone run); at t = 0.001 t_meas has advanced."""
     import fmpy.ssp.simulation as player
-    from harness.ssp import parameter_set_for_scenario, write_closed_loop_ssp
+    from harness.buildtime.ssp_file import parameter_set_for_scenario, write_closed_loop_ssp
     from harness.fmu import default_fmu_dir
 
     calls = []

@@ -4,15 +4,15 @@ set-point costs only the stage's own drift, and noisy sensors at start make the 
 wait instead of failing. A small deterministic slice of the studies whose whole families
 docs/robustness.md shows (``python -m harness supervision stuck`` and ``start``).
 
-References: the faults by construction (harness.supervision_table.STUCK_CASES), the issue's
+References: the faults by construction (harness.studies.supervision_table.STUCK_CASES), the issue's
 targets (named within 20 ms in motion and 0.2 s in a hold; the stage within 2 um beyond the
 reference in a scan and 0.1 um of the set-point in a hold), the loop's own delay (2) and the
 whole families' figures of docs/robustness.md."""
 
 import pytest
 
-from harness import supervision_table as st
-from harness.stage_day import H
+from harness.studies import supervision_table as st
+from harness.studies.stage_day_table import H
 
 STAGES = 3
 
@@ -149,7 +149,7 @@ def exchange(signal, plant_params, seconds, controller=None, each=None):
 
 def hour(stage):
     """The stage's day's random hour of ``stage`` as a signal on the 0.5 ms grid."""
-    from harness import stage_day as sd
+    from harness.studies import stage_day_table as sd
     from harness.scenarios import profile_signal
     return profile_signal(sd.hour_part(stage).segments, step=H)
 
@@ -173,7 +173,7 @@ def test_a_quiet_reading_held_after_a_long_move_is_not_taken_for_stuck(stage, se
 
 
 def test_a_noise_free_reading_that_stops_chattering_is_not_taken_for_frozen():
-    """The stage-use family's stage 23 (harness.stage_use_table, seed of its family) with the
+    """The stage-use family's stage 23 (harness.studies.stage_use_table, seed of its family) with the
     noise-free sensor on a 1 Hz triangle scan with 10 s dwells, its first 8 s through the C core
     in an exchange. In the dwell the loop chatters on the 2 nm grid, the reading stepping up and
     down as the stage itself moves (which the model explains), then settles on one step. The noise
@@ -181,7 +181,7 @@ def test_a_noise_free_reading_that_stops_chattering_is_not_taken_for_frozen():
     It now asks that the model's best fit leave of the reading's changes more than
     PIEZO_SUP_FROZEN_FLOOR times the grid's quantisation floor: the run goes on, hundreds of equal
     readings later (972), with no verdict."""
-    from harness import stage_use_table as su
+    from harness.studies import stage_use_table as su
     task = next(t for t in su.family_tasks(sensors=[0], laws=("ours",))
                 if t.stage == 23 and t.profile.name == "triangle scan 1 Hz, 10 s dwell")
     n = int(8.0 / H)

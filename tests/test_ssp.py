@@ -6,7 +6,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from harness import ssp
+from harness.buildtime import ssp_file
 from harness.masters.ssp import simulate_closed_loop_ssp
 from harness.metrics import compute_metrics
 from harness.scenarios import Signal, get_scenario
@@ -15,7 +15,7 @@ from test_masters import FIELDS, zero_start_jacobi
 
 @pytest.fixture(scope="module")
 def built(fmu_paths):
-    path = next(iter(fmu_paths.values())).parent / ssp.SSP_FILENAME
+    path = next(iter(fmu_paths.values())).parent / ssp_file.SSP_FILENAME
     assert path.is_file(), "the build writes the SSP beside the FMUs"
     return path
 
@@ -70,7 +70,7 @@ def test_bound_parameters_are_the_scenario(built):
     holds exactly the same names and values."""
     from fmpy.ssp.ssd import read_ssv
 
-    pset = ssp.read_bound_parameter_set(built)
+    pset = ssp_file.read_bound_parameter_set(built)
     assert pset.name == "mismatch_1_5_10hz"
     values = {p.name: p.value for p in pset.parameters}
     sc = get_scenario("mismatch_1_5_10hz")
@@ -92,17 +92,17 @@ def test_a_boolean_is_read_back_as_a_bool(tmp_path, built):
     """A set with a Boolean (sat.enabled = false on the controller): read_bound_parameter_set
     gives Python's False, which fmpy's player sets as false (it sets value != 0.0, which the
     SSV's text "false" would pass as true)."""
-    pset = ssp.parameter_set_for_scenario("mismatch_5hz")
+    pset = ssp_file.parameter_set_for_scenario("mismatch_5hz")
     pset = dataclasses.replace(pset, values={**pset.values, "controller.sat.enabled": False})
-    path = ssp.write_closed_loop_ssp(tmp_path / "b.ssp", built.parent, [pset])
-    values = {p.name: p.value for p in ssp.read_bound_parameter_set(path).parameters}
+    path = ssp_file.write_closed_loop_ssp(tmp_path / "b.ssp", built.parent, [pset])
+    values = {p.name: p.value for p in ssp_file.read_bound_parameter_set(path).parameters}
     assert values["controller.sat.enabled"] is False
 
 
 def test_two_sets_of_one_name_are_refused(tmp_path, built):
-    pset = ssp.parameter_set_for_scenario("mismatch_5hz")
+    pset = ssp_file.parameter_set_for_scenario("mismatch_5hz")
     with pytest.raises(ValueError, match="each needs its own name"):
-        ssp.write_closed_loop_ssp(tmp_path / "b.ssp", built.parent, [pset, pset])
+        ssp_file.write_closed_loop_ssp(tmp_path / "b.ssp", built.parent, [pset, pset])
 
 
 def test_fmpy_runs_it_and_it_tracks(built):
@@ -143,8 +143,8 @@ def test_the_readmes_pure_fmpy_recipe_tracks(built):
 
 def test_writing_is_reproducible(tmp_path, built):
     """The same FMUs and parameter sets give the same bytes (fixed zip timestamps)."""
-    a = ssp.write_closed_loop_ssp(tmp_path / "a.ssp", built.parent)
-    b = ssp.write_closed_loop_ssp(tmp_path / "b.ssp", built.parent)
+    a = ssp_file.write_closed_loop_ssp(tmp_path / "a.ssp", built.parent)
+    b = ssp_file.write_closed_loop_ssp(tmp_path / "b.ssp", built.parent)
     assert a.read_bytes() == b.read_bytes()
 
 
@@ -155,8 +155,8 @@ def test_only_sines_scenarios_fit_an_ssp():
     nine = {"n": sc.with_overrides(signal=Signal("sines", amplitudes=(1.0,) * 9,
                                                  frequencies=(1.0,) * 9, phases=(0.0,) * 9))}
     with pytest.raises(ValueError, match="sines reference"):
-        ssp.parameter_set_for_scenario("t", table)
+        ssp_file.parameter_set_for_scenario("t", table)
     with pytest.raises(ValueError, match="9 tones; ReferenceSignal has 8"):
-        ssp.parameter_set_for_scenario("n", nine)
+        ssp_file.parameter_set_for_scenario("n", nine)
     with pytest.raises(ValueError, match="not a tracking scenario"):
-        ssp.parameter_set_for_scenario("validate_1hz")
+        ssp_file.parameter_set_for_scenario("validate_1hz")

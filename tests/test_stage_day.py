@@ -1,4 +1,4 @@
-"""A stage's day (harness/stage_day.py, docs/stage_day.md): the parts of the day, the admissible
+"""A stage's day (harness/studies/stage_day_table.py, docs/stage_day.md): the parts of the day, the admissible
 set's check against the core's own, the native runner in chunks, and the slice of the family the
 suite runs (the family's fourth stage over 30 raster frames, and a 60 s tone then a step) with its
 exact figures."""
@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 
 from harness import core, profiles
-from harness import stage_day as sd
-from harness.masters.core import simulate_closed_loop_core
+from harness.studies import stage_day_table as sd
+from harness.masters.c_core import simulate_closed_loop_core
 from harness.scenarios import profile_signal
 
 H = sd.H
 
 
 def test_random_hour_is_seeded_on_the_grid_and_within_range():
-    """Reference: its own definition (harness.stage_day.random_hour): the same seed gives the same
+    """Reference: its own definition (harness.studies.stage_day_table.random_hour): the same seed gives the same
     segments, another seed others; every segment's time is a whole number of samples; the profile
     lasts at least the hour and stays within [0, 40] um at every sample; it holds, moves and scans."""
     a, b, c = sd.random_hour(3), sd.random_hour(3), sd.random_hour(4)
@@ -61,7 +61,7 @@ def test_outside_admissible_is_the_cores_verdict():
 def test_admissible_rows_follow_a_lower_nominal_zero_as_the_core_does():
     """Reference: the core's rows (raw.adm_c, raw.adm_d). For a nominal model whose zero (0.6) is
     below rls.zero_min (0.75, the default), the set's zero bound is the nominal zero in the core
-    and in harness.stage_day.admissible_rows alike, bit for bit, and the nominal model is inside."""
+    and in harness.studies.stage_day_table.admissible_rows alike, bit for bit, and the nominal model is inside."""
     b1 = core.default_controller_params()["tf.b1"]
     params = {"tf.b2": -0.6 * b1}
     raw = core.Controller(params).raw
@@ -150,7 +150,7 @@ def test_saved_results_load_as_they_were(tmp_path):
     """Reference: the runs themselves (a round trip through JSON): the stage day's and the stage-use
     table's results, saved with --save and read with --load, are equal to what was saved, keys
     (stage, sensor, law, part or profile, master) and metrics alike (the scans' pairs as tuples)."""
-    from harness import stage_use_table as su
+    from harness.studies import stage_use_table as su
     day = {(3, 1.0, "ours", "tone 1 Hz, 60 s", sd.MASTER_EXCHANGE):
            sd.PartMetrics(sd.MASTER_EXCHANGE, worst=[0.5, 0.25], kinds=["tone", "step"], holds=[0.004],
                           outside=0, fallbacks=1, warnings=["fallback at t = 60.5 s"], samples=120000,

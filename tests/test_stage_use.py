@@ -1,7 +1,7 @@
-"""Stage use (docs/stage_use.md): the profile reference of harness/scenarios.py, its windows
+"""Stage use (docs/stage_use.md): the profile reference of harness/scenarios/__init__.py, its windows
 (harness/profiles.py), the closed-loop FMU at a variable communication step, the wired master
 playing a profile, and a deterministic slice of the stage-use family of
-harness/stage_use_table.py with issue 35's targets.
+harness/studies/stage_use_table.py with issue 35's targets.
 
 References: a plain NumPy transcription of the profile's samples (below), the one-sample-step
 runs of the closed-loop FMU and of the native runner (bit for bit), and issue 35's targets."""
@@ -299,12 +299,12 @@ def test_report_stage_use_reproduces_issue_35_and_the_robust_law_holds_its_tunin
 
 
 # ---------------------------------------------------------------------------
-# a deterministic slice of the family (harness/stage_use_table.py)
+# a deterministic slice of the family (harness/studies/stage_use_table.py)
 # ---------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
 def family_slice():
-    from harness import stage_use_table as sut
+    from harness.studies import stage_use_table as sut
     plist = [p for p in sut.profiles_of(holds=(0.2, 4.0), scans=(10.0,), tones=(), staircase=False)
              if p.move in ("step +10 um from 0", "S-curve +30 um in 50 ms from 10 um", "")]
     tasks = sut.family_tasks(stages=2, sensors=(1, 20), profile_list=plist, jacobi_stages=1,
@@ -369,7 +369,7 @@ def test_a_noise_free_quantised_sensor_in_a_dwell_is_not_taken_for_no_response(s
     change. Without the floor on the response test's unexplained energy both were stopped as
     "no response" (at 3.88 s and 4.09 s, measured); with it they run to the end without an
     Error or a supervision warning, and the frame after the dwell tracks within 15 nm."""
-    from harness import stage_use_table as sut
+    from harness.studies import stage_use_table as sut
     prof = next(p for p in sut.profiles_of() if p.name == "triangle scan 10 Hz, 10 s dwell")
     task = next(t for t in sut.family_tasks(stages=stage + 1, sensors=(0,), laws=("ours",),
                                             profile_list=[prof], jacobi_stages=0, fmu_stages=0,
@@ -392,7 +392,7 @@ def test_a_step_after_a_long_tone_is_not_taken_for_an_outlier():
     the largest change a sample the tone taught them) makes the law fall back to the nominal model
     at its first sample: it errs 0.397 um, one fallback said in a Warning, one delay detection in
     the run, and still no reading taken for an outlier."""
-    from harness import stage_use_table as sut
+    from harness.studies import stage_use_table as sut
     prof = next(p for p in sut.profiles_of() if p.name == "1 Hz tone for 60 s, then a 10 um step")
     task = next(t for t in sut.family_tasks(stages=43, sensors=(20,), laws=("ours",), profile_list=[prof],
                                             jacobi_stages=0, fmu_stages=0, gs_stages=0) if t.stage == 42)

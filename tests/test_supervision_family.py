@@ -3,7 +3,7 @@ fault of the fault table stopped loudly in time in both FMI editions and schedul
 of legitimate loops drawn at random without a false alarm, and the wired master that runs
 them equal, sample for sample, to the real importers it stands for.
 
-References: the faults by construction (harness.supervision_table.FAULTS), the real importers
+References: the faults by construction (harness.studies.supervision_table.FAULTS), the real importers
 (fmpy's SSP player, fmu-manipulation-toolbox's container, the harness's fmpy master), the
 thresholds of piezo_supervisor.h, and docs/robustness.md's table regenerated.
 """
@@ -13,10 +13,12 @@ import re
 import numpy as np
 import pytest
 
-from harness import masters, supervision_table as st
+from harness import masters
+
+from harness.studies import supervision_table as st
 from harness.masters.container import CONTAINER_ORDER
 from harness.masters.wired import simulate_wired
-from harness.supervision import thresholds
+from harness.supervision_margins import thresholds
 
 from conftest import REPO
 
@@ -108,7 +110,7 @@ def test_the_message_says_which_signal_and_what_to_check(fault_results):
 
 
 def test_every_fault_on_drawn_stages_is_stopped_or_tracked(fmu_paths):
-    """The fault family (harness.supervision_table.fault_family): every fault of the table in
+    """The fault family (harness.studies.supervision_table.fault_family): every fault of the table in
     its schedules on 4 stages drawn from the identification family (seed 7: not the study's
     2028), the controller given the stage's own model and the paper's. Each faulty loop is
     stopped within 1 s of the fault's onset (a degraded one warns), or, where the fault looks
@@ -140,7 +142,7 @@ def test_every_fault_on_drawn_stages_is_stopped_or_tracked(fmu_paths):
 
 
 def test_docs_robustness_holds_the_fault_table_as_measured(fault_results):
-    """docs/robustness.md's fault table is the one harness.supervision_table writes (the
+    """docs/robustness.md's fault table is the one harness.studies.supervision_table writes (the
     message under each fault included): regenerate it with
     ``python -m harness supervision faults`` when it changes."""
     doc = (REPO / "docs" / "robustness.md").read_text()
@@ -200,7 +202,7 @@ def test_the_wired_master_is_each_real_importer_sample_for_sample(fmu_paths):
 
 
 def test_the_no_false_alarm_check_takes_any_family_and_both_reactions(fmu_paths):
-    """harness.supervision_table.false_alarms, the check a family of any origin is pointed at
+    """harness.studies.supervision_table.false_alarms, the check a family of any origin is pointed at
     (RunSpecs on the wired master, a real importer or a harness master; tables included). Two
     sound loops give no alarm with either reaction, each run in its group (the safe runs in
     "<group>, sup.reaction = safe"); a loop with a plant delay of 4 samples given as legitimate

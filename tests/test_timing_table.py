@@ -1,7 +1,7 @@
 """docs/cosimulation.md, section 4: its table of what the FMUs detect under each master is the
 output of python -m harness timing, not typed.
 
-Reference: the script itself (harness.timing_table.run_master), rerun here for the masters
+Reference: the script itself (harness.studies.timing_table.run_master), rerun here for the masters
 that are quick to run (ours and fmpy's SSP player, 48 runs) and for one sequential order of
 the container: every cell of their rows must equal the documented one as printed (two
 decimals of nm, the stamps and the choice time exactly). tests/test_masters.py checks the
@@ -9,7 +9,7 @@ other orders' delays and stamps against the schedules."""
 
 import pytest
 
-from harness import timing_table
+from harness.studies import timing_table
 from harness.scenarios import MISMATCH_SCENARIOS
 from conftest import REPO
 

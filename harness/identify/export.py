@@ -14,7 +14,7 @@ with
   and applies over its compiled defaults (an FMU must itself use the start
   values it declares: importers need not set them);
 * ``extra/org.fmi-standard.fmi-ls-ref/``: reference results computed anew on the
-  C core from the FMU's own start values (:data:`harness.fmu_references.EXPORT_EXPERIMENTS`),
+  C core from the FMU's own start values (:data:`harness.buildtime.references.EXPORT_EXPERIMENTS`),
   so that the FMU's regression experiment tests the model it now carries;
 * ``documentation/index.html`` with the variables table of the new model
   description (the identified start values) and a section saying where they came
@@ -24,7 +24,7 @@ with
   FMU it was made from, the start values changed) and copies of the
   identification reports when they sit beside the parameter file.
 
-The archive is written as the build writes its FMUs (:mod:`harness.fmu_archive`:
+The archive is written as the build writes its FMUs (:mod:`harness.buildtime.archive`:
 the same permissions and the built FMU's date), so exporting the same parameters
 twice gives the same bytes.
 
@@ -50,10 +50,11 @@ import zipfile
 import fmpy
 from fmpy.validation import validate_fmu
 
-from .. import core, fmu_documentation, fmu_references
+from .. import core
+from ..buildtime import documentation as fmu_documentation, references as fmu_references
 from ..closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters
 from ..fmu import FMUInitializationError, fmu_path, load, parameter_types
-from ..fmu_archive import write_fmu_zip
+from ..buildtime.archive import write_fmu_zip
 from ..paths import sha256_of
 from .params import CONTROLLER_MODEL, PLANT_MODEL, split_params
 from .run import output_paths

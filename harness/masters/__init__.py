@@ -40,7 +40,7 @@ import functools
 from ..closed_loop import CLOSED_LOOP_MODEL
 from ..fmu import CONTROLLER_MODEL, FMI_VERSIONS, PLANT_MODEL, REFERENCE_MODEL
 from ..scenarios import get_scenario
-from . import closed_loop_fmu, container, core, fmpy, native, ssp, wired
+from . import c_core, closed_loop_fmu, container, fmpy, native, ssp, wired
 from .closed_loop_fmu import closed_loop_fmu_parameters, simulate_closed_loop_fmu_steps
 from .container import CONTAINER_ORDER, ContainerTerminateWarning
 from .fmpy import simulate_setup
@@ -195,7 +195,7 @@ def closed_loop(name, fmi_version=2):
     """
     _check(name, fmi_version)
     if name == "core":
-        return core.simulate_closed_loop_core
+        return c_core.simulate_closed_loop_core
     if name == "ssp-player":
         return ssp.simulate_ssp_scenario
     if name == "container":
@@ -219,7 +219,7 @@ def open_loop(name, fmi_version=2):
     open loop of its own gives fmpy's. Raises ValueError as :func:`closed_loop`."""
     _check(name, fmi_version)
     if name == "core":
-        return core.simulate_open_loop_core
+        return c_core.simulate_open_loop_core
     if fmi_version != 2:
         return functools.partial(fmpy.simulate_open_loop, fmi_version=fmi_version)
     return fmpy.simulate_open_loop

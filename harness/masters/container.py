@@ -30,7 +30,7 @@ import numpy as np
 from ..fmu import TIMING_OUTPUTS, default_fmu_dir, warn_safe_state
 from ..loop import IMPORTER_DTYPE, IMPORTER_FIELDS
 from ..scenarios import get_scenario
-from ..ssp import SSP_CONNECTIONS, parameter_set_for_scenario
+from ..buildtime.ssp_file import SSP_CONNECTIONS, parameter_set_for_scenario
 
 __all__ = ["CONTAINER_ORDER", "ContainerTerminateWarning", "MissingImporterError", "build_closed_loop_container",
            "simulate_container", "simulate_closed_loop_container"]

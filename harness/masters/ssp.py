@@ -1,4 +1,4 @@
-"""The closed loop in fmpy's SSP player: the closed-loop SSP (:mod:`harness.ssp`) written for a
+"""The closed loop in fmpy's SSP player: the closed-loop SSP (:mod:`harness.buildtime.ssp_file`) written for a
 scenario and run by ``fmpy.ssp.simulation.simulate_ssp``.
 
 The player steps every component, then copies outputs to inputs: a Jacobi master, whose
@@ -23,7 +23,7 @@ import numpy as np
 
 from ..fmu import default_fmu_dir
 from ..loop import IMPORTER_DTYPE, IMPORTER_FIELDS
-from ..ssp import parameter_set_for_scenario, read_bound_parameter_set, write_closed_loop_ssp
+from ..buildtime.ssp_file import parameter_set_for_scenario, read_bound_parameter_set, write_closed_loop_ssp
 
 __all__ = ["simulate_closed_loop_ssp", "simulate_ssp_scenario"]
 
@@ -64,7 +64,7 @@ def simulate_ssp_scenario(scenario, *, fmu_dir=None, registry=None, workdir=None
     Parameters
     ----------
     scenario : str
-        A tracking scenario with a sines reference (see :mod:`harness.ssp`).
+        A tracking scenario with a sines reference (see :mod:`harness.buildtime.ssp_file`).
     fmu_dir : str or Path, optional
     registry : dict, optional
     workdir : str or Path, optional

@@ -1,7 +1,7 @@
 """The wired master: the three FMUs connected as a user wires them in a tool, under any
 schedule, with a fault on any connection.
 
-The loop is the closed-loop SSP's (:data:`harness.ssp.SSP_CONNECTIONS`): ReferenceSignal's
+The loop is the closed-loop SSP's (:data:`harness.buildtime.ssp_file.SSP_CONNECTIONS`): ReferenceSignal's
 ``y_ref``, ``y_preview``, ``t_preview`` and PiezoStage's ``y_meas``, ``t_meas`` to the
 controller's inputs of the same names, the controller's ``v`` to PiezoStage's.
 
@@ -52,7 +52,7 @@ import numpy as np
 from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, REFERENCE_MODEL, check_fmi_version, fmu_path, load
 from ..loop import REFERENCE_LEAD, REFERENCE_PREVIEW, reference_lead
 from ..scenarios import get_scenario
-from ..ssp import SSP_CONNECTIONS, parameter_set_for_scenario
+from ..buildtime.ssp_file import SSP_CONNECTIONS, parameter_set_for_scenario
 from .instance import Instance, ScalarFunctions, raw_function, vr_array
 
 __all__ = ["COMPONENTS", "SCHEDULES", "FAULT_KINDS", "WIRED_FIELDS", "Fault", "WiredRun",
@@ -87,7 +87,7 @@ class Fault:
     ----------
     connector : str
         The input, by its name on the controller or the plant (``"y_meas"``, ``"v"``,
-        ``"t_meas"``, ...): the end of one of :data:`harness.ssp.SSP_CONNECTIONS`.
+        ``"t_meas"``, ...): the end of one of :data:`harness.buildtime.ssp_file.SSP_CONNECTIONS`.
     kind : str
         One of :data:`FAULT_KINDS`.
     value : float or str
@@ -178,7 +178,7 @@ def simulate_wired(scenario, schedule="exchange", faults=(), *, duration=None, p
     ----------
     scenario : str
         A tracking scenario with a sines reference (its parameters as the closed-loop SSP
-        binds them: :func:`harness.ssp.parameter_set_for_scenario`).
+        binds them: :func:`harness.buildtime.ssp_file.parameter_set_for_scenario`).
     schedule : str or tuple of str
         One of :data:`SCHEDULES` (see the module docstring).
     faults : sequence of Fault

@@ -3,12 +3,12 @@ supervision names it and what the stage does meanwhile and after (docs/robustnes
 that stops answering"; the whole family: ``python -m harness supervision stuck``).
 
 The stage is the report's day's (:data:`harness.report.stage_day.REPORT_STAGE`), run on the C core
-in an exchange (:func:`harness.supervision_table.run_stuck`) with ``sup.reaction`` = 1, so that the
+in an exchange (:func:`harness.studies.supervision_table.run_stuck`) with ``sup.reaction`` = 1, so that the
 run goes on in the safe state after the verdict (v ramps to 0 V). The cases
-(:data:`REPORT_CASES`): every :data:`harness.supervision_table.STUCK_CASES` case with the paper's
+(:data:`REPORT_CASES`): every :data:`harness.studies.supervision_table.STUCK_CASES` case with the paper's
 sensor (1 nm rms) and with a 20 nm one. The figure (:func:`sensor_faults_figure`) shows two of them
 around their onset. Leaving the safe state (:func:`run_resets`): every
-:data:`harness.supervision_table.RESET_CASES` case on the same stage with a 20 nm sensor, a reset
+:data:`harness.studies.supervision_table.RESET_CASES` case on the same stage with a 20 nm sensor, a reset
 raised while the cause persists and one after it is gone (docs/robustness.md, "Leaving the safe
 state"; the family: ``python -m harness supervision reset``); the figure (:func:`reset_figure`)
 shows the stuck sensor's.
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import supervision_table as st
+from ..studies import supervision_table as st
 from .stage_day import REPORT_STAGE
 
 __all__ = ["REPORT_SENSORS_NM", "REPORT_CASES", "FIGURE_CASES", "run_sensor_faults", "sensor_fault_rows",
@@ -45,7 +45,7 @@ SENSOR_FAULT_NOTES = (
 
 def run_sensor_faults(plant_of=None):
     """Every report case with every report sensor: ``[(case, nm, result), ...]`` (the results of
-    :func:`harness.supervision_table.run_stuck`, with their traces)."""
+    :func:`harness.studies.supervision_table.run_stuck`, with their traces)."""
     plant_of = plant_of or (lambda nm: st._day_plant(REPORT_STAGE, nm))
     return [(case, nm, st.run_stuck(case, plant_of(nm), SAFE, keep=True))
             for case in REPORT_CASES for nm in REPORT_SENSORS_NM]

@@ -2,7 +2,7 @@
 estimates fixed at the nominal model, and under the paper's law, through PiezoStageClosedLoop at a
 variable communication step (docs/stage_day.md; the whole family: ``python -m harness stage-day``).
 
-The stage is the fourth the identification family draws (``harness.stage_day``'s family, seed
+The stage is the fourth the identification family draws (``harness.studies.stage_day_table``'s family, seed
 2026), with the paper's sensor (1 nm rms on the 2 nm grid): the one on which issue 43 found the
 robust update of issue 35 bursting after a few raster frames. Its day (:data:`REPORT_PARTS`):
 60 frames of a 10 Hz, 10 um raster with 0.5 s dwells, 60 s of a 1 Hz tone then a 10 um step, and
@@ -20,7 +20,7 @@ import time as _time
 
 import numpy as np
 
-from .. import stage_day as sd
+from ..studies import stage_day_table as sd
 from ..fmu import FMUError
 from ..masters import simulate_closed_loop_fmu_steps
 from ..scenarios import PAPER_LAW_SET, parameter_set

@@ -31,7 +31,7 @@ __all__ = ["HOLD_STEP", "LAWS", "StageUseRun", "run_stage_use", "stage_use_table
 HOLD_STEP = 0.01
 #: the two laws each scenario runs with: the controller's defaults, and the paper's set
 LAWS = ("ours", "paper")
-#: the warnings of the controller that are its supervision's (harness.supervision_table's words)
+#: the warnings of the controller that are its supervision's (harness.studies.supervision_table's words)
 _SUPERVISION_WARNINGS = ("is not connected (", "cannot be aligned")
 
 STAGE_USE_NOTES = (

@@ -15,7 +15,7 @@
  * every FMU: loop delay 2), and true Gauss-Seidel in the order plant,
  * controller, reference (each FMU gets the others' latest outputs: loop delay 1).
  *
- * One case per fault of the table (harness/supervision_table.py FAULTS, by the
+ * One case per fault of the table (harness/studies/supervision_table.py FAULTS, by the
  * same name, in the schedules the table runs it in; the Python wrapper checks
  * that every fault is here and that each time printed is the table's), each with
  * what the controller must say: an Error from its doStep within 1 s of the
@@ -61,7 +61,7 @@ typedef struct {
 } fault;
 
 typedef struct {
-    const char *name;           /* the fault's name in harness/supervision_table.py FAULTS */
+    const char *name;           /* the fault's name in harness/studies/supervision_table.py FAULTS */
     fault faults[2];
     const char *plant_param;    /* a plant parameter set for the case (NULL: none) */
     double plant_value;

@@ -36,7 +36,7 @@ wired master (:mod:`harness.masters.wired`, which plays the profile as Reference
 (d) during holds (from 0.5 s after a motion to the next): max ``|y - y_d|`` over
     5 x (noise rms + grid step), <= 1;
 (e) no supervision Error and no supervision Warning (the controller's stamps warnings, as
-    :mod:`harness.supervision_table` collects them) on the whole family;
+    :mod:`harness.studies.supervision_table` collects them) on the whole family;
 (f) the same ratios with the paper's law, to show what changed.
 
 Each target prints PASS or FAIL (against the issue's bound); the command exits 1 when a
@@ -61,14 +61,14 @@ from types import MappingProxyType
 
 import numpy as np
 
-from . import profiles
-from .fmu import FMUError
-from .identify.family import draw_stage
-from .loop import prepare_closed_loop
-from .masters import (NATIVE_CONTROLLER, missing_runner_message, native_available, native_loop,
+from .. import profiles
+from ..fmu import FMUError
+from ..identify.family import draw_stage
+from ..loop import prepare_closed_loop
+from ..masters import (NATIVE_CONTROLLER, missing_runner_message, native_available, native_loop,
                       simulate_closed_loop_fmu_steps, simulate_wired)
-from .scenarios import PAPER_LAW_SET, Scenario, parameter_set, profile_signal
-from .text_tables import markdown_table
+from ..scenarios import PAPER_LAW_SET, Scenario, parameter_set, profile_signal
+from ..text_tables import markdown_table
 
 __all__ = ["SEED", "SENSORS_NM", "HOLDS", "MOVES", "LONG_HOLD_MOVES", "SCAN_FREQUENCIES",
            "TONE_FREQUENCIES", "GS_ORDERS", "TARGETS", "DOCUMENTED", "Profile", "Task", "RunMetrics",
@@ -103,7 +103,7 @@ GS_ORDERS = (("plant", "controller", "reference"), ("reference", "controller", "
 MASTER_EXCHANGE = "native exchange"
 MASTER_JACOBI = "native Jacobi"
 MASTER_FMU = "closed-loop FMU, 10 ms in holds"
-#: the controller's supervision warnings, by their words (as harness.supervision_table)
+#: the controller's supervision warnings, by their words (as harness.studies.supervision_table)
 _SUPERVISION_WARNINGS = ("is not connected (", "cannot be aligned")
 _WARNING_KINDS = (("|pred_error| exceeded", "pred_error beyond its bound"),
                   ("was clipped", "v clipped"),

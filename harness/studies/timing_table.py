@@ -25,11 +25,11 @@ import statistics
 import sys
 from dataclasses import dataclass, field
 
-from . import masters
-from .loop import EXCHANGE_LOOP_DELAY
-from .masters import CONTAINER_ORDER
-from .metrics import compute_metrics
-from .scenarios import MISMATCH_SCENARIOS, get_scenario, reference_label
+from .. import masters
+from ..loop import EXCHANGE_LOOP_DELAY
+from ..masters import CONTAINER_ORDER
+from ..metrics import compute_metrics
+from ..scenarios import MISMATCH_SCENARIOS, get_scenario, reference_label
 
 __all__ = ["MASTERS", "MasterRun", "run_master", "measure", "markdown_table", "family_summary", "main"]
 

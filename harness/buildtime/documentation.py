@@ -4,7 +4,7 @@
 (``packaging/documentation/<id>.html``: what it models, the equations with units)
 + parts generated from the model description, so that they cannot drift from it:
 the identity table, the table of every variable (causality, variability, type, unit,
-default, range, description), how to connect the loop (from ``harness/ssp.py``, the
+default, range, description), how to connect the loop (from ``harness/buildtime/ssp_file.py``, the
 same connections the build's SSP uses), how to build from the sources, the reference
 results, the paper and the licence.
 
@@ -19,8 +19,8 @@ from pathlib import Path
 import re
 from xml.etree import ElementTree as ET
 
-from .platforms import PLATFORMS
-from .ssp import SSP_COMPONENTS, SSP_CONNECTIONS
+from ..platforms import PLATFORMS
+from .ssp_file import SSP_COMPONENTS, SSP_CONNECTIONS
 
 
 PROJECT = "piezo_fmus"

@@ -135,7 +135,7 @@ __all__ = [
 
 DEFAULT_STEP_SIZE = 0.0005
 DEFAULT_DURATION = 3.0
-SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+SCENARIO_DIR = Path(__file__).resolve().parent
 BUILTIN_FILES = ("tracking.toml", "validation.toml", "mismatch.toml", "stage_use.toml")
 #: the built-in file of the stage-use scenarios (docs/stage_use.md), and its parameter set of
 #: the paper's adaptation law

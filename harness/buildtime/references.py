@@ -27,7 +27,7 @@ Two kinds of FMU have experiments here:
   :data:`EXPORT_EXPERIMENTS`, which run the FMU's own start values, so that its
   references test the model it now carries.
 
-CMake runs ``python -m harness.fmu_references`` with ``PIEZO_CORE_LIB`` and
+CMake runs ``python -m harness.buildtime.references`` with ``PIEZO_CORE_LIB`` and
 ``PIEZO_CORE_INCLUDE`` set to the build's core library and headers
 (cmake/PiezoFmu.cmake, ``piezo_fmu_reference_results``).
 """
@@ -42,10 +42,10 @@ import sys
 from xml.etree import ElementTree as ET
 from xml.sax.saxutils import quoteattr
 
-from . import core
-from .closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters, component_parameters
-from .loop import REFERENCE_PREVIEW, loop_delay, reference_parameters
-from .scenarios import load_scenarios
+from .. import core
+from ..closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters, component_parameters
+from ..loop import REFERENCE_PREVIEW, loop_delay, reference_parameters
+from ..scenarios import load_scenarios
 
 LS_REF_VERSION = "1.0.0-alpha.1"
 LS_REF_DESCRIPTION = "Layered Standard providing information on related files included in an FMU."

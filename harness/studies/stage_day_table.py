@@ -56,11 +56,11 @@ import time as _time
 
 import numpy as np
 
-from .fmu import FMUError
-from .loop import prepare_closed_loop
+from ..fmu import FMUError
+from ..loop import prepare_closed_loop
 from . import stage_use_table
 from .stage_use_table import GRID, draw_stages, hold_band, profile_scenario, stage_plant
-from .text_tables import markdown_table
+from ..text_tables import markdown_table
 
 __all__ = ["SEED", "SENSORS_NM", "RASTER_FREQUENCIES", "DWELLS", "FRAMES", "TONE_FREQUENCIES",
            "TONE_TIMES", "HOUR", "TARGETS", "DOCUMENTED", "DayPart", "Task", "PartMetrics",
@@ -219,7 +219,7 @@ def admissible_rows(controller_params=None, margin=1e-4, radius=0.999):
     ``rls.pole_min`` and the supervision's ``sup.gain_min``, ``sup.gain_max``), each row computed
     with the core's operations in the core's order (``piezo_ctl_admissible_rows`` in piezo_controller_setup.c), so
     that :func:`outside_admissible` gives the core's verdict bit for bit."""
-    from .core import default_controller_params
+    from ..core import default_controller_params
     p = {**default_controller_params(), **(controller_params or {})}
     a1, a2, b1, b2 = p["tf.a1"], p["tf.a2"], p["tf.b1"], p["tf.b2"]
     z, pm, g_lo, g_hi = p["rls.zero_min"], p["rls.pole_min"], p["sup.gain_min"], p["sup.gain_max"]
@@ -311,7 +311,7 @@ def _segments_of(signal, n=None):
     "move"): the windows whose worst errors a part's metrics keep. A move's window runs on to
     ``profiles.SETTLE`` after its last sample (within the run's ``n`` samples), as
     :func:`harness.profiles.move_windows` has it."""
-    from . import profiles
+    from .. import profiles
     tail = int(round(profiles.SETTLE / H))
     n = signal.samples if n is None else n
     out = []
@@ -327,7 +327,7 @@ class _Streamer:
     """The metrics of one run from its rows, chunk by chunk."""
 
     def __init__(self, signal, n, controller_params, robust):
-        from . import profiles
+        from .. import profiles
         self.windows = _segments_of(signal, n)
         self.worst = np.full(len(self.windows), np.nan)
         self.holds_w = profiles.hold_windows(signal, n, H)
@@ -386,7 +386,7 @@ def _warnings(lines):
 def run_part(task, keep_stride=0):
     """Run one :class:`Task` on the native runner's exchange, streaming: ``(PartMetrics, kept)``,
     kept the estimates and the error every ``keep_stride`` samples (when > 0)."""
-    from .masters import NATIVE_CONTROLLER, native_loop
+    from ..masters import NATIVE_CONTROLLER, native_loop
     sc = task.part.scenario(task.plant, task.controller)
     setup = prepare_closed_loop(sc, master="gauss-seidel")
     robust = task.law != "fixed" and bool(setup.controller_params.get("rls.robust", True)) \
@@ -412,8 +412,8 @@ def run_part(task, keep_stride=0):
 def _fmu_check(task, exchange):
     """The closed-loop FMU at 10 ms steps in holds against the exchange at its communication
     points: a PartMetrics whose ``equal`` says whether every row's bits agree."""
-    from . import profiles
-    from .masters import native_loop, simulate_closed_loop_fmu_steps
+    from .. import profiles
+    from ..masters import native_loop, simulate_closed_loop_fmu_steps
     sc = task.part.scenario(task.plant, task.controller)
     t0 = _time.perf_counter()
     log = []

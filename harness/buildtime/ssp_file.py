@@ -41,7 +41,7 @@ the time stamps ``t_preview`` and ``t_meas``, aligns the stamped preview with it
 (docs/cosimulation.md).
 
 The build writes ``build/fmus/PiezoStageClosedLoop.ssp`` with
-``python -m harness.ssp --fmu-dir build/fmus --out build/fmus/PiezoStageClosedLoop.ssp``.
+``python -m harness.buildtime.ssp_file --fmu-dir build/fmus --out build/fmus/PiezoStageClosedLoop.ssp``.
 """
 
 from __future__ import annotations
@@ -56,9 +56,9 @@ import zipfile
 
 from fmpy.ssp.ssd import read_ssd
 
-from .fmu import fmu_path
-from .loop import reference_parameters
-from .scenarios import get_scenario
+from ..fmu import fmu_path
+from ..loop import reference_parameters
+from ..scenarios import get_scenario
 
 __all__ = [
     "SSP_FILENAME",
@@ -392,8 +392,8 @@ def read_bound_parameter_set(ssp_path):
 
 
 def main(argv=None):
-    """``python -m harness.ssp --fmu-dir DIR --out FILE [--scenario NAME ...]``."""
-    p = argparse.ArgumentParser(prog="python -m harness.ssp",
+    """``python -m harness.buildtime.ssp_file --fmu-dir DIR --out FILE [--scenario NAME ...]``."""
+    p = argparse.ArgumentParser(prog="python -m harness.buildtime.ssp_file",
                                 description="Write the closed-loop SSP (the build does this).")
     p.add_argument("--fmu-dir", required=True, help="folder with the three FMUs")
     p.add_argument("--out", required=True, help="the .ssp to write")
@@ -405,7 +405,7 @@ def main(argv=None):
         sets = [parameter_set_for_scenario(n) for n in (args.scenario or [SSP_SCENARIO])]
         out = write_closed_loop_ssp(args.out, args.fmu_dir, sets)
     except (ValueError, KeyError, FileNotFoundError) as exc:
-        sys.stderr.write(f"python -m harness.ssp: error: {exc}\n")
+        sys.stderr.write(f"python -m harness.buildtime.ssp_file: error: {exc}\n")
         return 2
     print(f"wrote {out}")
     return 0

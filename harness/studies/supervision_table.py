@@ -28,7 +28,7 @@ the real importers (the harness's fmpy master, fmpy's SSP player, the container 
 fmu-manipulation-toolbox in parallel and in each sequential order); and the saturation runs
 (the mismatch scenarios with voltage limits at 90, 70 and 50 % of the peak they need). A
 legitimate run must end without an Error and without a supervision warning; the wired runs
-also give their margins (:func:`harness.supervision.margins`). Every run of a family is run
+also give their margins (:func:`harness.supervision_margins.margins`). Every run of a family is run
 with each ``sup.reaction`` (0, error, and 1, safe: the safe runs in groups of their own), where
 a safe state's Warning counts as a false alarm. :func:`false_alarms` is that check for any
 family: a list of :class:`RunSpec` on the wired master (a sines scenario), a real importer
@@ -60,13 +60,13 @@ import warnings as _warnings
 
 import numpy as np
 
-from . import core, masters
-from .fmu import SAFE_STATE_WORDS, FMUError, LoopFaultWarning
-from .identify.family import SENSOR, draw_stage
-from .masters import (CONTAINER_ORDER, SCHEDULES, ContainerTerminateWarning, Fault, schedule_name,
+from .. import core, masters
+from ..fmu import SAFE_STATE_WORDS, FMUError, LoopFaultWarning
+from ..identify.family import SENSOR, draw_stage
+from ..masters import (CONTAINER_ORDER, SCHEDULES, ContainerTerminateWarning, Fault, schedule_name,
                       simulate_wired)
-from .scenarios import MISMATCH_SCENARIOS, get_scenario
-from .supervision import controller_samples, margins, thresholds
+from ..scenarios import MISMATCH_SCENARIOS, get_scenario
+from ..supervision_margins import controller_samples, margins, thresholds
 
 __all__ = ["FaultCase", "FAULTS", "FAULT_SCHEDULES", "SAFE_SCHEDULES", "FaultResult", "run_fault",
            "run_fault_safe", "harness_fault", "REACTIONS", "HARNESS_MASTERS", "with_reactions", "false_alarms",
@@ -781,7 +781,7 @@ STUCK_CASES = (
 
 
 def _stuck_profile(where, after=STUCK_AFTER):
-    from .scenarios import profile_signal
+    from ..scenarios import profile_signal
     if where == "hold":
         segs = ({"hold": 0.2}, {"to": 5.0, "shape": "scurve", "time": 0.1}, {"hold": STUCK_HOLD_ONSET + after})
     else:
@@ -842,7 +842,7 @@ def run_stuck(case, plant, controller=None, after=STUCK_AFTER, keep=False):
 
 def _day_plant(i, nm):
     """The stage's day's i-th stage (seed 2026) with a sensor of nm rms on the 2 nm grid."""
-    from .stage_day import SEED
+    from .stage_day_table import SEED
     from .stage_use_table import draw_stages, stage_plant
     return stage_plant(draw_stages(i + 1, SEED)[i], i, nm)
 
@@ -872,7 +872,7 @@ def stuck_markdown(family):
     """The stuck family as a Markdown table: per case and sensor the runs, those stopped (before the
     onset: false alarms), the time to the verdict (median, worst), the stage's excursion from y_d
     after the onset (median, worst) beside the largest error before it, and the verdicts."""
-    from .text_tables import markdown_table
+    from ..text_tables import markdown_table
     rows = []
     for (ci, nm), res in sorted(family.items()):
         case = STUCK_CASES[ci]
@@ -906,8 +906,8 @@ START_DELAY = 2
 
 
 def _start_profile(part):
-    from .scenarios import profile_signal
-    from .stage_day import FRESH, raster_part, tone_part
+    from ..scenarios import profile_signal
+    from .stage_day_table import FRESH, raster_part, tone_part
     if part.startswith("raster"):
         segs = raster_part(float(part.split()[1]), 0.1, 2).segments
     elif part == "fresh step":
@@ -954,7 +954,7 @@ def start_family(stages=50, sensors=STUCK_SENSORS_NM, parts=START_PARTS, jobs=2,
 def start_markdown(family):
     """Per part and sensor: runs, Errors, the delays first chosen (the loop's is 2), the runs still
     detecting at the end (waiting for the reference), and when the delay was chosen."""
-    from .text_tables import markdown_table
+    from ..text_tables import markdown_table
     rows = []
     for (part, nm), res in sorted(family.items(), key=lambda kv: (START_PARTS.index(kv[0][0]), kv[0][1])):
         t = np.array([r["time"] for r in res if r["delay"] > 0])
@@ -1116,7 +1116,7 @@ def reset_markdown(family):
     and largest change of v per sample over its ramp, the step's error after the restart (median,
     worst) and the error over the last 0.25 s, and for the case never cleared the time from the
     step to the second verdict."""
-    from .text_tables import markdown_table
+    from ..text_tables import markdown_table
     rows = []
     for (ci, nm), res in sorted(family.items()):
         case = RESET_CASES[ci]
@@ -1184,7 +1184,7 @@ def main(argv=None, prog=None):
                                 + " ".join(f"{s:g}" for s in sensors) + ")")
         study.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     fa_ = sub.add_parser("false-alarms", help="the no-false-alarm check of any family: a function "
-                         "returning RunSpecs, as module:function (e.g. harness.supervision_table:family_specs)")
+                         "returning RunSpecs, as module:function (e.g. harness.studies.supervision_table:family_specs)")
     fa_.add_argument("--specs", required=True, help="module:function; called without arguments")
     fa_.add_argument("--reactions", nargs="+", default=["error", "safe"], choices=list(REACTIONS))
     fa_.add_argument("--jobs", type=int, default=2)
