@@ -80,7 +80,7 @@ def reference_parameters(scenario):
         Not a tracking scenario, a table reference, or more than 8 tones.
     """
     sig = scenario.signal
-    if scenario.kind != "tracking" or sig.kind != "sines":
+    if scenario.kind != "tracking" or not sig.internal:
         raise ValueError(f"scenario '{scenario.name}' is not a tracking scenario with a sines "
                          f"reference, which ReferenceSignal's parameters would carry")
     if len(sig.amplitudes) > REFERENCE_TONES:

@@ -151,3 +151,36 @@ def test_a_master_beside_the_backends_is_not_a_command_line_choice(backend):
     """Reference: the registry's ``backend`` flag: the wired master is called by its function."""
     from harness import masters
     assert backend in masters.MASTERS and backend not in masters.BACKENDS
+
+
+def signal_kind_branches(root=HARNESS):
+    """["file:line"] of every comparison of a signal's kind with a string outside the scenarios."""
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        if (root / "scenarios") in path.parents:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.Compare):
+                continue
+            for side in (node.left, *node.comparators):
+                if (isinstance(side, ast.Attribute) and side.attr == "kind"
+                        and isinstance(side.value, (ast.Name, ast.Attribute))
+                        and (getattr(side.value, "id", None) or getattr(side.value, "attr", "")) in
+                        ("signal", "sig")):
+                    found.append(f"{path.relative_to(root.parent)}:{node.lineno}")
+    return found
+
+
+def test_no_job_or_master_branches_on_the_kind_of_a_signal():
+    """Reference: harness.scenarios.SIGNAL_KINDS, where each kind says what it is (its
+    ``internal`` among them): outside the scenarios nothing compares ``signal.kind``."""
+    assert signal_kind_branches() == []
+
+
+def test_the_signal_kind_check_sees_a_branch(tmp_path):
+    """Reference: a scratch module that branches on ``sc.signal.kind`` and on ``sig.kind``."""
+    (tmp_path / "harness").mkdir()
+    (tmp_path / "harness" / "job.py").write_text(
+        'def f(sc, sig):\n    if sc.signal.kind == "sines":\n        return 1\n'
+        '    return sig.kind != "table"\n')
+    assert signal_kind_branches(tmp_path / "harness") == ["harness/job.py:2", "harness/job.py:4"]

@@ -314,3 +314,39 @@ def test_a_bad_value_in_the_first_row_is_not_taken_for_a_header(tmp_path):
                        'reference = { type = "csv", file = "r.csv" }\n')
     with pytest.raises(ScenarioFileError, match="line 1: 'abc' is not a number"):
         load_scenario_file(f)
+
+
+def test_a_new_signal_kind_is_one_entry_of_the_registry(tmp_path, monkeypatch):
+    """Reference: harness.scenarios.SIGNAL_KINDS, the one place a kind of signal is declared. A
+    kind added there alone (a constant, as a test stand-in) is read from a scenario file, checked,
+    evaluated and described through it, is fed as the input y_d (not internal), and the file's
+    error for an unknown type lists it; the built-in kinds keep their file types."""
+    from harness import scenarios
+    assert {k: (v.file_type, v.internal, v.tracking_only) for k, v in scenarios.SIGNAL_KINDS.items()} == {
+        "sines": ("sines", True, False), "table": ("csv", False, False),
+        "profile": ("profile", False, True)}
+
+    def parse(spec, path, scenario, fieldname, value_name):
+        return scenarios.Signal("constant", offset=float(spec["value"]), source=str(path))
+
+    def check(signal, step, duration, path, name, fieldname):
+        if signal.offset < 0:
+            raise scenarios.ScenarioFileError(path, "must be >= 0", name, fieldname)
+
+    monkeypatch.setitem(scenarios.SIGNAL_KINDS, "constant", scenarios.SignalKind(
+        "constant", "constant", internal=False, tracking_only=False, parse=parse,
+        evaluate=lambda signal, t: np.full(t.shape, signal.offset),
+        describe=lambda signal: f"constant {signal.offset:g} um", check=check))
+    f = tmp_path / "c.toml"
+    f.write_text('[[scenario]]\nname = "c"\nkind = "tracking"\nduration = 0.01\n'
+                 'reference = { type = "constant", value = 3.5 }\n')
+    sc = load_scenario_file(f)["c"]
+    assert sc.signal.evaluate([0.0, 0.005]).tolist() == [3.5, 3.5]
+    assert sc.signal.describe() == "constant 3.5 um" and not sc.signal.internal
+    f.write_text(f.read_text().replace("3.5", "-1.0"))
+    with pytest.raises(ScenarioFileError, match="must be >= 0"):
+        load_scenario_file(f)
+    f.write_text(f.read_text().replace('"constant"', '"square"'))
+    with pytest.raises(ScenarioFileError, match=r'\'type\' must be one of "sines", "csv", "profile", '
+                                                r'"constant", got \'square\''):
+        load_scenario_file(f)

@@ -150,7 +150,7 @@ def closed_loop_fmu_times(scenario="mismatch_1_5_10hz", *, fmu_dir=None, registr
 
     duration, step = CLOSED_LOOP_DURATION, CLOSED_LOOP_STEP
     setup = prepare_closed_loop(scenario, registry=registry, duration=duration)
-    if setup.scenario.signal.kind != "sines":
+    if not setup.scenario.signal.internal:
         return None         # the internal reference (and the wired loop, the SSP) need sines
     params = closed_loop_fmu_parameters(setup)
     path = fmu_path(CLOSED_LOOP_MODEL, fmu_dir)

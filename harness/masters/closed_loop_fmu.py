@@ -56,7 +56,7 @@ def closed_loop_fmu_parameters(setup, preview=True):
     the input's lead (table)."""
     sc = setup.scenario
     lead = reference_lead(setup.controller_params) or REFERENCE_LEAD
-    if sc.signal.kind == "sines":
+    if sc.signal.internal:
         reference = reference_parameters(sc)
         reference.update({"lead": lead, "preview": REFERENCE_PREVIEW} if preview
                          else {"lead": 0, "preview": 0})
@@ -146,7 +146,7 @@ def _run(inst, setup, rows, progress):
     out = (ctypes.c_double * n_out)()
     sat = (ctypes.c_uint8 * 1)() if inst.fmi3 else (ctypes.c_int * 1)()
     y_d_in = (ctypes.c_double * 1)()
-    external = setup.scenario.signal.kind != "sines"
+    external = not setup.scenario.signal.internal
     y_ref = setup.y_ref
     lag = 1 if setup.feedthrough else 0          # the controller's outputs of row k are at t_(k+lag)
     a_out, a_sat, a_y = ctypes.addressof(out), ctypes.addressof(sat), ctypes.addressof(y_d_in)
@@ -275,7 +275,7 @@ def simulate_closed_loop_fmu_steps(scenario, *, hold_step=0.01, settle=0.5, adap
     setup = prepare_closed_loop(scenario, adaptation=adaptation, plant_params=plant_params,
                                 controller_params=controller_params, duration=duration,
                                 registry=registry)
-    if setup.scenario.signal.kind == "sines":
+    if setup.scenario.signal.internal:
         raise ValueError(f"scenario '{setup.scenario.name}' has a sines reference: "
                          f"simulate_closed_loop_fmu_steps runs the input y_d (a table or a profile)")
     if setup.feedthrough:

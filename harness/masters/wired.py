@@ -203,7 +203,7 @@ def simulate_wired(scenario, schedule="exchange", faults=(), *, duration=None, p
         fault_of[f.connector] = f
     fmi_version = check_fmi_version(fmi_version)
     sc = get_scenario(scenario, registry)
-    table = sc.kind == "tracking" and sc.signal.kind != "sines"
+    table = sc.kind == "tracking" and not sc.signal.internal
     params = {comp: {} for comp in COMPONENTS}
     if table:
         if reference_params:

@@ -147,7 +147,7 @@ def lag_error_rms(scenario):
     ``nan`` for a table reference.
     """
     sig = scenario.signal
-    if sig.kind != "sines":
+    if not sig.frequencies:
         return math.nan
     dh = loop_delay(scenario.controller, scenario.plant) * scenario.step_size
     return math.sqrt(sum(2.0 * (a * math.sin(math.pi * f * dh)) ** 2

@@ -135,7 +135,7 @@ def _period(spec):
     """Seconds of one period of the slowest tone; ``nan`` for a table reference."""
     sig = spec.signal
     freqs = [f for f, a in zip(sig.frequencies, sig.amplitudes) if f > 0 and a != 0]
-    if sig.kind != "sines" or not freqs:
+    if not freqs:
         return math.nan
     return 1.0 / min(freqs)
 
@@ -493,8 +493,6 @@ def effective_gain(nominal, plant, freqs, h):
 
 def _tones(spec):
     sig = spec.signal
-    if sig.kind != "sines":
-        return []
     return [f for f, a in zip(sig.frequencies, sig.amplitudes) if f > 0 and a != 0]
 
 

@@ -316,48 +316,64 @@ class Signal:
         -------
         ndarray of float
         """
-        t = np.asarray(time, dtype=float)
-        if self.kind == "sines":
-            out = np.full(t.shape, float(self.offset))
-            for a, f, p in zip(self.amplitudes, self.frequencies, self.phases):
-                out += a * np.sin(2.0 * np.pi * f * t + p)
-            return out
-        if self.kind == "profile":
-            return self._evaluate_profile(t)
-        return np.interp(t, np.asarray(self.table_time), np.asarray(self.table_value))
-
-    def _evaluate_profile(self, t):
-        # in samples, a time on the grid snapped to its integer k (k h / h may miss k by an ulp)
-        x = t / self.step
-        near = np.rint(x)
-        x = np.where(np.abs(x - near) < 1e-6, near, x)
-        out = np.full(x.shape, float(self.segments[-1].end))
-        out[x < 0] = self.offset
-        if x.ndim == 1 and x.size > 1 and np.all(x[1:] >= x[:-1]):
-            # times in order (a run's grid): each segment is one slice, found by bisection, so an
-            # hour of a thousand segments costs as much as one (the same values as the masks)
-            for seg in self.segments:
-                lo, hi = np.searchsorted(x, seg.first, "left"), np.searchsorted(x, seg.stop, "left")
-                if hi > lo:
-                    out[lo:hi] = seg.values(x[lo:hi], self.step)
-            return out
-        for seg in self.segments:
-            inside = (x >= seg.first) & (x < seg.stop)
-            if inside.any():
-                out[inside] = seg.values(x[inside], self.step)
-        return out
+        return SIGNAL_KINDS[self.kind].evaluate(self, np.asarray(time, dtype=float))
 
     def describe(self):
         """Return a short human-readable description."""
-        if self.kind == "sines":
-            terms = " + ".join(
-                f"{a:g} sin(2 pi {f:g} t{'' if p == 0 else f' + {p:g}'})"
-                for a, f, p in zip(self.amplitudes, self.frequencies, self.phases)
-            )
-            return terms + (f" + {self.offset:g}" if self.offset else "")
-        if self.kind == "profile":
-            return "profile: " + ", ".join(_segment_text(s, self.step) for s in self.segments)
-        return f"table {self.source} ({len(self.table_time)} rows)"
+        return SIGNAL_KINDS[self.kind].describe(self)
+
+    @property
+    def internal(self):
+        """ReferenceSignal plays it (its parameters carry it): the FMUs' internal reference,
+        the SSP's and the closed-loop FMU's; otherwise a master feeds it as the input y_d."""
+        return SIGNAL_KINDS[self.kind].internal
+
+
+def _evaluate_sines(sig, t):
+    out = np.full(t.shape, float(sig.offset))
+    for a, f, p in zip(sig.amplitudes, sig.frequencies, sig.phases):
+        out += a * np.sin(2.0 * np.pi * f * t + p)
+    return out
+
+
+def _evaluate_table(sig, t):
+    return np.interp(t, np.asarray(sig.table_time), np.asarray(sig.table_value))
+
+
+def _evaluate_profile(sig, t):
+    # in samples, a time on the grid snapped to its integer k (k h / h may miss k by an ulp)
+    x = t / sig.step
+    near = np.rint(x)
+    x = np.where(np.abs(x - near) < 1e-6, near, x)
+    out = np.full(x.shape, float(sig.segments[-1].end))
+    out[x < 0] = sig.offset
+    if x.ndim == 1 and x.size > 1 and np.all(x[1:] >= x[:-1]):
+        # times in order (a run's grid): each segment is one slice, found by bisection, so an
+        # hour of a thousand segments costs as much as one (the same values as the masks)
+        for seg in sig.segments:
+            lo, hi = np.searchsorted(x, seg.first, "left"), np.searchsorted(x, seg.stop, "left")
+            if hi > lo:
+                out[lo:hi] = seg.values(x[lo:hi], sig.step)
+        return out
+    for seg in sig.segments:
+        inside = (x >= seg.first) & (x < seg.stop)
+        if inside.any():
+            out[inside] = seg.values(x[inside], sig.step)
+    return out
+
+
+def _describe_sines(sig):
+    terms = " + ".join(f"{a:g} sin(2 pi {f:g} t{'' if p == 0 else f' + {p:g}'})"
+                       for a, f, p in zip(sig.amplitudes, sig.frequencies, sig.phases))
+    return terms + (f" + {sig.offset:g}" if sig.offset else "")
+
+
+def _describe_table(sig):
+    return f"table {sig.source} ({len(sig.table_time)} rows)"
+
+
+def _describe_profile(sig):
+    return "profile: " + ", ".join(_segment_text(s, sig.step) for s in sig.segments)
 
 
 def _segment_text(seg, h):
@@ -578,51 +594,56 @@ def _number_list(value, path, scenario, fieldname, nonneg=False):
 
 
 def _parse_signal(spec, path, scenario, fieldname, value_name):
+    types = ", ".join(f'"{k.file_type}"' for k in SIGNAL_KINDS.values())
     if not isinstance(spec, dict):
-        raise ScenarioFileError(path, "must be a table with a 'type' key (\"sines\" or \"csv\")",
+        raise ScenarioFileError(path, f"must be a table with a 'type' key ({types})", scenario,
+                                fieldname)
+    kind = next((k for k in SIGNAL_KINDS.values() if k.file_type == spec.get("type")), None)
+    if kind is None:
+        raise ScenarioFileError(path, f"'type' must be one of {types}, got {spec.get('type')!r}",
                                 scenario, fieldname)
-    kind = spec.get("type")
-    if kind == "sines":
-        allowed = {"type", "amplitudes", "frequencies", "phases", "offset"}
-        _reject_unknown(spec, allowed, path, scenario, fieldname)
-        for key in ("amplitudes", "frequencies"):
-            if key not in spec:
-                raise ScenarioFileError(path, "missing (required for type = \"sines\")",
-                                        scenario, f"{fieldname}.{key}")
-        amps = _number_list(spec["amplitudes"], path, scenario, f"{fieldname}.amplitudes")
-        freqs = _number_list(spec["frequencies"], path, scenario, f"{fieldname}.frequencies",
-                             nonneg=True)
-        phases = (_number_list(spec["phases"], path, scenario, f"{fieldname}.phases")
-                  if "phases" in spec else (0.0,) * len(amps))
-        if not len(amps) == len(freqs) == len(phases):
-            raise ScenarioFileError(
-                path, f"amplitudes, frequencies and phases must have the same length "
-                      f"(got {len(amps)}, {len(freqs)}, {len(phases)})", scenario, fieldname)
-        offset = _number(spec.get("offset", 0.0), path, scenario, f"{fieldname}.offset")
-        return Signal("sines", amps, freqs, phases, offset, source=str(path))
-    if kind == "csv":
-        _reject_unknown(spec, {"type", "file"}, path, scenario, fieldname)
-        file = spec.get("file")
-        if not isinstance(file, str) or not file:
-            raise ScenarioFileError(path, "missing or not a string (path of the CSV file)",
-                                    scenario, f"{fieldname}.file")
-        csv_path = Path(file)
-        if not csv_path.is_absolute() and path is not None:
-            csv_path = Path(path).resolve().parent / csv_path
-        try:
-            t, y = read_signal_csv(csv_path, value_name)
-        except ScenarioFileError as exc:    # name the scenario that wants the CSV, too
-            raise ScenarioFileError(path, str(exc), scenario, f"{fieldname}.file") from None
-        return Signal("table", table_time=tuple(t.tolist()), table_value=tuple(y.tolist()),
-                      source=str(csv_path))
-    if kind == "profile":
-        if value_name != "y_d":
-            raise ScenarioFileError(path, "a profile is a tracking reference (y_d in um); a "
-                                          "validation input takes \"sines\" or \"csv\"",
-                                    scenario, f"{fieldname}.type")
-        return _parse_profile(spec, path, scenario, fieldname)
-    raise ScenarioFileError(path, f"'type' must be \"sines\", \"csv\" or \"profile\", got {kind!r}",
-                            scenario, fieldname)
+    if kind.tracking_only and value_name != "y_d":
+        others = " or ".join(f'"{k.file_type}"' for k in SIGNAL_KINDS.values() if not k.tracking_only)
+        raise ScenarioFileError(path, f"a {kind.file_type} is a tracking reference (y_d in um); a "
+                                      f"validation input takes {others}", scenario, f"{fieldname}.type")
+    return kind.parse(spec, path, scenario, fieldname, value_name)
+
+
+def _parse_sines(spec, path, scenario, fieldname, value_name):
+    allowed = {"type", "amplitudes", "frequencies", "phases", "offset"}
+    _reject_unknown(spec, allowed, path, scenario, fieldname)
+    for key in ("amplitudes", "frequencies"):
+        if key not in spec:
+            raise ScenarioFileError(path, "missing (required for type = \"sines\")",
+                                    scenario, f"{fieldname}.{key}")
+    amps = _number_list(spec["amplitudes"], path, scenario, f"{fieldname}.amplitudes")
+    freqs = _number_list(spec["frequencies"], path, scenario, f"{fieldname}.frequencies",
+                         nonneg=True)
+    phases = (_number_list(spec["phases"], path, scenario, f"{fieldname}.phases")
+              if "phases" in spec else (0.0,) * len(amps))
+    if not len(amps) == len(freqs) == len(phases):
+        raise ScenarioFileError(
+            path, f"amplitudes, frequencies and phases must have the same length "
+                  f"(got {len(amps)}, {len(freqs)}, {len(phases)})", scenario, fieldname)
+    offset = _number(spec.get("offset", 0.0), path, scenario, f"{fieldname}.offset")
+    return Signal("sines", amps, freqs, phases, offset, source=str(path))
+
+
+def _parse_csv(spec, path, scenario, fieldname, value_name):
+    _reject_unknown(spec, {"type", "file"}, path, scenario, fieldname)
+    file = spec.get("file")
+    if not isinstance(file, str) or not file:
+        raise ScenarioFileError(path, "missing or not a string (path of the CSV file)",
+                                scenario, f"{fieldname}.file")
+    csv_path = Path(file)
+    if not csv_path.is_absolute() and path is not None:
+        csv_path = Path(path).resolve().parent / csv_path
+    try:
+        t, y = read_signal_csv(csv_path, value_name)
+    except ScenarioFileError as exc:    # name the scenario that wants the CSV, too
+        raise ScenarioFileError(path, str(exc), scenario, f"{fieldname}.file") from None
+    return Signal("table", table_time=tuple(t.tolist()), table_value=tuple(y.tolist()),
+                  source=str(csv_path))
 
 
 #: what one segment of a profile may hold, by the key that names its kind
@@ -633,6 +654,8 @@ _SEGMENT_KEYS = {"hold": {"hold"}, "move": {"move", "shape", "time"}, "to": {"to
 @dataclass(frozen=True)
 class _ProfileSpec:
     """A profile as written (times in s), placed on the grid once the step is known."""
+
+    kind = "profile"        # its SignalKind (not a field)
 
     start: float
     items: tuple        # (field, kind, shape, seconds, change or target, absolute, f, a)
@@ -820,12 +843,11 @@ def _parse_scenario(entry, index, path, known, sets, builtin=False):
 
     step = _number(entry.get("step_size", base.step_size if base else DEFAULT_STEP_SIZE),
                    path, name, "step_size", positive=True)
-    if isinstance(signal, _ProfileSpec):
-        signal = _place_profile(signal, step, path, name)
-    elif signal.kind == "profile" and signal.step != step:
-        signal = _regrid_profile(signal, step, path, name)
-    if signal.kind == "profile" and sig_key in entry:
-        default_duration = round(signal.samples * step, 9)      # a profile's own length
+    signal_kind = SIGNAL_KINDS[signal.kind]
+    signal = signal_kind.place(signal, step, path, name)
+    own = signal_kind.length(signal) if sig_key in entry else None
+    if own is not None:
+        default_duration = round(own * step, 9)     # the signal's own length (a profile's)
     else:
         default_duration = base.duration if base else DEFAULT_DURATION
     duration = _number(entry.get("duration", default_duration), path, name, "duration", positive=True)
@@ -880,8 +902,6 @@ def _parse_scenario(entry, index, path, known, sets, builtin=False):
         params[which] = MappingProxyType(merged)
 
     _check_sample_period(step, params, kind, path, name, "step_size" in entry)
-    if signal.kind == "sines":
-        _check_nyquist(signal, step, path, name, sig_key)
 
     # Paper values belong to the paper's own (built-in) scenarios: a user scenario
     # that extends one is a different experiment and must not be shown next to them.
@@ -898,13 +918,7 @@ def _parse_scenario(entry, index, path, known, sets, builtin=False):
         for key, value in table.items():
             paper[key] = _number(value, path, name, f"paper.{key}", nonneg=True)
 
-    if signal.kind == "table":
-        _check_table_covers(signal, duration, step, path, name, sig_key)
-    if signal.kind == "profile" and n < signal.samples:
-        raise ScenarioFileError(
-            path, f"duration {duration:g} s would cut the profile, which lasts "
-                  f"{signal.samples * step:g} s (leave duration out: it defaults to the profile's "
-                  f"length; a longer one holds the last position)", name, "duration")
+    signal_kind.check(signal, step, duration, path, name, sig_key)
 
     return Scenario(
         name=name, kind=kind, description=description, signal=signal, duration=duration,
@@ -936,7 +950,7 @@ def _check_sample_period(step, params, kind, path, name, step_given):
                 name, "step_size" if step_given else which)
 
 
-def _check_nyquist(signal, step, path, name, fieldname):
+def _check_nyquist(signal, step, duration, path, name, fieldname):
     """Every tone must lie below the Nyquist frequency of the sample grid."""
     nyquist = 0.5 / step
     for f, a in zip(signal.frequencies, signal.amplitudes):
@@ -947,13 +961,84 @@ def _check_nyquist(signal, step, path, name, fieldname):
                 name, f"{fieldname}.frequencies")
 
 
-def _check_table_covers(signal, duration, step, path, name, fieldname):
+def _check_table_covers(signal, step, duration, path, name, fieldname):
+    """The table must cover every sample time of the run."""
     t0, t1 = signal.table_time[0], signal.table_time[-1]
     last = (round(duration / step) - 1) * step
     if t0 > 1e-12 or t1 < last - 1e-9:
         raise ScenarioFileError(
             path, f"the table {signal.source} covers [{t0:g}, {t1:g}] s but the run needs "
                   f"[0, {last:g}] s", name, fieldname)
+
+
+def _check_profile_length(signal, step, duration, path, name, fieldname):
+    """The run must not cut the profile (a longer one holds its last position)."""
+    if round(duration / step) < signal.samples:
+        raise ScenarioFileError(
+            path, f"duration {duration:g} s would cut the profile, which lasts "
+                  f"{signal.samples * step:g} s (leave duration out: it defaults to the profile's "
+                  f"length; a longer one holds the last position)", name, "duration")
+
+
+def _place_profile_on(signal, step, path, name):
+    """A profile as written placed on the step's grid, or a placed one moved to another grid."""
+    if isinstance(signal, _ProfileSpec):
+        return _place_profile(signal, step, path, name)
+    return _regrid_profile(signal, step, path, name) if signal.step != step else signal
+
+
+@dataclass(frozen=True)
+class SignalKind:
+    """One kind of signal, everything about it in one place (:data:`SIGNAL_KINDS`).
+
+    Attributes
+    ----------
+    name : str
+        :attr:`Signal.kind`.
+    file_type : str
+        Its ``type`` in a scenario file.
+    internal : bool
+        ReferenceSignal plays it (:attr:`Signal.internal`).
+    tracking_only : bool
+        Only a tracking reference (``y_d``) may be of this kind.
+    parse : callable
+        ``parse(spec, path, scenario, fieldname, value_name)``: the Signal (or a profile as
+        written, which ``place`` puts on the grid) of a scenario file's table.
+    evaluate, describe : callable
+        ``evaluate(signal, t)``, ``describe(signal)``: :meth:`Signal.evaluate`, :meth:`Signal.describe`.
+    check : callable
+        ``check(signal, step, duration, path, scenario, fieldname)``: refuse a run it cannot
+        serve (ScenarioFileError).
+    place : callable
+        ``place(signal, step, path, scenario)``: the signal on the scenario's sample grid.
+    length : callable
+        ``length(signal)``: its own length in samples (the default duration), or None.
+    """
+
+    name: str
+    file_type: str
+    internal: bool
+    tracking_only: bool
+    parse: object
+    evaluate: object
+    describe: object
+    check: object
+    place: object = staticmethod(lambda signal, step, path, name: signal)
+    length: object = staticmethod(lambda signal: None)
+
+
+#: every kind of signal a scenario may have, by :attr:`Signal.kind`: a new kind is one entry
+SIGNAL_KINDS = {k.name: k for k in (
+    SignalKind("sines", "sines", internal=True, tracking_only=False, parse=_parse_sines,
+               evaluate=_evaluate_sines, describe=_describe_sines, check=_check_nyquist),
+    SignalKind("table", "csv", internal=False, tracking_only=False, parse=_parse_csv,
+               evaluate=_evaluate_table, describe=_describe_table, check=_check_table_covers),
+    SignalKind("profile", "profile", internal=False, tracking_only=True,
+               parse=lambda spec, path, scenario, fieldname, value_name:
+                   _parse_profile(spec, path, scenario, fieldname),
+               evaluate=_evaluate_profile, describe=_describe_profile, check=_check_profile_length,
+               place=_place_profile_on, length=lambda signal: signal.samples),
+)}
 
 
 def load_scenario_file(path, known=None, parameter_sets=None, builtin=False):
@@ -1106,7 +1191,7 @@ def list_scenarios(registry=None, kind=None):
 def reference_label(scenario):
     """'1 Hz', '1/5/10 Hz' for a sine reference; the scenario name otherwise."""
     sig = scenario.signal
-    if sig.kind == "sines" and sig.frequencies:
+    if sig.frequencies:
         return "/".join(f"{f:g}" for f in sig.frequencies) + " Hz"
     return scenario.name
 
