@@ -15,17 +15,21 @@ results (:mod:`harness.buildtime.references`) and ``export`` (:mod:`harness.iden
 from __future__ import annotations
 
 from . import core
+from .fmu_variables import COMPOSED
 
 __all__ = ["CLOSED_LOOP_MODEL", "CONTROLLER_PREFIX", "NOMINAL_MODEL_NAMES", "NOT_PARAMETERS",
            "closed_loop_parameters", "component_parameters"]
 
 CLOSED_LOOP_MODEL = "PiezoStageClosedLoop"
+_CONTROLLER = "AdaptiveCompoundController"
 #: the prefix of the controller's nominal model in the closed-loop FMU
 CONTROLLER_PREFIX = "controller."
-#: the controller's parameters that name its nominal model: the names the stage has too (not h)
-NOMINAL_MODEL_NAMES = frozenset(core.PLANT_PARAMETER_NAMES) & frozenset(core.CONTROLLER_PARAMETER_NAMES) - {"h"}
-#: the controller's parameters the closed-loop FMU does not have
-NOT_PARAMETERS = ("mv.hold_inputs",)
+#: the controller's names in the closed-loop FMU, as its declaration composes them
+_IN_LOOP = {name: loop for loop, (model, name) in COMPOSED[CLOSED_LOOP_MODEL].items() if model == _CONTROLLER}
+#: the controller's parameters that name its nominal model (``controller.<name>`` in the loop)
+NOMINAL_MODEL_NAMES = frozenset(n for n, loop in _IN_LOOP.items() if loop == CONTROLLER_PREFIX + n)
+#: the controller's parameters the closed-loop FMU does not have (``h``: the loop's one)
+NOT_PARAMETERS = tuple(n for n in core.CONTROLLER_PARAMETER_NAMES if n not in _IN_LOOP and n != "h")
 
 
 def closed_loop_parameters(plant=None, controller=None, reference=None):

@@ -362,6 +362,46 @@ class _History:
 
 
 # --------------------------------------------------------------------------
+# what the blocks share
+# --------------------------------------------------------------------------
+class _Block:
+    """A core block (``piezo_<name>``): its struct initialized from a parameter struct, the
+    parameters by FMU name, the sample index, reset, and the exact-mode history it owns."""
+
+    _NAME = ""          # the core's name of the block: piezo_<name>, piezo_<name>_init ...
+    _TABLE = {}         # its parameter table (FMU name -> field path, kind)
+
+    def __init__(self, params_struct):
+        self._lib = lib()
+        self._params = params_struct
+        self._raw = ffi.new(f"piezo_{self._NAME} *")
+        diag = ffi.new("piezo_diag *")
+        init = f"piezo_{self._NAME}_init"
+        _raise_init(getattr(self._lib, init)(self._raw, self._params, diag), init, diag)
+        self._hist = _History()
+
+    @property
+    def params(self) -> dict:
+        """The parameter set in use, keyed by FMU variable name."""
+        return _to_dict(self._TABLE, self._params)
+
+    @property
+    def raw(self):
+        """The underlying ``piezo_<name> *`` cdata (read-only use, for tests)."""
+        return self._raw
+
+    @property
+    def k(self) -> int:
+        """The core's sample index: the plant's current sample, the controller's next one."""
+        return int(self._raw.k)
+
+    def reset(self) -> None:
+        """Return to k = 0 (the plant at rest with its noise reseeded; the controller with its
+        nominal model and initial covariance)."""
+        getattr(self._lib, f"piezo_{self._NAME}_reset")(self._raw)
+
+
+# --------------------------------------------------------------------------
 # Plant
 # --------------------------------------------------------------------------
 PlantOutput = namedtuple("PlantOutput", "u x y y_meas")
@@ -372,7 +412,7 @@ PLANT_DTYPE = np.dtype([("time", "f8"), ("v", "f8"), ("u", "f8"), ("x", "f8"),
                         ("y", "f8"), ("y_meas", "f8")])
 
 
-class Plant:
+class Plant(_Block):
     """The coupled piezo stage model ``v -PI-> u -G-> x -creep-> y`` plus the sensor.
 
     Parameters
@@ -395,24 +435,13 @@ class Plant:
     growing history buffer of the creep input.
     """
 
+    _NAME = "plant"
+    _TABLE = _PLANT_TABLE
+
     def __init__(self, params: dict | None = None):
-        self._lib = lib()
-        self._params = plant_params_struct(params)
-        self._p = ffi.new("piezo_plant *")
-        diag = ffi.new("piezo_diag *")
-        _raise_init(self._lib.piezo_plant_init(self._p, self._params, diag), "piezo_plant_init", diag)
+        super().__init__(plant_params_struct(params))
+        self._p = self._raw
         self._h = float(self._params.h)
-        self._hist = _History()
-
-    @property
-    def params(self) -> dict:
-        """The parameter set in use, keyed by FMU variable name."""
-        return _to_dict(_PLANT_TABLE, self._params)
-
-    @property
-    def raw(self):
-        """The underlying ``piezo_plant *`` cdata (read-only use, for tests)."""
-        return self._p
 
     @property
     def h(self) -> float:
@@ -420,19 +449,10 @@ class Plant:
         return self._h
 
     @property
-    def k(self) -> int:
-        """Current sample index."""
-        return int(self._p.k)
-
-    @property
     def output(self) -> PlantOutput:
         """Outputs at the current sample k."""
         o = self._p.out
         return PlantOutput(o.u, o.x, o.y, o.y_meas)
-
-    def reset(self) -> None:
-        """Return to k = 0, at rest, with the noise generator reseeded."""
-        self._lib.piezo_plant_reset(self._p)
 
     def step(self, v: float) -> PlantOutput:
         """Apply v(k) [V] and advance to k+1.
@@ -524,7 +544,7 @@ def _ctrl_out(o) -> ControllerOutput:
                             int(o.fallback))
 
 
-class Controller:
+class Controller(_Block):
     """Adaptive compound controller (RLS + MV law + inverse creep + inverse PI).
 
     Parameters
@@ -541,40 +561,19 @@ class Controller:
         A parameter is out of range.
     """
 
+    _NAME = "controller"
+    _TABLE = _CONTROLLER_TABLE
+
     def __init__(self, params: dict | None = None):
-        self._lib = lib()
-        self._params = controller_params_struct(params)
-        self._c = ffi.new("piezo_controller *")
-        diag = ffi.new("piezo_diag *")
-        _raise_init(self._lib.piezo_controller_init(self._c, self._params, diag),
-                    "piezo_controller_init", diag)
-        self._hist = _History()
+        super().__init__(controller_params_struct(params))
+        self._c = self._raw
         self._out = ffi.new("piezo_controller_output *")
         self._in = ffi.new("piezo_controller_input *")
-
-    @property
-    def params(self) -> dict:
-        """The parameter set in use, keyed by FMU variable name."""
-        return _to_dict(_CONTROLLER_TABLE, self._params)
-
-    @property
-    def raw(self):
-        """The underlying ``piezo_controller *`` cdata (read-only use, for tests)."""
-        return self._c
-
-    @property
-    def k(self) -> int:
-        """Index of the next sample to be computed."""
-        return int(self._c.k)
 
     @property
     def output(self) -> ControllerOutput:
         """The last committed sample (zeros and the nominal estimates before the first)."""
         return _ctrl_out(self._c.out)
-
-    def reset(self) -> None:
-        """Return to k = 0 with the nominal model and the initial covariance."""
-        self._lib.piezo_controller_reset(self._c)
 
     def _call(self, fn, name, y_ref, y_meas) -> ControllerOutput:
         y_ref = float(y_ref)
