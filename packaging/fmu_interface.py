@@ -157,8 +157,10 @@ def _variable(path, decl):
         raise InterfaceError(f"{where}: causality {decl['causality']!r} not one of {CAUSALITIES}")
     if decl.get("unit") is not None and decl["unit"] not in UNITS:
         raise InterfaceError(f"{where}: unit {decl['unit']!r} not in fmu_interface.UNITS")
-    if not re.fullmatch(r"[A-Za-z_][\w.]*", decl["name"]):
-        raise InterfaceError(f"{where}: not a structured name")
+    if not re.fullmatch(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)*", decl["name"]):
+        raise InterfaceError(f"{where}: not a structured name (a.b.c, array elements by size)")
+    if not re.fullmatch(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*|\[\d+\])*", decl["field"]):
+        raise InterfaceError(f"{where}: field {decl['field']!r} is not a C member path of ModelData")
     size = decl.get("size")
     elements = []
     if size is not None:

@@ -190,6 +190,9 @@ def test_a_component_variable_the_loop_neither_takes_nor_lists_stops_the_generat
     (lambda t: t + '\n[[variable]]\nname = "x"\ntype = "Real"\ncausality = "parameter"\n'
                    'field = "params.h"\nunit = "mm"\ndescription = "d"\n',
      r"variable 'x': unit 'mm' not in"),
+    (lambda t: t + '\n[[variable]]\nname = "x"\ntype = "Real"\ncausality = "parameter"\n'
+                   'field = "params.h); exit(1); (void)(0"\ndescription = "d"\n',
+     r"variable 'x': field .* is not a C member path of ModelData"),
 ])
 def test_a_bad_declaration_is_refused_naming_the_file_and_variable(tmp_path, edit, message):
     """Reference: the generator's checks (fmu_interface._variable, load)."""
