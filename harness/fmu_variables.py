@@ -3,6 +3,8 @@ those declarations and run `python3 packaging/fmu_interface.py`, never this file
 
 PARAMETERS: the parameters of each FMU that wraps one core block, {name: (path of the
 field in the block's parameter struct, kind)}: harness/core.py's tables.
+SIGNALS: each FMU's inputs and outputs, {model: {name: (causality, type, unit)}}
+(the SSP's connectors).
 COMPOSED: the variables an FMU takes from its components (arrays element by element),
 {model: {its name: (component, the component's name)}}: harness/closed_loop.py's names.
 """
@@ -134,6 +136,80 @@ PARAMETERS = {
         'lead': (('lead',), 'int'),
         'h': (('h',), 'float'),
         'preview': (('preview',), 'int'),
+    },
+}
+
+SIGNALS = {
+    'PiezoStage': {
+        'v': ('input', 'Real', 'V'),
+        'y': ('output', 'Real', 'um'),
+        'y_meas': ('output', 'Real', 'um'),
+        'u': ('output', 'Real', 'um'),
+        'x': ('output', 'Real', 'um'),
+        't_meas': ('output', 'Real', 's'),
+    },
+    'AdaptiveCompoundController': {
+        'y_ref': ('input', 'Real', 'um'),
+        'y_meas': ('input', 'Real', 'um'),
+        'v': ('output', 'Real', 'V'),
+        'q': ('output', 'Real', 'um'),
+        'est.a1': ('output', 'Real', ''),
+        'est.a2': ('output', 'Real', ''),
+        'est.b1': ('output', 'Real', ''),
+        'est.b2': ('output', 'Real', ''),
+        'pred_error': ('output', 'Real', 'um'),
+        'saturated': ('output', 'Boolean', ''),
+        'y_preview': ('input', 'Real', 'um'),
+        't_preview': ('input', 'Real', 's'),
+        't_meas': ('input', 'Real', 's'),
+        'loop_delay': ('output', 'Integer', ''),
+        'loop_delay_time': ('output', 'Real', 's'),
+        'preview_lead': ('output', 'Integer', ''),
+        'meas_offset': ('output', 'Integer', ''),
+        'sup.status': ('output', 'Integer', ''),
+        'sup.gain': ('output', 'Real', ''),
+        'sup.delay': ('output', 'Integer', ''),
+        'est.adapting': ('output', 'Boolean', ''),
+        'est.noise': ('output', 'Real', 'um'),
+        'sup.fault': ('output', 'Integer', ''),
+        'sup.fault_time': ('output', 'Real', 's'),
+        'est.fallbacks': ('output', 'Integer', ''),
+        'sup.reset': ('input', 'Boolean', ''),
+    },
+    'ReferenceSignal': {
+        'y_d': ('output', 'Real', 'um'),
+        'y_ref': ('output', 'Real', 'um'),
+        'y_preview': ('output', 'Real', 'um'),
+        't_preview': ('output', 'Real', 's'),
+    },
+    'PiezoStageClosedLoop': {
+        'y_d': ('input', 'Real', 'um'),
+        'y': ('output', 'Real', 'um'),
+        'y_meas': ('output', 'Real', 'um'),
+        'v': ('output', 'Real', 'V'),
+        'reference': ('output', 'Real', 'um'),
+        'error': ('output', 'Real', 'um'),
+        'u': ('output', 'Real', 'um'),
+        'x': ('output', 'Real', 'um'),
+        'q': ('output', 'Real', 'um'),
+        'est.a1': ('output', 'Real', ''),
+        'est.a2': ('output', 'Real', ''),
+        'est.b1': ('output', 'Real', ''),
+        'est.b2': ('output', 'Real', ''),
+        'pred_error': ('output', 'Real', 'um'),
+        'saturated': ('output', 'Boolean', ''),
+        'loop_delay': ('output', 'Integer', ''),
+        'loop_delay_time': ('output', 'Real', 's'),
+        'preview_lead': ('output', 'Integer', ''),
+        'sup.status': ('output', 'Integer', ''),
+        'sup.gain': ('output', 'Real', ''),
+        'sup.delay': ('output', 'Integer', ''),
+        'est.adapting': ('output', 'Boolean', ''),
+        'est.noise': ('output', 'Real', 'um'),
+        'sup.fault': ('output', 'Integer', ''),
+        'sup.fault_time': ('output', 'Real', 's'),
+        'est.fallbacks': ('output', 'Integer', ''),
+        'sup.reset': ('input', 'Boolean', ''),
     },
 }
 

@@ -598,6 +598,8 @@ def harness_module(interfaces):
              "",
              "PARAMETERS: the parameters of each FMU that wraps one core block, {name: (path of the",
              "field in the block's parameter struct, kind)}: harness/core.py's tables.",
+             "SIGNALS: each FMU's inputs and outputs, {model: {name: (causality, type, unit)}}",
+             "(the SSP's connectors).",
              "COMPOSED: the variables an FMU takes from its components (arrays element by element),",
              "{model: {its name: (component, the component's name)}}: harness/closed_loop.py's names.",
              '"""', "", "PARAMETERS = {"]
@@ -609,6 +611,13 @@ def harness_module(interfaces):
         for v in params:
             for name, field, _ in v.elements():
                 lines.append(f"        {name!r}: ({_path(field)!r}, {_KINDS[v.type]!r}),")
+        lines.append("    },")
+    lines += ["}", "", "SIGNALS = {"]
+    for interface in interfaces:
+        lines.append(f"    {interface.model!r}: {{")
+        for v in interface.variables:
+            if v.causality != "parameter" and v.size is None:
+                lines.append(f"        {v.name!r}: ({v.causality!r}, {v.type!r}, {v.unit or ''!r}),")
         lines.append("    },")
     lines += ["}", "", "COMPOSED = {"]
     for interface in interfaces:

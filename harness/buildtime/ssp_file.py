@@ -57,6 +57,7 @@ import zipfile
 from fmpy.ssp.ssd import read_ssd
 
 from ..fmu import fmu_path
+from ..fmu_variables import SIGNALS
 from ..loop import reference_parameters
 from ..scenarios import get_scenario
 
@@ -75,29 +76,19 @@ __all__ = [
 SSP_FILENAME = "PiezoStageClosedLoop.ssp"
 #: The scenario whose parameters the built SSP binds (the mismatch case of docs/model.md, 1/5/10 Hz).
 SSP_SCENARIO = "mismatch_1_5_10hz"
-#: component name -> (FMU file, connectors as (name, kind, SSP type, unit))
-SSP_COMPONENTS = {
-    "reference": ("ReferenceSignal.fmu", (("y_d", "output", "Real", "um"),
-                                          ("y_ref", "output", "Real", "um"),
-                                          ("y_preview", "output", "Real", "um"),
-                                          ("t_preview", "output", "Real", "s"))),
-    "controller": ("AdaptiveCompoundController.fmu", (("y_ref", "input", "Real", "um"),
-                                                      ("y_meas", "input", "Real", "um"),
-                                                      ("y_preview", "input", "Real", "um"),
-                                                      ("t_preview", "input", "Real", "s"),
-                                                      ("t_meas", "input", "Real", "s"),
-                                                      ("v", "output", "Real", "V"),
-                                                      ("q", "output", "Real", "um"),
-                                                      ("pred_error", "output", "Real", "um"),
-                                                      ("loop_delay", "output", "Integer", ""),
-                                                      ("loop_delay_time", "output", "Real", "s"),
-                                                      ("preview_lead", "output", "Integer", ""),
-                                                      ("meas_offset", "output", "Integer", ""))),
-    "plant": ("PiezoStage.fmu", (("v", "input", "Real", "V"),
-                                 ("y", "output", "Real", "um"),
-                                 ("y_meas", "output", "Real", "um"),
-                                 ("t_meas", "output", "Real", "s"))),
+#: component name -> (its FMU, the connectors the SSP shows: the wired ones and the controller's
+#: outputs a tool plots)
+_CONNECTORS = {
+    "reference": ("ReferenceSignal", ("y_d", "y_ref", "y_preview", "t_preview")),
+    "controller": ("AdaptiveCompoundController", ("y_ref", "y_meas", "y_preview", "t_preview", "t_meas", "v",
+                                                  "q", "pred_error", "loop_delay", "loop_delay_time",
+                                                  "preview_lead", "meas_offset")),
+    "plant": ("PiezoStage", ("v", "y", "y_meas", "t_meas")),
 }
+#: component name -> (FMU file, connectors as (name, kind, SSP type, unit)), each connector as its
+#: FMU declares it (harness/fmu_variables.py, from fmu_src/<Model>/variables.toml)
+SSP_COMPONENTS = {comp: (f"{model}.fmu", tuple((name, *SIGNALS[model][name]) for name in names))
+                  for comp, (model, names) in _CONNECTORS.items()}
 #: (start component, connector, end component, connector)
 SSP_CONNECTIONS = (
     ("reference", "y_ref", "controller", "y_ref"),
