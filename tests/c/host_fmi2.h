@@ -296,47 +296,22 @@ static inline int host2_same_state(const host2_fmu *f, fmi2Component c, const un
 /* ------------------------------------------------------------------------ */
 /* values (FMI 2.0 has one value per value reference: n_values is FMI 3.0's) */
 
-static inline fmi2Status host2_get_reals(const host2_fmu *f, fmi2Component c, const fmi2ValueReference *vr,
-                                         size_t nvr, double *values, size_t n_values)
-{
-    (void)n_values;
-    return f->api.GetReal(c, vr, nvr, values);
-}
-
-static inline fmi2Status host2_set_reals(const host2_fmu *f, fmi2Component c, const fmi2ValueReference *vr,
-                                         size_t nvr, const double *values, size_t n_values)
-{
-    (void)n_values;
-    return f->api.SetReal(c, vr, nvr, values);
-}
-
-static inline fmi2Status host2_get_ints(const host2_fmu *f, fmi2Component c, const fmi2ValueReference *vr,
-                                        size_t nvr, fmi2Integer *values, size_t n_values)
-{
-    (void)n_values;
-    return f->api.GetInteger(c, vr, nvr, values);
-}
-
-static inline fmi2Status host2_set_ints(const host2_fmu *f, fmi2Component c, const fmi2ValueReference *vr,
-                                        size_t nvr, const fmi2Integer *values, size_t n_values)
-{
-    (void)n_values;
-    return f->api.SetInteger(c, vr, nvr, values);
-}
-
-static inline fmi2Status host2_get_bools(const host2_fmu *f, fmi2Component c, const fmi2ValueReference *vr,
-                                         size_t nvr, fmi2Boolean *values, size_t n_values)
-{
-    (void)n_values;
-    return f->api.GetBoolean(c, vr, nvr, values);
-}
-
-static inline fmi2Status host2_set_bools(const host2_fmu *f, fmi2Component c, const fmi2ValueReference *vr,
-                                         size_t nvr, const fmi2Boolean *values, size_t n_values)
-{
-    (void)n_values;
-    return f->api.SetBoolean(c, vr, nvr, values);
-}
+/* host2_get_reals, host2_set_reals, host2_get_ints ... : f->api.<Get|Set><Type>(c, vr, nvr, values) */
+#define HOST2_VALUES(verb, fn, kind, ctype, qual)                                                   \
+    static inline fmi2Status host2_##verb##_##kind(const host2_fmu *f, fmi2Component c,             \
+                                                   const fmi2ValueReference *vr, size_t nvr,        \
+                                                   qual ctype *values, size_t n_values)             \
+    {                                                                                               \
+        (void)n_values;                                                                             \
+        return f->api.fn(c, vr, nvr, values);                                                       \
+    }
+HOST2_VALUES(get, GetReal, reals, double, )
+HOST2_VALUES(set, SetReal, reals, double, const)
+HOST2_VALUES(get, GetInteger, ints, fmi2Integer, )
+HOST2_VALUES(set, SetInteger, ints, fmi2Integer, const)
+HOST2_VALUES(get, GetBoolean, bools, fmi2Boolean, )
+HOST2_VALUES(set, SetBoolean, bools, fmi2Boolean, const)
+#undef HOST2_VALUES
 
 /* Set one variable of any type from a double. */
 static inline fmi2Status host2_set(const host2_fmu *f, fmi2Component c, const host_var *v, double value)

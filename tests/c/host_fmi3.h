@@ -296,41 +296,22 @@ static inline int host3_same_state(const host3_fmu *f, fmi3Instance c, const uns
 /* ------------------------------------------------------------------------ */
 /* values                                                                    */
 
-static inline fmi3Status host3_get_reals(const host3_fmu *f, fmi3Instance c, const fmi3ValueReference *vr,
-                                         size_t nvr, double *values, size_t n_values)
-{
-    return f->api.GetFloat64(c, vr, nvr, values, n_values);
-}
-
-static inline fmi3Status host3_set_reals(const host3_fmu *f, fmi3Instance c, const fmi3ValueReference *vr,
-                                         size_t nvr, const double *values, size_t n_values)
-{
-    return f->api.SetFloat64(c, vr, nvr, values, n_values);
-}
-
-static inline fmi3Status host3_get_ints(const host3_fmu *f, fmi3Instance c, const fmi3ValueReference *vr,
-                                        size_t nvr, fmi3Int32 *values, size_t n_values)
-{
-    return f->api.GetInt32(c, vr, nvr, values, n_values);
-}
-
-static inline fmi3Status host3_set_ints(const host3_fmu *f, fmi3Instance c, const fmi3ValueReference *vr,
-                                        size_t nvr, const fmi3Int32 *values, size_t n_values)
-{
-    return f->api.SetInt32(c, vr, nvr, values, n_values);
-}
-
-static inline fmi3Status host3_get_bools(const host3_fmu *f, fmi3Instance c, const fmi3ValueReference *vr,
-                                         size_t nvr, fmi3Boolean *values, size_t n_values)
-{
-    return f->api.GetBoolean(c, vr, nvr, values, n_values);
-}
-
-static inline fmi3Status host3_set_bools(const host3_fmu *f, fmi3Instance c, const fmi3ValueReference *vr,
-                                         size_t nvr, const fmi3Boolean *values, size_t n_values)
-{
-    return f->api.SetBoolean(c, vr, nvr, values, n_values);
-}
+/* host3_get_reals, host3_set_reals, host3_get_ints ... : f->api.<Get|Set><Type>(c, vr, nvr, values,
+ * n_values) */
+#define HOST3_VALUES(verb, fn, kind, ctype, qual)                                                   \
+    static inline fmi3Status host3_##verb##_##kind(const host3_fmu *f, fmi3Instance c,              \
+                                                   const fmi3ValueReference *vr, size_t nvr,        \
+                                                   qual ctype *values, size_t n_values)             \
+    {                                                                                               \
+        return f->api.fn(c, vr, nvr, values, n_values);                                             \
+    }
+HOST3_VALUES(get, GetFloat64, reals, double, )
+HOST3_VALUES(set, SetFloat64, reals, double, const)
+HOST3_VALUES(get, GetInt32, ints, fmi3Int32, )
+HOST3_VALUES(set, SetInt32, ints, fmi3Int32, const)
+HOST3_VALUES(get, GetBoolean, bools, fmi3Boolean, )
+HOST3_VALUES(set, SetBoolean, bools, fmi3Boolean, const)
+#undef HOST3_VALUES
 
 /* Set every value of v (all elements of an array) from one double. */
 static inline fmi3Status host3_set(const host3_fmu *f, fmi3Instance c, const host_var *v, double value)
