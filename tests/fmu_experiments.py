@@ -9,6 +9,7 @@ FMU's sources (test_fmu_build_description.py).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 import zipfile
 from xml.etree import ElementTree as ET
 
@@ -97,6 +98,28 @@ def manifest(fmu):
     """The parsed ``fmi-ls-manifest.xml`` root of an FMU."""
     with zipfile.ZipFile(fmu) as zf:
         return ET.fromstring(zf.read(LS_REF + "fmi-ls-manifest.xml"))
+
+
+def zip_fmu(folder, fmu):
+    """Zip every file below `folder` into `fmu` (names relative to the folder, in order);
+    returns `fmu`."""
+    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
+        for path in sorted(Path(folder).rglob("*")):
+            if path.is_file():
+                zf.write(path, path.relative_to(folder).as_posix())
+    return fmu
+
+
+def simulate_experiment(fmu, exp, parameters=None):
+    """fmpy's run of experiment `exp` on the FMU at `fmu` (its own, or another build's or
+    edition's): its times, stimuli and outputs, with its parameters (or `parameters`) as start
+    values, FMI 3.0 arrays whole (:func:`start_values`)."""
+    import fmpy
+
+    params = exp.parameters if parameters is None else parameters
+    return fmpy.simulate_fmu(str(fmu), start_time=exp.start, stop_time=exp.stop,
+                             output_interval=exp.step, input=exp.stimuli,
+                             start_values=start_values(exp.variables, params), output=exp.outputs)
 
 
 def load_experiment(fmu):

@@ -40,7 +40,7 @@ from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
 from conftest import FMU_NAMES, assert_refused, expected_binaries
-from fmu_experiments import LS_REF, load_experiment, start_values
+from fmu_experiments import LS_REF, load_experiment, simulate_experiment
 
 from harness.masters.fmpy import simulate_closed_loop, simulate_open_loop
 from harness.metrics import compute_metrics
@@ -194,10 +194,7 @@ def test_plant_alone_equals_fmi2_on_a_validation_input():
 def test_reference_experiment_resimulates_bit_for_bit(fmu_paths, fmu3_paths, name):
     fmu = fmu3_paths[name]
     exp = load_experiment(fmu)
-    result = fmpy.simulate_fmu(str(fmu), start_time=exp.start, stop_time=exp.stop,
-                               output_interval=exp.step, input=exp.stimuli,
-                               start_values=start_values(exp.variables, exp.parameters),
-                               output=exp.outputs)
+    result = simulate_experiment(fmu, exp)
     assert np.array_equal(result["time"], exp.reference["time"])
     for output in exp.outputs:
         assert np.array_equal(np.asarray(result[output], dtype=float), exp.reference[output]), output

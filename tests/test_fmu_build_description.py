@@ -26,7 +26,7 @@ from fmpy.model_description import read_build_description
 import numpy as np
 import pytest
 
-from fmu_experiments import load_experiment
+from fmu_experiments import load_experiment, simulate_experiment, zip_fmu
 from conftest import FMU_NAMES
 
 FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
@@ -83,12 +83,7 @@ def rebuilt(fmu_paths, tmp_path_factory):
         command += ["-Wl,--no-undefined", "-lm", "-o", str(binary)]
         done = subprocess.run(command, capture_output=True, text=True)
         assert done.returncode == 0, f"{name} does not build from its sources:\n{done.stderr}"
-        fmu = root / f"{name}.fmu"
-        with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
-            for path in sorted(folder.rglob("*")):
-                if path.is_file():
-                    zf.write(path, path.relative_to(folder).as_posix())
-        out[name] = fmu
+        out[name] = zip_fmu(folder, root / f"{name}.fmu")
     return out
 
 
@@ -98,9 +93,7 @@ def test_rebuilt_fmu_reproduces_the_reference_results(fmu_paths, rebuilt, name):
         built = zf.read(f"binaries/{fmpy.platform}/{name}.so")
         assert built != shipped.read(f"binaries/{fmpy.platform}/{name}.so")   # really rebuilt
     exp = load_experiment(fmu_paths[name])
-    result = fmpy.simulate_fmu(str(rebuilt[name]), start_time=exp.start, stop_time=exp.stop,
-                               output_interval=exp.step, input=exp.stimuli,
-                               start_values=exp.parameters, output=exp.outputs)
+    result = simulate_experiment(rebuilt[name], exp)
     assert np.array_equal(result["time"], exp.reference["time"])
     for output in exp.outputs:
         assert np.array_equal(np.asarray(result[output], dtype=float), exp.reference[output]), output

@@ -26,7 +26,7 @@ import fmpy
 from fmpy.util import validate_result
 
 import numpy_reference as ref
-from fmu_experiments import LS, LS_REF, load_experiment, manifest, worst_violation
+from fmu_experiments import LS, LS_REF, load_experiment, manifest, simulate_experiment, worst_violation
 from conftest import FMU_NAMES
 
 NAMES = FMU_NAMES
@@ -100,10 +100,7 @@ def test_experiment_is_complete(fmu_paths, name):
 # (b) re-simulation with fmpy
 
 def _simulate(fmu, exp, parameters=None):
-    return fmpy.simulate_fmu(str(fmu), start_time=exp.start, stop_time=exp.stop,
-                             output_interval=exp.step, input=exp.stimuli,
-                             start_values=dict(exp.parameters if parameters is None else parameters),
-                             output=exp.outputs)
+    return simulate_experiment(fmu, exp, parameters)
 
 
 #: a change too small to see in a plot that the comparison must still catch

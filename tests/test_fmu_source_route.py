@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from conftest import FMU_NAMES
-from fmu_experiments import load_experiment, start_values
+from fmu_experiments import load_experiment, simulate_experiment
 
 FMI_VERSIONS = (2, 3)
 
@@ -67,10 +67,7 @@ def test_an_independent_builder_rebuilds_the_fmu_from_its_sources(fmu_paths, fmu
     assert binaries == [f"binaries/{folder}/{name}.so"], binaries
 
     exp = load_experiment(shipped)
-    result = fmpy.simulate_fmu(str(out), start_time=exp.start, stop_time=exp.stop,
-                               output_interval=exp.step, input=exp.stimuli,
-                               start_values=start_values(exp.variables, exp.parameters),
-                               output=exp.outputs)
+    result = simulate_experiment(out, exp)
     assert np.array_equal(result["time"], exp.reference["time"])
     moving = [o for o in exp.outputs if np.ptp(exp.reference[o]) > 1.0]
     assert moving

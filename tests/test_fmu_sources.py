@@ -24,6 +24,7 @@ from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 from conftest import FMU_NAMES, REPO
+from fmu_experiments import zip_fmu
 
 FMI_HEADERS_DIR = pathlib.Path(fmpy.__file__).parent / "c-code"
 FMI_HEADERS = {"fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"}
@@ -126,13 +127,7 @@ def source_built(fmu_paths, tmp_path_factory):
     for name, job in jobs.items():
         log = job.communicate()[0]
         assert job.returncode == 0, f"{name} does not build from its sources:\n{log}"
-        unzipdir = root / name
-        fmu = root / f"{name}.fmu"
-        with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
-            for path in sorted(unzipdir.rglob("*")):
-                if path.is_file():
-                    zf.write(path, path.relative_to(unzipdir).as_posix())
-        fmus[name] = fmu
+        fmus[name] = zip_fmu(root / name, root / f"{name}.fmu")
     return fmus
 
 
