@@ -330,6 +330,23 @@ def assert_refused(call, fmu, *fragments):
     return message
 
 
+def assert_nonfinite_refusals_change_nothing(make, signal, refuse_at, error):
+    """Two blocks from ``make()`` stepped through ``signal``; before each sample in ``refuse_at``
+    the second is handed NaN, +Inf and -Inf, each refused with ``error``: the two outputs must be
+    bitwise equal (a refusal changes nothing)."""
+    import numpy as np
+    a, b = make(), make()
+    out_a, out_b = [], []
+    for k, x in enumerate(signal):
+        if k in refuse_at:
+            for bad in (np.nan, np.inf, -np.inf):
+                with pytest.raises(error):
+                    b.step(bad)
+        out_a.append(a.step(x))
+        out_b.append(b.step(x))
+    assert out_a == out_b
+
+
 def assert_reset_to_start_values(fmu, fresh, terminate_first, outputs):
     """fmi2Reset of ``fmu`` (after fmi2Terminate when ``terminate_first``), then it and ``fresh``
     (a new instance of the same FMU) set up at t = 0: every parameter and input of ``fmu`` has
