@@ -15,7 +15,12 @@ compares with what is committed:
 - ``harness/fmu_variables.py``: the parameter tables through which harness/core.py sets the
   core's parameter structs by FMU name, and what PiezoStageClosedLoop takes from whom
   (harness/closed_loop.py's names);
-- the Interfaces table of ``docs/fmus.md`` (between its markers).
+- the Interfaces table of ``docs/fmus.md`` (between its markers);
+- ``fmu_src/core/piezo_controller_params.h``: the controller's plain parameters (those
+  AdaptiveCompoundController declares with a ``core`` table: a default, a range, perhaps the
+  controller's copy), from which the core sets its defaults, refuses a value out of range,
+  checks a restored state's copies and compares them with the parameters. The range is
+  also the variable's min/max in the model descriptions.
 
 PiezoStageClosedLoop's declaration composes its components': a line ``"controller:rls.p0"``
 takes AdaptiveCompoundController's variable (type, unit, range, description) into the loop,
@@ -65,7 +70,16 @@ UNITS = {
     "um/V": ({"kg": "-1", "m": "-1", "s": "3", "A": "1", "factor": "1e-6"}, "µm/V", False),
 }
 KEYS = {"name", "type", "causality", "field", "size", "unit", "min", "max", "description",
-        "element_description", "element_descriptions", "depends_on", "initial_depends_on"}
+        "element_description", "element_descriptions", "depends_on", "initial_depends_on", "core"}
+#: the keys of a plain controller parameter's ``core`` table: its range (the refusal's text,
+#: an interval first), its default, the controller's copy (a piezo_controller member), and
+#: which ends of the range the model descriptions state as min/max (``described``, default
+#: both; an end another parameter's rule narrows is left out)
+CORE_KEYS = {"range", "default", "copy", "described"}
+CORE_MODEL = "AdaptiveCompoundController"
+CORE_HEADER = Path("fmu_src") / "core" / "piezo_controller_params.h"
+_BOUND = r"(-?inf|-?\d+(?:\.\d+)?(?:e-?\d+)?)"
+_INTERVAL = re.compile(rf"([\[(])\s*{_BOUND}\s*,\s*{_BOUND}\s*([\])])")
 LOG_EVENTS = {2: "Mode changes: instantiate, setup, initialization, terminate, reset, state restore",
               3: "Mode changes: instantiate, initialization, terminate, reset, state restore"}
 
@@ -90,6 +104,7 @@ class Variable:
     element_descriptions: list[str] = dc_field(default_factory=list)
     depends_on: list[str] = dc_field(default_factory=list)
     initial_depends_on: list[str] | None = None     # None: on every known (FMI's default)
+    core: dict | None = None        # a plain controller parameter: range, default, copy
     origin: tuple | None = None     # a composed variable's (component model, its name there)
     start: object = None            # from the compiled model: a value, or a list for an array
 
@@ -174,11 +189,55 @@ def _variable(path, decl):
             if not 1 <= int(i) <= size:
                 raise InterfaceError(f"{where}: element_descriptions names element {i} of {size}")
             elements[int(i) - 1] = text
+    low, high = decl.get("min"), decl.get("max")
+    core = decl.get("core")
+    if core is not None:
+        core = _core(where, decl, core)
+        low, high = core["hull"]
     return Variable(name=decl["name"], type=decl["type"], causality=decl["causality"],
                     field=decl["field"], description=decl["description"], size=size,
-                    unit=decl.get("unit"), min=decl.get("min"), max=decl.get("max"),
+                    unit=decl.get("unit"), min=low, max=high, core=core,
                     element_descriptions=elements, depends_on=list(decl.get("depends_on", [])),
                     initial_depends_on=decl.get("initial_depends_on"))
+
+
+def _core(where, decl, core):
+    """A plain controller parameter's ``core`` table, checked, with its interval and the
+    closed hull of it (the variable's min/max; an infinite end has none)."""
+    unknown = set(core) - CORE_KEYS
+    if unknown:
+        raise InterfaceError(f"{where}: unknown keys in core {sorted(unknown)}")
+    if "range" not in core or "default" not in core:
+        raise InterfaceError(f"{where}: core needs a range and a default")
+    if decl["causality"] != "parameter" or decl["type"] == "Integer" or "size" in decl:
+        raise InterfaceError(f"{where}: core is for a scalar Real or Boolean parameter")
+    if "min" in decl or "max" in decl:
+        raise InterfaceError(f"{where}: min/max come from core's range; declare them once")
+    if not decl["field"].startswith("params.") or "[" in decl["field"]:
+        raise InterfaceError(f"{where}: core needs a field params.<member of piezo_controller_params>")
+    if "copy" in core and not re.fullmatch(r"[A-Za-z_]\w*", core["copy"]):
+        raise InterfaceError(f"{where}: core's copy {core['copy']!r} is not a member name")
+    text, default = core["range"], core["default"]
+    if decl["type"] == "Boolean":
+        if text != "false or true" or not isinstance(default, bool):
+            raise InterfaceError(f"{where}: a Boolean's core range is 'false or true', its default a bool")
+        return {**core, "interval": (0.0, 1.0, False, False), "hull": (None, None)}
+    m = _INTERVAL.match(text)
+    if not m:
+        raise InterfaceError(f"{where}: core's range {text!r} does not begin with an interval "
+                             "such as [0, 1) or (0, inf)")
+    lo, hi = float(m.group(2)), float(m.group(3))
+    interval = (lo, hi, m.group(1) == "(", m.group(4) == ")")
+    if not lo < hi or isinstance(default, bool) or not isinstance(default, (int, float)):
+        raise InterfaceError(f"{where}: core's range {text!r} or default {default!r} is not a real interval and value")
+    if not ((default > lo if interval[2] else default >= lo) and (default < hi if interval[3] else default <= hi)):
+        raise InterfaceError(f"{where}: core's default {default!r} is outside its range {text!r}")
+    described = core.get("described", ["min", "max"])
+    if not set(described) <= {"min", "max"}:
+        raise InterfaceError(f"{where}: core's described lists min and/or max, not {described!r}")
+    hull = tuple(None if abs(x) == float("inf") or end not in described else (int(x) if x == int(x) else x)
+                 for x, end in ((lo, "min"), (hi, "max")))
+    return {**core, "interval": interval, "hull": hull}
 
 
 def _move_field(rules, field, where):
@@ -335,6 +394,66 @@ def c_header(interface):
     return "\n".join(lines)
 
 
+def _c_double(x):
+    if x == float("inf"):
+        return "HUGE_VAL"
+    if x == -float("inf"):
+        return "-HUGE_VAL"
+    text = repr(float(x))
+    return text if ("." in text or "e" in text) else text + ".0"
+
+
+def core_header(interface):
+    """The text of fmu_src/core/piezo_controller_params.h, from the controller's declaration."""
+    params = [v for v in interface.variables if v.core is not None]
+    source = f"fmu_src/{interface.model}/variables.toml"
+    lines = [
+        "/*",
+        " * piezo_controller_params.h - GENERATED by packaging/fmu_interface.py from",
+        f" * {source} (its parameters with a `core` table): edit that",
+        " * declaration and run `python3 packaging/fmu_interface.py`, never this file.",
+        " *",
+        " * The controller's plain parameters: a default, a range and (most) a copy in the controller.",
+        " * piezo_controller_default_params sets the defaults, piezo_controller_init refuses a value",
+        " * outside its range (naming it and the range), piezo_controller_check holds a restored",
+        " * copy to the range and piezo_controller_check_params to the parameter. Parameters with",
+        " * rules across each other (rls.trace_max, sat.*, rls.zero_min, ...) are written by hand.",
+        " *",
+        " * PIEZO_CONTROLLER_PLAIN_PARAMS(X): X(field, name, default, lo, hi, lo_open, hi_open, range)",
+        " * PIEZO_CONTROLLER_PLAIN_COPIES(X): X(field, copy, name, lo, hi, lo_open, hi_open)",
+        " */",
+        "#ifndef PIEZO_CONTROLLER_PARAMS_H",
+        "#define PIEZO_CONTROLLER_PARAMS_H",
+        "",
+        "#include <math.h>",
+        "",
+    ]
+
+    def interval(v):
+        lo, hi, lo_open, hi_open = v.core["interval"]
+        return f"{_c_double(lo)}, {_c_double(hi)}, {int(lo_open)}, {int(hi_open)}"
+
+    def table(macro, rows):
+        out = [f"#define {macro}(X) \\"]
+        out += [f"    {row} \\" for row in rows]
+        out.append("    /* end */")
+        return out
+
+    def default(v):
+        d = v.core["default"]
+        return str(int(d)) if v.type == "Boolean" else _c_double(d)
+
+    lines += table("PIEZO_CONTROLLER_PLAIN_PARAMS", [
+        f'X({v.field[len("params."):]}, "{v.name}", {default(v)}, {interval(v)}, "{v.core["range"]}")'
+        for v in params])
+    lines.append("")
+    lines += table("PIEZO_CONTROLLER_PLAIN_COPIES", [
+        f'X({v.field[len("params."):]}, {v.core["copy"]}, "{v.name}", {interval(v)})'
+        for v in params if "copy" in v.core])
+    lines += ["", "#endif /* PIEZO_CONTROLLER_PARAMS_H */", ""]
+    return "\n".join(lines)
+
+
 # ---------------------------------------------------------------------------------------
 # the start values, from the compiled model
 
@@ -344,15 +463,20 @@ def _model_parts(model, root):
     return [root / "fmu_src" / "fmi" / f"fmu_{part}.c" for part in (m.group(1).split() if m else [])]
 
 
-def compiled_table(model, header_text, root=REPO):
-    """model_table.c's JSON for ``model`` built with ``header_text`` as its variables.h."""
+def compiled_table(model, header_text, root=REPO, core_text=None):
+    """model_table.c's JSON for ``model`` built with ``header_text`` as its variables.h (and
+    ``core_text``, when given, as the core's piezo_controller_params.h)."""
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if not cc:
         raise InterfaceError("a C compiler is needed (the start values are the compiled model's)")
     model_dir = root / "fmu_src" / model
-    core = root / "fmu_src" / "core"
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
+        # the core as it will be: a quoted include finds its own folder's header first
+        core = tmp / "core"
+        shutil.copytree(root / "fmu_src" / "core", core)
+        if core_text is not None:
+            (core / CORE_HEADER.name).write_text(core_text, encoding="utf-8")
         for name in ("config.h", "model.c"):
             shutil.copy(model_dir / name, tmp / name)
         (tmp / "variables.h").write_text(header_text, encoding="utf-8")
@@ -705,12 +829,14 @@ def generated_files(root=REPO, models=MODELS):
         doc = root / DOC
         if doc.is_file():
             out[doc] = doc_with_table(doc, doc.read_text(encoding="utf-8"), interfaces_table(interfaces))
+    core_text = core_header(load(CORE_MODEL, root, cache))
+    out[root / CORE_HEADER] = core_text
     for model in models:
         interface = load(model, root, cache)
         header = c_header(interface)
         out[root / "fmu_src" / model / "variables.h"] = header
         filled = replace(interface, variables=[replace(v) for v in interface.variables])
-        fill_starts(filled, compiled_table(model, header, root))
+        fill_starts(filled, compiled_table(model, header, root, core_text))
         g = guid(model, root)
         out[root / "modelDescription" / f"{model}.xml"] = model_description(filled, 2, g)
         out[root / "modelDescription" / "fmi3" / f"{model}.xml"] = model_description(filled, 3, g)

@@ -215,3 +215,99 @@ def test_the_controller_wildcard_must_come_last(tmp_path):
                     encoding="utf-8")
     with pytest.raises(fi.InterfaceError, match=r"'controller:\*' must come last"):
         fi.load(LOOP, root)
+
+
+#: a plain controller parameter as the adaptation and supervision issues add theirs: its
+#: declaration (with its core range, default and the controller's copy), its two C members,
+#: and the code that uses it (here the driver below): three files
+PLAIN_PARAMETER = '''
+[[variable]]
+name = "rls.new_gain"
+type = "Real"
+causality = "parameter"
+field = "params.rls_new_gain"
+core = { range = "(0, 2] (a new gain)", default = 0.25, copy = "new_gain" }
+description = "A new plain parameter, declared in this one place"
+'''
+
+#: the use: init with the defaults, a value out of range, the restore checks
+PLAIN_DRIVER = r'''
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include "piezo_controller.h"
+static piezo_controller c;
+int main(void)
+{
+    piezo_controller_params p;
+    piezo_diag diag;
+    const char *m;
+    int st;
+    piezo_controller_default_params(&p);
+    printf("default %.17g\n", p.rls_new_gain);
+    st = (int)piezo_controller_init(&c, &p, &diag);
+    printf("init %d copy %.17g\n", st, c.new_gain);
+    printf("params %s\n", (m = piezo_controller_check_params(&c, &p)) ? m : "ok");
+    printf("state %s\n", (m = piezo_controller_check(&c)) ? m : "ok");
+    c.new_gain = 0.5;
+    printf("tampered params %s\n", (m = piezo_controller_check_params(&c, &p)) ? m : "ok");
+    c.new_gain = NAN;
+    printf("tampered state %s\n", (m = piezo_controller_check(&c)) ? m : "ok");
+    p.rls_new_gain = 2.5;
+    memset(&diag, 0, sizeof diag);
+    st = (int)piezo_controller_init(&c, &p, &diag);
+    printf("refused %d %s %s %g\n", st, diag.parameter, diag.valid_range, diag.value);
+    return 0;
+}
+'''
+
+
+def test_a_plain_controller_parameter_takes_its_declaration_its_members_and_its_use(tmp_path):
+    """Reference: the issue's "at most 3 files" and the C core compiled from a scratch copy. A
+    parameter declared with a ``core`` table in the controller's declaration (1), given its
+    member in piezo_controller_params and its copy in piezo_controller (piezo_controller.h,
+    2) and used (3: a driver here) gets, with no other line: its default 0.25 (the model
+    descriptions' start, and piezo_controller_default_params), its range (0, 2] as the
+    descriptions' min/max and as init's refusal of 2.5 naming it and the range, its copy in
+    the controller, which the restore checks hold to the parameter (0.5: "does not match") and
+    to the range (NaN: "rls.new_gain out of range")."""
+    root = _scratch(tmp_path)
+    _write(root, CONTROLLER, PLAIN_PARAMETER)
+    header = root / "fmu_src" / "core" / "piezo_controller.h"
+    text = header.read_text(encoding="utf-8")
+    assert text.count("} piezo_controller_params;") == 1 and text.count("} piezo_controller;") == 1
+    header.write_text(text.replace("} piezo_controller_params;", "    double rls_new_gain;\n} piezo_controller_params;")
+                      .replace("} piezo_controller;", "    double new_gain;\n} piezo_controller;"), encoding="utf-8")
+    files = fi.generated_files(root)
+    for path, content in files.items():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(content, encoding="utf-8")
+    core_header = files[root / fi.CORE_HEADER]
+    assert ('X(rls_new_gain, "rls.new_gain", 0.25, 0.0, 2.0, 1, 0, "(0, 2] (a new gain)")' in core_header)
+    assert 'X(rls_new_gain, new_gain, "rls.new_gain", 0.0, 2.0, 1, 0)' in core_header
+    for sub in ("", "fmi3"):
+        for model in (CONTROLLER, LOOP):
+            found = [(attrs, typ) for name, attrs, typ in
+                     _variables(files[root / "modelDescription" / sub / f"{model}.xml"]).values()
+                     if name == "rls.new_gain"]
+            assert len(found) == 1, (sub, model)
+            attrs, typ = found[0]
+            values = typ if typ else attrs
+            assert (float(values["start"]), float(values["min"]), float(values["max"])) == (0.25, 0.0, 2.0)
+    cc = shutil.which("cc") or shutil.which("gcc")
+    core = root / "fmu_src" / "core"
+    (tmp_path / "driver.c").write_text(PLAIN_DRIVER, encoding="utf-8")
+    import subprocess
+    subprocess.run([cc, "-std=c99", "-O0", "-w", "-I", str(core), str(tmp_path / "driver.c"),
+                    *sorted(str(p) for p in core.glob("*.c")), "-lm", "-o", str(tmp_path / "driver")],
+                   check=True)
+    out = subprocess.run([str(tmp_path / "driver")], check=True, capture_output=True, text=True).stdout
+    assert out.splitlines() == [
+        "default 0.25",
+        "init 0 copy 0.25",
+        "params ok",
+        "state ok",
+        "tampered params controller state does not match its parameters",
+        "tampered state rls.new_gain out of range",
+        "refused 2 rls.new_gain (0, 2] (a new gain) 2.5",
+    ], out

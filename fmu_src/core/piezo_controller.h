@@ -66,7 +66,6 @@
 #define PIEZO_MV_MAX_EXTRA_DELAY 8   /* PIEZO_MV_MAX_D - 1 (PIEZO_MV_MAX_D: piezo_supervisor.h) */
 #define PIEZO_MV_Q_RING 10        /* PIEZO_MV_MAX_D + 1 */
 #define PIEZO_SAT_DEFAULT_V 150   /* default voltage limits +-150 V */
-#define PIEZO_MONITOR_DEFAULT_ERROR 1   /* default bound on |pred_error| [um] */
 #define PIEZO_MONITOR_DEFAULT_SAMPLES 200   /* default divergence window [samples] */
 #define PIEZO_MONITOR_SHARE_PERCENT 25      /* ... or this share of its samples beyond the bound */
 #define PIEZO_MONITOR_SHARE_MIN_SAMPLES 32  /* (judged from this sample on) */
@@ -85,7 +84,6 @@
 #define PIEZO_DETECT_PROBES 8    /* probes per detection at most (then trials without probes) */
 #define PIEZO_DETECT_HELD 200   /* a chosen d that holds this long ends the search for one */
 #define PIEZO_PREVIEW_RING 16    /* stamped previews kept: leads 1..15 samples */
-#define PIEZO_DETECT_PROBE_MAX 1 /* mv.probe_max's default [um] */
 /* Outliers (docs/model.md, controller): a sample whose a-priori prediction error is beyond
  * PIEZO_OUTLIER_RATIO times the recent rms error and beyond PIEZO_OUTLIER_FLOOR_PERCENT % of
  * monitor.pred_error_max, after PIEZO_OUTLIER_QUIET samples within them, while outliers were fewer than

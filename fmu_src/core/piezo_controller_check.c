@@ -3,6 +3,12 @@
 #include <math.h>
 #include <string.h>
 #include "piezo_controller_internal.h"
+#include "piezo_controller_params.h"
+
+int piezo_ctl_in_range(double v, double lo, double hi, int lo_open, int hi_open)
+{
+    return isfinite(v) && (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
+}
 
 /* A ring of values tagged 1 + the sample each is for (0: empty): each tag in its slot,
  * (tag - 1) % ring, and at most `last` */
@@ -38,6 +44,11 @@ const char *piezo_controller_check(const piezo_controller *c)
         || (c->n_resets == 0 ? c->k_start != 0 || c->k_ramp_end != 0
                              : c->k_start == 0 || c->k_ramp_end != c->k_start + c->sup.ramp_samples))
         return "restart (sup.reset) sample, ramp or count inconsistent";
+    /* the plain parameters' copies, each within its declared range (piezo_controller_params.h) */
+#define PLAIN_COPY_CHECK(field, copy, name, lo, hi, lo_open, hi_open) \
+    if (!piezo_ctl_in_range((double)c->copy, lo, hi, lo_open, hi_open)) return name " out of range";
+    PIEZO_CONTROLLER_PLAIN_COPIES(PLAIN_COPY_CHECK)
+#undef PLAIN_COPY_CHECK
     if ((fault = piezo_pi_check(&c->fwd_pi)) != NULL) return fault;
     if ((fault = piezo_pi_inverse_check(&c->inv_pi)) != NULL) return fault;
     if (c->inv_pi.m != c->fwd_pi.m) return "inverse PI and forward PI differ in m";
@@ -60,8 +71,7 @@ const char *piezo_controller_check(const piezo_controller *c)
                                                                               : PIEZO_DETECT_CONFIRM))
         || (c->det_leader < 0 && c->det_run != 0))
         return "delay detection leader out of range";
-    if (!(isfinite(c->probe_max) && c->probe_max >= 0.0) || !(isfinite(c->det_noise) && c->det_noise >= 0.0))
-        return "mv.probe_max or the detection's noise out of range";
+    if (!(isfinite(c->det_noise) && c->det_noise >= 0.0)) return "the detection's noise out of range";
     if (c->det_trial > c->k || !(isfinite(c->det_probe) && c->det_probe >= 0.0 && c->det_probe <= c->probe_max)
         || c->det_probes < 0 || c->det_probes > PIEZO_DETECT_PROBES)
         return "delay detection trial out of range";
@@ -73,22 +83,15 @@ const char *piezo_controller_check(const piezo_controller *c)
         || !piezo_ctl_all_finite(c->det_score, PIEZO_DETECT_N) || !isfinite(c->r_prev)
         || !piezo_ctl_all_finite(c->preview_value, PIEZO_PREVIEW_RING))
         return "delay detection or preview values not finite";
-    if (!(isfinite(c->observer) && c->observer >= 0.0 && c->observer < 1.0)) return "mv.observer out of range";
     if ((c->rls_enabled != 0 && c->rls_enabled != 1) || (c->sat_enabled != 0 && c->sat_enabled != 1))
         return "rls.enabled or sat.enabled is not 0 or 1";
-    if (!(isfinite(c->lambda_u) && c->lambda_u >= 0.0)) return "mv.lambda_u out of range";
-    if (!(isfinite(c->forgetting) && c->forgetting > 0.0 && c->forgetting <= 1.0)) return "rls.forgetting out of range";
     if (c->inv_forgetting != 1.0 / c->forgetting) return "the reciprocal of rls.forgetting kept from init does not match rls.forgetting";
-    if (!(isfinite(c->p0) && c->p0 > 0.0 && isfinite(c->trace_max) && c->trace_max >= 4.0 * c->p0))
-        return "rls.p0 or rls.trace_max out of range";
+    if (!(isfinite(c->trace_max) && c->trace_max >= 4.0 * c->p0)) return "rls.trace_max out of range";
     if (!(isfinite(c->sat_v_min) && isfinite(c->sat_v_max) && (!c->sat_enabled || c->sat_v_max > c->sat_v_min)))
         return "sat.v_min or sat.v_max out of range";
-    if ((c->robust != 0 && c->robust != 1) || !(isfinite(c->excitation) && c->excitation >= 0.0)
-        || c->excitation_samples > 9007199254740992ULL
-        || !(isfinite(c->variance_max) && c->variance_max > 0.0)
-        || !(isfinite(c->p0_loop) && c->p0_loop > 0.0 && 4.0 * c->p0_loop <= c->trace_max)
-        || !(isfinite(c->integral_gain) && c->integral_gain >= 0.0 && c->integral_gain < 1.0))
-        return "rls.robust, rls.excitation*, rls.variance_max, rls.p0_loop or mv.integral out of range";
+    if (c->excitation_samples > 9007199254740992ULL
+        || !(isfinite(c->p0_loop) && c->p0_loop > 0.0 && 4.0 * c->p0_loop <= c->trace_max))
+        return "rls.excitation_time or rls.p0_loop out of range";
     if (!(isfinite(c->noise_y) && c->noise_y >= 0.0 && isfinite(c->noise_y2) && c->noise_y2 >= 0.0
           && isfinite(c->noise_e) && c->noise_e >= 0.0
           && isfinite(c->r_anchor) && isfinite(c->offset) && isfinite(c->integral) && isfinite(c->r_last)
@@ -104,7 +107,6 @@ const char *piezo_controller_check(const piezo_controller *c)
      * of sample k - 1 stamps at most PIEZO_PREVIEW_RING - 1 ahead) */
     if (!ring_tags_valid(c->preview_tag, PIEZO_PREVIEW_RING, c->k + PIEZO_PREVIEW_RING - 1))
         return "a stamped preview's sample is not its slot's or too far ahead";
-    if (!(isfinite(c->pred_error_max) && c->pred_error_max > 0.0)) return "monitor.pred_error_max out of range";
     if (c->divergence_samples > 2147483647u) return "monitor.divergence_samples out of range";
     if (c->mon_forgetting != piezo_ctl_monitor_forgetting((int)c->divergence_samples))
         return "the monitor's window kept from init does not match monitor.divergence_samples";
@@ -156,17 +158,16 @@ const char *piezo_controller_check(const piezo_controller *c)
      * and the loop's estimates are in it; the fallback's window and counts in range */
     {
         double rows[PIEZO_ADMISSIBLE_ROWS][4], bounds[PIEZO_ADMISSIBLE_ROWS];
-        if (!(isfinite(c->zero_min) && isfinite(c->pole_min) && isfinite(c->gain_lo) && isfinite(c->gain_hi)
+        if (!(isfinite(c->zero_min) && isfinite(c->gain_lo) && isfinite(c->gain_hi)
               && c->gain_lo > 0.0 && c->gain_lo < 1.0 && c->gain_hi > 1.0))
-            return "rls.zero_min, rls.pole_min or the admissible gain range out of range";
+            return "rls.zero_min or the admissible gain range out of range";
         piezo_ctl_admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_lo, c->gain_hi, rows, bounds);
         if (memcmp(rows, c->adm_c, sizeof rows) != 0 || memcmp(bounds, c->adm_d, sizeof bounds) != 0)
             return "the admissible set differs from the one rls.zero_min, rls.pole_min and the gain range draw";
         if (piezo_ctl_admissible_violated(c, c->theta_nominal) || (c->robust && piezo_ctl_admissible_violated(c, c->theta)))
             return "the estimates (or the nominal model) outside the admissible set";
     }
-    if (!(isfinite(c->fallback_ratio) && c->fallback_ratio >= 0.0)
-        || c->fallback_samples < 1 || c->fallback_forgetting != 1.0 - 1.0 / (double)c->fallback_samples
+    if (c->fallback_samples < 1 || c->fallback_forgetting != 1.0 - 1.0 / (double)c->fallback_samples
         || !(isfinite(c->fb_adapted) && c->fb_adapted >= 0.0 && isfinite(c->fb_nominal) && c->fb_nominal >= 0.0
              && isfinite(c->learned_rate) && c->learned_rate >= 0.0)
         || c->n_projections > c->k || c->n_fallbacks > c->k
@@ -198,17 +199,19 @@ const char *piezo_controller_check(const piezo_controller *c)
 const char *piezo_controller_check_params(const piezo_controller *c, const piezo_controller_params *q)
 {
     piezo_controller scratch;
+    int differs = 0;
     if (!c || !q) return "controller missing";
     if (piezo_controller_init(&scratch, q, NULL) != PIEZO_OK) return "parameters out of range";
-    if ((q->mv_delay == PIEZO_MV_AUTO_DELAY) != c->auto_delay || (!c->auto_delay && c->d != 1 + q->mv_delay)
-        || c->observer != q->mv_observer || c->fwd_pi.m != q->pi.m || c->inv_creep.exact != (q->creep_exact ? 1 : 0)
-        || c->inv_creep.alpha != -q->creep_alpha || c->lambda_u != q->mv_lambda_u
+    /* the plain parameters' copies equal to the parameters (piezo_controller_params.h) */
+#define PLAIN_DIFFERS(field, copy, name, lo, hi, lo_open, hi_open) differs = differs || c->copy != q->field;
+    PIEZO_CONTROLLER_PLAIN_COPIES(PLAIN_DIFFERS)
+#undef PLAIN_DIFFERS
+    if (differs || (q->mv_delay == PIEZO_MV_AUTO_DELAY) != c->auto_delay || (!c->auto_delay && c->d != 1 + q->mv_delay)
+        || c->fwd_pi.m != q->pi.m || c->inv_creep.exact != (q->creep_exact ? 1 : 0)
+        || c->inv_creep.alpha != -q->creep_alpha
         || c->rls_enabled != (q->rls_enabled ? 1 : 0) || c->sat_enabled != (q->sat_enabled ? 1 : 0)
-        || c->forgetting != q->rls_forgetting || c->p0 != q->rls_p0 || c->trace_max != q->rls_trace_max
-        || c->robust != q->rls_robust || c->excitation != q->rls_excitation
-        || c->excitation_samples != scratch.excitation_samples || c->variance_max != q->rls_variance_max
-        || c->p0_loop != q->rls_p0_loop || c->integral_gain != q->mv_integral
-        || c->pred_error_max != q->monitor_pred_error_max
+        || c->trace_max != q->rls_trace_max || c->excitation_samples != scratch.excitation_samples
+        || c->p0_loop != q->rls_p0_loop
         || c->divergence_samples != (uint64_t)q->monitor_divergence_samples
         || (c->sat_enabled && (c->sat_v_min != q->sat_v_min || c->sat_v_max != q->sat_v_max))
         || c->sup.enabled != q->sup.enabled || c->sup.gain_min != q->sup.gain_min
@@ -216,9 +219,9 @@ const char *piezo_controller_check_params(const piezo_controller *c, const piezo
         || c->sup.clip_samples != scratch.sup.clip_samples || c->sup.detect_samples != scratch.sup.detect_samples
         || c->sup.window != scratch.sup.window || c->sup.clip_error != q->sup.clip_error
         || c->sup.reaction != q->sup.reaction || c->sup.ramp_time != q->sup.ramp_time
-        || c->sup.ramp_samples != scratch.sup.ramp_samples || c->probe_max != q->mv_probe_max
-        || c->zero_min != scratch.zero_min || c->pole_min != q->rls_pole_min || c->gain_lo != q->sup.gain_min || c->gain_hi != q->sup.gain_max
-        || c->fallback_ratio != q->rls_fallback_ratio || c->fallback_samples != scratch.fallback_samples)
+        || c->sup.ramp_samples != scratch.sup.ramp_samples
+        || c->zero_min != scratch.zero_min || c->gain_lo != q->sup.gain_min || c->gain_hi != q->sup.gain_max
+        || c->fallback_samples != scratch.fallback_samples)
         return "controller state does not match its parameters";
     return NULL;
 }

@@ -4,16 +4,7 @@
 #include <string.h>
 #include "piezo_controller_internal.h"
 #include "piezo_plant.h"
-
-/* Observer pole t of T = 1 - t z^-1 (docs/model.md, controller): the
- * measurement noise reaches y through Gd / T, whose norm falls from 1.6 (t = 0)
- * to 0.96 (t = 0.4) for d = 2. With the paper's update, measured on the mismatch
- * case (six scenarios, d = 1, 2, 3, four sensor seeds), t = 0.4 had the lowest
- * median e_rms and t = 0.5 raised the worst case (2.83 nm against 2.65). With the
- * robust update (six scenarios, d = 2 and 3, four seeds: 48 runs) t = 0.4, 0.5,
- * 0.6 give medians 0.81, 0.69, 0.59 nm and worst cases 2.03, 1.98, 2.06 nm:
- * 0.5 has the lowest worst case. The paper's law keeps 0.4. */
-#define DEFAULT_OBSERVER 0.5
+#include "piezo_controller_params.h"
 
 void piezo_controller_default_params(piezo_controller_params *p)
 {
@@ -31,47 +22,32 @@ void piezo_controller_default_params(piezo_controller_params *p)
     p->creep_alpha = plant.creep_alpha;
     p->creep_exact = plant.creep_exact;
     p->h = plant.h;
-    /* No direct feedthrough by default: the control computed from the inputs
-     * of sample k is published at t_(k+1), so the loop delay is d = 2. */
+    /* the plain parameters' defaults (mv.observer, rls.forgetting, rls.robust, mv.integral, ...),
+     * with the measurements that chose them, are in the controller's declaration:
+     * piezo_controller_params.h */
+#define PLAIN_DEFAULT(field, name, dflt, lo, hi, lo_open, hi_open, range) p->field = (dflt);
+    PIEZO_CONTROLLER_PLAIN_PARAMS(PLAIN_DEFAULT)
+#undef PLAIN_DEFAULT
     p->mv_delay = PIEZO_MV_AUTO_DELAY;   /* detected: 2 in a master that exchanges at
                                             communication points, 1 in true Gauss-Seidel */
-    p->mv_feedthrough = 0;
-    p->mv_lambda_u = 0.0;
-    p->mv_observer = DEFAULT_OBSERVER;
-    /* RLS tuning of the robust update (docs/model.md, adaptation): forgetting 0.99 and a
-     * trace bound of 100 (a bound of 1000 tracked the mismatch case's tones 2-3 times better
-     * but burst on 10 of 200 tone runs of drawn stages, up to 68 um; 300 on 5, 100 on none);
-     * the noise-scaled bound rls.variance_max keeps a noisy sensor from driving the estimates. */
+    /* RLS tuning of the robust update (docs/model.md, adaptation): a trace bound of 100 (a
+     * bound of 1000 tracked the mismatch case's tones 2-3 times better but burst on 10 of 200
+     * tone runs of drawn stages, up to 68 um; 300 on 5, 100 on none) */
     p->rls_enabled = 1;
-    p->rls_forgetting = 0.99;
-    p->rls_p0 = 1.0;
     p->rls_trace_max = 100.0;
-    /* robust adaptation and integral action, measured on the stage-use family and the
-     * paper's scenarios (docs/model.md, adaptation); the paper's law is rls.robust = false,
-     * rls.forgetting = 0.995, mv.integral = 0, mv.observer = 0.4 */
-    p->rls_robust = 1;
-    p->rls_excitation = 3.0;
     p->rls_excitation_time = 0.05;
-    p->rls_variance_max = 0.004;
     p->rls_p0_loop = 0.01;
-    p->mv_integral = 0.01;
     p->sat_enabled = 1;
     p->sat_v_min = -PIEZO_SAT_DEFAULT_V;
     p->sat_v_max = PIEZO_SAT_DEFAULT_V;
-    p->monitor_pred_error_max = PIEZO_MONITOR_DEFAULT_ERROR;
     p->monitor_divergence_samples = PIEZO_MONITOR_DEFAULT_SAMPLES;
     piezo_supervisor_default_params(&p->sup);
-    p->mv_probe_max = PIEZO_DETECT_PROBE_MAX;
     /* estimates with guarantees (docs/model.md): measured on the stage family's days and the
      * paper's scenarios. The zero of B at 0.5 or above (a drift to -0.3 rang +-44 um; the
-     * paper's tones move it to 0.66-0.95), poles of A in the hull of real poles in [0, 1) (a
-     * fast pole driven to -0.3 by a 1 Hz tone overshot a step by 8.5 um); b1 and the static
-     * gain are kept within the supervision's sup.gain_min .. sup.gain_max times the nominal
-     * model's (piezo_supervisor.h); the fallback at twice the nominal model's squared errors
-     * over 0.5 s */
+     * paper's tones move it to 0.66-0.95); b1 and the static gain are kept within the
+     * supervision's sup.gain_min .. sup.gain_max times the nominal model's (piezo_supervisor.h);
+     * the fallback's window 0.5 s (rls.pole_min and rls.fallback_ratio: the declaration) */
     p->rls_zero_min = 0.75;
-    p->rls_pole_min = 0.0;
-    p->rls_fallback_ratio = 2.0;
     p->rls_fallback_window = 0.5;
 }
 
@@ -166,31 +142,18 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     if (p->mv_delay < PIEZO_MV_AUTO_DELAY || p->mv_delay > PIEZO_MV_MAX_EXTRA_DELAY)
         return piezo_refuse(diag, "mv.delay", "-1 (detect d in 1..3) or 0..8 samples (d = 1 + mv.delay)",
                             (double)p->mv_delay);
-    if (p->mv_feedthrough != 0 && p->mv_feedthrough != 1)
-        return piezo_refuse(diag, "mv.feedthrough", "false or true", (double)p->mv_feedthrough);
-    if (p->mv_hold_inputs != 0 && p->mv_hold_inputs != 1)
-        return piezo_refuse(diag, "mv.hold_inputs", "false or true", (double)p->mv_hold_inputs);
-    if (!(isfinite(p->mv_lambda_u) && p->mv_lambda_u >= 0.0))
-        return piezo_refuse(diag, "mv.lambda_u", "[0, inf)", p->mv_lambda_u);
-    if (!(isfinite(p->mv_observer) && p->mv_observer >= 0.0 && p->mv_observer < 1.0))
-        return piezo_refuse(diag, "mv.observer", "[0, 1) (pole of the observer polynomial T)", p->mv_observer);
-    if (!(isfinite(p->rls_forgetting) && p->rls_forgetting > 0.0 && p->rls_forgetting <= 1.0))
-        return piezo_refuse(diag, "rls.forgetting", "(0, 1]", p->rls_forgetting);
-    if (!(isfinite(p->rls_p0) && p->rls_p0 > 0.0))
-        return piezo_refuse(diag, "rls.p0", "(0, inf)", p->rls_p0);
+    /* the plain parameters, each within its declared range (piezo_controller_params.h) */
+#define PLAIN_CHECK(field, name, dflt, lo, hi, lo_open, hi_open, range) \
+    if (!piezo_ctl_in_range((double)p->field, lo, hi, lo_open, hi_open)) \
+        return piezo_refuse(diag, name, range, (double)p->field);
+    PIEZO_CONTROLLER_PLAIN_PARAMS(PLAIN_CHECK)
+#undef PLAIN_CHECK
     if (!(isfinite(p->rls_trace_max) && p->rls_trace_max >= 4.0 * p->rls_p0))
         return piezo_refuse(diag, "rls.trace_max", "[4 rls.p0, inf) (trace of the initial covariance)", p->rls_trace_max);
-    if (p->rls_robust != 0 && p->rls_robust != 1)
-        return piezo_refuse(diag, "rls.robust", "false or true", (double)p->rls_robust);
-    if (!(isfinite(p->rls_excitation) && p->rls_excitation >= 0.0))
-        return piezo_refuse(diag, "rls.excitation", "[0, inf) (times the measured noise of y_meas)", p->rls_excitation);
     if (!(isfinite(p->rls_excitation_time) && p->rls_excitation_time >= 0.0
           && p->rls_excitation_time <= 3600.0 && p->rls_excitation_time / p->h <= 9007199254740992.0))
         return piezo_refuse(diag, "rls.excitation_time", "[0, 3600] s (and at most 2^53 samples of h)",
                             p->rls_excitation_time);
-    if (!(isfinite(p->rls_variance_max) && p->rls_variance_max > 0.0))
-        return piezo_refuse(diag, "rls.variance_max", "(0, inf) (bound on trace(P) times the measured noise squared)",
-                            p->rls_variance_max);
     if (!(isfinite(p->rls_p0_loop) && p->rls_p0_loop > 0.0 && 4.0 * p->rls_p0_loop <= p->rls_trace_max))
         return piezo_refuse(diag, "rls.p0_loop", "(0, rls.trace_max / 4]", p->rls_p0_loop);
     if (!(isfinite(p->mv_integral) && p->mv_integral >= 0.0 && p->mv_integral < 1.0))
@@ -200,13 +163,9 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
         if (!(isfinite(p->sat_v_max) && p->sat_v_max > p->sat_v_min))
             return piezo_refuse(diag, "sat.v_max", "finite, > sat.v_min", p->sat_v_max);
     }
-    if (!(isfinite(p->monitor_pred_error_max) && p->monitor_pred_error_max > 0.0))
-        return piezo_refuse(diag, "monitor.pred_error_max", "(0, inf) um", p->monitor_pred_error_max);
     if (p->monitor_divergence_samples < 0)
         return piezo_refuse(diag, "monitor.divergence_samples", "0..2147483647 samples (0: never)",
                             (double)p->monitor_divergence_samples);
-    if (!(isfinite(p->mv_probe_max) && p->mv_probe_max >= 0.0))
-        return piezo_refuse(diag, "mv.probe_max", "[0, inf) um (0: no delay probe)", p->mv_probe_max);
     /* the admissible set must hold the nominal model: the estimates start there, and the fallback
      * returns there (tf.b1 > 0 and |tf.b2| <= 0.999 tf.b1 are checked above). A nominal zero below
      * rls.zero_min lowers the bound to it (admissible_zero_min), so the default suits any
@@ -214,9 +173,6 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     if (!(isfinite(p->rls_zero_min) && p->rls_zero_min >= -ZERO_RADIUS_MAX && p->rls_zero_min <= ZERO_RADIUS_MAX))
         return piezo_refuse(diag, "rls.zero_min", "[-0.999, 0.999] (lowest zero of B the estimates may have; "
                             "the nominal zero -tf.b2/tf.b1 when that is lower)", p->rls_zero_min);
-    if (!(isfinite(p->rls_pole_min) && p->rls_pole_min >= -1.0 && p->rls_pole_min < 1.0))
-        return piezo_refuse(diag, "rls.pole_min", "[-1, 1) (the poles of A in the hull of real poles in "
-                            "[rls.pole_min, 1))", p->rls_pole_min);
     {
         /* the nominal model inside the set, row by row (the parameter that draws each row) */
         static const char *const who[PIEZO_ADMISSIBLE_ROWS] = {
@@ -241,9 +197,6 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
                                     : (i < 5 ? p->rls_zero_min : (i == 5 || i == 7 ? p->sup.gain_max
                                                                                     : p->sup.gain_min)));
     }
-    if (!(isfinite(p->rls_fallback_ratio) && p->rls_fallback_ratio >= 0.0))
-        return piezo_refuse(diag, "rls.fallback_ratio", "[0, inf) (times the nominal model's squared prediction "
-                            "errors; 0: no prediction test)", p->rls_fallback_ratio);
     if (!(isfinite(p->rls_fallback_window) && p->rls_fallback_window > 0.0 && p->rls_fallback_window <= 3600.0))
         return piezo_refuse(diag, "rls.fallback_window", "(0, 3600] s (window of the prediction test, at least "
                             "one sample)", p->rls_fallback_window);
@@ -258,36 +211,27 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
     if (st != PIEZO_OK) return st;
     c->auto_delay = p->mv_delay == PIEZO_MV_AUTO_DELAY;
     c->d = c->auto_delay ? PIEZO_DETECT_START_D : 1 + p->mv_delay;
-    c->lambda_u = p->mv_lambda_u;
-    c->observer = p->mv_observer;
+#define PLAIN_COPY(field, copy, name, lo, hi, lo_open, hi_open) c->copy = p->field;
+    PIEZO_CONTROLLER_PLAIN_COPIES(PLAIN_COPY)
+#undef PLAIN_COPY
     c->rls_enabled = p->rls_enabled ? 1 : 0;
-    c->forgetting = p->rls_forgetting;
     c->inv_forgetting = 1.0 / p->rls_forgetting;
-    c->p0 = p->rls_p0;
     c->trace_max = p->rls_trace_max;
-    c->robust = p->rls_robust;
-    c->excitation = p->rls_excitation;
     c->excitation_samples = rounded_samples(p->rls_excitation_time, p->h);
-    c->variance_max = p->rls_variance_max;
     c->p0_loop = p->rls_p0_loop;
-    c->integral_gain = p->mv_integral;
     c->sat_enabled = p->sat_enabled ? 1 : 0;
     c->sat_v_min = p->sat_v_min;
     c->sat_v_max = p->sat_v_max;
-    c->pred_error_max = p->monitor_pred_error_max;
     c->divergence_samples = (uint64_t)p->monitor_divergence_samples;
     c->mon_forgetting = piezo_ctl_monitor_forgetting(p->monitor_divergence_samples);
     c->theta_nominal[0] = p->tf_a1;
     c->theta_nominal[1] = p->tf_a2;
     c->theta_nominal[2] = p->tf_b1;
     c->theta_nominal[3] = p->tf_b2;
-    c->probe_max = p->mv_probe_max;
     c->zero_min = admissible_zero_min(p);
-    c->pole_min = p->rls_pole_min;
     c->gain_lo = p->sup.gain_min;
     c->gain_hi = p->sup.gain_max;
     piezo_ctl_admissible_rows(c->theta_nominal, c->zero_min, c->pole_min, c->gain_lo, c->gain_hi, c->adm_c, c->adm_d);
-    c->fallback_ratio = p->rls_fallback_ratio;
     c->fallback_samples = rounded_samples(p->rls_fallback_window, p->h);
     if (c->fallback_samples < 1) c->fallback_samples = 1;
     c->fallback_forgetting = 1.0 - 1.0 / (double)c->fallback_samples;
