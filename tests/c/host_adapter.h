@@ -8,6 +8,8 @@
  *   hostV_start, hostV_free_instance    a fresh instance in Step Mode, and its end
  *   hostV_get_state ... hostV_deserialize   the six FMU-state calls
  *   hostV_snapshot, hostV_same_state    the state as a blob, and a comparison with one
+ *   hostV_get_reals, hostV_set_reals, hostV_get_ints ... hostV_set_bools
+ *                                       the typed value calls
  *   hostV_real_outputs                  every Real (Float64) output
  *
  * The names the including adapter defines (this file undefines them at its
@@ -22,7 +24,12 @@
  *   HOSTV_SERIALIZE, HOSTV_DESERIALIZE
  *                        f->api's names of the six FMU-state functions (the
  *                        versions spell them differently: GetFMUstate, GetFMUState)
- *   HOSTV_GET_REAL(f, c, vr, x)  one Real (Float64) value into *x
+ *   HOSTV_VR             its value reference type
+ *   HOSTV_VALUE_TYPES(X) X(api name, kind, C type) of the three value types:
+ *                        X(Real, reals, double) ... (FMI 3.0: Float64, Int32)
+ *   HOSTV_VALUES_CALL(fn, c, vr, nvr, values, n_values)
+ *                        a call of the get or set function fn (FMI 2.0 has
+ *                        one value per value reference: no n_values)
  *
  * No include guard: it is meant to be included once per version.
  */
@@ -146,6 +153,21 @@ static inline int HOSTV(same_state)(const HOSTV_FMU *f, HOSTV_C c, const unsigne
 /* ------------------------------------------------------------------------ */
 /* values                                                                    */
 
+/* hostV_get_reals, hostV_set_reals, hostV_get_ints ... : f->api.<Get|Set><Type> */
+#define HOSTV_GET_SET(api_name, kind, ctype)                                                            \
+    static inline HOSTV_STATUS HOSTV(get_##kind)(const HOSTV_FMU *f, HOSTV_C c, const HOSTV_VR *vr,    \
+                                                 size_t nvr, ctype *values, size_t n_values)           \
+    {                                                                                                   \
+        return HOSTV_VALUES_CALL(f->api.Get##api_name, c, vr, nvr, values, n_values);                   \
+    }                                                                                                   \
+    static inline HOSTV_STATUS HOSTV(set_##kind)(const HOSTV_FMU *f, HOSTV_C c, const HOSTV_VR *vr,    \
+                                                 size_t nvr, const ctype *values, size_t n_values)     \
+    {                                                                                                   \
+        return HOSTV_VALUES_CALL(f->api.Set##api_name, c, vr, nvr, values, n_values);                   \
+    }
+HOSTV_VALUE_TYPES(HOSTV_GET_SET)
+#undef HOSTV_GET_SET
+
 /* Every Real (Float64) output into out[capacity] (in variable order); returns how many,
  * or -1 on an error status or more outputs than capacity (a FAIL). */
 static inline int HOSTV(real_outputs)(const HOSTV_FMU *f, HOSTV_C c, double *out, int capacity)
@@ -158,7 +180,7 @@ static inline int HOSTV(real_outputs)(const HOSTV_FMU *f, HOSTV_C c, double *out
             host_fail("%s has more than %d Real outputs: the host's buffer is too small", f->id, capacity);
             return -1;
         }
-        if (HOSTV_GET_REAL(f, c, &f->vars[i].vr, &out[n]) != HOSTV_OK)
+        if (HOSTV(get_reals)(f, c, &f->vars[i].vr, 1, &out[n], 1) != HOSTV_OK)
             return -1;
         n++;
     }
@@ -181,4 +203,6 @@ static inline int HOSTV(real_outputs)(const HOSTV_FMU *f, HOSTV_C c, double *out
 #undef HOSTV_STATE_SIZE
 #undef HOSTV_SERIALIZE
 #undef HOSTV_DESERIALIZE
-#undef HOSTV_GET_REAL
+#undef HOSTV_VR
+#undef HOSTV_VALUE_TYPES
+#undef HOSTV_VALUES_CALL

@@ -177,7 +177,7 @@ static inline fmi2Status host2_step_out(const host2_fmu *f, fmi2Component c, dou
 }
 
 /* ------------------------------------------------------------------------ */
-/* loading, start, FMU states, Real outputs: written once for both versions  */
+/* loading, start, FMU states, values: written once for both versions       */
 
 #define HOSTV(name) host2_##name
 #define HOSTV_FMU host2_fmu
@@ -195,28 +195,14 @@ static inline fmi2Status host2_step_out(const host2_fmu *f, fmi2Component c, dou
 #define HOSTV_STATE_SIZE SerializedFMUstateSize
 #define HOSTV_SERIALIZE SerializeFMUstate
 #define HOSTV_DESERIALIZE DeSerializeFMUstate
-#define HOSTV_GET_REAL(f, c, vr, x) (f)->api.GetReal((c), (vr), 1, (x))
+#define HOSTV_VR fmi2ValueReference
+#define HOSTV_VALUE_TYPES(X) X(Real, reals, double) X(Integer, ints, fmi2Integer) X(Boolean, bools, fmi2Boolean)
+/* FMI 2.0 has one value per value reference: n_values is FMI 3.0's */
+#define HOSTV_VALUES_CALL(fn, c, vr, nvr, values, n_values) ((void)(n_values), fn((c), (vr), (nvr), (values)))
 #include "host_adapter.h"
 
 /* ------------------------------------------------------------------------ */
-/* values (FMI 2.0 has one value per value reference: n_values is FMI 3.0's) */
-
-/* host2_get_reals, host2_set_reals, host2_get_ints ... : f->api.<Get|Set><Type>(c, vr, nvr, values) */
-#define HOST2_VALUES(verb, fn, kind, ctype, qual)                                                   \
-    static inline fmi2Status host2_##verb##_##kind(const host2_fmu *f, fmi2Component c,             \
-                                                   const fmi2ValueReference *vr, size_t nvr,        \
-                                                   qual ctype *values, size_t n_values)             \
-    {                                                                                               \
-        (void)n_values;                                                                             \
-        return f->api.fn(c, vr, nvr, values);                                                       \
-    }
-HOST2_VALUES(get, GetReal, reals, double, )
-HOST2_VALUES(set, SetReal, reals, double, const)
-HOST2_VALUES(get, GetInteger, ints, fmi2Integer, )
-HOST2_VALUES(set, SetInteger, ints, fmi2Integer, const)
-HOST2_VALUES(get, GetBoolean, bools, fmi2Boolean, )
-HOST2_VALUES(set, SetBoolean, bools, fmi2Boolean, const)
-#undef HOST2_VALUES
+/* values                                                                    */
 
 /* Set one variable of any type from a double. */
 static inline fmi2Status host2_set(const host2_fmu *f, fmi2Component c, const host_var *v, double value)

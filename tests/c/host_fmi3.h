@@ -177,7 +177,7 @@ static inline fmi3Status host3_step(const host3_fmu *f, fmi3Instance c, double t
 }
 
 /* ------------------------------------------------------------------------ */
-/* loading, start, FMU states, Real outputs: written once for both versions  */
+/* loading, start, FMU states, values: written once for both versions       */
 
 #define HOSTV(name) host3_##name
 #define HOSTV_FMU host3_fmu
@@ -195,28 +195,13 @@ static inline fmi3Status host3_step(const host3_fmu *f, fmi3Instance c, double t
 #define HOSTV_STATE_SIZE SerializedFMUStateSize
 #define HOSTV_SERIALIZE SerializeFMUState
 #define HOSTV_DESERIALIZE DeserializeFMUState
-#define HOSTV_GET_REAL(f, c, vr, x) (f)->api.GetFloat64((c), (vr), 1, (x), 1)
+#define HOSTV_VR fmi3ValueReference
+#define HOSTV_VALUE_TYPES(X) X(Float64, reals, double) X(Int32, ints, fmi3Int32) X(Boolean, bools, fmi3Boolean)
+#define HOSTV_VALUES_CALL(fn, c, vr, nvr, values, n_values) fn((c), (vr), (nvr), (values), (n_values))
 #include "host_adapter.h"
 
 /* ------------------------------------------------------------------------ */
 /* values                                                                    */
-
-/* host3_get_reals, host3_set_reals, host3_get_ints ... : f->api.<Get|Set><Type>(c, vr, nvr, values,
- * n_values) */
-#define HOST3_VALUES(verb, fn, kind, ctype, qual)                                                   \
-    static inline fmi3Status host3_##verb##_##kind(const host3_fmu *f, fmi3Instance c,              \
-                                                   const fmi3ValueReference *vr, size_t nvr,        \
-                                                   qual ctype *values, size_t n_values)             \
-    {                                                                                               \
-        return f->api.fn(c, vr, nvr, values, n_values);                                             \
-    }
-HOST3_VALUES(get, GetFloat64, reals, double, )
-HOST3_VALUES(set, SetFloat64, reals, double, const)
-HOST3_VALUES(get, GetInt32, ints, fmi3Int32, )
-HOST3_VALUES(set, SetInt32, ints, fmi3Int32, const)
-HOST3_VALUES(get, GetBoolean, bools, fmi3Boolean, )
-HOST3_VALUES(set, SetBoolean, bools, fmi3Boolean, const)
-#undef HOST3_VALUES
 
 /* Set every value of v (all elements of an array) from one double. */
 static inline fmi3Status host3_set(const host3_fmu *f, fmi3Instance c, const host_var *v, double value)
