@@ -13,25 +13,7 @@
 #define HOST_FMI2_H
 
 #include "host_common.h"
-#include "fmi2Functions.h"
-
-#define FMI2_API(X) \
-    X(GetTypesPlatform) X(GetVersion) X(SetDebugLogging) X(Instantiate) X(FreeInstance) \
-    X(SetupExperiment) X(EnterInitializationMode) X(ExitInitializationMode) X(Terminate) X(Reset) \
-    X(GetReal) X(GetInteger) X(GetBoolean) X(GetString) X(SetReal) X(SetInteger) X(SetBoolean) \
-    X(SetString) X(GetFMUstate) X(SetFMUstate) X(FreeFMUstate) X(SerializedFMUstateSize) \
-    X(SerializeFMUstate) X(DeSerializeFMUstate) X(GetDirectionalDerivative) \
-    X(EnterEventMode) X(NewDiscreteStates) X(EnterContinuousTimeMode) X(CompletedIntegratorStep) \
-    X(SetTime) X(SetContinuousStates) X(GetDerivatives) X(GetEventIndicators) \
-    X(GetContinuousStates) X(GetNominalsOfContinuousStates) \
-    X(SetRealInputDerivatives) X(GetRealOutputDerivatives) X(DoStep) X(CancelStep) X(GetStatus) \
-    X(GetRealStatus) X(GetIntegerStatus) X(GetBooleanStatus) X(GetStringStatus)
-
-typedef struct {
-#define FMI2_FIELD(name) fmi2##name##TYPE *name;
-    FMI2_API(FMI2_FIELD)
-#undef FMI2_FIELD
-} fmi2_api;
+#include "fmi2_api.h"        /* FMI2_API, fmi2_api */
 
 typedef HOST_FMU_STRUCT(fmi2_api) host2_fmu;
 
