@@ -113,10 +113,7 @@ void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller
 int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
                          char *text, size_t size)
 {
-    piezo_sup_context ctx;
-    memset(&ctx, 0, sizeof ctx);
-    ctx.t0 = t0;
-    ctx.h = h;
+    piezo_sup_context ctx = fmu_controller_context(t0, h);
     if (reset_message(t, c, &ctx, 0, text, size))
         return 1;
     if (c->sup.status && !t->said_verified)
