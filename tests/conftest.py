@@ -347,6 +347,43 @@ def assert_nonfinite_refusals_change_nothing(make, signal, refuse_at, error):
     assert out_a == out_b
 
 
+def assert_state_continues_bitwise(make_fmu, package, params, run, n_before, n_after, carried):
+    """An FMU state taken after ``n_before`` samples of ``run(fmu, n, k0=...)`` (``params`` set
+    at initialization) continues bitwise: the next ``n_after`` samples equal the uninterrupted
+    run's when the state is set back, when its serialized blob is deserialized into the same
+    instance, and when the blob is deserialized into a fresh instance never initialized, where
+    ``carried(fresh)`` first checks what the state brought (its parameters)."""
+    import numpy as np
+    fmu = make_fmu(package)
+    fmu.initialize(params)
+    run(fmu, n_before)
+    state = fmu.slave.getFMUstate()
+    blob = fmu.slave.serializeFMUstate(state)
+    reference = run(fmu, n_after, k0=n_before)
+
+    # set the state back: same continuation
+    fmu.slave.setFMUstate(state)
+    fmu.k = n_before
+    assert np.array_equal(run(fmu, n_after, k0=n_before), reference)
+    fmu.slave.freeFMUstate(state)
+
+    # deserialize in the same instance
+    state2 = fmu.slave.deSerializeFMUstate(blob)
+    fmu.slave.setFMUstate(state2)
+    fmu.k = n_before
+    assert np.array_equal(run(fmu, n_after, k0=n_before), reference)
+    fmu.slave.freeFMUstate(state2)
+
+    # deserialize into a fresh instance that was never initialized
+    fresh = make_fmu(package)
+    state3 = fresh.slave.deSerializeFMUstate(blob)
+    fresh.slave.setFMUstate(state3)
+    fresh.slave.freeFMUstate(state3)
+    fresh.h, fresh.k = fmu.h, n_before
+    carried(fresh)
+    assert np.array_equal(run(fresh, n_after, k0=n_before), reference)
+
+
 def assert_reset_to_start_values(fmu, fresh, terminate_first, outputs):
     """fmi2Reset of ``fmu`` (after fmi2Terminate when ``terminate_first``), then it and ``fresh``
     (a new instance of the same FMU) set up at t = 0: every parameter and input of ``fmu`` has
@@ -360,6 +397,27 @@ def assert_reset_to_start_values(fmu, fresh, terminate_first, outputs):
         if var.causality in ("parameter", "input"):
             assert fmu.get(name) == start_value(var), name
     assert fmu.get_reals(outputs) == fresh.get_reals(outputs)
+
+
+def reset_after_a_non_default_run(make_fmu, package, non_default, run, inputs, terminate_first, outputs):
+    """The reset tests' common start: ``non_default`` must set every parameter of ``package``
+    away from its XML start value; an instance initialized with them and run 200 samples
+    (``run(fmu, n)``), then its ``inputs`` set, must hold them all; then
+    assert_reset_to_start_values of it against a fresh instance. Returns (the reset instance,
+    the fresh one), both in InitializationMode."""
+    variables = package.variables
+    params = {n for n, var in variables.items() if var.causality == "parameter"}
+    assert set(non_default) == params       # a new parameter must be added here
+    assert all(non_default[n] != start_value(variables[n]) for n in params)
+
+    fmu = make_fmu(package)
+    fmu.initialize(non_default)
+    run(fmu, 200)
+    fmu.set(inputs)
+    assert {n: fmu.get(n) for n in params} == non_default     # the run really used them
+    fresh = make_fmu(package)
+    assert_reset_to_start_values(fmu, fresh, terminate_first, outputs)
+    return fmu, fresh
 
 
 def start_value(var):

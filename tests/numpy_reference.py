@@ -288,6 +288,30 @@ def rls_project(theta, b1_nominal: float) -> np.ndarray:
     return th
 
 
+def _recorded(q, y):
+    """Recorded data (q(k), y(k)) as arrays, and their pasts Q(i), Y(i) (0.0 before k = 0)."""
+    q = np.asarray(q, dtype=float)
+    y = np.asarray(y, dtype=float)
+    return q, y, _past(q), _past(y)
+
+
+def rls_step(theta, P, phi, e, lam: float, trace_max: float):
+    """One exponentially weighted RLS update with the trace bound, from the a-priori error e:
+
+        K      = P phi / (lambda + phi^T P phi)
+        theta  = theta + K e,   P = (P - K phi^T P) / lambda
+        if trace(P) > trace_max: P = P trace_max / trace(P)
+
+    Returns theta, P and whether the trace bound acted."""
+    K = P @ phi / (lam + phi @ P @ phi)
+    theta = theta + K * e
+    P = (P - np.outer(K, phi @ P)) / lam
+    tr = np.trace(P)
+    if tr > trace_max:
+        return theta, P * (trace_max / tr), True
+    return theta, P, False
+
+
 def rls_reference(q, y, d: int, forgetting: float, p0: float, trace_max: float, theta0,
                   skip=None) -> dict:
     """Textbook exponentially weighted RLS, run over recorded data (q(k), y(k)), k = 0..N-1,
@@ -304,12 +328,9 @@ def rls_reference(q, y, d: int, forgetting: float, p0: float, trace_max: float, 
     theta and P untouched at sample k (e(k) is still reported). Returns a dict of arrays:
     theta (N, 4) after sample k, P (N, 4, 4) after sample k, e (N,), trace_scaled (N, bool:
     the trace bound acted at k)."""
-    q = np.asarray(q, dtype=float)
-    y = np.asarray(y, dtype=float)
+    q, y, Q, Y = _recorded(q, y)
     n = len(y)
     lam = float(forgetting)
-
-    Y, Q = _past(y), _past(q)
 
     theta = np.array(theta0, dtype=float)
     b1_nominal = theta[2]
@@ -320,13 +341,7 @@ def rls_reference(q, y, d: int, forgetting: float, p0: float, trace_max: float, 
         phi = np.array([-Y(k - 1), -Y(k - 2), Q(k - d), Q(k - d - 1)])
         e = y[k] - phi @ theta
         if skip is None or not skip[k]:
-            K = P @ phi / (lam + phi @ P @ phi)
-            theta = theta + K * e
-            P = (P - np.outer(K, phi @ P)) / lam
-            tr = np.trace(P)
-            if tr > trace_max:
-                P = P * (trace_max / tr)
-                out["trace_scaled"][k] = True
+            theta, P, out["trace_scaled"][k] = rls_step(theta, P, phi, e, lam, trace_max)
             theta = rls_project(theta, b1_nominal)
         out["theta"][k] = theta
         out["P"][k] = P
@@ -452,13 +467,10 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
     e_before is the prediction error of the sample before the first (0 from rest). Returns
     theta (N, 4), P (N, 4, 4), e (N,), c (N,) after each sample, adapting (N, bool: updated,
     or reset by a fallback) and fallback (N, int: 0, 1 a jump, 2 a prediction)."""
-    q = np.asarray(q, dtype=float)
-    y = np.asarray(y, dtype=float)
+    q, y, Q, Y = _recorded(q, y)
     r = np.asarray(r, dtype=float)
     n = len(y)
     lam = float(forgetting)
-
-    Y, Q = _past(y), _past(q)
 
     theta = np.array(theta0, dtype=float)
     nominal = np.array(theta0, dtype=float)
@@ -505,12 +517,7 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         excited, adapting = adapting, adapting and not noisy
         if adapting:
             bound = trace_max if m_e == 0.0 else min(trace_max, variance_max / m_e ** 2)
-            K = P @ phi / (lam + phi @ P @ phi)
-            theta = theta + K * e
-            P = (P - np.outer(K, phi @ P)) / lam
-            tr = np.trace(P)
-            if tr > bound:
-                P = P * (bound / tr)
+            theta, P, _ = rls_step(theta, P, phi, e, lam, bound)
             theta = admissible_projection(theta, P, C, d_rows, nominal)
         elif not excited and (hold_same is None or same < hold_same):
             c = c + OFFSET_GAIN * e

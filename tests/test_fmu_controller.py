@@ -12,7 +12,8 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from harness import core
-from conftest import assert_refused, assert_reset_to_start_values, start_value, state_format
+from conftest import (assert_refused, assert_state_continues_bitwise, reset_after_a_non_default_run,
+                      start_value, state_format)
 
 OUTPUTS = ["v", "q", "est.a1", "est.a2", "est.b1", "est.b2", "pred_error"]   # the Real outputs of the law
 TIMING = ["loop_delay", "loop_delay_time", "preview_lead", "meas_offset"]   # what it detected
@@ -295,25 +296,11 @@ def test_many_samples_per_step_equal_one_sample_per_step(controller, make_fmu, e
 @pytest.mark.parametrize("exact", [False, True])
 def test_state_save_restore_and_serialization_continue_bitwise(controller, make_fmu, exact):
     params = {"creep.exact": exact, "sat.enabled": True, "sat.v_min": -30.0, "sat.v_max": 30.0, **OPEN_LOOP}
-    fmu = make_fmu(controller)
-    fmu.initialize(params)
-    run(fmu, 1200)
-    state = fmu.slave.getFMUstate()
-    blob = fmu.slave.serializeFMUstate(state)
-    reference = run(fmu, 800, k0=1200)
 
-    fmu.slave.setFMUstate(state)
-    fmu.k = 1200
-    assert np.array_equal(run(fmu, 800, k0=1200), reference)
-    fmu.slave.freeFMUstate(state)
+    def carried(fresh):
+        assert fresh.get("sat.enabled") is True and fresh.get("creep.exact") == exact
 
-    fresh = make_fmu(controller)
-    restored = fresh.slave.deSerializeFMUstate(blob)
-    fresh.slave.setFMUstate(restored)
-    fresh.slave.freeFMUstate(restored)
-    fresh.h, fresh.k = H, 1200
-    assert fresh.get("sat.enabled") is True and fresh.get("creep.exact") == exact
-    assert np.array_equal(run(fresh, 800, k0=1200), reference)
+    assert_state_continues_bitwise(make_fmu, controller, params, run, 1200, 800, carried)
 
 
 def _uninterrupted(controller, make_fmu, n, params=None):
@@ -348,18 +335,8 @@ def test_reset_restores_every_start_value(controller, make_fmu, terminate_first)
     values of modelDescription.xml as read by fmpy (every parameter and input, exact
     equality), and a fresh instance: its outputs in initialization mode and its 300-sample
     run must equal the reset instance's bitwise."""
-    variables = controller.variables
-    params = {n for n, var in variables.items() if var.causality == "parameter"}
-    assert set(NON_DEFAULT_PARAMETERS) == params       # a new parameter must be added here
-    assert all(NON_DEFAULT_PARAMETERS[n] != start_value(variables[n]) for n in params)
-
-    fmu = make_fmu(controller)
-    fmu.initialize(NON_DEFAULT_PARAMETERS)
-    run(fmu, 200)
-    fmu.set({"y_ref": 1.5, "y_meas": -0.5})
-    assert {n: fmu.get(n) for n in params} == NON_DEFAULT_PARAMETERS     # the run really used them
-    fresh = make_fmu(controller)
-    assert_reset_to_start_values(fmu, fresh, terminate_first, OUTPUTS)
+    fmu, fresh = reset_after_a_non_default_run(make_fmu, controller, NON_DEFAULT_PARAMETERS, run, {"y_ref": 1.5, "y_meas": -0.5},
+                                               terminate_first, OUTPUTS)
     for f in (fmu, fresh):                     # the same open-loop run on both: supervision off
         f.set(OPEN_LOOP)
     fmu.slave.exitInitializationMode()

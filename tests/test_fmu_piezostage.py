@@ -11,7 +11,8 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 import numpy_reference as ref
-from conftest import assert_refused, assert_reset_to_start_values, start_value, state_format
+from conftest import (assert_refused, assert_state_continues_bitwise, reset_after_a_non_default_run,
+                      state_format)
 
 OUTPUTS = ["y", "y_meas", "u", "x"]
 H = 0.0005
@@ -235,18 +236,8 @@ def test_reset_restores_every_start_value(piezo_stage, make_fmu, terminate_first
     modelDescription.xml as read by fmpy (every parameter and the input, exact equality),
     and a fresh instance: its outputs in initialization mode and its 300-sample run must
     equal the reset instance's bitwise."""
-    variables = piezo_stage.variables
-    params = {n for n, var in variables.items() if var.causality == "parameter"}
-    assert set(NON_DEFAULT_PARAMETERS) == params       # a new parameter must be added here
-    assert all(NON_DEFAULT_PARAMETERS[n] != start_value(variables[n]) for n in params)
-
-    fmu = make_fmu(piezo_stage)
-    fmu.initialize(NON_DEFAULT_PARAMETERS)
-    run(fmu, 200)
-    fmu.set({"v": 7.5})
-    assert {n: fmu.get(n) for n in params} == NON_DEFAULT_PARAMETERS     # the run really used them
-    fresh = make_fmu(piezo_stage)
-    assert_reset_to_start_values(fmu, fresh, terminate_first, OUTPUTS)
+    fmu, fresh = reset_after_a_non_default_run(make_fmu, piezo_stage, NON_DEFAULT_PARAMETERS, run, {"v": 7.5},
+                                               terminate_first, OUTPUTS)
     fmu.slave.exitInitializationMode()
     fresh.slave.exitInitializationMode()
     fmu.h, fmu.k, fresh.h, fresh.k = H, 0, H, 0
@@ -275,34 +266,11 @@ PARAMS_WITH_NOISE = {"sensor.noise_rms": 0.001, "sensor.resolution": 0.002, "sen
 @pytest.mark.parametrize("exact", [False, True])
 def test_state_save_restore_and_serialization_continue_bitwise(piezo_stage, make_fmu, exact):
     params = dict(PARAMS_WITH_NOISE, **{"creep.exact": exact})
-    fmu = make_fmu(piezo_stage)
-    fmu.initialize(params)
-    run(fmu, 1500)
-    state = fmu.slave.getFMUstate()
-    blob = fmu.slave.serializeFMUstate(state)
-    reference = run(fmu, 1500, k0=1500)
 
-    # set the state back: same continuation
-    fmu.slave.setFMUstate(state)
-    fmu.k = 1500
-    assert np.array_equal(run(fmu, 1500, k0=1500), reference)
-    fmu.slave.freeFMUstate(state)
+    def carried(fresh):
+        assert fresh.get("creep.exact") == exact and fresh.get("sensor.seed") == 42
 
-    # deserialize in the same instance
-    state2 = fmu.slave.deSerializeFMUstate(blob)
-    fmu.slave.setFMUstate(state2)
-    fmu.k = 1500
-    assert np.array_equal(run(fmu, 1500, k0=1500), reference)
-    fmu.slave.freeFMUstate(state2)
-
-    # deserialize into a fresh instance that was never initialized
-    fresh = make_fmu(piezo_stage)
-    state3 = fresh.slave.deSerializeFMUstate(blob)
-    fresh.slave.setFMUstate(state3)
-    fresh.slave.freeFMUstate(state3)
-    fresh.h, fresh.k = H, 1500
-    assert fresh.get("creep.exact") == exact and fresh.get("sensor.seed") == 42
-    assert np.array_equal(run(fresh, 1500, k0=1500), reference)
+    assert_state_continues_bitwise(make_fmu, piezo_stage, params, run, 1500, 1500, carried)
 
 
 def test_state_restores_the_mode(piezo_stage, make_fmu):

@@ -321,11 +321,7 @@ int model_step_notice(ModelData *data, char *text, size_t size)
 /* Where this controller's loop is, for its messages: wired to a stage by hand, from t0. */
 static piezo_sup_context context(const ModelData *data)
 {
-    piezo_sup_context ctx;
-    memset(&ctx, 0, sizeof ctx);
-    ctx.t0 = data->t0;
-    ctx.h = data->params.h;
-    return ctx;
+    return fmu_controller_context(data->t0, data->params.h);
 }
 
 int model_step_warning(ModelData *data, double start_time, char *text, size_t size)

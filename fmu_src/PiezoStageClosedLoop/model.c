@@ -298,10 +298,7 @@ static int preview_warning(ModelData *data, char *text, size_t size)
  * named, the stage's against the controller's model's), from t0. */
 static piezo_sup_context context(const ModelData *data)
 {
-    piezo_sup_context ctx;
-    memset(&ctx, 0, sizeof ctx);
-    ctx.t0 = data->t0;
-    ctx.h = data->stage.h;
+    piezo_sup_context ctx = fmu_controller_context(data->t0, data->stage.h);
     ctx.internal = 1;
     ctx.stage_delay = data->stage.tf.delay;
     ctx.feedthrough = data->control.mv_feedthrough;

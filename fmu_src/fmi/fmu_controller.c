@@ -2,11 +2,26 @@
  * fmu_controller.c - the controller as an FMU shows it (see fmu_controller.h).
  */
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
 
 #include "fmu_controller.h"
 #include "fmu_model.h"
+
+/* A message said once: marks it said (*said = 1) and writes it into text; 1, a message. */
+#if defined(__GNUC__)
+__attribute__((format(printf, 4, 5)))
+#endif
+static int say_once(int *said, char *text, size_t size, const char *fmt, ...)
+{
+    va_list ap;
+    *said = 1;
+    va_start(ap, fmt);
+    vsnprintf(text, size, fmt, ap);
+    va_end(ap);
+    return 1;
+}
 
 void fmu_controller_track_init(fmu_controller_track *t, const piezo_controller *c, double t0)
 {
@@ -98,30 +113,21 @@ void fmu_controller_track_commit(fmu_controller_track *t, const piezo_controller
 int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, double t0, double h,
                          char *text, size_t size)
 {
-    piezo_sup_context ctx;
-    memset(&ctx, 0, sizeof ctx);
-    ctx.t0 = t0;
-    ctx.h = h;
+    piezo_sup_context ctx = fmu_controller_context(t0, h);
     if (reset_message(t, c, &ctx, 0, text, size))
         return 1;
-    if (c->sup.status && !t->said_verified) {
-        t->said_verified = 1;
-        snprintf(text, size, "supervision: y_meas answers v as the model says (%.3g times its response, %d "
-                 "samples after it), verified at t = %.9g s", c->sup.verified_gain, c->sup.delay,
-                 fmu_sample_time(t0, c->sup.k_verified, h));
-        return 1;
-    }
-    if (c->detecting && c->auto_delay && !t->said_wait && piezo_controller_probes_buried(c)) {
-        t->said_wait = 1;
-        snprintf(text, size, "delay detection waits (t = %.9g s): y_meas's noise, %.3g um rms, buries a probe of "
-                 "mv.probe_max = %g um (it needs %g times the noise over the model's first response tf.b1). While "
-                 "the noise stays this high no loop delay is chosen: the start-up law (d = %d, the nominal model) "
-                 "runs on, sup.status stays 0 (not verified) and sup.detect_time does not run. Set mv.delay to "
-                 "the loop's delay to run the adaptive law", fmu_sample_time(t0, c->k - 1, h), c->noise_y2,
-                 c->probe_max,
-                 piezo_controller_probe_snr(), PIEZO_DETECT_START_D);
-        return 1;
-    }
+    if (c->sup.status && !t->said_verified)
+        return say_once(&t->said_verified, text, size, "supervision: y_meas answers v as the model says (%.3g "
+                        "times its response, %d samples after it), verified at t = %.9g s", c->sup.verified_gain,
+                        c->sup.delay, fmu_sample_time(t0, c->sup.k_verified, h));
+    if (c->detecting && c->auto_delay && !t->said_wait && piezo_controller_probes_buried(c))
+        return say_once(&t->said_wait, text, size, "delay detection waits (t = %.9g s): y_meas's noise, %.3g um "
+                        "rms, buries a probe of mv.probe_max = %g um (it needs %g times the noise over the model's "
+                        "first response tf.b1). While the noise stays this high no loop delay is chosen: the "
+                        "start-up law (d = %d, the nominal model) runs on, sup.status stays 0 (not verified) and "
+                        "sup.detect_time does not run. Set mv.delay to the loop's delay to run the adaptive law",
+                        fmu_sample_time(t0, c->k - 1, h), c->noise_y2, c->probe_max, piezo_controller_probe_snr(),
+                        PIEZO_DETECT_START_D);
     if (t->delay == t->said_delay)
         return 0;
     t->said_delay = t->delay;
@@ -149,15 +155,13 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
         piezo_controller_explain_safe_state(c, ctx, text, size);
         return 1;
     }
-    if (c->n_outliers > 0 && !t->said_outlier) {
-        t->said_outlier = 1;
-        snprintf(text, size, "y_meas = %.6g um at t = %.9g s was %.4g um from what the model predicted, between "
-                 "samples it predicted well: an outlier (a reading dropped or glitched), for which the model's "
-                 "prediction stood in (the law, the adaptation and the monitor did not see it); further outliers "
-                 "are counted, not logged: the terminate call reports the count",
-                 c->first_outlier, fmu_sample_time(t0, c->k_first_outlier, h), c->first_outlier_error);
-        return 1;
-    }
+    if (c->n_outliers > 0 && !t->said_outlier)
+        return say_once(&t->said_outlier, text, size, "y_meas = %.6g um at t = %.9g s was %.4g um from what the "
+                        "model predicted, between samples it predicted well: an outlier (a reading dropped or "
+                        "glitched), for which the model's prediction stood in (the law, the adaptation and the "
+                        "monitor did not see it); further outliers are counted, not logged: the terminate call "
+                        "reports the count", c->first_outlier, fmu_sample_time(t0, c->k_first_outlier, h),
+                        c->first_outlier_error);
     if (c->n_fallbacks > 0 && !t->said_fallback) {
         t->said_fallback = 1;
         if (c->first_fallback == PIEZO_FALLBACK_JUMP)
@@ -178,25 +182,19 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
                      c->fallback_ratio);
         return 1;
     }
-    if (c->n_detections > 1 && !t->said_redetect) {
-        t->said_redetect = 1;
-        snprintf(text, size, "the chosen loop delay no longer predicts the measurement (|pred_error| above "
-                 "monitor.pred_error_max = %g um for %d samples): delay detection restarted at t = %.9g s with "
-                 "the start-up law; later restarts are not logged (the terminate call counts them)",
-                 c->pred_error_max, PIEZO_DETECT_REDETECT, fmu_sample_time(t0, c->k_delay, h));
-        return 1;
-    }
-    if (c->n_saturated > 0 && !t->said_saturated) {
-        t->said_saturated = 1;
-        snprintf(text, size, "v was clipped to [sat.v_min, sat.v_max] = [%g, %g] V, first at "
-                 "t = %.9g s (adaptation pauses while a clipped sample is in the regressor); "
-                 "further clipping is counted, not logged: the terminate call reports the count",
-                 c->sat_v_min, c->sat_v_max, fmu_sample_time(t0, c->k_first_saturated, h));
-        return 1;
-    }
+    if (c->n_detections > 1 && !t->said_redetect)
+        return say_once(&t->said_redetect, text, size, "the chosen loop delay no longer predicts the measurement "
+                        "(|pred_error| above monitor.pred_error_max = %g um for %d samples): delay detection "
+                        "restarted at t = %.9g s with the start-up law; later restarts are not logged (the "
+                        "terminate call counts them)", c->pred_error_max, PIEZO_DETECT_REDETECT,
+                        fmu_sample_time(t0, c->k_delay, h));
+    if (c->n_saturated > 0 && !t->said_saturated)
+        return say_once(&t->said_saturated, text, size, "v was clipped to [sat.v_min, sat.v_max] = [%g, %g] V, "
+                        "first at t = %.9g s (adaptation pauses while a clipped sample is in the regressor); "
+                        "further clipping is counted, not logged: the terminate call reports the count",
+                        c->sat_v_min, c->sat_v_max, fmu_sample_time(t0, c->k_first_saturated, h));
     if (c->n_large_settled > 0 && !t->said_large_error) {
         char consequence[192], bound[256];
-        t->said_large_error = 1;
         /* monitor.divergence_samples = 0 switches the verdict off: say so, not "after 0 samples" */
         if (c->divergence_samples > 0)
             snprintf(consequence, sizeof consequence, "If it stays above for monitor.divergence_samples = %llu "
@@ -207,11 +205,10 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
             snprintf(consequence, sizeof consequence, "With monitor.divergence_samples = 0 the loop is never "
                      "declared unstable, however long it stays above");
         piezo_controller_explain_bound(c, bound, sizeof bound);
-        snprintf(text, size, "|pred_error| exceeded %s, first at t = %.9g s "
-                 "(not in the answer to a jump of the reference, which is counted but not logged): the model "
-                 "of G no longer predicts the measurement. %s; further exceedances are counted, not logged",
-                 bound, fmu_sample_time(t0, c->k_first_large_settled, h), consequence);
-        return 1;
+        return say_once(&t->said_large_error, text, size, "|pred_error| exceeded %s, first at t = %.9g s "
+                        "(not in the answer to a jump of the reference, which is counted but not logged): the model "
+                        "of G no longer predicts the measurement. %s; further exceedances are counted, not logged",
+                        bound, fmu_sample_time(t0, c->k_first_large_settled, h), consequence);
     }
     return 0;
 }

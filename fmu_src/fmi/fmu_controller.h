@@ -17,6 +17,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 #include "piezo_controller.h"
 
 typedef struct {
@@ -62,6 +63,18 @@ typedef struct {
 void fmu_controller_reset_keep(fmu_controller_reset_backup *u, const fmu_controller_track *t,
                                const piezo_controller *c, int raised);
 void fmu_controller_reset_undo(const fmu_controller_reset_backup *u, fmu_controller_track *t, piezo_controller *c);
+/* Where a loop is, for the messages: sample 0 at t0, sample period h, the controller wired to a
+ * stage by hand (the other fields 0); an FMU with the stage inside sets those after. Inline: the
+ * messages ask for it after every doStep. */
+static inline piezo_sup_context fmu_controller_context(double t0, double h)
+{
+    piezo_sup_context ctx;
+    memset(&ctx, 0, sizeof ctx);
+    ctx.t0 = t0;
+    ctx.h = h;
+    return ctx;
+}
+
 /* At most one event / one warning per call, each thing once: 1 with the text written, else 0.
  * ctx: where the loop is (its t0 and h, wired or inside one FMU: piezo_sup_context). */
 int fmu_controller_event(fmu_controller_track *t, const piezo_controller *c, double t0, double h,

@@ -141,6 +141,14 @@ static fmi2Component run(const char *p1, double v1, const char *p2, double v2, i
     return c;
 }
 
+/* The seed `name`: the state after run(p1, v1, p2, v2, n), the instance freed after. */
+static void run_seed(const char *name, const char *p1, double v1, const char *p2, double v2, int n)
+{
+    fmi2Component c = run(p1, v1, p2, v2, n);
+    save_state(c, name, 0);
+    fmi2FreeInstance(c);
+}
+
 static void deserialize_seeds(void)
 {
     fmi2CallbackFunctions cb = fuzz_callbacks();
@@ -151,9 +159,7 @@ static void deserialize_seeds(void)
     save_state(c, "initialization", 0);
     fmi2FreeInstance(c);
 
-    c = run(NULL, 0, NULL, 0, 0);
-    save_state(c, "step0", 0);
-    fmi2FreeInstance(c);
+    run_seed("step0", NULL, 0, NULL, 0, 0);
     c = run(NULL, 0, NULL, 0, 300);
     save_state(c, "step300", 0);
     fmi2Terminate(c);
@@ -162,42 +168,26 @@ static void deserialize_seeds(void)
     c = run(NULL, 0, NULL, 0, 40);
     save_state(c, "error", 16);   /* a state saved in Error has this model data */
     fmi2FreeInstance(c);
-    if (vr_named("creep.exact") >= 0) {
-        c = run("creep.exact", 1, NULL, 0, 64);
-        save_state(c, "exact64", 0);
-        fmi2FreeInstance(c);
-    }
-    if (vr_named("sensor.noise_rms") >= 0) {
-        c = run("sensor.noise_rms", 0.001, "sensor.resolution", 0.002, 100);
-        save_state(c, "sensor100", 0);
-        fmi2FreeInstance(c);
-    }
-    if (vr_named("mv.feedthrough") >= 0) {
-        c = run("mv.feedthrough", 1, "mv.delay", 0, 100);
-        save_state(c, "feedthrough100", 0);
-        fmi2FreeInstance(c);
-    }
+    if (vr_named("creep.exact") >= 0)
+        run_seed("exact64", "creep.exact", 1, NULL, 0, 64);
+    if (vr_named("sensor.noise_rms") >= 0)
+        run_seed("sensor100", "sensor.noise_rms", 0.001, "sensor.resolution", 0.002, 100);
+    if (vr_named("mv.feedthrough") >= 0)
+        run_seed("feedthrough100", "mv.feedthrough", 1, "mv.delay", 0, 100);
     if (vr_named("t_preview") >= 0) {
         stamped = 1;
-        c = run(NULL, 0, NULL, 0, 300);
+        run_seed("stamped300", NULL, 0, NULL, 0, 300);
         stamped = 0;
-        save_state(c, "stamped300", 0);
-        fmi2FreeInstance(c);
     }
     if (open_loop_controller()) {
         /* the supervisor's and the monitor's sums filled, before a verdict can come
          * (PIEZO_SUP_MIN_SAMPLES + PIEZO_SUP_CONFIRM samples, a quarter of the monitor's window) */
         supervised = 1;
-        c = run(NULL, 0, NULL, 0, 25);
+        run_seed("supervised25", NULL, 0, NULL, 0, 25);
         supervised = 0;
-        save_state(c, "supervised25", 0);
-        fmi2FreeInstance(c);
     }
-    if (vr_named("amplitude[1]") >= 0) {
-        c = run("amplitude[1]", 5, "frequency[1]", 10, 100);
-        save_state(c, "tone100", 0);
-        fmi2FreeInstance(c);
-    }
+    if (vr_named("amplitude[1]") >= 0)
+        run_seed("tone100", "amplitude[1]", 5, "frequency[1]", 10, 100);
 }
 
 /* fuzz_run programs */

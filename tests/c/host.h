@@ -8,7 +8,8 @@
  *                              version's functions) and one instance of it
  *   host_status, HOST_OK ...   the version's status, Boolean, Integer, FMU state
  *   host_load ... host_real_outputs   the adapter's operations (host_fmi2.h,
- *                              host_fmi3.h), host_find and host_named
+ *                              host_fmi3.h; what they do alike is written
+ *                              once, host_adapter.h), host_find and host_named
  *                              (host_common.h), and the helpers below
  *   BY_VERSION(a2, a3)         a2 in the FMI 2.0 build, a3 in the FMI 3.0 one:
  *                              the words and values that differ between them

@@ -191,6 +191,20 @@ typedef struct {
     double min, max;
 } host_var;
 
+/* An FMU as an adapter loads it (host2_fmu, host3_fmu): its description's names and
+ * step, its binary and the version's functions (api, of type API), its variables. The
+ * code written once over both adapters (host_adapter.h, host.h) reads these fields. */
+#define HOST_FMU_STRUCT(API)                                                        \
+    struct {                                                                        \
+        char id[64];                /* modelIdentifier */                           \
+        char token[64];             /* guid (FMI 2.0), instantiationToken (3.0) */  \
+        double h;                   /* DefaultExperiment stepSize */                \
+        void *lib;                                                                  \
+        API api;                                                                    \
+        host_var vars[HOST_MAX_VARS];                                               \
+        int n_vars;                                                                 \
+    }
+
 /* The value of attribute `name` inside [p, end), copied into out; 0 if absent. */
 static inline int xml_attribute(const char *p, const char *end, const char *name, char *out, size_t size)
 {

@@ -13,35 +13,9 @@
 #define HOST_FMI2_H
 
 #include "host_common.h"
-#include "fmi2Functions.h"
+#include "fmi2_api.h"        /* FMI2_API, fmi2_api */
 
-#define FMI2_API(X) \
-    X(GetTypesPlatform) X(GetVersion) X(SetDebugLogging) X(Instantiate) X(FreeInstance) \
-    X(SetupExperiment) X(EnterInitializationMode) X(ExitInitializationMode) X(Terminate) X(Reset) \
-    X(GetReal) X(GetInteger) X(GetBoolean) X(GetString) X(SetReal) X(SetInteger) X(SetBoolean) \
-    X(SetString) X(GetFMUstate) X(SetFMUstate) X(FreeFMUstate) X(SerializedFMUstateSize) \
-    X(SerializeFMUstate) X(DeSerializeFMUstate) X(GetDirectionalDerivative) \
-    X(EnterEventMode) X(NewDiscreteStates) X(EnterContinuousTimeMode) X(CompletedIntegratorStep) \
-    X(SetTime) X(SetContinuousStates) X(GetDerivatives) X(GetEventIndicators) \
-    X(GetContinuousStates) X(GetNominalsOfContinuousStates) \
-    X(SetRealInputDerivatives) X(GetRealOutputDerivatives) X(DoStep) X(CancelStep) X(GetStatus) \
-    X(GetRealStatus) X(GetIntegerStatus) X(GetBooleanStatus) X(GetStringStatus)
-
-typedef struct {
-#define FMI2_FIELD(name) fmi2##name##TYPE *name;
-    FMI2_API(FMI2_FIELD)
-#undef FMI2_FIELD
-} fmi2_api;
-
-typedef struct {
-    char id[64];                /* modelIdentifier */
-    char token[64];             /* guid */
-    double h;                   /* DefaultExperiment stepSize */
-    void *lib;
-    fmi2_api api;
-    host_var vars[HOST_MAX_VARS];
-    int n_vars;
-} host2_fmu;
+typedef HOST_FMU_STRUCT(fmi2_api) host2_fmu;
 
 /* One instance with its own log and callbacks (neither may move while it lives). */
 typedef struct {
@@ -147,35 +121,6 @@ static inline int host2_read_model_description(host2_fmu *f, const char *xml_pat
     return f->n_vars > 0;
 }
 
-/* An FMU: its description and every fmi2 function of its binary. */
-static inline int host2_load(host2_fmu *f, const char *xml_path, const char *so_path)
-{
-    memset(f, 0, sizeof *f);
-    if (!host2_read_model_description(f, xml_path))
-        return 0;
-    f->lib = dlopen(so_path, RTLD_NOW | RTLD_LOCAL);
-    if (f->lib == NULL) {
-        host_fail("dlopen %s: %s", so_path, dlerror());
-        return 0;
-    }
-#define FMI2_LOAD(name)                                                     \
-    *(void **)(&f->api.name) = dlsym(f->lib, "fmi2" #name);                 \
-    if (f->api.name == NULL) {                                              \
-        host_fail("%s: symbol fmi2%s missing", so_path, #name);          \
-        return 0;                                                           \
-    }
-    FMI2_API(FMI2_LOAD)
-#undef FMI2_LOAD
-    return 1;
-}
-
-static inline void host2_unload(host2_fmu *f)
-{
-    if (f->lib != NULL)
-        dlclose(f->lib);
-    f->lib = NULL;
-}
-
 /* ------------------------------------------------------------------------ */
 /* instances                                                                 */
 
@@ -198,24 +143,6 @@ static inline fmi2Status host2_enter_init(const host2_fmu *f, fmi2Component c, d
     return st != fmi2OK ? st : f->api.EnterInitializationMode(c);
 }
 
-/* A fresh instance in StepComplete at t0 = 0 with the start values (in->c NULL if not). */
-static inline fmi2Component host2_start(host2_inst *in, const host2_fmu *f, const char *name)
-{
-    if (host2_instantiate(in, f, name) != NULL
-        && (host2_enter_init(f, in->c, 0.0, 0, 0.0) != fmi2OK || f->api.ExitInitializationMode(in->c) != fmi2OK)) {
-        f->api.FreeInstance(in->c);
-        in->c = NULL;
-    }
-    return in->c;
-}
-
-static inline void host2_free_instance(host2_inst *in)
-{
-    if (in->c != NULL)
-        in->f->api.FreeInstance(in->c);
-    in->c = NULL;
-}
-
 static inline fmi2Status host2_step(const host2_fmu *f, fmi2Component c, double t, double H)
 {
     return f->api.DoStep(c, t, H, fmi2True);
@@ -232,86 +159,32 @@ static inline fmi2Status host2_step_out(const host2_fmu *f, fmi2Component c, dou
 }
 
 /* ------------------------------------------------------------------------ */
-/* FMU states                                                                */
+/* loading, start, FMU states, values: written once for both versions       */
 
-static inline fmi2Status host2_get_state(const host2_fmu *f, fmi2Component c, fmi2FMUstate *s)
-{
-    return f->api.GetFMUstate(c, s);
-}
-
-static inline fmi2Status host2_set_state(const host2_fmu *f, fmi2Component c, fmi2FMUstate s)
-{
-    return f->api.SetFMUstate(c, s);
-}
-
-static inline fmi2Status host2_free_state(const host2_fmu *f, fmi2Component c, fmi2FMUstate *s)
-{
-    return f->api.FreeFMUstate(c, s);
-}
-
-static inline fmi2Status host2_state_size(const host2_fmu *f, fmi2Component c, fmi2FMUstate s, size_t *size)
-{
-    return f->api.SerializedFMUstateSize(c, s, size);
-}
-
-static inline fmi2Status host2_serialize(const host2_fmu *f, fmi2Component c, fmi2FMUstate s, unsigned char *blob,
-                                         size_t size)
-{
-    return f->api.SerializeFMUstate(c, s, (fmi2Byte *)blob, size);
-}
-
-static inline fmi2Status host2_deserialize(const host2_fmu *f, fmi2Component c, const unsigned char *blob,
-                                           size_t size, fmi2FMUstate *s)
-{
-    return f->api.DeSerializeFMUstate(c, (const fmi2Byte *)blob, size, s);
-}
-
-/* The instance's current state as a serialized blob (malloc'ed, *size set), or NULL. */
-static inline unsigned char *host2_snapshot(const host2_fmu *f, fmi2Component c, size_t *size)
-{
-    fmi2FMUstate s = NULL;
-    unsigned char *blob = NULL;
-    *size = 0;
-    if (f->api.GetFMUstate(c, &s) != fmi2OK)
-        return NULL;
-    if (f->api.SerializedFMUstateSize(c, s, size) == fmi2OK && (blob = (unsigned char *)malloc(*size)) != NULL
-        && f->api.SerializeFMUstate(c, s, (fmi2Byte *)blob, *size) != fmi2OK) {
-        free(blob);
-        blob = NULL;
-    }
-    f->api.FreeFMUstate(c, &s);
-    return blob;
-}
-
-/* 1 when the instance's state serializes to exactly `blob`. */
-static inline int host2_same_state(const host2_fmu *f, fmi2Component c, const unsigned char *blob, size_t size)
-{
-    size_t now_size;
-    unsigned char *now = host2_snapshot(f, c, &now_size);
-    int same = now != NULL && blob != NULL && now_size == size && memcmp(now, blob, size) == 0;
-    free(now);
-    return same;
-}
+#define HOSTV(name) host2_##name
+#define HOSTV_FMU host2_fmu
+#define HOSTV_INST host2_inst
+#define HOSTV_C fmi2Component
+#define HOSTV_STATUS fmi2Status
+#define HOSTV_OK fmi2OK
+#define HOSTV_STATE fmi2FMUstate
+#define HOSTV_BYTE fmi2Byte
+#define HOSTV_API FMI2_API
+#define HOSTV_PREFIX "fmi2"
+#define HOSTV_GET_STATE GetFMUstate
+#define HOSTV_SET_STATE SetFMUstate
+#define HOSTV_FREE_STATE FreeFMUstate
+#define HOSTV_STATE_SIZE SerializedFMUstateSize
+#define HOSTV_SERIALIZE SerializeFMUstate
+#define HOSTV_DESERIALIZE DeSerializeFMUstate
+#define HOSTV_VR fmi2ValueReference
+#define HOSTV_VALUE_TYPES(X) X(Real, reals, double) X(Integer, ints, fmi2Integer) X(Boolean, bools, fmi2Boolean)
+/* FMI 2.0 has one value per value reference: n_values is FMI 3.0's */
+#define HOSTV_VALUES_CALL(fn, c, vr, nvr, values, n_values) ((void)(n_values), fn((c), (vr), (nvr), (values)))
+#include "host_adapter.h"
 
 /* ------------------------------------------------------------------------ */
-/* values (FMI 2.0 has one value per value reference: n_values is FMI 3.0's) */
-
-/* host2_get_reals, host2_set_reals, host2_get_ints ... : f->api.<Get|Set><Type>(c, vr, nvr, values) */
-#define HOST2_VALUES(verb, fn, kind, ctype, qual)                                                   \
-    static inline fmi2Status host2_##verb##_##kind(const host2_fmu *f, fmi2Component c,             \
-                                                   const fmi2ValueReference *vr, size_t nvr,        \
-                                                   qual ctype *values, size_t n_values)             \
-    {                                                                                               \
-        (void)n_values;                                                                             \
-        return f->api.fn(c, vr, nvr, values);                                                       \
-    }
-HOST2_VALUES(get, GetReal, reals, double, )
-HOST2_VALUES(set, SetReal, reals, double, const)
-HOST2_VALUES(get, GetInteger, ints, fmi2Integer, )
-HOST2_VALUES(set, SetInteger, ints, fmi2Integer, const)
-HOST2_VALUES(get, GetBoolean, bools, fmi2Boolean, )
-HOST2_VALUES(set, SetBoolean, bools, fmi2Boolean, const)
-#undef HOST2_VALUES
+/* values                                                                    */
 
 /* Set one variable of any type from a double. */
 static inline fmi2Status host2_set(const host2_fmu *f, fmi2Component c, const host_var *v, double value)
@@ -336,25 +209,6 @@ static inline fmi2Status host2_set_named(const host2_fmu *f, fmi2Component c, co
         return fmi2Fatal;
     }
     return host2_set(f, c, v, value);
-}
-
-/* Every Real output into out[capacity] (in variable order); returns how many, or -1 on fmi2Error
- * or more outputs than capacity (a FAIL). */
-static inline int host2_real_outputs(const host2_fmu *f, fmi2Component c, double *out, int capacity)
-{
-    int i, n = 0;
-    for (i = 0; i < f->n_vars; i++) {
-        if (f->vars[i].causality != VAR_OUTPUT || f->vars[i].type != VAR_REAL)
-            continue;
-        if (n >= capacity) {
-            host_fail("%s has more than %d Real outputs: the host's buffer is too small", f->id, capacity);
-            return -1;
-        }
-        if (f->api.GetReal(c, &f->vars[i].vr, 1, &out[n]) != fmi2OK)
-            return -1;
-        n++;
-    }
-    return n;
 }
 
 #endif

@@ -43,15 +43,7 @@ typedef struct {
 #undef FMI3_FIELD
 } fmi3_api;
 
-typedef struct {
-    char id[64];                /* modelIdentifier */
-    char token[64];             /* instantiationToken */
-    double h;                   /* DefaultExperiment stepSize */
-    void *lib;
-    fmi3_api api;
-    host_var vars[HOST_MAX_VARS];
-    int n_vars;
-} host3_fmu;
+typedef HOST_FMU_STRUCT(fmi3_api) host3_fmu;
 
 /* One instance with its own log (which may not move while it lives). */
 typedef struct {
@@ -143,35 +135,6 @@ static inline int host3_read_model_description(host3_fmu *f, const char *xml_pat
     return f->n_vars > 0;
 }
 
-/* An FMU: its FMI 3.0 description and every fmi3 function of its binary. */
-static inline int host3_load(host3_fmu *f, const char *xml_path, const char *so_path)
-{
-    memset(f, 0, sizeof *f);
-    if (!host3_read_model_description(f, xml_path))
-        return 0;
-    f->lib = dlopen(so_path, RTLD_NOW | RTLD_LOCAL);
-    if (f->lib == NULL) {
-        host_fail("dlopen %s: %s", so_path, dlerror());
-        return 0;
-    }
-#define FMI3_LOAD(name)                                                     \
-    *(void **)(&f->api.name) = dlsym(f->lib, "fmi3" #name);                 \
-    if (f->api.name == NULL) {                                              \
-        host_fail("%s: symbol fmi3%s missing", so_path, #name);          \
-        return 0;                                                           \
-    }
-    FMI3_API(FMI3_LOAD)
-#undef FMI3_LOAD
-    return 1;
-}
-
-static inline void host3_unload(host3_fmu *f)
-{
-    if (f->lib != NULL)
-        dlclose(f->lib);
-    f->lib = NULL;
-}
-
 /* ------------------------------------------------------------------------ */
 /* instances                                                                 */
 
@@ -191,24 +154,6 @@ static inline fmi3Status host3_enter_init(const host3_fmu *f, fmi3Instance c, do
                                           double stop)
 {
     return f->api.EnterInitializationMode(c, fmi3False, 0.0, start, stop_defined ? fmi3True : fmi3False, stop);
-}
-
-/* A fresh instance in Step Mode at t0 = 0 with the start values (in->c NULL if not). */
-static inline fmi3Instance host3_start(host3_inst *in, const host3_fmu *f, const char *name)
-{
-    if (host3_instantiate(in, f, name) != NULL
-        && (host3_enter_init(f, in->c, 0.0, 0, 0.0) != fmi3OK || f->api.ExitInitializationMode(in->c) != fmi3OK)) {
-        f->api.FreeInstance(in->c);
-        in->c = NULL;
-    }
-    return in->c;
-}
-
-static inline void host3_free_instance(host3_inst *in)
-{
-    if (in->c != NULL)
-        in->f->api.FreeInstance(in->c);
-    in->c = NULL;
 }
 
 /* The doStep and its out-arguments (set to true and -1 before: the FMU must write them). */
@@ -232,86 +177,31 @@ static inline fmi3Status host3_step(const host3_fmu *f, fmi3Instance c, double t
 }
 
 /* ------------------------------------------------------------------------ */
-/* FMU states                                                                */
+/* loading, start, FMU states, values: written once for both versions       */
 
-static inline fmi3Status host3_get_state(const host3_fmu *f, fmi3Instance c, fmi3FMUState *s)
-{
-    return f->api.GetFMUState(c, s);
-}
-
-static inline fmi3Status host3_set_state(const host3_fmu *f, fmi3Instance c, fmi3FMUState s)
-{
-    return f->api.SetFMUState(c, s);
-}
-
-static inline fmi3Status host3_free_state(const host3_fmu *f, fmi3Instance c, fmi3FMUState *s)
-{
-    return f->api.FreeFMUState(c, s);
-}
-
-static inline fmi3Status host3_state_size(const host3_fmu *f, fmi3Instance c, fmi3FMUState s, size_t *size)
-{
-    return f->api.SerializedFMUStateSize(c, s, size);
-}
-
-static inline fmi3Status host3_serialize(const host3_fmu *f, fmi3Instance c, fmi3FMUState s, unsigned char *blob,
-                                         size_t size)
-{
-    return f->api.SerializeFMUState(c, s, blob, size);
-}
-
-static inline fmi3Status host3_deserialize(const host3_fmu *f, fmi3Instance c, const unsigned char *blob,
-                                           size_t size, fmi3FMUState *s)
-{
-    return f->api.DeserializeFMUState(c, blob, size, s);
-}
-
-/* The instance's current state as a serialized blob (malloc'ed, *size set), or NULL. */
-static inline unsigned char *host3_snapshot(const host3_fmu *f, fmi3Instance c, size_t *size)
-{
-    fmi3FMUState s = NULL;
-    unsigned char *blob = NULL;
-    *size = 0;
-    if (f->api.GetFMUState(c, &s) != fmi3OK)
-        return NULL;
-    if (f->api.SerializedFMUStateSize(c, s, size) == fmi3OK && (blob = (unsigned char *)malloc(*size)) != NULL
-        && f->api.SerializeFMUState(c, s, blob, *size) != fmi3OK) {
-        free(blob);
-        blob = NULL;
-    }
-    f->api.FreeFMUState(c, &s);
-    return blob;
-}
-
-/* 1 when the instance's state serializes to exactly `blob`. */
-static inline int host3_same_state(const host3_fmu *f, fmi3Instance c, const unsigned char *blob, size_t size)
-{
-    size_t now_size;
-    unsigned char *now = host3_snapshot(f, c, &now_size);
-    int same = now != NULL && blob != NULL && now_size == size && memcmp(now, blob, size) == 0;
-    free(now);
-    return same;
-}
+#define HOSTV(name) host3_##name
+#define HOSTV_FMU host3_fmu
+#define HOSTV_INST host3_inst
+#define HOSTV_C fmi3Instance
+#define HOSTV_STATUS fmi3Status
+#define HOSTV_OK fmi3OK
+#define HOSTV_STATE fmi3FMUState
+#define HOSTV_BYTE fmi3Byte
+#define HOSTV_API FMI3_API
+#define HOSTV_PREFIX "fmi3"
+#define HOSTV_GET_STATE GetFMUState
+#define HOSTV_SET_STATE SetFMUState
+#define HOSTV_FREE_STATE FreeFMUState
+#define HOSTV_STATE_SIZE SerializedFMUStateSize
+#define HOSTV_SERIALIZE SerializeFMUState
+#define HOSTV_DESERIALIZE DeserializeFMUState
+#define HOSTV_VR fmi3ValueReference
+#define HOSTV_VALUE_TYPES(X) X(Float64, reals, double) X(Int32, ints, fmi3Int32) X(Boolean, bools, fmi3Boolean)
+#define HOSTV_VALUES_CALL(fn, c, vr, nvr, values, n_values) fn((c), (vr), (nvr), (values), (n_values))
+#include "host_adapter.h"
 
 /* ------------------------------------------------------------------------ */
 /* values                                                                    */
-
-/* host3_get_reals, host3_set_reals, host3_get_ints ... : f->api.<Get|Set><Type>(c, vr, nvr, values,
- * n_values) */
-#define HOST3_VALUES(verb, fn, kind, ctype, qual)                                                   \
-    static inline fmi3Status host3_##verb##_##kind(const host3_fmu *f, fmi3Instance c,              \
-                                                   const fmi3ValueReference *vr, size_t nvr,        \
-                                                   qual ctype *values, size_t n_values)             \
-    {                                                                                               \
-        return f->api.fn(c, vr, nvr, values, n_values);                                             \
-    }
-HOST3_VALUES(get, GetFloat64, reals, double, )
-HOST3_VALUES(set, SetFloat64, reals, double, const)
-HOST3_VALUES(get, GetInt32, ints, fmi3Int32, )
-HOST3_VALUES(set, SetInt32, ints, fmi3Int32, const)
-HOST3_VALUES(get, GetBoolean, bools, fmi3Boolean, )
-HOST3_VALUES(set, SetBoolean, bools, fmi3Boolean, const)
-#undef HOST3_VALUES
 
 /* Set every value of v (all elements of an array) from one double. */
 static inline fmi3Status host3_set(const host3_fmu *f, fmi3Instance c, const host_var *v, double value)
@@ -361,25 +251,6 @@ static inline fmi3Status host3_set_named(const host3_fmu *f, fmi3Instance c, con
         return st;
     x[element] = value;
     return f->api.SetFloat64(c, &v->vr, 1, x, (size_t)v->n);
-}
-
-/* Every Float64 output into out[capacity] (in variable order); returns how many, or -1 on
- * fmi3Error or more outputs than capacity (a FAIL). */
-static inline int host3_real_outputs(const host3_fmu *f, fmi3Instance c, double *out, int capacity)
-{
-    int i, n = 0;
-    for (i = 0; i < f->n_vars; i++) {
-        if (f->vars[i].causality != VAR_OUTPUT || f->vars[i].type != VAR_REAL)
-            continue;
-        if (n >= capacity) {
-            host_fail("%s has more than %d Real outputs: the host's buffer is too small", f->id, capacity);
-            return -1;
-        }
-        if (f->api.GetFloat64(c, &f->vars[i].vr, 1, &out[n], 1) != fmi3OK)
-            return -1;
-        n++;
-    }
-    return n;
 }
 
 #endif

@@ -21,7 +21,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fmi2Functions.h"
+#include "../c/fmi2_api.h"   /* fmi2Functions.h, and the list of its functions */
 
 static int n_passed, n_failed;
 static int messages_logged;
@@ -50,25 +50,8 @@ static void host_logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2S
     printf("log  [%s] %d %s: %s\n", instance ? instance : "?", (int)status, category ? category : "?", text);
 }
 
-/* the whole fmi2 API, looked up by name: a missing symbol fails the run */
-#define FMI2_API(X) \
-    X(GetTypesPlatform) X(GetVersion) X(SetDebugLogging) X(Instantiate) X(FreeInstance) \
-    X(SetupExperiment) X(EnterInitializationMode) X(ExitInitializationMode) X(Terminate) X(Reset) \
-    X(GetReal) X(GetInteger) X(GetBoolean) X(GetString) X(SetReal) X(SetInteger) X(SetBoolean) \
-    X(SetString) X(GetFMUstate) X(SetFMUstate) X(FreeFMUstate) X(SerializedFMUstateSize) \
-    X(SerializeFMUstate) X(DeSerializeFMUstate) X(GetDirectionalDerivative) \
-    X(EnterEventMode) X(NewDiscreteStates) X(EnterContinuousTimeMode) X(CompletedIntegratorStep) \
-    X(SetTime) X(SetContinuousStates) X(GetDerivatives) X(GetEventIndicators) \
-    X(GetContinuousStates) X(GetNominalsOfContinuousStates) \
-    X(SetRealInputDerivatives) X(GetRealOutputDerivatives) X(DoStep) X(CancelStep) X(GetStatus) \
-    X(GetRealStatus) X(GetIntegerStatus) X(GetBooleanStatus) X(GetStringStatus)
-
-typedef struct {
-#define FIELD(name) fmi2##name##TYPE *name;
-    FMI2_API(FIELD)
-#undef FIELD
-} fmi2_api;
-
+/* the whole fmi2 API (FMI2_API, fmi2_api: ../c/fmi2_api.h), looked up by name: a missing
+ * symbol fails the run */
 static int load_api(void *lib, fmi2_api *api)
 {
     int missing = 0;

@@ -129,6 +129,12 @@ static int fail(const char *what, const char *id)
 #define LOAD(f, type, var, name)                                        \
     type *var = (type *)LIB_SYM((f)->lib, name);                        \
     if (!var) return fail("missing symbol " name, (f)->id)
+/* LOAD of a function both editions name alike: fmi2DoStep or fmi3DoStep, of its edition's type */
+#ifdef FMU_HOST_FMI3
+#define LOAD_FMI(f, name, var) LOAD(f, fmi3##name##TYPE, var, "fmi3" #name)
+#else
+#define LOAD_FMI(f, name, var) LOAD(f, fmi2##name##TYPE, var, "fmi2" #name)
+#endif
 
 /* load, instantiate, set the parameters and the first inputs; initialization mode entered */
 static int start(fmu_t *f, const char *binary, const double *row0)
@@ -136,24 +142,36 @@ static int start(fmu_t *f, const char *binary, const double *row0)
     size_t i;
     f->lib = LIB_OPEN(binary);
     if (!f->lib) return fail("cannot load the binary", f->id);
-#ifdef FMU_HOST_FMI3
     {
-        LOAD(f, fmi3GetVersionTYPE, get_version, "fmi3GetVersion");
+        /* the binary's functions, in the order each edition looks them up */
+        LOAD_FMI(f, GetVersion, get_version);
+#ifdef FMU_HOST_FMI3
         LOAD(f, fmi3InstantiateCoSimulationTYPE, instantiate, "fmi3InstantiateCoSimulation");
-        LOAD(f, fmi3EnterInitializationModeTYPE, enter_init, "fmi3EnterInitializationMode");
+        LOAD_FMI(f, EnterInitializationMode, enter_init);
         LOAD(f, fmi3SetInt32TYPE, set_int32, "fmi3SetInt32");
-        LOAD(f, fmi3SetBooleanTYPE, set_boolean, "fmi3SetBoolean");
+        LOAD_FMI(f, SetBoolean, set_boolean);
         LOAD(f, fmi3SetFloat64TYPE, set_float64, "fmi3SetFloat64");
         LOAD(f, fmi3GetFloat64TYPE, get_float64, "fmi3GetFloat64");
-        LOAD(f, fmi3GetBooleanTYPE, get_boolean, "fmi3GetBoolean");
-        LOAD(f, fmi3DoStepTYPE, do_step, "fmi3DoStep");
-        LOAD(f, fmi3TerminateTYPE, terminate, "fmi3Terminate");
-        LOAD(f, fmi3FreeInstanceTYPE, free_instance, "fmi3FreeInstance");
+#else
+        LOAD(f, fmi2GetTypesPlatformTYPE, get_types_platform, "fmi2GetTypesPlatform");
+        LOAD(f, fmi2InstantiateTYPE, instantiate, "fmi2Instantiate");
+        LOAD(f, fmi2SetupExperimentTYPE, setup_experiment, "fmi2SetupExperiment");
+        LOAD_FMI(f, EnterInitializationMode, enter_init);
+        LOAD(f, fmi2SetIntegerTYPE, set_integer, "fmi2SetInteger");
+        LOAD_FMI(f, SetBoolean, set_boolean);
+        LOAD(f, fmi2SetRealTYPE, set_real, "fmi2SetReal");
+        LOAD(f, fmi2GetRealTYPE, get_real, "fmi2GetReal");
+#endif
+        LOAD_FMI(f, GetBoolean, get_boolean);
+        LOAD_FMI(f, DoStep, do_step);
+        LOAD_FMI(f, Terminate, terminate);
+        LOAD_FMI(f, FreeInstance, free_instance);
+        f->get_boolean = get_boolean; f->do_step = do_step; f->terminate = terminate; f->free_instance = free_instance;
+#ifdef FMU_HOST_FMI3
         fmi3Boolean flags[MAX_VARS];
         fmi3Int32 ints[MAX_VARS];
         size_t offset = 0;
-        f->set_real = set_float64; f->get_real = get_float64; f->get_boolean = get_boolean;
-        f->do_step = do_step; f->terminate = terminate; f->free_instance = free_instance;
+        f->set_real = set_float64; f->get_real = get_float64;
 
         if (strcmp(get_version(), "3.0")) return fail("not an FMI 3.0 binary", f->id);
         f->c = instantiate(f->id, f->token, NULL, fmi3False, fmi3False, fmi3False, fmi3False, NULL, 0,
@@ -174,26 +192,10 @@ static int start(fmu_t *f, const char *binary, const double *row0)
             return fail("set Boolean parameters", f->id);
         if (f->n_in && !STATUS_OK(set_float64(f->c, f->in, f->n_in, row0 + f->first_column, f->n_in)))
             return fail("set inputs", f->id);
-    }
 #else
-    {
-        LOAD(f, fmi2GetVersionTYPE, get_version, "fmi2GetVersion");
-        LOAD(f, fmi2GetTypesPlatformTYPE, get_types_platform, "fmi2GetTypesPlatform");
-        LOAD(f, fmi2InstantiateTYPE, instantiate, "fmi2Instantiate");
-        LOAD(f, fmi2SetupExperimentTYPE, setup_experiment, "fmi2SetupExperiment");
-        LOAD(f, fmi2EnterInitializationModeTYPE, enter_init, "fmi2EnterInitializationMode");
-        LOAD(f, fmi2SetIntegerTYPE, set_integer, "fmi2SetInteger");
-        LOAD(f, fmi2SetBooleanTYPE, set_boolean, "fmi2SetBoolean");
-        LOAD(f, fmi2SetRealTYPE, set_real, "fmi2SetReal");
-        LOAD(f, fmi2GetRealTYPE, get_real, "fmi2GetReal");
-        LOAD(f, fmi2GetBooleanTYPE, get_boolean, "fmi2GetBoolean");
-        LOAD(f, fmi2DoStepTYPE, do_step, "fmi2DoStep");
-        LOAD(f, fmi2TerminateTYPE, terminate, "fmi2Terminate");
-        LOAD(f, fmi2FreeInstanceTYPE, free_instance, "fmi2FreeInstance");
         fmi2Boolean flags[MAX_VARS];
         fmi2Integer ints[MAX_VARS];
-        f->set_real = set_real; f->get_real = get_real; f->get_boolean = get_boolean;
-        f->do_step = do_step; f->terminate = terminate; f->free_instance = free_instance;
+        f->set_real = set_real; f->get_real = get_real;
 
         if (f->n_a) return fail("reals (array parameters) need FMI 3.0", f->id);
         if (strcmp(get_version(), "2.0") || strcmp(get_types_platform(), "default"))
@@ -213,18 +215,14 @@ static int start(fmu_t *f, const char *binary, const double *row0)
             return fail("set boolean parameters", f->id);
         if (f->n_in && !STATUS_OK(set_real(f->c, f->in, f->n_in, row0 + f->first_column)))
             return fail("set inputs", f->id);
-    }
 #endif
+    }
     return 0;
 }
 
 static int exit_init(fmu_t *f)
 {
-#ifdef FMU_HOST_FMI3
-    LOAD(f, fmi3ExitInitializationModeTYPE, exit_init_mode, "fmi3ExitInitializationMode");
-#else
-    LOAD(f, fmi2ExitInitializationModeTYPE, exit_init_mode, "fmi2ExitInitializationMode");
-#endif
+    LOAD_FMI(f, ExitInitializationMode, exit_init_mode);
     return STATUS_OK(exit_init_mode(f->c)) ? 0 : fail("exit of initialization mode failed", f->id);
 }
 
