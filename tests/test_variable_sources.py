@@ -19,7 +19,7 @@ variables added later are covered as they come.
     against what the core refuses in ``test_fmu_packaging.py``;
 (c) the checks can fail: a scratch copy with two value references swapped (in a model
     description, in the C table) or two array elements swapped is caught, naming them;
-(d) ``harness/core.py``'s parameter tables: the same names, each mapped to the C field the FMU
+(d) ``harness/binding/core.py``'s parameter tables: the same names, each mapped to the C field the FMU
     writes (offset and C type through cffi), its default equal to the C start value;
 (e) the docs: every variable named in a "FMU variables" column of README.md or docs/ exists (the
     Interfaces table of ``docs/fmus.md`` is generated from the declarations:
@@ -318,11 +318,11 @@ def test_swapped_entries_in_the_c_table_are_caught(tmp_path, tables):
 
 
 # ---------------------------------------------------------------------------------------
-# (d) harness/core.py's parameter tables
+# (d) harness/binding/core.py's parameter tables
 
 
 def _core_tables():
-    from harness import core
+    from harness.binding import core
     # which core.py table and core parameter struct (ModelData.params) serve which FMU
     return {"PiezoStage": (core._PLANT_TABLE, "piezo_plant_params", core.default_plant_params),
             "AdaptiveCompoundController": (core._CONTROLLER_TABLE, "piezo_controller_params",
@@ -336,7 +336,7 @@ _C_TYPE = {"Real": "double", "Integer": "int", "Boolean": "int"}
 
 def core_table_mismatches(model: str, table: dict) -> list[str]:
     """Where core.py's table for model differs from the C table's parameters, one line each."""
-    from harness.core import ffi
+    from harness.binding.core import ffi
     py_table, struct, defaults = _core_tables()[model]
     params = {e["name"]: e for e in table["variables"] if e["causality"] == "parameter"}
     out = [f"{n}: in core.py, not a parameter of the C table" for n in py_table if n not in params]
@@ -367,8 +367,8 @@ def test_core_py_tables_map_each_parameter_to_the_c_tables_field(tables, model):
 
 
 def test_every_core_py_table_is_checked():
-    """Reference: harness/core.py's module namespace: each *_TABLE of FMU names is one above."""
-    from harness import core
+    """Reference: harness/binding/core.py's module namespace: each *_TABLE of FMU names is one above."""
+    from harness.binding import core
     tables = {name for name in vars(core) if re.fullmatch(r"_[A-Z]+_TABLE", name)}
     assert tables == {"_PLANT_TABLE", "_CONTROLLER_TABLE"}
 

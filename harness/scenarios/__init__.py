@@ -57,7 +57,7 @@ Every time is a whole number of samples of ``step_size``, so each segment
 begins on a sample; ``duration`` defaults to the profile's length (a longer
 one holds the last position). The moves, the holds and the scans, and so the
 windows of the stage-use metrics (where a move ends and a hold begins:
-:mod:`harness.profiles`), come from the profile itself. Segments are counted
+:mod:`harness.loop.profiles`), come from the profile itself. Segments are counted
 from 1 in messages (``reference.segments[2].time``).
 
 Rules a file is checked against (each broken rule is one error naming the

@@ -2,11 +2,11 @@
 those declarations and run `python3 packaging/fmu_interface.py`, never this file.
 
 PARAMETERS: the parameters of each FMU that wraps one core block, {name: (path of the
-field in the block's parameter struct, kind)}: harness/core.py's tables.
+field in the block's parameter struct, kind)}: harness/binding/core.py's tables.
 SIGNALS: each FMU's inputs and outputs, {model: {name: (causality, type, unit)}}
 (the SSP's connectors).
 COMPOSED: the variables an FMU takes from its components (arrays element by element),
-{model: {its name: (component, the component's name)}}: harness/closed_loop.py's names.
+{model: {its name: (component, the component's name)}}: harness/binding/closed_loop.py's names.
 """
 
 PARAMETERS = {
