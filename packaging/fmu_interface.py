@@ -718,10 +718,14 @@ def generated_files(root=REPO, models=MODELS):
     return out
 
 
+def _stale(files):
+    """The paths of ``files`` ({path: text}) whose committed text differs (or that are missing)."""
+    return [p for p, text in files.items() if not p.is_file() or p.read_text(encoding="utf-8") != text]
+
+
 def stale_files(root=REPO, models=MODELS):
     """The generated files whose committed text differs from what the declarations give."""
-    return [p for p, text in generated_files(root, models).items()
-            if not p.is_file() or p.read_text(encoding="utf-8") != text]
+    return _stale(generated_files(root, models))
 
 
 def main(argv=None):
@@ -738,7 +742,7 @@ def main(argv=None):
     except InterfaceError as exc:
         print(f"fmu_interface: {exc}", file=sys.stderr)
         return 2
-    stale = [p for p, text in files.items() if not p.is_file() or p.read_text(encoding="utf-8") != text]
+    stale = _stale(files)
     if args.check:
         if stale:
             print("out of date (run python3 packaging/fmu_interface.py): "
