@@ -339,33 +339,63 @@ def c_header(interface):
 # the start values, from the compiled model
 
 
-def _model_parts(model, root):
+def model_parts(model, root=REPO):
+    """The FMU-layer files ``model`` shares with others (fmu_src/fmi/fmu_<part>.c), as
+    CMakeLists.txt's ``<model>_PARTS`` lists them."""
     m = re.search(rf"^set\({model}_PARTS ([^)]*)\)", (root / "CMakeLists.txt").read_text(), re.M)
     return [root / "fmu_src" / "fmi" / f"fmu_{part}.c" for part in (m.group(1).split() if m else [])]
 
 
-def compiled_table(model, header_text, root=REPO):
-    """model_table.c's JSON for ``model`` built with ``header_text`` as its variables.h."""
+def compile_table(model, source_dir, exe, root=REPO, warnings=("-w",)):
+    """The JSON of tests/model_table/model_table.c compiled against a model's sources.
+
+    Parameters
+    ----------
+    model : str
+        The model whose FMU-layer parts (:func:`model_parts`) are compiled in.
+    source_dir : Path
+        Where its ``config.h``, ``model.c`` and ``variables.h`` are (fmu_src/<model> or a
+        scratch copy).
+    exe : Path
+        The program to write.
+    root : Path
+        The checkout (its ``fmu_src/fmi``, ``fmu_src/core`` and ``tests/model_table``).
+    warnings : sequence of str
+        The compiler's warning options: the generator ignores warnings (``-w``),
+        tests/test_variable_sources.py makes every warning an error.
+
+    Raises
+    ------
+    InterfaceError
+        No C compiler, or the model does not compile (with the compiler's message).
+    """
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if not cc:
         raise InterfaceError("a C compiler is needed (the start values are the compiled model's)")
-    model_dir = root / "fmu_src" / model
+    source_dir = Path(source_dir)
     core = root / "fmu_src" / "core"
+    proc = subprocess.run(
+        [cc, "-std=c99", "-O0", *warnings, "-I", str(source_dir),
+         "-I", str(root / "fmu_src" / "fmi"), "-I", str(core),
+         str(root / "tests" / "model_table" / "model_table.c"),
+         str(source_dir / "model.c"), *(str(p) for p in model_parts(model, root)),
+         *sorted(str(p) for p in core.glob("*.c")), "-lm", "-o", str(exe)],
+        capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise InterfaceError(f"{model}: the model does not compile with the generated "
+                             f"variables.h:\n{proc.stderr.strip()}")
+    return json.loads(subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout)
+
+
+def compiled_table(model, header_text, root=REPO):
+    """model_table.c's JSON for ``model`` built with ``header_text`` as its variables.h."""
+    model_dir = root / "fmu_src" / model
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for name in ("config.h", "model.c"):
             shutil.copy(model_dir / name, tmp / name)
         (tmp / "variables.h").write_text(header_text, encoding="utf-8")
-        exe = tmp / "model_table"
-        proc = subprocess.run(
-            [cc, "-std=c99", "-O0", "-w", "-I", str(tmp), "-I", str(root / "fmu_src" / "fmi"),
-             "-I", str(core), str(root / "tests" / "model_table" / "model_table.c"), str(tmp / "model.c"),
-             *(str(p) for p in _model_parts(model, root)), *sorted(str(p) for p in core.glob("*.c")),
-             "-lm", "-o", str(exe)], capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise InterfaceError(f"{model}: the model does not compile with the generated "
-                                 f"variables.h:\n{proc.stderr.strip()}")
-        return json.loads(subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout)
+        return compile_table(model, tmp, tmp / "model_table", root)
 
 
 def fill_starts(interface, table):
