@@ -114,6 +114,9 @@ class Interface:
     sources: list[str]
     time_description: str
     variables: list[Variable]
+    #: a composing model's: the prefix it puts before a component's renamed names, {component
+    #: model: prefix} (its declaration's [component.<key>] prefix)
+    prefixes: dict[str, str] = dc_field(default_factory=dict)
 
     def value_references(self):
         """{name: first value reference} (an array: that of its first element)."""
@@ -267,8 +270,11 @@ def load(model, root=REPO, cache=None):
     for key in ("description", "sources", "time_description"):
         if key not in head:
             raise InterfaceError(f"{path}: [model] {key} missing")
+    prefixes = {}
     if "order" in doc:
         variables = _compose(path, doc, root, cache)
+        prefixes = {comp["model"]: comp["prefix"] for comp in doc["component"].values()
+                    if "prefix" in comp}
     else:
         variables = [_variable(path, decl) for decl in doc.get("variable", [])]
     names = [v.name for v in variables]
@@ -285,7 +291,7 @@ def load(model, root=REPO, cache=None):
             raise InterfaceError(f"{path}: {v.name}: initial_depends_on must name inputs or "
                                  "parameters of an output")
     cache[model] = Interface(model, head["description"], list(head["sources"]),
-                             head["time_description"], variables)
+                             head["time_description"], variables, prefixes)
     return cache[model]
 
 
@@ -633,6 +639,8 @@ def harness_module(interfaces):
              "(the SSP's connectors).",
              "COMPOSED: the variables an FMU takes from its components (arrays element by element),",
              "{model: {its name: (component, the component's name)}}: harness/binding/closed_loop.py's names.",
+             "PREFIXES: the prefix a composing FMU puts before the names of a component it renames",
+             "(the controller's nominal model), {model: {component: prefix}}.",
              '"""', "", "PARAMETERS = {"]
     for interface in interfaces:
         params = [v for v in interface.variables if v.causality == "parameter"]
@@ -660,6 +668,10 @@ def harness_module(interfaces):
                 suffixes = [""] if v.size is None else [f"[{i}]" for i in range(1, v.size + 1)]
                 lines += [f"        {v.name + x!r}: {(model, name + x)!r}," for x in suffixes]
             lines.append("    },")
+    lines += ["}", "", "PREFIXES = {"]
+    for interface in interfaces:
+        if interface.prefixes:
+            lines.append(f"    {interface.model!r}: {interface.prefixes!r},")
     lines += ["}", ""]
     return "\n".join(lines)
 

@@ -7,6 +7,8 @@ SIGNALS: each FMU's inputs and outputs, {model: {name: (causality, type, unit)}}
 (the SSP's connectors).
 COMPOSED: the variables an FMU takes from its components (arrays element by element),
 {model: {its name: (component, the component's name)}}: harness/binding/closed_loop.py's names.
+PREFIXES: the prefix a composing FMU puts before the names of a component it renames
+(the controller's nominal model), {model: {component: prefix}}.
 """
 
 PARAMETERS = {
@@ -354,4 +356,8 @@ COMPOSED = {
         'est.fallbacks': ('AdaptiveCompoundController', 'est.fallbacks'),
         'sup.reset': ('AdaptiveCompoundController', 'sup.reset'),
     },
+}
+
+PREFIXES = {
+    'PiezoStageClosedLoop': {'AdaptiveCompoundController': 'controller.'},
 }
