@@ -44,7 +44,7 @@ _HOMES = {
                  "read_record", "run_identification"),
     "identify.export": ("export_fmus",),
     "sweep": ("run_sweep",),
-    "metrics": ("Metrics", "compute_metrics", "relative_error", "rms_error"),
+    "loop.metrics": ("Metrics", "compute_metrics", "relative_error", "rms_error"),
     "report": ("evaluate_tracking", "evaluate_validation", "run_all", "run_scenario"),
     "scenarios": ("Scenario", "ScenarioError", "ScenarioFileError", "Signal",
                   "UnknownScenarioError", "get_scenario", "list_scenarios", "load_scenario_file",

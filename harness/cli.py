@@ -38,7 +38,7 @@ Exit codes, each with a one-line message on stderr that names the program:
   output folder that cannot be written);
 * 3: a run failed its own checks: it diverged (the controller's monitor stopped
   it, a value overflowed, or its error exceeds the reference) or the controller
-  clipped the voltage persistently (see :mod:`harness.checks`).
+  clipped the voltage persistently (see :mod:`harness.loop.checks`).
 """
 
 from __future__ import annotations
@@ -50,10 +50,11 @@ import sys
 from . import masters, report
 from .paths import describe_fmu_dir
 from .bench import add_bench_arguments, run_bench
-from .checks import EXIT_RUN_FAILED, RunCheckError
 from .fmu import FMUError, UnknownParameterError, missing_windows_binaries
-from .identify.cli import (add_export_arguments, add_identify_arguments, add_param_file_arguments,
-                           apply_param_files, check_identify_arguments, run_export, run_identify)
+from .identify.identify_command import (add_export_arguments, add_identify_arguments,
+                                        add_param_file_arguments, apply_param_files,
+                                        check_identify_arguments, run_export, run_identify)
+from .loop.checks import EXIT_RUN_FAILED, RunCheckError
 from .scenarios import ScenarioError, format_scenario_list, get_scenario, load_scenarios
 from .sweep import add_sweep_arguments, run_sweep_command
 

@@ -12,9 +12,9 @@ compares with what is committed:
   (FMI 3.0). Their start values are the model's own: the values ``model_set_start_values``
   leaves (the core's defaults), read from the compiled model (tests/model_table/model_table.c),
   so a default is written once, in the core;
-- ``harness/fmu_variables.py``: the parameter tables through which harness/core.py sets the
-  core's parameter structs by FMU name, and what PiezoStageClosedLoop takes from whom
-  (harness/closed_loop.py's names);
+- ``harness/binding/fmu_variables.py``: the parameter tables through which
+  harness/binding/core.py sets the core's parameter structs by FMU name, and what
+  PiezoStageClosedLoop takes from whom (harness/binding/closed_loop.py's names);
 - the Interfaces table of ``docs/fmus.md`` (between its markers);
 - ``fmu_src/core/piezo_controller_params.h``: the controller's plain parameters (those
   AdaptiveCompoundController declares with a ``core`` table: a default, a range, perhaps the
@@ -129,6 +129,9 @@ class Interface:
     sources: list[str]
     time_description: str
     variables: list[Variable]
+    #: a composing model's: the prefix it puts before a component's renamed names, {component
+    #: model: prefix} (its declaration's [component.<key>] prefix)
+    prefixes: dict[str, str] = dc_field(default_factory=dict)
 
     def value_references(self):
         """{name: first value reference} (an array: that of its first element)."""
@@ -326,8 +329,11 @@ def load(model, root=REPO, cache=None):
     for key in ("description", "sources", "time_description"):
         if key not in head:
             raise InterfaceError(f"{path}: [model] {key} missing")
+    prefixes = {}
     if "order" in doc:
         variables = _compose(path, doc, root, cache)
+        prefixes = {comp["model"]: comp["prefix"] for comp in doc["component"].values()
+                    if "prefix" in comp}
     else:
         variables = [_variable(path, decl) for decl in doc.get("variable", [])]
     names = [v.name for v in variables]
@@ -344,7 +350,7 @@ def load(model, root=REPO, cache=None):
             raise InterfaceError(f"{path}: {v.name}: initial_depends_on must name inputs or "
                                  "parameters of an output")
     cache[model] = Interface(model, head["description"], list(head["sources"]),
-                             head["time_description"], variables)
+                             head["time_description"], variables, prefixes)
     return cache[model]
 
 
@@ -458,17 +464,59 @@ def core_header(interface):
 # the start values, from the compiled model
 
 
-def _model_parts(model, root):
+def model_parts(model, root=REPO):
+    """The FMU-layer files ``model`` shares with others (fmu_src/fmi/fmu_<part>.c), as
+    CMakeLists.txt's ``<model>_PARTS`` lists them."""
     m = re.search(rf"^set\({model}_PARTS ([^)]*)\)", (root / "CMakeLists.txt").read_text(), re.M)
     return [root / "fmu_src" / "fmi" / f"fmu_{part}.c" for part in (m.group(1).split() if m else [])]
+
+
+def compile_table(model, source_dir, exe, root=REPO, warnings=("-w",), core_dir=None):
+    """The JSON of tests/model_table/model_table.c compiled against a model's sources.
+
+    Parameters
+    ----------
+    model : str
+        The model whose FMU-layer parts (:func:`model_parts`) are compiled in.
+    source_dir : Path
+        Where its ``config.h``, ``model.c`` and ``variables.h`` are (fmu_src/<model> or a
+        scratch copy).
+    exe : Path
+        The program to write.
+    root : Path
+        The checkout (its ``fmu_src/fmi``, ``fmu_src/core`` and ``tests/model_table``).
+    warnings : sequence of str
+        The compiler's warning options: the generator ignores warnings (``-w``),
+        tests/test_variable_sources.py makes every warning an error.
+    core_dir : Path, optional
+        The C core to compile (default: the checkout's fmu_src/core).
+
+    Raises
+    ------
+    InterfaceError
+        No C compiler, or the model does not compile (with the compiler's message).
+    """
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if not cc:
+        raise InterfaceError("a C compiler is needed (the start values are the compiled model's)")
+    source_dir = Path(source_dir)
+    core = Path(core_dir) if core_dir is not None else root / "fmu_src" / "core"
+    proc = subprocess.run(
+        [cc, "-std=c99", "-O0", *warnings, "-I", str(source_dir),
+         "-I", str(root / "fmu_src" / "fmi"), "-I", str(core),
+         str(root / "tests" / "model_table" / "model_table.c"),
+         str(source_dir / "model.c"), *(str(p) for p in model_parts(model, root)),
+         *sorted(str(p) for p in core.glob("*.c")), "-lm", "-o", str(exe)],
+        capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise InterfaceError(f"{model}: the model does not compile with the generated "
+                             f"variables.h:\n{proc.stderr.strip()}")
+    return json.loads(subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout)
 
 
 def compiled_table(model, header_text, root=REPO, core_text=None):
     """model_table.c's JSON for ``model`` built with ``header_text`` as its variables.h (and
     ``core_text``, when given, as the core's piezo_controller_params.h)."""
-    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    if not cc:
-        raise InterfaceError("a C compiler is needed (the start values are the compiled model's)")
     model_dir = root / "fmu_src" / model
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -480,16 +528,7 @@ def compiled_table(model, header_text, root=REPO, core_text=None):
         for name in ("config.h", "model.c"):
             shutil.copy(model_dir / name, tmp / name)
         (tmp / "variables.h").write_text(header_text, encoding="utf-8")
-        exe = tmp / "model_table"
-        proc = subprocess.run(
-            [cc, "-std=c99", "-O0", "-w", "-I", str(tmp), "-I", str(root / "fmu_src" / "fmi"),
-             "-I", str(core), str(root / "tests" / "model_table" / "model_table.c"), str(tmp / "model.c"),
-             *(str(p) for p in _model_parts(model, root)), *sorted(str(p) for p in core.glob("*.c")),
-             "-lm", "-o", str(exe)], capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise InterfaceError(f"{model}: the model does not compile with the generated "
-                                 f"variables.h:\n{proc.stderr.strip()}")
-        return json.loads(subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout)
+        return compile_table(model, tmp, tmp / "model_table", root, core_dir=core)
 
 
 def fill_starts(interface, table):
@@ -701,7 +740,7 @@ def model_description(interface, fmi, guid_text):
 # ---------------------------------------------------------------------------------------
 # the harness's names
 
-HARNESS_MODULE = Path("harness") / "fmu_variables.py"
+HARNESS_MODULE = Path("harness") / "binding" / "fmu_variables.py"
 _KINDS = {"Real": "float", "Integer": "int", "Boolean": "bool"}
 
 
@@ -715,17 +754,20 @@ def _path(field):
 
 
 def harness_module(interfaces):
-    """The text of harness/fmu_variables.py: each component's parameters as fields of its core
-    parameter struct (harness/core.py's tables), and what a composing FMU takes from whom."""
+    """The text of harness/binding/fmu_variables.py: each component's parameters as fields of its
+    core parameter struct (harness/binding/core.py's tables), and what a composing FMU takes from
+    whom."""
     lines = ['"""GENERATED by packaging/fmu_interface.py from fmu_src/<Model>/variables.toml: edit',
              "those declarations and run `python3 packaging/fmu_interface.py`, never this file.",
              "",
              "PARAMETERS: the parameters of each FMU that wraps one core block, {name: (path of the",
-             "field in the block's parameter struct, kind)}: harness/core.py's tables.",
+             "field in the block's parameter struct, kind)}: harness/binding/core.py's tables.",
              "SIGNALS: each FMU's inputs and outputs, {model: {name: (causality, type, unit)}}",
              "(the SSP's connectors).",
              "COMPOSED: the variables an FMU takes from its components (arrays element by element),",
-             "{model: {its name: (component, the component's name)}}: harness/closed_loop.py's names.",
+             "{model: {its name: (component, the component's name)}}: harness/binding/closed_loop.py's names.",
+             "PREFIXES: the prefix a composing FMU puts before the names of a component it renames",
+             "(the controller's nominal model), {model: {component: prefix}}.",
              '"""', "", "PARAMETERS = {"]
     for interface in interfaces:
         params = [v for v in interface.variables if v.causality == "parameter"]
@@ -753,6 +795,10 @@ def harness_module(interfaces):
                 suffixes = [""] if v.size is None else [f"[{i}]" for i in range(1, v.size + 1)]
                 lines += [f"        {v.name + x!r}: {(model, name + x)!r}," for x in suffixes]
             lines.append("    },")
+    lines += ["}", "", "PREFIXES = {"]
+    for interface in interfaces:
+        if interface.prefixes:
+            lines.append(f"    {interface.model!r}: {interface.prefixes!r},")
     lines += ["}", ""]
     return "\n".join(lines)
 
@@ -843,10 +889,14 @@ def generated_files(root=REPO, models=MODELS):
     return out
 
 
+def _stale(files):
+    """The paths of ``files`` ({path: text}) whose committed text differs (or that are missing)."""
+    return [p for p, text in files.items() if not p.is_file() or p.read_text(encoding="utf-8") != text]
+
+
 def stale_files(root=REPO, models=MODELS):
     """The generated files whose committed text differs from what the declarations give."""
-    return [p for p, text in generated_files(root, models).items()
-            if not p.is_file() or p.read_text(encoding="utf-8") != text]
+    return _stale(generated_files(root, models))
 
 
 def main(argv=None):
@@ -863,7 +913,7 @@ def main(argv=None):
     except InterfaceError as exc:
         print(f"fmu_interface: {exc}", file=sys.stderr)
         return 2
-    stale = [p for p, text in files.items() if not p.is_file() or p.read_text(encoding="utf-8") != text]
+    stale = _stale(files)
     if args.check:
         if stale:
             print("out of date (run python3 packaging/fmu_interface.py): "

@@ -164,7 +164,7 @@ def plant_params(**over) -> dict:
 def plant_simulate(v, params: dict | None = None) -> dict:
     """Reference plant from rest at k = 0.
 
-    Returns a dict of arrays aligned like harness.core.Plant.simulate: row k holds
+    Returns a dict of arrays aligned like harness.binding.core.Plant.simulate: row k holds
     u(k-1) (u of the last applied voltage, 0 at k = 0), x(k) and y(k).
     """
     p = plant_params() if params is None else params

@@ -1,4 +1,4 @@
-"""Tests of the cffi binding itself (harness/core.py): struct layout, symbols,
+"""Tests of the cffi binding itself (harness/binding/core.py): struct layout, symbols,
 library lookup, parameter naming."""
 import os
 import re
@@ -10,7 +10,8 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from harness import core, paths
+from harness import paths
+from harness.binding import core
 import numpy_reference as ref
 
 
@@ -91,7 +92,7 @@ def test_missing_library_message(tmp_path):
     """Reference: the documented contract. A missing library raises FileNotFoundError
     naming the exact cmake command (checked in a fresh interpreter)."""
     code = ("import sys; sys.path.insert(0, %r)\n"
-            "from harness import core\n"
+            "from harness.binding import core\n"
             "try:\n    core.lib()\nexcept FileNotFoundError as e:\n    print('FNF', e)\n") % str(paths.REPO_ROOT)
     env = dict(os.environ, PIEZO_CORE_LIB=str(tmp_path / "nope.so"))
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout

@@ -1,12 +1,12 @@
 """Adaptive compound controller in the C core (piezo_controller.h) through
-harness.core.Controller, closed against the core plant or a NumPy ARX plant."""
+harness.binding.core.Controller, closed against the core plant or a NumPy ARX plant."""
 
 import numpy as np
 from scipy.signal import lfilter
 import pytest
 from scipy import signal
 
-from harness import core
+from harness.binding import core
 import numpy_reference as ref
 
 H = 0.0005

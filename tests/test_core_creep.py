@@ -8,7 +8,7 @@ import pytest
 from scipy import special
 
 from conftest import assert_nonfinite_refusals_change_nothing
-from harness import core
+from harness.binding import core
 import numpy_reference as ref
 
 H = 0.0005

@@ -2,7 +2,7 @@
 delay it detects, the start-up law it runs meanwhile, the probes, the restart, and the
 stamped preview it aligns with the delay it runs.
 
-The loops are closed here on the core (harness.core): the schedule of a master is a delay
+The loops are closed here on the core (harness.binding.core): the schedule of a master is a delay
 line between the controller's v and the plant, and a shift of the measurement it sees, so
 the true loop delay of every case is known by construction (the independent reference).
 """
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from harness import core
+from harness.binding import core
 from harness.scenarios import get_scenario
 import numpy_reference as ref
 

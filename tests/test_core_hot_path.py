@@ -21,7 +21,7 @@ import math
 import numpy as np
 import pytest
 
-from harness import core
+from harness.binding import core
 from conftest import mismatch_plant
 
 H = 0.0005

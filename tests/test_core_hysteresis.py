@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from harness import core
+from harness.binding import core
 import numpy_reference as ref
 
 DEF = ref.DOC_DEFAULTS

@@ -1,10 +1,10 @@
-"""The coupled plant model in the C core (piezo_plant.h) through harness.core.Plant."""
+"""The coupled plant model in the C core (piezo_plant.h) through harness.binding.core.Plant."""
 import math
 
 import numpy as np
 import pytest
 
-from harness import core
+from harness.binding import core
 import numpy_reference as ref
 
 H = 0.0005

@@ -1,4 +1,4 @@
-"""The core's side of issue 9 (robustness), through harness.core: finite values in, finite
+"""The core's side of issue 9 (robustness), through harness.binding.core: finite values in, finite
 outputs out or a refused step that leaves the state as it was; parameters that make
 overflow inevitable refused at init; the invariant checks a deserialized FMU state goes
 through (piezo_*_check) accept every state a run produces and name what a tampered one
@@ -12,8 +12,8 @@ import math
 
 import pytest
 
-from harness import core
-from harness.core import ffi
+from harness.binding import core
+from harness.binding.core import ffi
 
 SIZE_MAX = 2 ** (8 * ffi.sizeof("size_t")) - 1
 

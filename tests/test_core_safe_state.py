@@ -2,7 +2,7 @@
 supervision): the safe reaction (sup.reaction = 1), outliers, a gain that changes, a
 measurement that freezes, the longest loop delay, the delay probe's cap.
 
-The loops are closed on the core (harness.core.Plant and Controller, cffi) as in
+The loops are closed on the core (harness.binding.core.Plant and Controller, cffi) as in
 tests/test_core_supervision.py: the plant's y_meas of sample k reaches the controller at its
 sample k, the v it computes is applied over the next sample (loop delay 2). The independent
 references are named in each test: the same loop with sup.reaction = 0 (the sample it refuses,
@@ -15,7 +15,7 @@ import re
 import numpy as np
 import pytest
 
-from harness import core
+from harness.binding import core
 from harness.scenarios import get_scenario
 from numpy_reference import PAPER_LAW
 

@@ -2,18 +2,19 @@
 supervision): its statistics against a NumPy transcription, each verdict on a loop built to
 have that fault, the watchdogs, the switch for open-loop use and the parameters' ranges.
 
-The loops are closed on the core itself (harness.core.Plant and Controller, cffi): the plant's
+The loops are closed on the core itself (harness.binding.core.Plant and Controller, cffi): the plant's
 y_meas of sample k reaches the controller at its sample k, and the v it computes is applied
 over the next sample (a master that exchanges values at communication points: loop delay 2).
 A fault changes what one side receives. The independent references are named in each test:
-the loop's delay by construction, the fault's factor, the NumPy sums of harness.supervision_margins.
+the loop's delay by construction, the fault's factor, the NumPy sums of harness.loop.supervision_margins.
 """
 import math
 
 import numpy as np
 import pytest
 
-from harness import core, supervision_margins
+from harness.binding import core
+from harness.loop import supervision_margins
 from harness.scenarios import get_scenario
 
 H = 0.0005
@@ -57,7 +58,7 @@ def loop(n=2000, meas=None, act=None, plant=None, ctrl=None, amplitude=10.0, f=5
 
 @pytest.mark.parametrize("bound", [D["monitor.pred_error_max"], 0.014], ids=["default bound", "bound 0.014 um"])
 def test_statistics_equal_the_numpy_transcription(bound):
-    """Reference: harness.supervision_margins.statistics, the sums of piezo_supervisor.c written again
+    """Reference: harness.loop.supervision_margins.statistics, the sums of piezo_supervisor.c written again
     with scipy.signal.lfilter. After every sample of a 1 s mismatch loop, the C core's
     Szz, Szw_d (d = 1..9), Sww_d (from its ring), the travelled distances, the model's yhat averaged
     over the last second (the stuck test's creep allowance), the window's weight,

@@ -5,7 +5,7 @@ import pytest
 from scipy import signal
 
 from conftest import assert_nonfinite_refusals_change_nothing
-from harness import core
+from harness.binding import core
 import numpy_reference as ref
 
 D = ref.DOC_DEFAULTS

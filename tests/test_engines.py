@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from harness import masters
-from harness.closed_loop import CLOSED_LOOP_MODEL
+from harness.binding.closed_loop import CLOSED_LOOP_MODEL
 from harness.loop import prepare_closed_loop
 from harness.masters.closed_loop_fmu import closed_loop_fmu_parameters
 from harness.masters.wired import COMPONENTS
@@ -190,6 +190,6 @@ def test_ecos_without_the_sets_name_runs_the_fmus_defaults(ecos, fmu_paths):
     """What Ecos does when init() is not given the set's name: no binding is applied (Ecos applies
     a component's binding only by name), so the plant runs its defaults (the default pi.w0, not
     the set's 0.36784): the name is part of how to run the SSP in Ecos (docs/fmus.md)."""
-    from harness.core import default_plant_params
+    from harness.binding.core import default_plant_params
     run = er.ecos_ssp(FMU_DIR / SSP_FILENAME, 10, 0.0005, names={"plant.pi.w0": 0.0})
     assert run["params"]["plant.pi.w0"] == default_plant_params()["pi.w0"] != 0.36784

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from fmpy.fmi3 import FMU3Slave
 
-from harness import core
+from harness.binding import core
 from harness.studies import supervision_table as st
 
 H = 0.0005

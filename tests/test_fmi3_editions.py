@@ -43,7 +43,7 @@ from conftest import FMU_NAMES, assert_refused, expected_binaries
 from fmu_experiments import LS_REF, load_experiment, simulate_experiment
 
 from harness.masters.fmpy import simulate_closed_loop, simulate_open_loop
-from harness.metrics import compute_metrics
+from harness.loop.metrics import compute_metrics
 from harness.scenarios import get_scenario
 
 H = 5e-4

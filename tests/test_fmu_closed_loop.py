@@ -8,7 +8,7 @@ Independent references:
   * for any other step, the FMU's own one-sample run (checked against the three FMUs): the
     outputs at a communication point t are those of the last sample instant at or before t;
   * for the input y_d, the documented rule (docs/fmus.md) written out here on the core binding
-    (harness.core), and the lag of a stage that follows a tone d samples late,
+    (harness.binding.core), and the lag of a stage that follows a tone d samples late,
     sqrt(2) A sin(pi f d h) rms;
   * the components' model descriptions and C tables for the parameters' names, types, ranges,
     defaults and the core fields they set.
@@ -25,9 +25,9 @@ import numpy as np
 import pytest
 
 from conftest import FMU3_DIR, REPO, assert_refused
-from harness import core
-from harness.closed_loop import (CLOSED_LOOP_MODEL, CONTROLLER_PREFIX, NOMINAL_MODEL_NAMES,
-                                 closed_loop_parameters)
+from harness.binding import core
+from harness.binding.closed_loop import (CLOSED_LOOP_MODEL, CONTROLLER_PREFIX, NOMINAL_MODEL_NAMES,
+                                         closed_loop_parameters)
 from harness.fmu import LOOP_FAILURES, LoopFaultError, loop_error_class
 from harness.loop import reference_parameters
 from harness.masters.wired import simulate_wired

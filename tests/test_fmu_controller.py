@@ -11,7 +11,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from harness import core
+from harness.binding import core
 from conftest import (assert_refused, assert_state_continues_bitwise, reset_after_a_non_default_run,
                       start_value, state_format)
 
@@ -142,7 +142,7 @@ def test_start_values_in_the_binary_match_the_xml(controller, make_fmu):
 
 
 def _core_peek(params, y_ref, y_meas):
-    """The core controller's sample-0 output for these inputs (harness.core, cffi), in the
+    """The core controller's sample-0 output for these inputs (harness.binding.core, cffi), in the
     order of OUTPUTS."""
     out = core.Controller(params).peek(y_ref, y_meas)
     return [out.v, out.q, out.a1, out.a2, out.b1, out.b2, out.pred_error]
@@ -171,7 +171,7 @@ def test_outputs_during_initialization_are_the_published_rest(controller, make_f
 @pytest.mark.parametrize("params", [FEEDTHROUGH, {**FEEDTHROUGH, "mv.delay": 2, **OTHER_MODEL}])
 def test_feedthrough_outputs_during_initialization(controller, make_fmu, params):
     """mv.feedthrough: in initialization mode the outputs are sample 0 of the current
-    parameters and held inputs. Reference: harness.core.Controller(params).peek(y_ref,
+    parameters and held inputs. Reference: harness.binding.core.Controller(params).peek(y_ref,
     y_meas) on the same C core through cffi, exact equality; at rest (zero inputs)
     v = q = 0 and the estimates are the nominal tf.* start values."""
     fmu = make_fmu(controller)
@@ -192,7 +192,7 @@ def test_default_publishes_at_the_end_of_the_step(controller, make_fmu):
     """Default timing: the outputs read at t_(k+1) are the sample computed in the step from
     t_k with the inputs set before it, and setting other inputs afterwards changes nothing
     until the next step. Reference: the core controller stepped with the same inputs
-    (harness.core.Controller(...).step, cffi), exact equality, over 300 samples."""
+    (harness.binding.core.Controller(...).step, cffi), exact equality, over 300 samples."""
     fmu = make_fmu(controller)
     fmu.initialize(OPEN_LOOP)
     twin = core.Controller(OPEN_LOOP)
@@ -706,7 +706,7 @@ def test_time_stamps_set_the_preview_lead_and_the_measurement_offset(
 
 def test_unconnected_stamps_keep_y_ref(controller, piezo_stage, make_fmu):
     """Reference: the core controller stepped with y_ref and y_meas only
-    (harness.core.Controller.step, today's inputs): an FMU whose new inputs are never set
+    (harness.binding.core.Controller.step, today's inputs): an FMU whose new inputs are never set
     gives the same v at every sample bit for bit, reports preview_lead = meas_offset = 0,
     and still detects its loop delay (2 in this exchange loop)."""
     ctrl, rows = _loop_with_stamps(controller, piezo_stage, make_fmu, stamps=False, n=300)
@@ -722,7 +722,7 @@ def test_unconnected_stamps_keep_y_ref(controller, piezo_stage, make_fmu):
 
 
 def test_the_chosen_delay_and_its_time_are_outputs_and_an_event(controller, piezo_stage, make_fmu):
-    """Reference: the core controller's own record of the choice (harness.core: the first
+    """Reference: the core controller's own record of the choice (harness.binding.core: the first
     sample whose output delay is not 0) in the same loop. loop_delay is 0 with
     loop_delay_time = start time while detecting, then 2 with loop_delay_time = the time of
     that sample; with debug logging on, one logEvents message says

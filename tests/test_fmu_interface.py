@@ -4,7 +4,7 @@ Reference: ``packaging/fmu_interface.py``, which writes from the declarations ea
 ``variables.h`` (value references and the C table's entries) and its two model descriptions;
 PiezoStageClosedLoop's declaration composes its components'. What the binaries then serve is
 checked independently in ``test_variable_sources.py`` (the compiled C table against the model
-descriptions, harness/core.py and the docs).
+descriptions, harness/binding/core.py and the docs).
 
 (a) the committed generated files (and the Interfaces table of docs/fmus.md) are exactly what
     the declarations give, and say so in their first lines;
@@ -59,7 +59,7 @@ def _scratch(tmp_path: Path) -> Path:
     (root / "tests").mkdir()
     shutil.copytree(REPO / "tests" / "model_table", root / "tests" / "model_table")
     shutil.copy(REPO / "CMakeLists.txt", root / "CMakeLists.txt")
-    (root / "harness").mkdir()
+    (root / "harness" / "binding").mkdir(parents=True)
     (root / "docs").mkdir()
     shutil.copy(REPO / "docs" / "fmus.md", root / "docs" / "fmus.md")
     return root
@@ -88,7 +88,7 @@ def test_the_generated_files_are_what_the_declarations_give():
 def test_each_generated_file_says_so_in_its_first_lines(model):
     """Reference: the generator's header comments: they name the generator and the declaration."""
     for path in (REPO / "fmu_src" / model / "variables.h", REPO / "modelDescription" / f"{model}.xml",
-                 REPO / "harness" / "fmu_variables.py",
+                 REPO / "harness" / "binding" / "fmu_variables.py",
                  REPO / "modelDescription" / "fmi3" / f"{model}.xml"):
         head = "\n".join(path.read_text(encoding="utf-8").splitlines()[:4])
         assert "packaging/fmu_interface.py" in head, path
@@ -100,9 +100,9 @@ def test_a_parameter_declared_once_reaches_every_fmu_and_edition(tmp_path):
     adds exactly that variable, after the last one, to the controller's and the closed loop's C
     tables and both editions of their model descriptions, with rls.fallback_window's start value
     0.5 s (the field it shares, read from the compiled model), and to the harness's names
-    (harness/fmu_variables.py, harness/core.py's parameter table); everything else is unchanged,
-    the other two FMUs' files are identical, and so is docs/fmus.md's Interfaces table (it lists
-    the controller's parameters as `rls.*`)."""
+    (harness/binding/fmu_variables.py, harness/binding/core.py's parameter table); everything
+    else is unchanged, the other two FMUs' files are identical, and so is docs/fmus.md's
+    Interfaces table (it lists the controller's parameters as `rls.*`)."""
     root = _scratch(tmp_path)
     decl = root / "fmu_src" / CONTROLLER / "variables.toml"
     decl.write_text(decl.read_text(encoding="utf-8") + NEW_PARAMETER, encoding="utf-8")
@@ -112,9 +112,10 @@ def test_a_parameter_declared_once_reaches_every_fmu_and_edition(tmp_path):
     assert changed == sorted([f"fmu_src/{m}/variables.h" for m in (CONTROLLER, LOOP)]
                              + [f"modelDescription/{m}.xml" for m in (CONTROLLER, LOOP)]
                              + [f"modelDescription/fmi3/{m}.xml" for m in (CONTROLLER, LOOP)]
-                             + ["harness/fmu_variables.py"])
+                             + ["harness/binding/fmu_variables.py"])
     names = {}
-    exec(compile(files[root / "harness" / "fmu_variables.py"], "fmu_variables.py", "exec"), names)
+    module = files[root / "harness" / "binding" / "fmu_variables.py"]
+    exec(compile(module, "fmu_variables.py", "exec"), names)
     assert names["PARAMETERS"][CONTROLLER]["rls.new_window"] == (("rls_fallback_window",), "float")
     assert names["COMPOSED"][LOOP]["rls.new_window"] == (CONTROLLER, "rls.new_window")
     expected_vr = {CONTROLLER: 87, LOOP: 147}

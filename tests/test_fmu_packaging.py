@@ -156,7 +156,7 @@ def _companions(parameter):
 
 def _refusal(name, parameter, value, others=None):
     """The parameter the C core names when refusing `parameter` = `value`, or None."""
-    from harness import core
+    from harness.binding import core
     if name == "PiezoStageClosedLoop":
         return _closed_loop_refusal(parameter, value, others)
     if name == "PiezoStage":
@@ -175,7 +175,7 @@ def _refusal(name, parameter, value, others=None):
 def _closed_loop_refusal(parameter, value, others=None):
     """The closed-loop FMU's parameter refused (its component's core, the name mapped back), or
     None; its own parameter y_d_lead through the FMU itself (it checks it, no core block)."""
-    from harness.closed_loop import CONTROLLER_PREFIX, component_parameters
+    from harness.binding.closed_loop import CONTROLLER_PREFIX, component_parameters
     plant, controller, rest = component_parameters({**(others or {}), parameter: value})
     if parameter == "y_d_lead":
         return _fmu_refusal("PiezoStageClosedLoop", parameter, value)
@@ -215,7 +215,7 @@ def _fmu_refusal(model, parameter, value):
 
 
 def _reference_refusal(parameter, value):
-    from harness import core
+    from harness.binding import core
     lib, ffi = core.lib(), core.ffi
     p = ffi.new("piezo_reference_params *")
     lib.piezo_reference_default_params(p)

@@ -3,7 +3,7 @@ AdaptiveCompoundController and PiezoStageClosedLoop, both FMI editions, and in t
 masters (issue 36; docs/robustness.md, the fault codes and the safe reaction).
 
 References: the same loop with sup.reaction = 0 (the sample its doStep refuses, its message),
-the core's safe state (harness.core, the ramp's closed form), the FMI 2.0 edition against the
+the core's safe state (harness.binding.core, the ramp's closed form), the FMI 2.0 edition against the
 FMI 3.0 one, a run restored from a saved or serialized FMU state against the run it was saved
 from, and the start time against the times the FMU states.
 """

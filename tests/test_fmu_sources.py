@@ -232,9 +232,9 @@ def test_closed_loop_from_sources_matches_shipped_binaries(fmu_paths, source_bui
 
 
 def test_closed_loop_fmu_from_sources_matches_shipped_binary(fmu_paths, source_built):
-    """The mismatch benchmark (harness.closed_loop's names) through fmpy.simulate_fmu, 1 s at
+    """The mismatch benchmark (harness.binding.closed_loop's names) through fmpy.simulate_fmu, 1 s at
     10 ms steps: the RLS adapting, the sensor noisy, the supervision on."""
-    from harness.closed_loop import closed_loop_parameters
+    from harness.binding.closed_loop import closed_loop_parameters
     from harness.loop import reference_parameters
     from harness.scenarios import get_scenario
     sc = get_scenario("mismatch_1_5_10hz")

@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-from harness import core
+from harness.binding import core
 from harness.bench.measure import timing_library
 from harness.loop import prepare_closed_loop
 from harness.masters import native

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from harness.masters import fmpy as fmpy_master
-from harness.metrics import compute_metrics
+from harness.loop.metrics import compute_metrics
 from harness.scenarios import load_scenarios
 from conftest import CROSS_PLATFORMS, HOST_PLATFORM, REPO, need_win64, run_harness
 

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from harness import core as core_binding
+from harness.binding import core as core_binding
 from harness import fmu
 from harness.masters import fmpy as fmpy_master, instance
 from harness.masters.c_core import simulate_closed_loop_core, simulate_open_loop_core
-from harness.metrics import compute_metrics
+from harness.loop.metrics import compute_metrics
 from harness.scenarios import MISMATCH_SCENARIOS, TRACKING_SCENARIOS, Signal, get_scenario
 
 import numpy_reference as ref

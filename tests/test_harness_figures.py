@@ -9,7 +9,7 @@ gain ratios), against the estimates of closed-loop runs on the C core."""
 import numpy as np
 import pytest
 
-from harness import core
+from harness.binding import core
 from harness.report import figures
 from harness.report.run import evaluate_tracking
 from harness.scenarios import get_scenario

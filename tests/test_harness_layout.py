@@ -1,10 +1,12 @@
 """The harness's layers (docs/harness.md): each module imports only its own layer or those below,
-and the jobs reach the masters through the registry package only.
+the jobs reach the masters through the registry package only, and the package is grouped by
+job (few top-level modules, no module name twice).
 
 Reference: the layer diagram of docs/harness.md (:data:`LAYERS` below, top to bottom) and
 harness/masters/__init__.py's promise (its docstring): the jobs and studies ask the registry
 (``MASTERS``, ``closed_loop`` ...) and the names it exports, never a master's module. Read from
 the source (ast), so a later import that breaks either fails here naming the file and line.
+The layout's limits are issue 45's (:data:`MAX_TOP_LEVEL_MODULES`).
 """
 
 from __future__ import annotations
@@ -22,8 +24,10 @@ LAYERS = (
     ("cli", "__main__"),
     ("report", "identify", "sweep", "bench", "studies"),
     ("masters", "buildtime"),
-    ("loop", "fmu", "core", "fmu_variables", "closed_loop", "supervision_margins"),
+    ("loop", "binding", "fmu"),
 )
+#: issue 45: at most this many modules directly in harness/ besides __init__.py and __main__.py
+MAX_TOP_LEVEL_MODULES = 10
 
 
 def _resolve(path, node, repo):
@@ -99,14 +103,61 @@ def test_no_module_imports_a_layer_above_its_own():
 def test_the_layer_check_sees_an_upward_import(tmp_path):
     """Reference: a scratch harness whose ground module imports a study and a master."""
     (tmp_path / "harness" / "studies").mkdir(parents=True)
-    (tmp_path / "harness" / "studies" / "timing_table.py").write_text("from ..metrics import X\n")
-    (tmp_path / "harness" / "metrics.py").write_text(
+    (tmp_path / "harness" / "studies" / "timing_table.py").write_text("from ..progress import X\n")
+    (tmp_path / "harness" / "progress.py").write_text(
         "from .studies import timing_table\nfrom .masters import MASTERS\nX = 1\n")
     assert upward_imports(tmp_path / "harness") == [
-        "harness/metrics.py:1 harness.metrics -> harness.studies",
-        "harness/metrics.py:1 harness.metrics -> harness.studies.timing_table",
-        "harness/metrics.py:2 harness.metrics -> harness.masters",
-        "harness/metrics.py:2 harness.metrics -> harness.masters.MASTERS"]
+        "harness/progress.py:1 harness.progress -> harness.studies",
+        "harness/progress.py:1 harness.progress -> harness.studies.timing_table",
+        "harness/progress.py:2 harness.progress -> harness.masters",
+        "harness/progress.py:2 harness.progress -> harness.masters.MASTERS"]
+
+
+def layout_problems(root=HARNESS):
+    """["..."] of what breaks the package's grouping: more than :data:`MAX_TOP_LEVEL_MODULES`
+    modules directly in ``root``, and each module name (a file's or a package's, ``__init__``
+    and ``__main__`` aside) used more than once below it, with its places."""
+    top = sorted(p.stem for p in root.glob("*.py") if p.stem not in ("__init__", "__main__"))
+    found = []
+    if len(top) > MAX_TOP_LEVEL_MODULES:
+        found.append(f"{len(top)} top-level modules (at most {MAX_TOP_LEVEL_MODULES}): "
+                     + ", ".join(top))
+    places = {}
+    for path in sorted(root.rglob("*.py")):
+        if path.stem == "__init__" and path.parent != root:
+            package = path.parent
+            places.setdefault(package.name, []).append(f"{package.relative_to(root.parent)}/")
+        elif path.stem not in ("__init__", "__main__"):
+            places.setdefault(path.stem, []).append(str(path.relative_to(root.parent)))
+    found += [f"{name}: {', '.join(where)}" for name, where in sorted(places.items())
+              if len(where) > 1]
+    return found
+
+
+def test_the_package_is_grouped_by_job():
+    """At most ten top-level modules in harness/, and no module name twice (issue 45)."""
+    assert layout_problems() == []
+
+
+def test_the_layout_check_sees_too_many_modules_and_a_name_twice(tmp_path):
+    """Reference: a scratch harness with eleven top-level modules, a file name in two packages
+    and a file named as a package; renamed, it passes."""
+    root = tmp_path / "harness"
+    for package in ("report", "sweep", "bench"):
+        (root / package).mkdir(parents=True)
+        (root / package / "__init__.py").write_text("")
+    for name in ("__init__", "__main__", *(f"m{i:02d}" for i in range(11))):
+        (root / f"{name}.py").write_text("")
+    for path in ("report/run.py", "sweep/run.py", "bench/report.py", "bench/measure.py"):
+        (root / path).write_text("")
+    assert layout_problems(root) == [
+        "11 top-level modules (at most 10): " + ", ".join(f"m{i:02d}" for i in range(11)),
+        "report: harness/bench/report.py, harness/report/",
+        "run: harness/report/run.py, harness/sweep/run.py"]
+    (root / "m10.py").unlink()
+    (root / "bench" / "report.py").rename(root / "bench" / "text_report.py")
+    (root / "sweep" / "run.py").rename(root / "sweep" / "dispatch.py")
+    assert layout_problems(root) == []
 
 
 def test_no_job_imports_a_masters_module():

@@ -1,11 +1,11 @@
-"""harness.metrics: eqs 36-37 of the paper as fixed by docs/model.md, scenarios."""
+"""harness.loop.metrics: eqs 36-37 of the paper as fixed by docs/model.md, scenarios."""
 
 import math
 
 import numpy as np
 import pytest
 
-from harness.metrics import compute_metrics, relative_error, rms_error, window_mask
+from harness.loop.metrics import compute_metrics, relative_error, rms_error, window_mask
 
 
 def test_rms_and_relative_error_hand_computed():
@@ -62,7 +62,7 @@ def test_metrics_from_sums_are_the_metrics_of_the_signals():
     # the sums got their own functions), on random windows of many lengths: rms_from_sum and
     # relative_from_sums, given np.sum's sums, give the same bits, for one window and for a
     # column of them; a normalizer of energy 0 gives nan.
-    from harness.metrics import relative_from_sums, rms_from_sum
+    from harness.loop.metrics import relative_from_sums, rms_from_sum
     rng = np.random.default_rng(2)
     sums, want_rms, want_r, ns = [], [], [], []
     for n in (1, 7, 8, 129, 4000, 8193):
@@ -84,8 +84,8 @@ def test_check_rules_decide_columns_as_single_runs():
     # decide arrays the same way, element by element: an error above the reference's rms
     # diverges (not when the reference is 0, nor at equality); clipping in more than 1 % of
     # the window saturates (exactly 1 % does not).
-    from harness.checks import (MAX_SATURATED_FRACTION, RunDivergedError, RunSaturatedError,
-                                check_tracking_run, clipped_too_often, error_above_reference)
+    from harness.loop.checks import (MAX_SATURATED_FRACTION, RunDivergedError, RunSaturatedError,
+                                     check_tracking_run, clipped_too_often, error_above_reference)
     from harness.loop import CLOSED_LOOP_DTYPE
     from harness.scenarios import get_scenario
     sc = get_scenario("track_1hz")

@@ -112,10 +112,10 @@ NAME = NEAR_LIMITS_NAME
 def _one_by_one(sc, params, loop):
     """A run as the harness runs a single one (the sweep's reference): the native master,
     the run's checks, its metrics; (status, e_rms, e_r, reason)."""
-    from harness.checks import RunSaturatedError, check_tracking_run
+    from harness.loop.checks import RunSaturatedError, check_tracking_run
     from harness.fmu import FMUError, FMUInitializationError
     from harness.loop import prepare_closed_loop
-    from harness.metrics import compute_metrics
+    from harness.loop.metrics import compute_metrics
 
     try:
         data = loop.run(prepare_closed_loop(sc, plant_params=params))
@@ -222,7 +222,7 @@ def test_tasks_hand_out_each_missing_run_once_and_shrink_at_the_end(tmp_path):
     blocks and around runs already done; the largest is the size asked for, and towards the
     end they shrink to a quarter of each worker's share of what is left; a fixed size
     stays fixed. The automatic size follows the runner's cost per run."""
-    from harness.sweep import run as sweep_run
+    from harness.sweep import dispatch as sweep_run
 
     store = RunStore(tmp_path, ["a", "b"], 150_000, [])
     done = np.zeros(150_000, bool)
@@ -267,7 +267,7 @@ def test_cdf_drawn_stays_within_a_step_of_the_exact_one():
 
 def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path, monkeypatch):
     """Reference: every drawn parameter set run on its own the way a single run is run (the
-    native master, harness.checks, harness.metrics; "stopped" where the controller's message
+    native master, harness.loop.checks, harness.loop.metrics; "stopped" where the controller's message
     says its supervision stopped the loop). A sweep with spreads wide enough to make runs be
     stopped by the supervision, clip or be refused, on the scenario of
     tests/scenarios/near_limits.toml, and to make them diverge on the same scenario with the
@@ -275,7 +275,7 @@ def test_in_process_sweep_counts_failures_and_worst_file_reproduces(tmp_path, mo
     and reports the not-ok ones without stopping: each run's status, e_rms and e_r (bit for
     bit) and reason are those of the run on its own. The worst parameter file, loaded as a
     scenario file, reproduces the worst e_rms exactly."""
-    from harness.metrics import compute_metrics
+    from harness.loop.metrics import compute_metrics
 
     batches = []
     real_batch = native.NativeLoop.run_batch

@@ -7,7 +7,7 @@ worst and first-failed parameter files byte for byte.
 Every test starts a real ``dask scheduler`` and ``dask worker`` processes on 127.0.0.1 (one
 thread each, no nanny, as tests/test_harness_sweep.py starts them), each worker in a process
 group of its own, and kills a worker with SIGKILL of its group at a moment the test chooses by
-an event, not by a delay: the sweep's own moments (``harness.sweep.run._hook``, called in this
+an event, not by a delay: the sweep's own moments (``harness.sweep.dispatch._hook``, called in this
 process, the client) or a function of ``harness.sweep.worker`` that a preloaded module makes
 block in the worker to be killed (``BLOCKING``: it writes a file when it is called and never
 returns, so the worker is killed while it is inside it).
@@ -29,7 +29,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from harness import sweep  # noqa: E402
 from harness.scenarios import load_scenarios  # noqa: E402
-from harness.sweep import run as sweep_run  # noqa: E402
+from harness.sweep import dispatch as sweep_run  # noqa: E402
 
 from conftest import NEAR_LIMITS, NEAR_LIMITS_NAME  # noqa: E402
 

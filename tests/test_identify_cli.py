@@ -17,7 +17,7 @@ from harness.masters.c_core import simulate_open_loop_core
 from harness.identify.data import write_record
 from harness.identify.demo import DEMO_PLANT, DEMO_SENSOR
 from harness.identify.params import read_params
-from harness.identify.run import identify_files
+from harness.identify.from_files import identify_files
 
 H = 0.0005
 
@@ -165,7 +165,7 @@ def test_failed_checks_exit_3_with_one_line(capsys, monkeypatch, records):
     from types import SimpleNamespace
 
     import harness.identify.demo as demo
-    import harness.identify.run as run
+    import harness.identify.from_files as run
     from harness.identify.fit import IdentificationFitError
 
     monkeypatch.setattr(demo, "run_demo", lambda *a, **k: SimpleNamespace(

@@ -16,7 +16,7 @@ import pytest
 from harness.identify.data import read_record
 from harness.identify.demo import DEMO_PLANT, demo_truth, run_demo
 from harness.identify.params import read_params
-from harness.identify.tables import _model_value
+from harness.identify.result_tables import _model_value
 
 DURATION = 3.0
 
@@ -34,7 +34,7 @@ def noisy(tmp_path_factory):
 
 
 def test_the_truth_differs_from_the_defaults():
-    from harness import core
+    from harness.binding import core
 
     d = core.default_plant_params()
     t = demo_truth()

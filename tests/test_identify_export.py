@@ -194,7 +194,7 @@ def from_files(tmp_path_factory, fmu_paths):
     """The user's path: CSV records -> identify (parameter file and reports) -> export."""
     from harness.identify.data import write_record
     from harness.identify.params import read_params
-    from harness.identify.run import identify_files, write_outputs
+    from harness.identify.from_files import identify_files, write_outputs
 
     folder = tmp_path_factory.mktemp("from_files")
     rec = _records()

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from harness import core
+from harness.binding import core
 from harness.masters.c_core import simulate_open_loop_core
 from harness.identify.fit import CoupledModel
 from harness.identify.model import (

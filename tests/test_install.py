@@ -54,7 +54,7 @@ def test_pip_install_then_run_a_scenario_from_another_folder(fmu_paths, tmp_path
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     where = _run([python, "-c",
-                  "import harness, harness.fmu as c, harness.core as k; "
+                  "import harness, harness.fmu as c, harness.binding.core as k; "
                   "print(harness.__file__); print(c.default_fmu_dir()); print(k.library_path()); "
                   "print(k.CORE_DIR)"], elsewhere, env).stdout.split()
     package = Path(where[0]).parent

@@ -25,12 +25,12 @@ import itertools
 import numpy as np
 import pytest
 
-from harness import core
+from harness.binding import core
 from harness.loop import REFERENCE_LEAD, REFERENCE_PREVIEW
 from harness.masters import container
 from harness.masters.fmpy import simulate_closed_loop
 from harness.masters.ssp import simulate_ssp_scenario
-from harness.metrics import compute_metrics
+from harness.loop.metrics import compute_metrics
 from harness.scenarios import MISMATCH_SCENARIOS, get_scenario
 
 FIELDS = ("y_d", "y", "y_meas", "v")

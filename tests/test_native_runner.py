@@ -264,7 +264,7 @@ def test_batch_equals_runs_one_by_one():
     there and whether y, y_meas and v stayed finite; every run whose FMI calls fail on its
     own fails in the batch too, at the same sample. The batch is the same with fresh
     instances and with used ones, and a run after it equals a fresh loop's."""
-    from harness.metrics import window_mask
+    from harness.loop.metrics import window_mask
     sc, base, columns, sets = _batch_parameters(24)
     setup = prepare_closed_loop(sc, plant_params=base)
     win = window_mask(setup.time, sc.metric_window, sc.step_size)

@@ -133,7 +133,7 @@ def exchange(signal, plant_params, seconds, controller=None, each=None):
     v applied over the next sample) on ``signal`` for ``seconds``: (plant, controller, y_d), y_d
     up to the last reference taken. ``each(c)`` after every sample."""
     import numpy as np
-    from harness import core
+    from harness.binding import core
     n = int(seconds / H)
     y_d = signal.evaluate(np.arange(n + 2) * H)
     p, c = core.Plant(dict(plant_params)), core.Controller(dict(controller or {}))
@@ -214,7 +214,7 @@ def test_the_monitor_bound_is_said_as_it_is_computed(noise, words):
     the bound is monitor.pred_error_max, at 0.2 um it is 8 times the noise (1.6 um,
     piezo_controller_monitor_bound), at 0.3 um its cap of 2 um. Before sample 100 the noise counts
     for nothing."""
-    from harness import core
+    from harness.binding import core
     c = core.Controller({})
     c.raw.noise_y2 = noise
     text = core.ffi.new("char[256]")

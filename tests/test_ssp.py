@@ -8,7 +8,7 @@ import pytest
 
 from harness.buildtime import ssp_file
 from harness.masters.ssp import simulate_closed_loop_ssp
-from harness.metrics import compute_metrics
+from harness.loop.metrics import compute_metrics
 from harness.scenarios import Signal, get_scenario
 from test_masters import FIELDS, zero_start_jacobi
 

@@ -5,7 +5,8 @@ exact figures."""
 import numpy as np
 import pytest
 
-from harness import core, profiles
+from harness.binding import core
+from harness.loop import profiles
 from harness.studies import stage_day_table as sd
 from harness.masters.c_core import simulate_closed_loop_core
 from harness.scenarios import profile_signal

@@ -1,5 +1,5 @@
 """Stage use (docs/stage_use.md): the profile reference of harness/scenarios/__init__.py, its windows
-(harness/profiles.py), the closed-loop FMU at a variable communication step, the wired master
+(harness/loop/profiles.py), the closed-loop FMU at a variable communication step, the wired master
 playing a profile, and a deterministic slice of the stage-use family of
 harness/studies/stage_use_table.py with issue 35's targets.
 
@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness import profiles
+from harness.loop import profiles
 from harness.masters import native
 from harness.masters.closed_loop_fmu import (communication_points, simulate_closed_loop_fmu,
                                              simulate_closed_loop_fmu_steps)

@@ -20,7 +20,7 @@ import re
 
 import pytest
 
-from harness import core
+from harness.binding import core
 
 FFI, LIB = core.ffi, core.lib()
 H = 0.0005

@@ -18,7 +18,7 @@ from harness import masters
 from harness.studies import supervision_table as st
 from harness.masters.container import CONTAINER_ORDER
 from harness.masters.wired import simulate_wired
-from harness.supervision_margins import thresholds
+from harness.loop.supervision_margins import thresholds
 
 from conftest import REPO
 

@@ -4,7 +4,8 @@ Each FMU's variables are declared once, in ``fmu_src/<Model>/variables.toml``; t
 (``packaging/fmu_interface.py``, checked in ``test_fmu_interface.py``) writes from it the C table's
 entries (``variables.h``) and both model descriptions. This file checks the results against the
 binaries' own view, independently of the generator: ``tests/model_table/model_table.c`` is
-compiled against each model's ``config.h`` and ``model.c`` (and the core, for the start values)
+compiled against each model's ``config.h`` and ``model.c`` (and the core, for the start values;
+the compile is the generator's, ``fmu_interface.compile_table``, with every warning an error)
 and prints the table ``model_variables`` as JSON. Nothing below lists a variable by hand, so
 variables added later are covered as they come.
 
@@ -19,7 +20,7 @@ variables added later are covered as they come.
     against what the core refuses in ``test_fmu_packaging.py``;
 (c) the checks can fail: a scratch copy with two value references swapped (in a model
     description, in the C table) or two array elements swapped is caught, naming them;
-(d) ``harness/core.py``'s parameter tables: the same names, each mapped to the C field the FMU
+(d) ``harness/binding/core.py``'s parameter tables: the same names, each mapped to the C field the FMU
     writes (offset and C type through cffi), its default equal to the C start value;
 (e) the docs: every variable named in a "FMU variables" column of README.md or docs/ exists (the
     Interfaces table of ``docs/fmus.md`` is generated from the declarations:
@@ -28,10 +29,9 @@ variables added later are covered as they come.
 
 from __future__ import annotations
 
-import json
 import re
 import shutil
-import subprocess
+import sys
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
@@ -39,8 +39,11 @@ import pytest
 
 from conftest import FMU_NAMES, REPO
 
-TABLE_SOURCE = REPO / "tests" / "model_table" / "model_table.c"
-CORE_DIR = REPO / "fmu_src" / "core"
+sys.path.insert(0, str(REPO / "packaging"))
+import fmu_interface as fi  # noqa: E402
+
+#: the compile of the model's table here: every warning an error
+STRICT_WARNINGS = ("-Wall", "-Wextra", "-Wpedantic", "-Werror")
 
 # FMI 3.0 type names of the model's three types (FMI 2.0 uses the C table's: Real, Integer, Boolean)
 FMI3_TYPES = {"Float64": "Real", "Int32": "Integer", "Boolean": "Boolean"}
@@ -57,26 +60,14 @@ _ELEMENT = re.compile(r"^(.*)\[(\d+)\]$")
 # the C table, printed by the C code
 
 
-def model_parts(model: str) -> list[Path]:
-    """The FMU-layer files a model shares with others (fmu_src/fmi/fmu_<part>.c), as
-    CMakeLists.txt's <model>_PARTS lists them."""
-    m = re.search(rf"^set\({model}_PARTS ([^)]*)\)", (REPO / "CMakeLists.txt").read_text(), re.M)
-    return [REPO / "fmu_src" / "fmi" / f"fmu_{part}.c" for part in (m.group(1).split() if m else [])]
-
-
 def compile_table(model: str, out_dir: Path, source_dir: Path | None = None) -> dict:
     """Compile model_table.c against fmu_src/<model> (or a scratch copy of its config.h, model.c
-    and variables.h in ``source_dir``) and return its JSON."""
-    cc = shutil.which("cc") or shutil.which("gcc")
-    assert cc, "a C compiler is needed (the FMUs are built with one)"
-    model_dir = source_dir or REPO / "fmu_src" / model
-    exe = out_dir / f"model_table_{model}"
-    subprocess.run([cc, "-std=c99", "-O0", "-Wall", "-Wextra", "-Wpedantic", "-Werror",
-                    "-I", str(model_dir), "-I", str(REPO / "fmu_src" / "fmi"), "-I", str(CORE_DIR),
-                    str(TABLE_SOURCE), str(model_dir / "model.c"),
-                    *(str(p) for p in model_parts(model)),
-                    *sorted(str(p) for p in CORE_DIR.glob("*.c")), "-lm", "-o", str(exe)], check=True)
-    return json.loads(subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout)
+    and variables.h in ``source_dir``) and return its JSON: the generator's compile
+    (``fmu_interface.compile_table``, the same sources and the same <model>_PARTS), with every
+    warning an error. Only the compile is shared: what the table is checked against below is
+    read from the committed files, not from the generator."""
+    return fi.compile_table(model, source_dir or REPO / "fmu_src" / model,
+                            out_dir / f"model_table_{model}", warnings=STRICT_WARNINGS)
 
 
 @pytest.fixture(scope="module")
@@ -318,11 +309,11 @@ def test_swapped_entries_in_the_c_table_are_caught(tmp_path, tables):
 
 
 # ---------------------------------------------------------------------------------------
-# (d) harness/core.py's parameter tables
+# (d) harness/binding/core.py's parameter tables
 
 
 def _core_tables():
-    from harness import core
+    from harness.binding import core
     # which core.py table and core parameter struct (ModelData.params) serve which FMU
     return {"PiezoStage": (core._PLANT_TABLE, "piezo_plant_params", core.default_plant_params),
             "AdaptiveCompoundController": (core._CONTROLLER_TABLE, "piezo_controller_params",
@@ -336,7 +327,7 @@ _C_TYPE = {"Real": "double", "Integer": "int", "Boolean": "int"}
 
 def core_table_mismatches(model: str, table: dict) -> list[str]:
     """Where core.py's table for model differs from the C table's parameters, one line each."""
-    from harness.core import ffi
+    from harness.binding.core import ffi
     py_table, struct, defaults = _core_tables()[model]
     params = {e["name"]: e for e in table["variables"] if e["causality"] == "parameter"}
     out = [f"{n}: in core.py, not a parameter of the C table" for n in py_table if n not in params]
@@ -367,8 +358,8 @@ def test_core_py_tables_map_each_parameter_to_the_c_tables_field(tables, model):
 
 
 def test_every_core_py_table_is_checked():
-    """Reference: harness/core.py's module namespace: each *_TABLE of FMU names is one above."""
-    from harness import core
+    """Reference: harness/binding/core.py's module namespace: each *_TABLE of FMU names is one above."""
+    from harness.binding import core
     tables = {name for name in vars(core) if re.fullmatch(r"_[A-Z]+_TABLE", name)}
     assert tables == {"_PLANT_TABLE", "_CONTROLLER_TABLE"}
 

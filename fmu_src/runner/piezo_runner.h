@@ -140,8 +140,8 @@ int piezo_runner_run(piezo_runner *runner, size_t n, double h, int master, int s
  * completed. Any status above fmi2Warning, whichever it is, stops that run
  * and is recorded with the call; the next run starts with fmi2Reset.
  * Nothing returns to the caller between runs; every run is summarised by
- * what the harness's checks and metrics read (harness/checks.py,
- * harness/metrics.py), so the caller decides on them, and runs again on its
+ * what the harness's checks and metrics read (harness/loop/checks.py,
+ * harness/loop/metrics.py), so the caller decides on them, and runs again on its
  * own path any run that fails them or whose FMI calls failed, to report it
  * with its messages (the FMUs' log holds only the last run's).
  */

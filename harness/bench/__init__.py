@@ -22,8 +22,8 @@ master, a sweep's compute bound for runs of 0.5, 3 and 30 s (:mod:`.bound`: the 
 runner's ns/sample x samples a run / cores; ``sweep`` measures its own), and the machine.
 """
 
-from .command import add_bench_arguments, run_bench
+from .bench_command import add_bench_arguments, run_bench
 from .measure import CHECKPOINTS, measure
-from .report import format_figures
+from .text_report import format_figures
 
 __all__ = ["CHECKPOINTS", "add_bench_arguments", "run_bench", "measure", "format_figures"]

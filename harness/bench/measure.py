@@ -14,8 +14,9 @@ import time
 import fmpy
 import numpy as np
 
-from .. import core, masters
-from ..closed_loop import CLOSED_LOOP_MODEL
+from .. import masters
+from ..binding import core
+from ..binding.closed_loop import CLOSED_LOOP_MODEL
 from ..fmu import REFERENCE_MODEL, fmu_path
 from ..loop import prepare_closed_loop
 from ..masters import (NativeLoop, closed_loop_fmu_parameters, live_bytes, simulate_setup,

@@ -13,7 +13,7 @@ Writes into ``--out`` the files the build puts in the FMU's
 * ``<id>_ref.csv``: the reference outputs at every ``t_k``.
 
 The reference outputs are computed on the C core through the cffi binding
-(``harness.core``), not through the FMU, so an FMU that re-simulates them checks its
+(``harness.binding.core``), not through the FMU, so an FMU that re-simulates them checks its
 FMI layer against the core. CSV values are written with Python's shortest round-trip
 ``repr``, so they read back bit for bit. The tolerance of an experiment means: at every
 sample, ``|y - y_ref| <= tolerance * (1 + |y_ref|)``.
@@ -42,8 +42,8 @@ import sys
 from xml.etree import ElementTree as ET
 from xml.sax.saxutils import quoteattr
 
-from .. import core
-from ..closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters, component_parameters
+from ..binding import core
+from ..binding.closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters, component_parameters
 from ..loop import REFERENCE_PREVIEW, loop_delay, reference_parameters
 from ..scenarios import load_scenarios
 

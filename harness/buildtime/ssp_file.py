@@ -56,8 +56,8 @@ import zipfile
 
 from fmpy.ssp.ssd import read_ssd
 
+from ..binding.fmu_variables import SIGNALS
 from ..fmu import fmu_path
-from ..fmu_variables import SIGNALS
 from ..loop import reference_parameters
 from ..scenarios import get_scenario
 
@@ -86,7 +86,7 @@ _CONNECTORS = {
     "plant": ("PiezoStage", ("v", "y", "y_meas", "t_meas")),
 }
 #: component name -> (FMU file, connectors as (name, kind, SSP type, unit)), each connector as its
-#: FMU declares it (harness/fmu_variables.py, from fmu_src/<Model>/variables.toml)
+#: FMU declares it (harness/binding/fmu_variables.py, from fmu_src/<Model>/variables.toml)
 SSP_COMPONENTS = {comp: (f"{model}.fmu", tuple((name, *SIGNALS[model][name]) for name in names))
                   for comp, (model, names) in _CONNECTORS.items()}
 #: (start component, connector, end component, connector)

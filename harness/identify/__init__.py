@@ -12,11 +12,11 @@
   ranges;
 * :mod:`~harness.identify.params`: parameter files (JSON of FMU variable names);
 * :mod:`~harness.identify.export`: parameterised FMUs;
-* :mod:`~harness.identify.run`, :mod:`~harness.identify.tables`: files in, reports out;
+* :mod:`~harness.identify.from_files`, :mod:`~harness.identify.result_tables`: files in, reports out;
 * :mod:`~harness.identify.demo`: the virtual experiment;
 * :mod:`~harness.identify.internal`: each step alone on the model's internal outputs
   (``identify --internal-channels``);
-* :mod:`~harness.identify.cli`: the command-line pieces.
+* :mod:`~harness.identify.identify_command`: the command-line pieces.
 
 Heavy modules (fmpy, scipy) are imported on first use.
 """

@@ -6,7 +6,7 @@ row for every input, the mismatch case's ``G``) and a realistic sensor (2 nm
 resolution, 1 nm rms noise), is driven with the paper's six validation inputs
 (Tables 1-3), 10 s each from rest.  The records (``time, v, y`` with
 ``y = y_meas``) are written as CSV and read back through the same path as a
-user's data (:func:`harness.identify.run.identify_files`); the fit sees only
+user's data (:func:`harness.identify.from_files.identify_files`); the fit sees only
 ``v`` and ``y``.  The result is compared with the truth, normalised the same
 way, and with the sensor's noise floor on the held-out samples (``rms(y_meas
 - y)``, ``y`` the stage's true displacement, which only a virtual stage gives).
@@ -34,8 +34,8 @@ from .. import masters
 from ..scenarios import get_scenario
 from .data import MIN_RECORD_SAMPLES, count_reversals, write_record
 from .fit import DEFAULT_MAX_EVALUATIONS, CoupledModel
-from .run import PI_MIN_REVERSALS, identify_files, output_paths, write_outputs
-from .tables import format_report
+from .from_files import PI_MIN_REVERSALS, identify_files, output_paths, write_outputs
+from .result_tables import format_report
 
 __all__ = ["DEMO_PLANT", "DEMO_SENSOR", "DEMO_INPUTS", "DemoResult", "demo_truth",
            "generate_demo_records", "check_demo_duration", "run_demo", "check_demo"]
@@ -194,7 +194,7 @@ def check_demo_duration(duration, h=0.0005):
     """Refuse a record length the identification would refuse, before anything is written.
 
     Each record needs :data:`harness.identify.data.MIN_RECORD_SAMPLES` samples, and the
-    records of steps 1 and 2 need :data:`harness.identify.run.PI_MIN_REVERSALS` voltage
+    records of steps 1 and 2 need :data:`harness.identify.from_files.PI_MIN_REVERSALS` voltage
     reversals (the check :func:`harness.identify.data.read_record` makes on the files).
 
     Raises

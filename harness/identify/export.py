@@ -3,7 +3,7 @@
 :func:`export_fmus` writes ``PiezoStage.fmu``, ``AdaptiveCompoundController.fmu`` and
 ``PiezoStageClosedLoop.fmu`` into a folder: the stage, its controller with the stage as its
 nominal model, and both in one closed loop (the stage's parameters under their names and the
-controller's nominal model as ``controller.<name>``, :mod:`harness.closed_loop`).  Each is the
+controller's nominal model as ``controller.<name>``, :mod:`harness.binding.closed_loop`).  Each is the
 built FMU (same binaries, sources and GUID: the binary checks the GUID it is instantiated with)
 with
 
@@ -50,14 +50,14 @@ import zipfile
 import fmpy
 from fmpy.validation import validate_fmu
 
-from .. import core
+from ..binding import core
+from ..binding.closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters
 from ..buildtime import documentation as fmu_documentation, references as fmu_references
-from ..closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters
 from ..fmu import FMUInitializationError, fmu_path, load, parameter_types
 from ..buildtime.archive import write_fmu_zip
 from ..paths import sha256_of
+from .from_files import output_paths
 from .params import CONTROLLER_MODEL, PLANT_MODEL, split_params
-from .run import output_paths
 
 __all__ = ["ExportError", "START_VALUES_PATH", "PROVENANCE_DIR", "export_fmus",
            "format_start_value"]

@@ -80,7 +80,7 @@ import numpy as np
 # scipy is imported inside the functions that use it: the build imports this package with
 # its build requirements only (fmpy, cffi, numpy), and scipy costs 0.3-0.7 s at import.
 
-from ..metrics import relative_error, rms_error
+from ..loop.metrics import relative_error, rms_error
 from .model import (
     IdentificationInputError,
     creep_output,

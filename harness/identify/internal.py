@@ -18,7 +18,8 @@ import time as _time
 
 import numpy as np
 
-from .. import core, masters
+from .. import masters
+from ..binding import core
 from ..progress import Progress
 from ..scenarios import VALIDATION_SCENARIOS, get_scenario, reference_label
 from ..text_tables import markdown_table, num, text_table

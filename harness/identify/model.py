@@ -24,7 +24,7 @@ import numpy as np
 # scipy is imported inside the functions that use it: the build imports this package with
 # its build requirements only (fmpy, cffi, numpy), and scipy costs 0.3-0.7 s at import.
 
-from .. import core
+from ..binding import core
 
 __all__ = [
     "IdentificationInputError",
@@ -154,7 +154,7 @@ def creep_output(x, k_c, alpha, h, exact=False):
     """Fractional creep (eq 17) of ``x``, computed by the C core's G-L operator.
 
     ``y(k) = k_c h^-alpha sum_{j=0..k} w_j(alpha) x(k-j)``, memory from the
-    first sample (:func:`harness.core.gl_operator`).
+    first sample (:func:`harness.binding.core.gl_operator`).
 
     Parameters
     ----------

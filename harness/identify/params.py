@@ -23,7 +23,7 @@ import json
 import math
 from pathlib import Path
 
-from .. import core
+from ..binding import core
 from ..fmu import parameter_types as fmu_parameter_types
 
 __all__ = [

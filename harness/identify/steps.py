@@ -13,7 +13,7 @@ Step 3 (:func:`identify_creep`): the fractional creep gain ``k_c`` and order
 ``alpha`` of ``y(k) = k_c h^-alpha sum_j w_j(alpha) x(k-j)`` (eq 17) by
 nonlinear least squares (:func:`scipy.optimize.least_squares`); the model is
 evaluated by the C core's Grunwald-Letnikov operator through the binding
-(:func:`harness.core.gl_operator`), not re-implemented here.
+(:func:`harness.binding.core.gl_operator`), not re-implemented here.
 
 :func:`identify_coupled_model` runs the three steps in order on
 :class:`IdentificationRecord` s and returns a :class:`CoupledModelEstimate`.
@@ -245,7 +245,7 @@ def identify_creep(x, y, h, *, alpha0=0.0, exact=False, tol=1e-12, max_nfev=200)
     region reflective) of eq 17,
     ``y(k) = k_c h^-alpha sum_{j=0..k} w_j(alpha) x(k-j)``, over
     ``k_c > 0`` and ``-1 <= alpha <= 1``.  Every model evaluation runs the C
-    core's G-L operator through the binding (:func:`harness.core.gl_operator`);
+    core's G-L operator through the binding (:func:`harness.binding.core.gl_operator`);
     the derivative in ``alpha`` is a central difference of two such runs, the
     one in ``k_c`` is exact.  The start is ``alpha0`` with the best ``k_c``
     for it (linear least squares).

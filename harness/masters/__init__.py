@@ -37,7 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import functools
 
-from ..closed_loop import CLOSED_LOOP_MODEL
+from ..binding.closed_loop import CLOSED_LOOP_MODEL
 from ..fmu import CONTROLLER_MODEL, FMI_VERSIONS, PLANT_MODEL, REFERENCE_MODEL
 from ..scenarios import get_scenario
 from . import c_core, closed_loop_fmu, container, fmpy, native, ssp, wired

@@ -2,7 +2,7 @@
 directly on the C core.
 
 Same experiment, same result fields, no FMI layer: the plant and controller are
-the cffi binding's :class:`harness.core.Plant` and :class:`harness.core.Controller`.
+the cffi binding's :class:`harness.binding.core.Plant` and :class:`harness.binding.core.Controller`.
 Comparing both runs sample by sample checks the FMI layer and the master.
 """
 
@@ -12,7 +12,7 @@ import warnings
 
 import numpy as np
 
-from .. import core
+from ..binding import core
 from ..fmu import LoopFaultWarning
 from ..loop import (
     CLOSED_LOOP_DTYPE,
@@ -53,7 +53,7 @@ def simulate_closed_loop_core(scenario, *, adaptation=None, preview=True, master
         ``build/libpiezo_core.so`` is missing.
     KeyError
         Unknown parameter name.
-    harness.core.CoreParameterError
+    harness.binding.core.CoreParameterError
         A parameter value is out of range.
     """
     setup = prepare_closed_loop(scenario, adaptation=adaptation, preview=preview, master=master,

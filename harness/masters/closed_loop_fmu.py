@@ -2,7 +2,7 @@
 run by one FMU, PiezoStageClosedLoop (the stage, the controller and the reference inside,
 fmu_src/PiezoStageClosedLoop), through fmpy, on its FMI 2.0 or FMI 3.0 edition.
 
-The scenario's parameters go to the FMU under its names (:func:`harness.closed_loop.
+The scenario's parameters go to the FMU under its names (:func:`harness.binding.closed_loop.
 closed_loop_parameters`: the controller's nominal model as ``controller.<name>``). A sines
 reference is the FMU's internal one (ReferenceSignal's parameters: the same ``y_ref`` =
 y_d(k + lead) and stamped preview y_d(k + 4) the other masters give the controller, from the
@@ -36,7 +36,7 @@ import ctypes
 
 import numpy as np
 
-from ..closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters
+from ..binding.closed_loop import CLOSED_LOOP_MODEL, closed_loop_parameters
 from ..fmu import TIMING_OUTPUTS, FMUError, check_fmi_version, fmu_path, load, warn_safe_state
 from ..loop import (CLOSED_LOOP_DTYPE, CLOSED_LOOP_FIELDS, REFERENCE_LEAD, REFERENCE_PREVIEW,
                     as_structured, prepare_closed_loop, reference_lead, reference_parameters)

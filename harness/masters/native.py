@@ -32,7 +32,7 @@ from cffi import FFI
 from fmpy import platform, sharedLibraryExtension
 import numpy as np
 
-from ..core import header_cdef
+from ..binding.core import header_cdef
 from ..fmu import (CONTROLLER_MODEL, PLANT_MODEL, FMUError, FMUInitializationError,
                    fmu_path, load, loop_error_class, typed_parameters, warn_safe_state)
 from ..loop import CLOSED_LOOP_DTYPE, CLOSED_LOOP_FIELDS, as_structured, prepare_closed_loop

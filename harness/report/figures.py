@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..metrics import window_mask
-from ..profiles import motions
+from ..loop.metrics import window_mask
+from ..loop.profiles import motions
 from ..scenarios import reference_label
 
 __all__ = [

@@ -16,7 +16,8 @@ from pathlib import Path
 import platform
 import sys
 
-from .. import _source, core, masters, paths
+from .. import _source, masters, paths
+from ..binding import core
 from ..fmu import fmu_path, fmu_platforms, model_description
 
 __all__ = ["FMUInfo", "Provenance", "collect_provenance", "fmu_info", "commit_id"]

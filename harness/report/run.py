@@ -13,10 +13,11 @@ import time as _time
 
 import numpy as np
 
-from .. import core, masters
-from ..checks import RunDivergedError, check_tracking_run
+from .. import masters
+from ..binding import core
 from ..fmu import CONTROLLER_MODEL, PLANT_MODEL, LoopDivergedError, parameter_starts
-from ..metrics import compute_metrics, window_mask
+from ..loop.checks import RunDivergedError, check_tracking_run
+from ..loop.metrics import compute_metrics, window_mask
 from ..scenarios import get_scenario
 
 __all__ = [
@@ -111,7 +112,8 @@ def parameter_defaults(model, backend="fmpy", fmu_dir=None, fmi_version=2):
     backend : {"auto", "fmpy", "native", "core"}
         The FMU backends: the ``start`` of every Real/Integer/Boolean parameter in the FMU's
         modelDescription (:func:`harness.fmu.parameter_starts`); core:
-        :func:`harness.core.default_plant_params` or :func:`harness.core.default_controller_params`.
+        :func:`harness.binding.core.default_plant_params` or
+        :func:`harness.binding.core.default_controller_params`.
     fmu_dir : str or Path, optional
     fmi_version : {2, 3}
         The edition whose modelDescription is read; the elements of an FMI 3.0 array variable
@@ -157,9 +159,9 @@ def evaluate_tracking(scenario, *, condition="run", adaptation=None, preview=Tru
 
     Raises
     ------
-    harness.checks.RunCheckError
+    harness.loop.checks.RunCheckError
         The run diverged (the controller stopped it, or its error exceeds the reference) or
-        saturated persistently (:func:`harness.checks.check_tracking_run`).
+        saturated persistently (:func:`harness.loop.checks.check_tracking_run`).
     """
     sc = get_scenario(scenario, registry)
     closed = masters.closed_loop(backend, fmi_version)

@@ -178,7 +178,7 @@ def day_estimates_figure(runs, out_dir, nominal):
     """The estimates over the report's day (the defaults), as the admissible set bounds them: the zero
     of B, the poles of A, b1 and the static gain over the nominal model's, with the set's bounds."""
     from .figures import _pyplot, _save
-    from ..core import default_controller_params
+    from ..binding.core import default_controller_params
     p = {**default_controller_params(), **(nominal or {})}
     plt = _pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(7.0, 7.0), sharex=True)

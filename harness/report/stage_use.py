@@ -3,9 +3,9 @@ each run with the controller's defaults and with the paper's law, side by side.
 
 Each runs through PiezoStageClosedLoop at a variable communication step
 (:func:`harness.masters.closed_loop_fmu.simulate_closed_loop_fmu_steps`: one sample per step
-while y_d moves and for :data:`harness.profiles.SETTLE` after, 10 ms steps while it holds,
+while y_d moves and for :data:`harness.loop.profiles.SETTLE` after, 10 ms steps while it holds,
 the rows of one-sample steps at those points), so a minute's hold costs a fraction of a
-second. The metrics are :mod:`harness.profiles`': the worst error after each move, the worst
+second. The metrics are :mod:`harness.loop.profiles`': the worst error after each move, the worst
 ``|y - y_d|`` during holds (at the communication points), and a scan frame after a dwell
 against the last second before it.
 """
@@ -19,7 +19,7 @@ import time as _time
 
 import numpy as np
 
-from .. import profiles
+from ..loop import profiles
 from ..masters import simulate_closed_loop_fmu_steps
 from ..scenarios import PAPER_LAW_SET, get_scenario, parameter_set, stage_use_scenarios
 from ..text_tables import fmt, num, titled_table

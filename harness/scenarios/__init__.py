@@ -57,7 +57,7 @@ Every time is a whole number of samples of ``step_size``, so each segment
 begins on a sample; ``duration`` defaults to the profile's length (a longer
 one holds the last position). The moves, the holds and the scans, and so the
 windows of the stage-use metrics (where a move ends and a hold begins:
-:mod:`harness.profiles`), come from the profile itself. Segments are counted
+:mod:`harness.loop.profiles`), come from the profile itself. Segments are counted
 from 1 in messages (``reference.segments[2].time``).
 
 Rules a file is checked against (each broken rule is one error naming the
@@ -987,6 +987,16 @@ def _place_profile_on(signal, step, path, name):
     return _regrid_profile(signal, step, path, name) if signal.step != step else signal
 
 
+def _placed_as_it_is(signal, step, path, name):
+    """A :class:`SignalKind`'s ``place`` unless it has its own: the signal serves any grid as it is."""
+    return signal
+
+
+def _no_length_of_its_own(signal):
+    """A :class:`SignalKind`'s ``length`` unless it has its own: None (the scenario's duration)."""
+    return None
+
+
 @dataclass(frozen=True)
 class SignalKind:
     """One kind of signal, everything about it in one place (:data:`SIGNAL_KINDS`).
@@ -1023,8 +1033,8 @@ class SignalKind:
     evaluate: object
     describe: object
     check: object
-    place: object = staticmethod(lambda signal, step, path, name: signal)
-    length: object = staticmethod(lambda signal: None)
+    place: object = _placed_as_it_is
+    length: object = _no_length_of_its_own
 
 
 #: every kind of signal a scenario may have, by :attr:`Signal.kind`: a new kind is one entry

@@ -219,7 +219,7 @@ def admissible_rows(controller_params=None, margin=1e-4, radius=0.999):
     ``rls.pole_min`` and the supervision's ``sup.gain_min``, ``sup.gain_max``), each row computed
     with the core's operations in the core's order (``piezo_ctl_admissible_rows`` in piezo_controller_setup.c), so
     that :func:`outside_admissible` gives the core's verdict bit for bit."""
-    from ..core import default_controller_params
+    from ..binding.core import default_controller_params
     p = {**default_controller_params(), **(controller_params or {})}
     a1, a2, b1, b2 = p["tf.a1"], p["tf.a2"], p["tf.b1"], p["tf.b2"]
     z, pm, g_lo, g_hi = p["rls.zero_min"], p["rls.pole_min"], p["sup.gain_min"], p["sup.gain_max"]
@@ -310,8 +310,8 @@ def _segments_of(signal, n=None):
     """``(first, stop, kind)`` of every motion segment (scan frames and tones as "scan", moves as
     "move"): the windows whose worst errors a part's metrics keep. A move's window runs on to
     ``profiles.SETTLE`` after its last sample (within the run's ``n`` samples), as
-    :func:`harness.profiles.move_windows` has it."""
-    from .. import profiles
+    :func:`harness.loop.profiles.move_windows` has it."""
+    from ..loop import profiles
     tail = int(round(profiles.SETTLE / H))
     n = signal.samples if n is None else n
     out = []
@@ -327,7 +327,7 @@ class _Streamer:
     """The metrics of one run from its rows, chunk by chunk."""
 
     def __init__(self, signal, n, controller_params, robust):
-        from .. import profiles
+        from ..loop import profiles
         self.windows = _segments_of(signal, n)
         self.worst = np.full(len(self.windows), np.nan)
         self.holds_w = profiles.hold_windows(signal, n, H)
@@ -412,7 +412,7 @@ def run_part(task, keep_stride=0):
 def _fmu_check(task, exchange):
     """The closed-loop FMU at 10 ms steps in holds against the exchange at its communication
     points: a PartMetrics whose ``equal`` says whether every row's bits agree."""
-    from .. import profiles
+    from ..loop import profiles
     from ..masters import native_loop, simulate_closed_loop_fmu_steps
     sc = task.part.scenario(task.plant, task.controller)
     t0 = _time.perf_counter()

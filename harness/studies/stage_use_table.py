@@ -26,7 +26,7 @@ for bit, its metrics read there); and on the first ``--gs-stages`` stages, with 
 sensors, without the 600 s holds and the tones, two true Gauss-Seidel orders (d = 1) of the
 wired master (:mod:`harness.masters.wired`, which plays the profile as ReferenceSignal would).
 
-**The targets** (:data:`TARGETS`, issue 35; :mod:`harness.profiles` for the windows):
+**The targets** (:data:`TARGETS`, issue 35; :mod:`harness.loop.profiles` for the windows):
 
 (a) a move after a hold T (sensors 0, 1, 5 nm): its worst ``|y_d - y|`` (from its start to
     0.5 s after its end) over the same move after a 0.2 s hold with the 1 nm sensor, <= 1.1;
@@ -61,10 +61,9 @@ from types import MappingProxyType
 
 import numpy as np
 
-from .. import profiles
 from ..fmu import FMUError
 from ..identify.family import draw_stage
-from ..loop import prepare_closed_loop
+from ..loop import prepare_closed_loop, profiles
 from ..masters import (NATIVE_CONTROLLER, missing_runner_message, native_available, native_loop,
                       simulate_closed_loop_fmu_steps, simulate_wired)
 from ..scenarios import PAPER_LAW_SET, Scenario, parameter_set, profile_signal

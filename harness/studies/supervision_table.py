@@ -28,7 +28,7 @@ the real importers (the harness's fmpy master, fmpy's SSP player, the container 
 fmu-manipulation-toolbox in parallel and in each sequential order); and the saturation runs
 (the mismatch scenarios with voltage limits at 90, 70 and 50 % of the peak they need). A
 legitimate run must end without an Error and without a supervision warning; the wired runs
-also give their margins (:func:`harness.supervision_margins.margins`). Every run of a family is run
+also give their margins (:func:`harness.loop.supervision_margins.margins`). Every run of a family is run
 with each ``sup.reaction`` (0, error, and 1, safe: the safe runs in groups of their own), where
 a safe state's Warning counts as a false alarm. :func:`false_alarms` is that check for any
 family: a list of :class:`RunSpec` on the wired master (a sines scenario), a real importer
@@ -60,13 +60,14 @@ import warnings as _warnings
 
 import numpy as np
 
-from .. import core, masters
+from .. import masters
+from ..binding import core
 from ..fmu import SAFE_STATE_WORDS, FMUError, LoopFaultWarning
 from ..identify.family import SENSOR, draw_stage
+from ..loop.supervision_margins import controller_samples, margins, thresholds
 from ..masters import (CONTAINER_ORDER, SCHEDULES, ContainerTerminateWarning, Fault, schedule_name,
                       simulate_wired)
 from ..scenarios import MISMATCH_SCENARIOS, get_scenario
-from ..supervision_margins import controller_samples, margins, thresholds
 
 __all__ = ["FaultCase", "FAULTS", "FAULT_SCHEDULES", "SAFE_SCHEDULES", "FaultResult", "run_fault",
            "run_fault_safe", "harness_fault", "REACTIONS", "HARNESS_MASTERS", "with_reactions", "false_alarms",

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 
 from .. import masters
 from ..loop import EXCHANGE_LOOP_DELAY
+from ..loop.metrics import compute_metrics
 from ..masters import CONTAINER_ORDER
-from ..metrics import compute_metrics
 from ..scenarios import MISMATCH_SCENARIOS, get_scenario, reference_label
 
 __all__ = ["MASTERS", "MasterRun", "run_master", "measure", "markdown_table", "family_summary", "main"]

@@ -27,7 +27,7 @@ would be the same run, and it is refused. Run i draws its parameters from a gene
 by (``--seed``, i), on the worker that runs it, so a sweep is reproducible whatever the
 scheduling, and the same draws are applied to every scenario's own plant. A run that
 diverges (the controller's monitor stops it, a value overflows, or its error exceeds the
-reference: :mod:`harness.checks`), clips its voltage persistently, or whose drawn
+reference: :mod:`harness.loop.checks`), clips its voltage persistently, or whose drawn
 parameters the FMU refuses is counted and reported; it does not stop the sweep.
 
 Speed: a task is a batch of runs in one C call of the native runner
@@ -56,10 +56,10 @@ set as a scenario file keyed by FMU variable names (``worst_<scenario>.toml``: r
 e_rms (``sweep_e_rms.png``).
 """
 
-from .command import add_sweep_arguments, run_sweep_command
+from .sweep_command import add_sweep_arguments, run_sweep_command
 from .outputs import summary_rows, write_outputs
 from .manifest import MANIFEST
-from .run import SweepIncompleteError, plant_start_values, run_sweep
+from .dispatch import SweepIncompleteError, plant_start_values, run_sweep
 from .spreads import Spread, draw_plant_parameters, parse_spread
 from .store import JOURNAL, RUNS, STATUSES, SweepResult
 

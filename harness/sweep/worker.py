@@ -4,9 +4,9 @@ parameters, on this process's instances of the shipped FMUs, and returns their j
 On the native master a task's runs are one C call (``piezo_runner_batch``): the
 parameters are drawn for the whole task (:func:`harness.sweep.spreads.draw_columns`), the
 runner runs them back to back and returns per run the sums the checks and metrics are made
-of, and the checks' rules (:mod:`harness.checks`) decide on all of them at once. A run that
+of, and the checks' rules (:mod:`harness.loop.checks`) decide on all of them at once. A run that
 fails a rule, or whose FMI calls failed, is run again on its own, the way every run is run
-otherwise (:func:`harness.masters.prepared_loop`, :func:`harness.checks.check_tracking_run`),
+otherwise (:func:`harness.masters.prepared_loop`, :func:`harness.loop.checks.check_tracking_run`),
 and reported with that run's status and message. Both ways give the same bits.
 """
 
@@ -25,11 +25,11 @@ from types import MappingProxyType
 import numpy as np
 
 from .. import masters
-from ..checks import (RunCheckError, RunSaturatedError, check_tracking_run, clipped_too_often,
-                      error_above_reference, reference_rms)
 from ..fmu import FMUError, FMUInitializationError, LoopDivergedError, LoopFaultError, UnknownParameterError
 from ..loop import prepare_closed_loop
-from ..metrics import compute_metrics, relative_from_sums, rms_from_sum, window_mask
+from ..loop.checks import (RunCheckError, RunSaturatedError, check_tracking_run, clipped_too_often,
+                           error_above_reference, reference_rms)
+from ..loop.metrics import compute_metrics, relative_from_sums, rms_from_sum, window_mask
 from ..scenarios import Scenario
 from .spreads import apply_spreads, draw_columns, run_deltas
 from .store import task_rows

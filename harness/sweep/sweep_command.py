@@ -7,8 +7,8 @@ import sys
 
 from .. import masters
 from ..scenarios import load_scenarios
+from .dispatch import NO_WORKERS_TIMEOUT, SweepIncompleteError, run_sweep
 from .outputs import PROG, format_summary, write_outputs
-from .run import NO_WORKERS_TIMEOUT, SweepIncompleteError, run_sweep
 
 __all__ = ["add_sweep_arguments", "run_sweep_command"]
 

@@ -24,7 +24,7 @@
 
 User errors raise ValueError (or FileNotFoundError), which the caller turns
 into exit code 2 and one line; a fit that does not converge and a virtual
-experiment that fails its own checks raise :class:`harness.checks.RunCheckError`
+experiment that fails its own checks raise :class:`harness.loop.checks.RunCheckError`
 (exit code 3).
 """
 
@@ -33,8 +33,8 @@ from __future__ import annotations
 import math
 import sys
 
-from ..checks import RunCheckError
-from . import demo, run
+from ..loop.checks import RunCheckError
+from . import demo, from_files
 from .export import export_fmus
 from .family import validate_family
 from .fit import (DEFAULT_HOLDOUT, DEFAULT_MAX_EVALUATIONS, IdentificationFitError,
@@ -42,7 +42,7 @@ from .fit import (DEFAULT_HOLDOUT, DEFAULT_MAX_EVALUATIONS, IdentificationFitErr
 from .internal import run_identification
 from .params import (CONTROLLER_MODEL, PLANT_MODEL, override_scenarios, parameter_types,
                      read_params, split_params)
-from .tables import format_report
+from .result_tables import format_report
 
 __all__ = ["add_identify_arguments", "check_identify_arguments", "run_identify",
            "add_export_arguments", "run_export", "add_param_file_arguments",
@@ -207,7 +207,7 @@ def run_identify(args, stream=sys.stdout, progress=sys.stderr):
 
     Raises
     ------
-    harness.checks.RunCheckError
+    harness.loop.checks.RunCheckError
         The fit did not converge, or the virtual experiment failed its checks.
     """
     holdout = DEFAULT_HOLDOUT if args.holdout is None else args.holdout
@@ -271,14 +271,15 @@ def _progress_lines(stream):
 def _identify_records(args, holdout, max_evaluations, stream, say):
     h = 0.0005 if args.sample_period is None else args.sample_period
     m = 9 if args.operators is None else args.operators
-    result, records = run.identify_files(args.pi_data, args.tf_data, args.creep_data, h=h, m=m,
-                                     v_max=args.v_max, delay=args.delay or 0, holdout=holdout,
-                                     max_evaluations=max_evaluations, progress=say)
+    result, records = from_files.identify_files(args.pi_data, args.tf_data, args.creep_data, h=h,
+                                                m=m, v_max=args.v_max, delay=args.delay or 0,
+                                                holdout=holdout, max_evaluations=max_evaluations,
+                                                progress=say)
     header = [f"Identification from measured records (v and y only): step 1 {args.pi_data}, "
               f"step 2 {args.tf_data}, step 3 {', '.join(args.creep_data)}; h = {h:g} s, "
               f"m = {m}, v_max = {result.model.v_max:g} V; the last {holdout:.0%} of each "
               f"record held out; {result.elapsed_s:.1f} s."]
-    files = run.write_outputs(result, args.out, records=records, header=header)
+    files = from_files.write_outputs(result, args.out, records=records, header=header)
     if result.undetermined:
         first = result.undetermined[0]
         more = (f" (and {len(result.undetermined) - 1} more)" if len(result.undetermined) > 1

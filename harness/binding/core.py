@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from cffi import FFI
 
-from . import paths
+from .. import paths
 from .fmu_variables import PARAMETERS
 
 __all__ = [

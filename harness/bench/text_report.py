@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..closed_loop import CLOSED_LOOP_MODEL
+from ..binding.closed_loop import CLOSED_LOOP_MODEL
 from .bound import RUN_SECONDS, Bound
 from .measure import BLOCK, EXACT_WINDOW, SUPERVISION_OFF, WINDOW
 

@@ -15,15 +15,15 @@ results (:mod:`harness.buildtime.references`) and ``export`` (:mod:`harness.iden
 from __future__ import annotations
 
 from . import core
-from .fmu_variables import COMPOSED
+from .fmu_variables import COMPOSED, PREFIXES
 
 __all__ = ["CLOSED_LOOP_MODEL", "CONTROLLER_PREFIX", "NOMINAL_MODEL_NAMES", "NOT_PARAMETERS",
            "closed_loop_parameters", "component_parameters"]
 
 CLOSED_LOOP_MODEL = "PiezoStageClosedLoop"
 _CONTROLLER = "AdaptiveCompoundController"
-#: the prefix of the controller's nominal model in the closed-loop FMU
-CONTROLLER_PREFIX = "controller."
+#: the prefix of the controller's nominal model in the closed-loop FMU (its declaration's)
+CONTROLLER_PREFIX = PREFIXES[CLOSED_LOOP_MODEL][_CONTROLLER]
 #: the controller's names in the closed-loop FMU, as its declaration composes them
 _IN_LOOP = {name: loop for loop, (model, name) in COMPOSED[CLOSED_LOOP_MODEL].items() if model == _CONTROLLER}
 #: the controller's parameters that name its nominal model (``controller.<name>`` in the loop)

@@ -7,7 +7,7 @@ import sys
 from ..paths import describe_fmu_dir
 from ..scenarios import load_scenarios
 from .measure import BLOCK, CHECKPOINTS, measure
-from .report import format_figures
+from .text_report import format_figures
 
 __all__ = ["add_bench_arguments", "run_bench"]
 

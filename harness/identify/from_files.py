@@ -8,7 +8,7 @@ and :func:`write_outputs` writes
 * the parameter file (a flat JSON of FMU variable names, see
   :mod:`harness.identify.params`), ready for ``--plant-params``,
   ``--controller-params`` and ``export``;
-* ``<stem>.report.md``: the tables (:mod:`harness.identify.tables`);
+* ``<stem>.report.md``: the tables (:mod:`harness.identify.result_tables`);
 * ``<stem>.report.json``: everything, machine-readable (every fit with its
   parameters, standard errors and errors, the creep rows, the held-out errors).
 """
@@ -23,7 +23,7 @@ from ..paths import sha256_of
 from .data import read_record
 from .fit import DEFAULT_HOLDOUT, DEFAULT_MAX_EVALUATIONS, fit_coupled_model
 from .params import write_params
-from .tables import NORMALISATION_NOTE, format_report
+from .result_tables import NORMALISATION_NOTE, format_report
 
 __all__ = ["PI_MIN_REVERSALS", "read_records", "identify_files", "output_paths", "write_outputs",
            "result_to_dict"]

@@ -14,7 +14,7 @@ prediction errors over the divergence monitor's window, the longest clipping and
 delay detection.
 
 The thresholds are the core's: the ``PIEZO_SUP_*`` constants of ``piezo_supervisor.h`` and
-the defaults of the ``sup.*`` parameters (read through :mod:`harness.core`).
+the defaults of the ``sup.*`` parameters (read through :mod:`harness.binding.core`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import lfilter
 
-from . import core
+from ..binding import core
 
 __all__ = ["Thresholds", "thresholds", "statistics", "margins", "Margins", "controller_samples"]
 

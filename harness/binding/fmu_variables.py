@@ -2,11 +2,13 @@
 those declarations and run `python3 packaging/fmu_interface.py`, never this file.
 
 PARAMETERS: the parameters of each FMU that wraps one core block, {name: (path of the
-field in the block's parameter struct, kind)}: harness/core.py's tables.
+field in the block's parameter struct, kind)}: harness/binding/core.py's tables.
 SIGNALS: each FMU's inputs and outputs, {model: {name: (causality, type, unit)}}
 (the SSP's connectors).
 COMPOSED: the variables an FMU takes from its components (arrays element by element),
-{model: {its name: (component, the component's name)}}: harness/closed_loop.py's names.
+{model: {its name: (component, the component's name)}}: harness/binding/closed_loop.py's names.
+PREFIXES: the prefix a composing FMU puts before the names of a component it renames
+(the controller's nominal model), {model: {component: prefix}}.
 """
 
 PARAMETERS = {
@@ -354,4 +356,8 @@ COMPOSED = {
         'est.fallbacks': ('AdaptiveCompoundController', 'est.fallbacks'),
         'sup.reset': ('AdaptiveCompoundController', 'sup.reset'),
     },
+}
+
+PREFIXES = {
+    'PiezoStageClosedLoop': {'AdaptiveCompoundController': 'controller.'},
 }

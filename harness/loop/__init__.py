@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from .scenarios import Scenario, get_scenario
+from ..scenarios import Scenario, get_scenario
 
 #: the schedules of our own masters (``master=`` of :func:`prepare_closed_loop`)
 SCHEDULES = ("gauss-seidel", "jacobi")
