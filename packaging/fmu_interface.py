@@ -775,8 +775,11 @@ def harness_module(interfaces):
             continue
         lines.append(f"    {interface.model!r}: {{")
         for v in params:
-            for name, field, _ in v.elements():
-                lines.append(f"        {name!r}: ({_path(field)!r}, {_KINDS[v.type]!r}),")
+            if v.size is None:
+                lines.append(f"        {v.name!r}: ({_path(v.field)!r}, {_KINDS[v.type]!r}),")
+            else:           # an array's elements name[1]..name[size] at field[0]..field[size - 1]
+                lines.append(f"        **{{f'{v.name}[{{i + 1}}]': ({_path(v.field)!r} + (i,), "
+                             f"{_KINDS[v.type]!r}) for i in range({v.size})}},")
         lines.append("    },")
     lines += ["}", "", "SIGNALS = {"]
     for interface in interfaces:
@@ -792,8 +795,11 @@ def harness_module(interfaces):
             lines.append(f"    {interface.model!r}: {{")
             for v in composed:
                 model, name = v.origin
-                suffixes = [""] if v.size is None else [f"[{i}]" for i in range(1, v.size + 1)]
-                lines += [f"        {v.name + x!r}: {(model, name + x)!r}," for x in suffixes]
+                if v.size is None:
+                    lines.append(f"        {v.name!r}: {(model, name)!r},")
+                else:
+                    lines.append(f"        **{{f'{v.name}[{{i}}]': ({model!r}, f'{name}[{{i}}]') "
+                                 f"for i in range(1, {v.size + 1})}},")
             lines.append("    },")
     lines += ["}", "", "PREFIXES = {"]
     for interface in interfaces:
