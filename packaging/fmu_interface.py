@@ -216,8 +216,10 @@ def _core(where, decl, core):
         raise InterfaceError(f"{where}: core is for a scalar Real or Boolean parameter")
     if "min" in decl or "max" in decl:
         raise InterfaceError(f"{where}: min/max come from core's range; declare them once")
-    if not decl["field"].startswith("params.") or "[" in decl["field"]:
-        raise InterfaceError(f"{where}: core needs a field params.<member of piezo_controller_params>")
+    if not decl["field"].startswith("params.") or "[" in decl["field"] or decl["field"].count(".") > (
+            2 if decl["field"].startswith("params.sup.") else 1):
+        raise InterfaceError(f"{where}: core needs a field params.<member of piezo_controller_params> "
+                             "or params.sup.<member of piezo_supervisor_params>")
     if "copy" in core and not re.fullmatch(r"[A-Za-z_]\w*", core["copy"]):
         raise InterfaceError(f"{where}: core's copy {core['copy']!r} is not a member name")
     text, default = core["range"], core["default"]
@@ -409,6 +411,17 @@ def _c_double(x):
     return text if ("." in text or "e" in text) else text + ".0"
 
 
+#: the core blocks a ``core`` table may feed: {field prefix below ModelData: list name}, the
+#: longest prefix first (the supervisor's parameters are the controller's ``sup`` member)
+CORE_BLOCKS = {"params.sup.": "PIEZO_SUPERVISOR", "params.": "PIEZO_CONTROLLER"}
+
+
+def _block(v):
+    """(list name, member path in the block's parameter struct) of a ``core`` parameter."""
+    prefix = next(p for p in CORE_BLOCKS if v.field.startswith(p))
+    return CORE_BLOCKS[prefix], v.field[len(prefix):]
+
+
 def core_header(interface):
     """The text of fmu_src/core/piezo_controller_params.h, from the controller's declaration."""
     params = [v for v in interface.variables if v.core is not None]
@@ -419,14 +432,16 @@ def core_header(interface):
         f" * {source} (its parameters with a `core` table): edit that",
         " * declaration and run `python3 packaging/fmu_interface.py`, never this file.",
         " *",
-        " * The controller's plain parameters: a default, a range and (most) a copy in the controller.",
-        " * piezo_controller_default_params sets the defaults, piezo_controller_init refuses a value",
-        " * outside its range (naming it and the range), piezo_controller_check holds a restored",
-        " * copy to the range and piezo_controller_check_params to the parameter. Parameters with",
-        " * rules across each other (rls.trace_max, sat.*, rls.zero_min, ...) are written by hand.",
+        " * The plain parameters of the controller and of its supervisor (sup.*): a default, a",
+        " * range and (most) a copy in the block. *_default_params set the defaults, *_init refuse",
+        " * a value outside its range (naming it and the range), *_check hold a restored copy to",
+        " * the range and piezo_controller_check_params to the parameter. Parameters with rules",
+        " * across each other (rls.trace_max, sat.*, rls.zero_min, sup.window, ...) are by hand.",
         " *",
-        " * PIEZO_CONTROLLER_PLAIN_PARAMS(X): X(field, name, default, lo, hi, lo_open, hi_open, range)",
-        " * PIEZO_CONTROLLER_PLAIN_COPIES(X): X(field, copy, name, lo, hi, lo_open, hi_open)",
+        " * <BLOCK>_PLAIN_PARAMS(X): X(field, name, default, lo, hi, lo_open, hi_open, range)",
+        " * <BLOCK>_PLAIN_COPIES(X): X(field, copy, name, lo, hi, lo_open, hi_open)",
+        " * (BLOCK: PIEZO_CONTROLLER, fields of piezo_controller_params and piezo_controller;",
+        " * PIEZO_SUPERVISOR, of piezo_supervisor_params and piezo_supervisor)",
         " */",
         "#ifndef PIEZO_CONTROLLER_PARAMS_H",
         "#define PIEZO_CONTROLLER_PARAMS_H",
@@ -449,14 +464,15 @@ def core_header(interface):
         d = v.core["default"]
         return str(int(d)) if v.type == "Boolean" else _c_double(d)
 
-    lines += table("PIEZO_CONTROLLER_PLAIN_PARAMS", [
-        f'X({v.field[len("params."):]}, "{v.name}", {default(v)}, {interval(v)}, "{v.core["range"]}")'
-        for v in params])
-    lines.append("")
-    lines += table("PIEZO_CONTROLLER_PLAIN_COPIES", [
-        f'X({v.field[len("params."):]}, {v.core["copy"]}, "{v.name}", {interval(v)})'
-        for v in params if "copy" in v.core])
-    lines += ["", "#endif /* PIEZO_CONTROLLER_PARAMS_H */", ""]
+    for block in CORE_BLOCKS.values():
+        mine = [(v, _block(v)[1]) for v in params if _block(v)[0] == block]
+        lines += table(f"{block}_PLAIN_PARAMS", [
+            f'X({field}, "{v.name}", {default(v)}, {interval(v)}, "{v.core["range"]}")' for v, field in mine])
+        lines.append("")
+        lines += table(f"{block}_PLAIN_COPIES", [
+            f'X({field}, {v.core["copy"]}, "{v.name}", {interval(v)})' for v, field in mine if "copy" in v.core])
+        lines.append("")
+    lines += ["#endif /* PIEZO_CONTROLLER_PARAMS_H */", ""]
     return "\n".join(lines)
 
 

@@ -229,6 +229,14 @@ causality = "parameter"
 field = "params.rls_new_gain"
 core = { range = "(0, 2] (a new gain)", default = 0.25, copy = "new_gain" }
 description = "A new plain parameter, declared in this one place"
+
+[[variable]]
+name = "sup.new_margin"
+type = "Real"
+causality = "parameter"
+field = "params.sup.new_margin"
+core = { range = "[1, 10) (a new margin)", default = 3.0, copy = "new_margin" }
+description = "A new plain parameter of the supervisor"
 '''
 
 #: the use: init with the defaults, a value out of range, the restore checks
@@ -258,6 +266,17 @@ int main(void)
     memset(&diag, 0, sizeof diag);
     st = (int)piezo_controller_init(&c, &p, &diag);
     printf("refused %d %s %s %g\n", st, diag.parameter, diag.valid_range, diag.value);
+    piezo_controller_default_params(&p);
+    st = (int)piezo_controller_init(&c, &p, &diag);
+    printf("sup default %.17g init %d copy %.17g\n", p.sup.new_margin, st, c.sup.new_margin);
+    c.sup.new_margin = 4.0;
+    printf("sup tampered params %s\n", (m = piezo_controller_check_params(&c, &p)) ? m : "ok");
+    c.sup.new_margin = 10.0;
+    printf("sup tampered state %s\n", (m = piezo_controller_check(&c)) ? m : "ok");
+    p.sup.new_margin = 0.5;
+    memset(&diag, 0, sizeof diag);
+    st = (int)piezo_controller_init(&c, &p, &diag);
+    printf("sup refused %d %s %s %g\n", st, diag.parameter, diag.valid_range, diag.value);
     return 0;
 }
 '''
@@ -271,7 +290,9 @@ def test_a_plain_controller_parameter_takes_its_declaration_its_members_and_its_
     descriptions' start, and piezo_controller_default_params), its range (0, 2] as the
     descriptions' min/max and as init's refusal of 2.5 naming it and the range, its copy in
     the controller, which the restore checks hold to the parameter (0.5: "does not match") and
-    to the range (NaN: "rls.new_gain out of range")."""
+    to the range (NaN: "rls.new_gain out of range"). The same for a supervisor parameter
+    (sup.new_margin, its members in piezo_supervisor.h): default 3, a copy of 4 "does not
+    match", 10 is "sup.new_margin out of range" (the open end), 0.5 refused naming it."""
     root = _scratch(tmp_path)
     _write(root, CONTROLLER, PLAIN_PARAMETER)
     header = root / "fmu_src" / "core" / "piezo_controller.h"
@@ -279,6 +300,11 @@ def test_a_plain_controller_parameter_takes_its_declaration_its_members_and_its_
     assert text.count("} piezo_controller_params;") == 1 and text.count("} piezo_controller;") == 1
     header.write_text(text.replace("} piezo_controller_params;", "    double rls_new_gain;\n} piezo_controller_params;")
                       .replace("} piezo_controller;", "    double new_gain;\n} piezo_controller;"), encoding="utf-8")
+    header = root / "fmu_src" / "core" / "piezo_supervisor.h"
+    text = header.read_text(encoding="utf-8")
+    assert text.count("} piezo_supervisor_params;") == 1 and text.count("} piezo_supervisor;") == 1
+    header.write_text(text.replace("} piezo_supervisor_params;", "    double new_margin;\n} piezo_supervisor_params;")
+                      .replace("} piezo_supervisor;", "    double new_margin;\n} piezo_supervisor;"), encoding="utf-8")
     files = fi.generated_files(root)
     for path, content in files.items():
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -286,6 +312,8 @@ def test_a_plain_controller_parameter_takes_its_declaration_its_members_and_its_
     core_header = files[root / fi.CORE_HEADER]
     assert ('X(rls_new_gain, "rls.new_gain", 0.25, 0.0, 2.0, 1, 0, "(0, 2] (a new gain)")' in core_header)
     assert 'X(rls_new_gain, new_gain, "rls.new_gain", 0.0, 2.0, 1, 0)' in core_header
+    assert 'X(new_margin, new_margin, "sup.new_margin", 1.0, 10.0, 0, 1)' in core_header.split(
+        "PIEZO_SUPERVISOR_PLAIN_COPIES")[1].split("PIEZO_CONTROLLER")[0]
     for sub in ("", "fmi3"):
         for model in (CONTROLLER, LOOP):
             found = [(attrs, typ) for name, attrs, typ in
@@ -311,4 +339,8 @@ def test_a_plain_controller_parameter_takes_its_declaration_its_members_and_its_
         "tampered params controller state does not match its parameters",
         "tampered state rls.new_gain out of range",
         "refused 2 rls.new_gain (0, 2] (a new gain) 2.5",
+        "sup default 3 init 0 copy 3",
+        "sup tampered params controller state does not match its parameters",
+        "sup tampered state sup.new_margin out of range",
+        "sup refused 2 sup.new_margin [1, 10) (a new margin) 0.5",
     ], out

@@ -5,11 +5,6 @@
 #include "piezo_controller_internal.h"
 #include "piezo_controller_params.h"
 
-int piezo_ctl_in_range(double v, double lo, double hi, int lo_open, int hi_open)
-{
-    return isfinite(v) && (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
-}
-
 /* A ring of values tagged 1 + the sample each is for (0: empty): each tag in its slot,
  * (tag - 1) % ring, and at most `last` */
 static int ring_tags_valid(const uint64_t *tag, int ring, uint64_t last)
@@ -46,7 +41,7 @@ const char *piezo_controller_check(const piezo_controller *c)
         return "restart (sup.reset) sample, ramp or count inconsistent";
     /* the plain parameters' copies, each within its declared range (piezo_controller_params.h) */
 #define PLAIN_COPY_CHECK(field, copy, name, lo, hi, lo_open, hi_open) \
-    if (!piezo_ctl_in_range((double)c->copy, lo, hi, lo_open, hi_open)) return name " out of range";
+    if (!piezo_in_range((double)c->copy, lo, hi, lo_open, hi_open)) return name " out of range";
     PIEZO_CONTROLLER_PLAIN_COPIES(PLAIN_COPY_CHECK)
 #undef PLAIN_COPY_CHECK
     if ((fault = piezo_pi_check(&c->fwd_pi)) != NULL) return fault;
@@ -206,6 +201,9 @@ const char *piezo_controller_check_params(const piezo_controller *c, const piezo
 #define PLAIN_DIFFERS(field, copy, name, lo, hi, lo_open, hi_open) differs = differs || c->copy != q->field;
     PIEZO_CONTROLLER_PLAIN_COPIES(PLAIN_DIFFERS)
 #undef PLAIN_DIFFERS
+#define SUP_PLAIN_DIFFERS(field, copy, name, lo, hi, lo_open, hi_open) differs = differs || c->sup.copy != q->sup.field;
+    PIEZO_SUPERVISOR_PLAIN_COPIES(SUP_PLAIN_DIFFERS)
+#undef SUP_PLAIN_DIFFERS
     if (differs || (q->mv_delay == PIEZO_MV_AUTO_DELAY) != c->auto_delay || (!c->auto_delay && c->d != 1 + q->mv_delay)
         || c->fwd_pi.m != q->pi.m || c->inv_creep.exact != (q->creep_exact ? 1 : 0)
         || c->inv_creep.alpha != -q->creep_alpha
@@ -214,11 +212,9 @@ const char *piezo_controller_check_params(const piezo_controller *c, const piezo
         || c->p0_loop != q->rls_p0_loop
         || c->divergence_samples != (uint64_t)q->monitor_divergence_samples
         || (c->sat_enabled && (c->sat_v_min != q->sat_v_min || c->sat_v_max != q->sat_v_max))
-        || c->sup.enabled != q->sup.enabled || c->sup.gain_min != q->sup.gain_min
-        || c->sup.gain_max != q->sup.gain_max || c->sup.forgetting != scratch.sup.forgetting
+        || c->sup.forgetting != scratch.sup.forgetting
         || c->sup.clip_samples != scratch.sup.clip_samples || c->sup.detect_samples != scratch.sup.detect_samples
-        || c->sup.window != scratch.sup.window || c->sup.clip_error != q->sup.clip_error
-        || c->sup.reaction != q->sup.reaction || c->sup.ramp_time != q->sup.ramp_time
+        || c->sup.window != scratch.sup.window || c->sup.reaction != q->sup.reaction
         || c->sup.ramp_samples != scratch.sup.ramp_samples
         || c->zero_min != scratch.zero_min || c->gain_lo != q->sup.gain_min || c->gain_hi != q->sup.gain_max
         || c->fallback_samples != scratch.fallback_samples)

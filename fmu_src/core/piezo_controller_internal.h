@@ -47,8 +47,6 @@ void piezo_ctl_rls_gain(const piezo_controller *c, const double *theta_in, const
 void piezo_ctl_project(const piezo_controller *c, double *th);
 void piezo_ctl_detect_carry(const piezo_controller *c, piezo_controller_sample *s);
 int piezo_ctl_all_finite(const double *x, int n);
-/* 1 when v is finite and in the interval [lo, hi], an end open where lo_open / hi_open */
-int piezo_ctl_in_range(double v, double lo, double hi, int lo_open, int hi_open);
 double piezo_ctl_admissible_excess(const double *row, double d, const double *th);
 int piezo_ctl_admissible_violated(const piezo_controller *c, const double *th);
 double piezo_ctl_safe_v(const piezo_controller *c, double v0, uint64_t j);

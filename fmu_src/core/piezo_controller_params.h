@@ -3,19 +3,37 @@
  * fmu_src/AdaptiveCompoundController/variables.toml (its parameters with a `core` table): edit that
  * declaration and run `python3 packaging/fmu_interface.py`, never this file.
  *
- * The controller's plain parameters: a default, a range and (most) a copy in the controller.
- * piezo_controller_default_params sets the defaults, piezo_controller_init refuses a value
- * outside its range (naming it and the range), piezo_controller_check holds a restored
- * copy to the range and piezo_controller_check_params to the parameter. Parameters with
- * rules across each other (rls.trace_max, sat.*, rls.zero_min, ...) are written by hand.
+ * The plain parameters of the controller and of its supervisor (sup.*): a default, a
+ * range and (most) a copy in the block. *_default_params set the defaults, *_init refuse
+ * a value outside its range (naming it and the range), *_check hold a restored copy to
+ * the range and piezo_controller_check_params to the parameter. Parameters with rules
+ * across each other (rls.trace_max, sat.*, rls.zero_min, sup.window, ...) are by hand.
  *
- * PIEZO_CONTROLLER_PLAIN_PARAMS(X): X(field, name, default, lo, hi, lo_open, hi_open, range)
- * PIEZO_CONTROLLER_PLAIN_COPIES(X): X(field, copy, name, lo, hi, lo_open, hi_open)
+ * <BLOCK>_PLAIN_PARAMS(X): X(field, name, default, lo, hi, lo_open, hi_open, range)
+ * <BLOCK>_PLAIN_COPIES(X): X(field, copy, name, lo, hi, lo_open, hi_open)
+ * (BLOCK: PIEZO_CONTROLLER, fields of piezo_controller_params and piezo_controller;
+ * PIEZO_SUPERVISOR, of piezo_supervisor_params and piezo_supervisor)
  */
 #ifndef PIEZO_CONTROLLER_PARAMS_H
 #define PIEZO_CONTROLLER_PARAMS_H
 
 #include <math.h>
+
+#define PIEZO_SUPERVISOR_PLAIN_PARAMS(X) \
+    X(enabled, "sup.enabled", 1, 0.0, 1.0, 0, 0, "false or true") \
+    X(gain_min, "sup.gain_min", 0.25, 0.0, 1.0, 1, 1, "(0, 1) (times the model's response)") \
+    X(gain_max, "sup.gain_max", 4.0, 1.0, HUGE_VAL, 1, 1, "(1, inf) (times the model's response)") \
+    X(ramp_time, "sup.ramp_time", 0.01, 0.0, 1000000.0, 0, 0, "[0, 1e6] s") \
+    X(clip_error, "sup.clip_error", 1.0, 0.0, HUGE_VAL, 1, 1, "(0, inf) um") \
+    /* end */
+
+#define PIEZO_SUPERVISOR_PLAIN_COPIES(X) \
+    X(enabled, enabled, "sup.enabled", 0.0, 1.0, 0, 0) \
+    X(gain_min, gain_min, "sup.gain_min", 0.0, 1.0, 1, 1) \
+    X(gain_max, gain_max, "sup.gain_max", 1.0, HUGE_VAL, 1, 1) \
+    X(ramp_time, ramp_time, "sup.ramp_time", 0.0, 1000000.0, 0, 0) \
+    X(clip_error, clip_error, "sup.clip_error", 0.0, HUGE_VAL, 1, 1) \
+    /* end */
 
 #define PIEZO_CONTROLLER_PLAIN_PARAMS(X) \
     X(mv_feedthrough, "mv.feedthrough", 0, 0.0, 1.0, 0, 0, "false or true") \

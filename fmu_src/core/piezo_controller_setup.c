@@ -144,7 +144,7 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
                             (double)p->mv_delay);
     /* the plain parameters, each within its declared range (piezo_controller_params.h) */
 #define PLAIN_CHECK(field, name, dflt, lo, hi, lo_open, hi_open, range) \
-    if (!piezo_ctl_in_range((double)p->field, lo, hi, lo_open, hi_open)) \
+    if (!piezo_in_range((double)p->field, lo, hi, lo_open, hi_open)) \
         return piezo_refuse(diag, name, range, (double)p->field);
     PIEZO_CONTROLLER_PLAIN_PARAMS(PLAIN_CHECK)
 #undef PLAIN_CHECK

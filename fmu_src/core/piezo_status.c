@@ -1,4 +1,5 @@
 /* piezo_status.c - parameter diagnostics. See piezo_status.h. */
+#include <math.h>
 #include <stddef.h>
 #include "piezo_status.h"
 
@@ -10,4 +11,9 @@ piezo_status piezo_refuse(piezo_diag *diag, const char *parameter, const char *v
         diag->value = value;
     }
     return PIEZO_ERR_PARAM;
+}
+
+int piezo_in_range(double v, double lo, double hi, int lo_open, int hi_open)
+{
+    return isfinite(v) && (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi);
 }

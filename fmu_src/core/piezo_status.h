@@ -37,4 +37,8 @@ typedef struct {
 /* Fill *diag (may be NULL) and return PIEZO_ERR_PARAM: the one way inits refuse. */
 piezo_status piezo_refuse(piezo_diag *diag, const char *parameter, const char *valid_range, double value);
 
+/* 1 when v is finite and in [lo, hi], an end open where lo_open / hi_open: the declared range of
+ * a plain parameter (piezo_controller_params.h) */
+int piezo_in_range(double v, double lo, double hi, int lo_open, int hi_open);
+
 #endif

@@ -2,39 +2,28 @@
 #include <math.h>
 #include <string.h>
 #include "piezo_supervisor.h"
+#include "piezo_controller_params.h"
 
-/* Defaults (docs/model.md, supervision; the margins measured on the legitimate
- * family are in docs/robustness.md): a working loop's response gain stayed in
- * 0.359 .. 1.71 times the model's under strong evidence (0.858 .. 1.13 with the
- * stage's own model); v stayed clipped at most 669 samples (0.33 s) with limits at
- * half the peak needed; a delay was chosen within 103 samples (51.5 ms). */
-#define DEFAULT_GAIN_MIN 0.25
-#define DEFAULT_GAIN_MAX 4.0
+/* Defaults (docs/model.md, supervision; the margins measured on the legitimate family are in
+ * docs/robustness.md; the plain parameters' defaults, sup.gain_min, sup.gain_max, sup.ramp_time
+ * and sup.clip_error, with why, are in the controller's declaration: piezo_controller_params.h):
+ * v stayed clipped at most 669 samples (0.33 s) with limits at half the peak needed; a delay was
+ * chosen within 103 samples (51.5 ms). */
 #define DEFAULT_CLIP_TIME 0.5
 #define DEFAULT_DETECT_TIME 0.5
 #define WINDOW_MIN 20
 #define WINDOW_MAX 1000000
-/* The safe state (sup.reaction = safe) ramps v to 0 V over 10 ms, 20 samples at the paper's
- * h: a step of v would excite the stage's mechanical resonance (a kHz and above for a
- * piezo stage), a ramp of 10 ms stays far below it and still drops v within a few of the
- * stage's own time constants. */
-#define DEFAULT_RAMP_TIME 0.01
-/* The clipping watchdog's bound on the mean |y_d - y_meas| over a clipped run: 1 um, as
- * the defaults of the fault table were measured with (it borrowed monitor.pred_error_max). */
-#define DEFAULT_CLIP_ERROR 1.0
 
 void piezo_supervisor_default_params(piezo_supervisor_params *p)
 {
     if (!p) return;
-    p->enabled = 1;
-    p->gain_min = DEFAULT_GAIN_MIN;
-    p->gain_max = DEFAULT_GAIN_MAX;
+#define PLAIN_DEFAULT(field, name, dflt, lo, hi, lo_open, hi_open, range) p->field = (dflt);
+    PIEZO_SUPERVISOR_PLAIN_PARAMS(PLAIN_DEFAULT)
+#undef PLAIN_DEFAULT
     p->window = PIEZO_SUP_DEFAULT_WINDOW;
     p->clip_time = DEFAULT_CLIP_TIME;
     p->detect_time = DEFAULT_DETECT_TIME;
     p->reaction = PIEZO_SUP_REACT_ERROR;
-    p->ramp_time = DEFAULT_RAMP_TIME;
-    p->clip_error = DEFAULT_CLIP_ERROR;
 }
 
 /* samples of a duration t at h, at least 1, saturated far below 2^63 */
@@ -50,12 +39,12 @@ piezo_status piezo_supervisor_init(piezo_supervisor *s, const piezo_supervisor_p
                                    double a1, double a2, double b1, double b2, double h, piezo_diag *diag)
 {
     if (!s || !p) return PIEZO_ERR_NULL;
-    if (p->enabled != 0 && p->enabled != 1)
-        return piezo_refuse(diag, "sup.enabled", "false or true", (double)p->enabled);
-    if (!(isfinite(p->gain_min) && p->gain_min > 0.0 && p->gain_min < 1.0))
-        return piezo_refuse(diag, "sup.gain_min", "(0, 1) (times the model's response)", p->gain_min);
-    if (!(isfinite(p->gain_max) && p->gain_max > 1.0))
-        return piezo_refuse(diag, "sup.gain_max", "(1, inf) (times the model's response)", p->gain_max);
+    /* the plain parameters, each within its declared range (piezo_controller_params.h) */
+#define PLAIN_CHECK(field, name, dflt, lo, hi, lo_open, hi_open, range) \
+    if (!piezo_in_range((double)p->field, lo, hi, lo_open, hi_open)) \
+        return piezo_refuse(diag, name, range, (double)p->field);
+    PIEZO_SUPERVISOR_PLAIN_PARAMS(PLAIN_CHECK)
+#undef PLAIN_CHECK
     if (p->window < WINDOW_MIN || p->window > WINDOW_MAX)
         return piezo_refuse(diag, "sup.window", "20..1000000 samples", (double)p->window);
     if (!(isfinite(p->clip_time) && p->clip_time > 0.0))
@@ -65,21 +54,15 @@ piezo_status piezo_supervisor_init(piezo_supervisor *s, const piezo_supervisor_p
     if (p->reaction != PIEZO_SUP_REACT_ERROR && p->reaction != PIEZO_SUP_REACT_SAFE)
         return piezo_refuse(diag, "sup.reaction", "0 (error: a verdict fails the step) or 1 (safe: v ramps "
                             "to 0 V and the simulation goes on)", (double)p->reaction);
-    if (!(isfinite(p->ramp_time) && p->ramp_time >= 0.0 && p->ramp_time <= 1e6))
-        return piezo_refuse(diag, "sup.ramp_time", "[0, 1e6] s", p->ramp_time);
-    if (!(isfinite(p->clip_error) && p->clip_error > 0.0))
-        return piezo_refuse(diag, "sup.clip_error", "(0, inf) um", p->clip_error);
     memset(s, 0, sizeof *s);
-    s->enabled = p->enabled;
+#define PLAIN_COPY(field, copy, name, lo, hi, lo_open, hi_open) s->copy = p->field;
+    PIEZO_SUPERVISOR_PLAIN_COPIES(PLAIN_COPY)
+#undef PLAIN_COPY
     s->forgetting = 1.0 - 1.0 / (double)p->window;
-    s->gain_min = p->gain_min;
-    s->gain_max = p->gain_max;
     s->clip_samples = samples_of(p->clip_time, h);
     s->detect_samples = samples_of(p->detect_time, h);
     s->window = (uint64_t)p->window;
-    s->clip_error = p->clip_error;
     s->reaction = p->reaction;
-    s->ramp_time = p->ramp_time;
     s->ramp_samples = p->ramp_time > 0.0 ? samples_of(p->ramp_time, h) : 0;
     s->a1 = a1;
     s->a2 = a2;
@@ -574,17 +557,20 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
 {
     int i;
     if (!s) return "supervisor missing";
+    /* the plain parameters' copies, each within its declared range (piezo_controller_params.h) */
+#define PLAIN_COPY_CHECK(field, copy, name, lo, hi, lo_open, hi_open) \
+    if (!piezo_in_range((double)s->copy, lo, hi, lo_open, hi_open)) return name " out of range";
+    PIEZO_SUPERVISOR_PLAIN_COPIES(PLAIN_COPY_CHECK)
+#undef PLAIN_COPY_CHECK
     if (s->bridged_run > s->k)
         return "supervisor counters exceed the sample count";
-    if ((s->enabled != 0 && s->enabled != 1) || (s->status != 0 && s->status != 1)
+    if ((s->status != 0 && s->status != 1)
         || (s->open_loop != 0 && s->open_loop != 1) || s->v_dir < -1 || s->v_dir > 1)
         return "supervisor flags are not 0 or 1";
     if (!(s->forgetting >= 1.0 - 1.0 / WINDOW_MIN && s->forgetting < 1.0)
-        || !(s->gain_min > 0.0 && s->gain_min < 1.0 && s->gain_max > 1.0 && isfinite(s->gain_max))
         || s->clip_samples < 1 || s->detect_samples < 1 || !(isfinite(s->h) && s->h > 0.0)
-        || s->window < WINDOW_MIN || s->window > WINDOW_MAX || !(isfinite(s->clip_error) && s->clip_error > 0.0)
+        || s->window < WINDOW_MIN || s->window > WINDOW_MAX
         || (s->reaction != PIEZO_SUP_REACT_ERROR && s->reaction != PIEZO_SUP_REACT_SAFE)
-        || !(isfinite(s->ramp_time) && s->ramp_time >= 0.0 && s->ramp_time <= 1e6)
         || s->ramp_samples != (s->ramp_time > 0.0 ? samples_of(s->ramp_time, s->h) : 0))
         return "supervisor parameters out of range";
     if (s->ref_head < 0 || s->ref_head >= PIEZO_SUP_REF_RING)
