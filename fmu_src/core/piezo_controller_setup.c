@@ -156,8 +156,6 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
                             p->rls_excitation_time);
     if (!(isfinite(p->rls_p0_loop) && p->rls_p0_loop > 0.0 && 4.0 * p->rls_p0_loop <= p->rls_trace_max))
         return piezo_refuse(diag, "rls.p0_loop", "(0, rls.trace_max / 4]", p->rls_p0_loop);
-    if (!(isfinite(p->mv_integral) && p->mv_integral >= 0.0 && p->mv_integral < 1.0))
-        return piezo_refuse(diag, "mv.integral", "[0, 1) (gain of the integral action per sample)", p->mv_integral);
     if (p->sat_enabled) {
         if (!isfinite(p->sat_v_min)) return piezo_refuse(diag, "sat.v_min", "finite, < sat.v_max", p->sat_v_min);
         if (!(isfinite(p->sat_v_max) && p->sat_v_max > p->sat_v_min))
