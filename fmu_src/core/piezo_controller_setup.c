@@ -182,10 +182,13 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
         nominal[1] = p->tf_a2;
         nominal[2] = p->tf_b1;
         nominal[3] = p->tf_b2;
-        if (!(isfinite(p->sup.gain_min) && p->sup.gain_min > 0.0 && p->sup.gain_min < 1.0))
-            return piezo_refuse(diag, "sup.gain_min", "(0, 1) (times the model's response)", p->sup.gain_min);
-        if (!(isfinite(p->sup.gain_max) && p->sup.gain_max > 1.0))
-            return piezo_refuse(diag, "sup.gain_max", "(1, inf) (times the model's response)", p->sup.gain_max);
+        /* the rows use sup.gain_min and sup.gain_max before piezo_supervisor_init checks them:
+         * the supervisor's plain parameters, each within its declared range, first */
+#define SUP_PLAIN_CHECK(field, name, dflt, lo, hi, lo_open, hi_open, range) \
+        if (!piezo_in_range((double)p->sup.field, lo, hi, lo_open, hi_open)) \
+            return piezo_refuse(diag, name, range, (double)p->sup.field);
+        PIEZO_SUPERVISOR_PLAIN_PARAMS(SUP_PLAIN_CHECK)
+#undef SUP_PLAIN_CHECK
         piezo_ctl_admissible_rows(nominal, admissible_zero_min(p), p->rls_pole_min, p->sup.gain_min, p->sup.gain_max, rows, bounds);
         for (i = 0; i < PIEZO_ADMISSIBLE_ROWS; ++i)
             if (piezo_ctl_admissible_excess(rows[i], bounds[i], nominal) > 0.0)
