@@ -338,6 +338,10 @@ def load(model, root=REPO, cache=None):
                     if "prefix" in comp}
     else:
         variables = [_variable(path, decl) for decl in doc.get("variable", [])]
+    stray = [v.name for v in variables if v.core is not None and v.origin is None and model != CORE_MODEL]
+    if stray:
+        raise InterfaceError(f"{path}: core tables are read from {CORE_MODEL}'s declaration only, "
+                             f"not here: {stray}")
     names = [v.name for v in variables]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:

@@ -194,6 +194,9 @@ def test_a_component_variable_the_loop_neither_takes_nor_lists_stops_the_generat
     (lambda t: t + '\n[[variable]]\nname = "x"\ntype = "Real"\ncausality = "parameter"\n'
                    'field = "params.h); exit(1); (void)(0"\ndescription = "d"\n',
      r"variable 'x': field .* is not a C member path of ModelData"),
+    (lambda t: t + '\n[[variable]]\nname = "x"\ntype = "Real"\ncausality = "parameter"\n'
+                   'field = "params.h"\ncore = { range = "(0, 1)", default = 0.5 }\ndescription = "d"\n',
+     r"core tables are read from AdaptiveCompoundController's declaration only, not here: \['x'\]"),
 ])
 def test_a_bad_declaration_is_refused_naming_the_file_and_variable(tmp_path, edit, message):
     """Reference: the generator's checks (fmu_interface._variable, load)."""
