@@ -195,7 +195,7 @@ def _read_rows(path):
     except IsADirectoryError:
         raise RecordFileError(f"{path}: is a folder, not a CSV file") from None
     except UnicodeDecodeError as exc:
-        raise RecordFileError(f"{path}: not a text file ({exc.reason} at byte {exc.start})") from None
+        raise RecordFileError(f"{path}: not a text file ({exc.reason})") from None
     except csv.Error as exc:
         raise RecordFileError(f"{path}: not a valid CSV file ({exc})") from None
     except OSError as exc:
