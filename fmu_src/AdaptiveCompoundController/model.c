@@ -178,11 +178,6 @@ static void after_commit(ModelData *data, const piezo_controller_input *in, int 
     fmu_controller_track_commit(&data->track, &data->ctrl, data->t0, data->params.h);
 }
 
-double model_sample_period(const ModelData *data)
-{
-    return data->params.h;
-}
-
 size_t model_history_needed(const ModelData *data)
 {
     return piezo_controller_history_needed(&data->ctrl);

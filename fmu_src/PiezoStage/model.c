@@ -48,11 +48,6 @@ piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
     return piezo_plant_init(&data->plant, &data->params, diag);
 }
 
-double model_sample_period(const ModelData *data)
-{
-    return data->params.h;
-}
-
 size_t model_history_needed(const ModelData *data)
 {
     return piezo_plant_history_needed(&data->plant);

@@ -144,11 +144,6 @@ piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
     return PIEZO_OK;
 }
 
-double model_sample_period(const ModelData *data)
-{
-    return data->stage.h;
-}
-
 size_t model_history_needed(const ModelData *data)
 {
     return stage_exact(data) ? piezo_plant_history_needed(&data->plant)

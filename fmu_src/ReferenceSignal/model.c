@@ -26,11 +26,6 @@ piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag)
     return piezo_reference_init(&data->ref, &data->params, start_time, diag);
 }
 
-double model_sample_period(const ModelData *data)
-{
-    return data->params.h;
-}
-
 size_t model_history_needed(const ModelData *data)
 {
     (void)data;

@@ -246,6 +246,13 @@ static void *value_ptr(glue_instance *inst, uint32_t index)
     return (char *)&inst->data + model_variables[index].offset;
 }
 
+/* Every model declares its sample period as the parameter "h" (a Real): read where its entry
+ * of the generated variable table says it lies. */
+double model_sample_period(const ModelData *data)
+{
+    return *(const double *)((const char *)data + model_variables[vr_h].offset);
+}
+
 /* The name of the variable at value reference vr: an array's without "[1]". */
 static const char *variable_name(const glue_instance *inst, uint32_t vr, char *buf, size_t size)
 {

@@ -69,7 +69,8 @@ void model_set_start_values(ModelData *data);
  * parameter. */
 piezo_status model_init(ModelData *data, double start_time, piezo_diag *diag);
 
-/* The sample period h of an initialized model. */
+/* The sample period h of an initialized model: its parameter "h", which every model declares
+ * (the glue reads it where the generated table model_variables[vr_h] says it lies). */
 double model_sample_period(const ModelData *data);
 
 /* Doubles of exact-mode history the next step (or output update) needs;

@@ -184,22 +184,44 @@ def _fmt(x):
     return repr(float(x))
 
 
+def unreadable_file_message(path, exc, what):
+    """One line saying why a text file could not be read (records here, parameter files in
+    :mod:`harness.identify.params`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    exc : OSError or UnicodeDecodeError
+        What opening, reading or decoding it raised.
+    what : str
+        What a folder given instead is not, e.g. ``"a CSV file"``.
+
+    Returns
+    -------
+    str
+        ``"<path>: no such file"``, ``"<path>: is a folder, not <what>"``,
+        ``"<path>: not a text file (<reason>)"`` or ``"<path>: cannot be read (<reason>)"``.
+    """
+    if isinstance(exc, FileNotFoundError):
+        return f"{path}: no such file"
+    if isinstance(exc, IsADirectoryError):
+        return f"{path}: is a folder, not {what}"
+    if isinstance(exc, UnicodeDecodeError):
+        return f"{path}: not a text file ({exc.reason})"
+    return f"{path}: cannot be read ({exc.strerror or exc})"
+
+
 def _read_rows(path):
     """(header, [(line number, fields)]) of the file, blank and '#' lines skipped."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             rows = [(i, row) for i, row in enumerate(csv.reader(fh), start=1)
                     if row and any(f.strip() for f in row) and not row[0].lstrip().startswith("#")]
-    except FileNotFoundError:
-        raise RecordFileError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise RecordFileError(f"{path}: is a folder, not a CSV file") from None
-    except UnicodeDecodeError as exc:
-        raise RecordFileError(f"{path}: not a text file ({exc.reason} at byte {exc.start})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RecordFileError(unreadable_file_message(path, exc, "a CSV file")) from None
     except csv.Error as exc:
         raise RecordFileError(f"{path}: not a valid CSV file ({exc})") from None
-    except OSError as exc:
-        raise RecordFileError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     if not rows:
         raise RecordFileError(f"{path}: the file is empty (expected a header: time,v,y)")
     return rows[0], rows[1:]

@@ -25,6 +25,7 @@ from pathlib import Path
 
 from ..binding import core
 from ..fmu import parameter_types as fmu_parameter_types
+from .data import unreadable_file_message
 
 __all__ = [
     "PLANT_MODEL",
@@ -114,14 +115,8 @@ def read_params(path):
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ParameterFileError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise ParameterFileError(f"{path}: is a folder, not a parameter file") from None
-    except UnicodeDecodeError as exc:
-        raise ParameterFileError(f"{path}: not a text file ({exc.reason})") from None
-    except OSError as exc:
-        raise ParameterFileError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParameterFileError(unreadable_file_message(path, exc, "a parameter file")) from None
     try:
         data = json.loads(text, parse_constant=_reject_constant, object_pairs_hook=_no_duplicates)
     except json.JSONDecodeError as exc:

@@ -131,27 +131,41 @@ def _read_timing(inst):
     return {name: out[name] for name in TIMING_OUTPUTS}
 
 
+class _Exchange:
+    """What a run's loop exchanges with the FMU at each step, set up once: the instance's scalar
+    functions (:class:`~harness.masters.instance.ScalarFunctions`), the buffers of the reals and
+    booleans it reads and of the input y_d it sets, and the addresses of those buffers and of
+    their value references (the loop passes addresses, the fastest call)."""
+
+    def __init__(self, inst, reals, bools):
+        self.fn = ScalarFunctions(inst)
+        info = inst.info
+        self.n_out, self.n_bool = len(reals), len(bools)
+        self.vr_out = vr_array([info.vr(x) for x in reals])
+        self.vr_bool = vr_array([info.vr(x) for x in bools])
+        self.vr_y_d = vr_array([info.vr("y_d")])
+        self.out = (ctypes.c_double * self.n_out)()
+        self.bools = ((ctypes.c_uint8 if inst.fmi3 else ctypes.c_int) * self.n_bool)()
+        self.y_d_in = (ctypes.c_double * 1)()
+        self.np_out = np.ctypeslib.as_array(self.out)
+        #: a_out, a_bool, a_y, a_vr_out, a_vr_bool, a_vr_y
+        self.addresses = tuple(ctypes.addressof(x) for x in (self.out, self.bools, self.y_d_in,
+                                                              self.vr_out, self.vr_bool, self.vr_y_d))
+
+
 def _run(inst, setup, rows, progress):
     """Row k: the outputs at t_k (with mv.feedthrough the controller's at t_(k+1)); one sample a step.
     The y_d input of a table reference is set before each step."""
-    fn = ScalarFunctions(inst)
-    info = inst.info
+    ex = _Exchange(inst, _OUTPUTS, ("saturated",))
+    fn = ex.fn
     GET, SET, GET_BOOL, DO_STEP = fn.names
     c, get, set_, get_bool, step = fn.c, fn.get, fn.set, fn.get_bool, fn.step
     n, h = setup.n, setup.h
-    vr_out = vr_array([info.vr(x) for x in _OUTPUTS])
-    vr_sat = vr_array([info.vr("saturated")])
-    vr_y_d = vr_array([info.vr("y_d")])
-    n_out = len(_OUTPUTS)
-    out = (ctypes.c_double * n_out)()
-    sat = (ctypes.c_uint8 * 1)() if inst.fmi3 else (ctypes.c_int * 1)()
-    y_d_in = (ctypes.c_double * 1)()
+    n_out, sat, y_d_in, np_out = ex.n_out, ex.bools, ex.y_d_in, ex.np_out
+    a_out, a_sat, a_y, a_vr_out, a_vr_sat, a_vr_y = ex.addresses
     external = not setup.scenario.signal.internal
     y_ref = setup.y_ref
     lag = 1 if setup.feedthrough else 0          # the controller's outputs of row k are at t_(k+lag)
-    a_out, a_sat, a_y = ctypes.addressof(out), ctypes.addressof(sat), ctypes.addressof(y_d_in)
-    a_vr_out, a_vr_sat, a_vr_y = ctypes.addressof(vr_out), ctypes.addressof(vr_sat), ctypes.addressof(vr_y_d)
-    np_out = np.ctypeslib.as_array(out)
     second = max(1, int(round(1.0 / h)))
     total = n + lag                              # outputs read at t_0 .. t_(total-1)
     failed, stage, k = False, GET, 0
@@ -303,22 +317,13 @@ def simulate_closed_loop_fmu_steps(scenario, *, hold_step=0.01, settle=0.5, adap
 
 def _run_steps(inst, setup, points, rows):
     """Row i: the outputs at communication point ``points[i]``; the input y_d set before each step."""
-    fn = ScalarFunctions(inst)
-    info = inst.info
+    ex = _Exchange(inst, _STEPS_REALS, _STEPS_BOOLS)
+    fn = ex.fn
     GET, SET, GET_BOOL, DO_STEP = fn.names
     c, get, set_, get_bool, step = fn.c, fn.get, fn.set, fn.get_bool, fn.step
     h, y_ref = setup.h, setup.y_ref
-    vr_out = vr_array([info.vr(x) for x in _STEPS_REALS])
-    vr_bool = vr_array([info.vr(x) for x in _STEPS_BOOLS])
-    vr_y_d = vr_array([info.vr("y_d")])
-    n_out, n_bool = len(_STEPS_REALS), len(_STEPS_BOOLS)
-    out = (ctypes.c_double * n_out)()
-    bools = (ctypes.c_uint8 * n_bool)() if inst.fmi3 else (ctypes.c_int * n_bool)()
-    y_d_in = (ctypes.c_double * 1)()
-    a_out, a_bool, a_y = ctypes.addressof(out), ctypes.addressof(bools), ctypes.addressof(y_d_in)
-    a_vr_out, a_vr_bool, a_vr_y = (ctypes.addressof(vr_out), ctypes.addressof(vr_bool),
-                                   ctypes.addressof(vr_y_d))
-    np_out = np.ctypeslib.as_array(out)
+    n_out, n_bool, bools, y_d_in, np_out = ex.n_out, ex.n_bool, ex.bools, ex.y_d_in, ex.np_out
+    a_out, a_bool, a_y, a_vr_out, a_vr_bool, a_vr_y = ex.addresses
     n_fields = len(CLOSED_LOOP_FIELDS)
     last = points.size - 1
     failed, stage, k = False, GET, 0

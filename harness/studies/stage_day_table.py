@@ -59,7 +59,8 @@ import numpy as np
 from ..fmu import FMUError
 from ..loop import prepare_closed_loop
 from . import stage_use_table
-from .stage_use_table import GRID, draw_stages, hold_band, profile_scenario, stage_plant
+# draw_stages is no longer called here (family_grid draws the stages) but stays importable from this module
+from .stage_use_table import GRID, draw_stages, family_grid, hold_band, profile_scenario, stage_plant  # noqa: F401
 from ..text_tables import markdown_table
 
 __all__ = ["SEED", "SENSORS_NM", "RASTER_FREQUENCIES", "DWELLS", "FRAMES", "TONE_FREQUENCIES",
@@ -295,14 +296,11 @@ def family_tasks(stages=50, seed=SEED, sensors=SENSORS_NM, laws=LAWS, parts=None
     """Every :class:`Task` of the family (see the module docstring)."""
     parts = day_parts() if parts is None else parts
     tasks = []
-    for i, stage in enumerate(draw_stages(stages, seed)):
-        for nm in sensors:
-            for law in laws:
-                for part in parts:
-                    if part.kind == "hour":
-                        part = hour_part(i)
-                    tasks.append(Task(i, nm, law, part, stage_plant(stage, i, nm), _controller(law),
-                                      fmu=i < fmu_stages and nm in fmu_sensors and law == "ours"))
+    for i, stage, nm, law, part in family_grid(stages, seed, sensors, laws, parts):
+        if part.kind == "hour":
+            part = hour_part(i)
+        tasks.append(Task(i, nm, law, part, stage_plant(stage, i, nm), _controller(law),
+                          fmu=i < fmu_stages and nm in fmu_sensors and law == "ours"))
     return tasks
 
 

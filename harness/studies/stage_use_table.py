@@ -52,6 +52,7 @@ import argparse
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from functools import partial
+import itertools
 import json
 import math
 from pathlib import Path
@@ -71,7 +72,7 @@ from ..text_tables import markdown_table
 
 __all__ = ["SEED", "SENSORS_NM", "HOLDS", "MOVES", "LONG_HOLD_MOVES", "SCAN_FREQUENCIES",
            "TONE_FREQUENCIES", "GS_ORDERS", "TARGETS", "DOCUMENTED", "Profile", "Task", "RunMetrics",
-           "profiles_of", "profile_scenario", "draw_stages", "stage_plant", "hold_band", "family_tasks", "run_task", "run_tasks", "run_family",
+           "profiles_of", "profile_scenario", "draw_stages", "stage_plant", "family_grid", "hold_band", "family_tasks", "run_task", "run_tasks", "run_family",
            "save_results", "load_results",
            "summarize", "family_markdown", "verdicts", "write_into", "main"]
 
@@ -227,6 +228,15 @@ def stage_plant(stage, index, nm):
     return {**stage, "sensor.resolution": GRID, "sensor.noise_rms": nm * 1e-3, "sensor.seed": index + 1}
 
 
+def family_grid(stages, seed, sensors, laws, items):
+    """The runs of a family, in order: ``(i, stage, nm, law, item)`` for each of the first
+    ``stages`` stages drawn with ``seed`` (index ``i``), each sensor noise ``nm`` [nm rms], each
+    law and each item (a profile here, a part of the day in :mod:`.stage_day_table`)."""
+    for i, stage in enumerate(draw_stages(stages, seed)):
+        for nm, law, item in itertools.product(sensors, laws, items):
+            yield i, stage, nm, law, item
+
+
 def _controller(law):
     if law == "paper":
         return parameter_set(PAPER_LAW_SET)
@@ -238,13 +248,10 @@ def family_tasks(stages=50, seed=SEED, sensors=SENSORS_NM, laws=("ours", "paper"
     """Every :class:`Task` of the family (see the module docstring)."""
     profile_list = profiles_of() if profile_list is None else profile_list
     tasks = []
-    for i, stage in enumerate(draw_stages(stages, seed)):
-        for nm in sensors:
-            for law in laws:
-                for prof in profile_list:
-                    gs = gs_orders if (i < gs_stages and nm in gs_sensors and prof.gs) else ()
-                    tasks.append(Task(i, nm, law, prof, stage_plant(stage, i, nm), _controller(law),
-                                      i < jacobi_stages, i < fmu_stages, gs))
+    for i, stage, nm, law, prof in family_grid(stages, seed, sensors, laws, profile_list):
+        gs = gs_orders if (i < gs_stages and nm in gs_sensors and prof.gs) else ()
+        tasks.append(Task(i, nm, law, prof, stage_plant(stage, i, nm), _controller(law),
+                          i < jacobi_stages, i < fmu_stages, gs))
     return tasks
 
 

@@ -1146,6 +1146,21 @@ def reset_markdown(family):
                            "inverted: the restarted loop stopped again (median / worst)"], rows)
 
 
+def _exit_code(bad, what):
+    """0 when no run went wrong; else 1, after one line on stderr: ``bad`` runs, ``what`` they did."""
+    if bad:
+        print(f"{bad} {what}", file=sys.stderr)
+    return 1 if bad else 0
+
+
+def _sensor_family(args, family_of, markdown_of, progress):
+    """Run one of the sensor studies (stuck, reset, start) with its options, print its table and
+    return its results."""
+    family = family_of(args.stages, tuple(args.sensors), jobs=args.jobs, progress=progress)
+    print(markdown_of(family))
+    return family
+
+
 def main(argv=None, prog=None):
     """``python -m harness supervision``: the fault table or the family, in Markdown."""
     ap = argparse.ArgumentParser(prog=prog or "python -m harness supervision",
@@ -1207,35 +1222,24 @@ def main(argv=None, prog=None):
         # a fault the loop tracks through is a stage to the controller; one it does not, a silent failure
         # (but for a blind spot docs/robustness.md documents)
         silent = [m for c, m in missed if not m[2] <= SILENT_ERROR and not FAULTS[c].blind]
-        if silent:
-            print(f"{len(silent)} runs neither stopped nor tracking within {1e3 * SILENT_ERROR:g} nm: "
-                  "silently wrong", file=sys.stderr)
-        return 1 if silent else 0
+        return _exit_code(len(silent), f"runs neither stopped nor tracking within "
+                                       f"{1e3 * SILENT_ERROR:g} nm: silently wrong")
     if args.job == "stuck":
-        family = stuck_family(args.stages, tuple(args.sensors), jobs=args.jobs, progress=say)
-        print(stuck_markdown(family))
+        family = _sensor_family(args, stuck_family, stuck_markdown, say)
         early = sum(r["stopped_before"] or (STUCK_CASES[c].reads == "none" and r["fault"] != "")
                     for (c, _), res in family.items() for r in res)
-        if early:
-            print(f"{early} runs stopped where no fault was: false alarms", file=sys.stderr)
-        return 1 if early else 0
+        return _exit_code(early, "runs stopped where no fault was: false alarms")
     if args.job == "reset":
-        family = reset_family(args.stages, tuple(args.sensors), jobs=args.jobs, progress=say)
-        print(reset_markdown(family))
+        family = _sensor_family(args, reset_family, reset_markdown, say)
         bad = [(RESET_CASES[ci].name, nm, reset_verdict(RESET_CASES[ci], r))
                for (ci, nm), res in family.items() for r in res if reset_verdict(RESET_CASES[ci], r)]
         for name, nm, why in bad[:10]:
             print(f"{name}, {nm:g} nm: {why[:300]}", file=sys.stderr)
-        if bad:
-            print(f"{len(bad)} runs did not do what their case says", file=sys.stderr)
-        return 1 if bad else 0
+        return _exit_code(len(bad), "runs did not do what their case says")
     if args.job == "start":
-        family = start_family(args.stages, tuple(args.sensors), jobs=args.jobs, progress=say)
-        print(start_markdown(family))
+        family = _sensor_family(args, start_family, start_markdown, say)
         bad = sum(bool(r["error"]) or r["delay"] not in (0, START_DELAY) for res in family.values() for r in res)
-        if bad:
-            print(f"{bad} runs stopped or chose a wrong loop delay", file=sys.stderr)
-        return 1 if bad else 0
+        return _exit_code(bad, "runs stopped or chose a wrong loop delay")
     if args.job == "false-alarms":
         module, _, function = args.specs.partition(":")
         specs = list(getattr(importlib.import_module(module), function)())
