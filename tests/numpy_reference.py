@@ -395,13 +395,15 @@ def admissible_rows(theta0, zero_min: float, pole_min: float, gain_min: float = 
     return C, d
 
 
-def admissible_projection(theta, P, C, d, nominal, sweeps: int = 8):
+def admissible_projection(theta, P, C, d, nominal, sweeps: int = 8, p0_loop: float = 0.01):
     """Into C theta <= d: sweeps of projections onto each violated half-space in the metric of
     P^-1 (theta - P c (c^T theta - d) / c^T P c), then the step towards the nominal model that
-    ends inside (theta = n + s (theta - n), s the least slack / (slack + excess)), then the
-    nominal model itself if still outside."""
+    ends inside (theta = n + s (theta - n), s the least slack / (slack + excess); rounding may
+    leave that on the wrong side of the boundary: s shrunk by 1e-12, 1e-9, 1e-6, 1e-3 of itself in
+    turn), then the nominal model itself if still outside. ``(theta, P)``: P is p0_loop I when the
+    nominal model was taken (``p0_loop``), else the P given."""
     if np.all(C @ theta <= d):
-        return theta
+        return theta, P
     th = np.array(theta, dtype=float)
     for _ in range(sweeps):
         moved = False
@@ -421,10 +423,16 @@ def admissible_projection(theta, P, C, d, nominal, sweeps: int = 8):
         slack = d - C @ nominal
         excess = C @ th - d
         s = min(1.0, float(np.min(slack[outside] / (slack[outside] + excess[outside]))))
-        th = nominal + s * (th - nominal)
+        out = th
+        th = nominal + s * (out - nominal)
+        for shrink in (1e-12, 1e-9, 1e-6, 1e-3):
+            if not np.any(C @ th - d > 0.0):
+                break
+            th = nominal + (s - s * shrink) * (out - nominal)
         if np.any(C @ th - d > 0.0):
             th = np.array(nominal, dtype=float)
-    return th
+            P = p0_loop * np.eye(4)
+    return th, P
 
 
 #: the fallback's constants (piezo_controller.h): a jump beyond 5 times the largest change learned,
@@ -518,7 +526,7 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         if adapting:
             bound = trace_max if m_e == 0.0 else min(trace_max, variance_max / m_e ** 2)
             theta, P, _ = rls_step(theta, P, phi, e, lam, bound)
-            theta = admissible_projection(theta, P, C, d_rows, nominal)
+            theta, P = admissible_projection(theta, P, C, d_rows, nominal, p0_loop=p0_loop)
         elif not excited and (hold_same is None or same < hold_same):
             c = c + OFFSET_GAIN * e
         rate = abs(r[k] - r1)

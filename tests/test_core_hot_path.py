@@ -235,10 +235,11 @@ class ControllerRef:
 
     def admissible_project(self, P, th):
         """Sweeps of P-metric half-space projections over the violated rows (at most 8), then
-        the radial step towards the nominal model, then the nominal model itself if rounding
-        left it outside."""
+        the radial step towards the nominal model (shrunk by 1e-12 .. 1e-3 of itself while
+        rounding leaves it outside), then the nominal model itself with P = p0_loop I:
+        ``(theta, P)``."""
         if not self.outside(th):
-            return th
+            return th, P
         th = list(th)
         for _ in range(8):
             moved = False
@@ -265,10 +266,16 @@ class ControllerRef:
                     ratio = slack / (slack + excess)
                     if ratio < s:
                         s = ratio
-            th = [n[j] + s * (th[j] - n[j]) for j in range(4)]
+            out = th
+            th = [n[j] + s * (out[j] - n[j]) for j in range(4)]
+            for shrink in (1e-12, 1e-9, 1e-6, 1e-3):
+                if not self.outside(th):
+                    break
+                th = [n[j] + (s - s * shrink) * (out[j] - n[j]) for j in range(4)]
             if self.outside(th):
                 th = list(n)
-        return th
+                P = [[self.p0_loop if i == j else 0.0 for j in range(4)] for i in range(4)]
+        return th, P
 
     def error(self, theta, d, y):
         """The a-priori error y - phi^T theta, in the C order."""
@@ -400,7 +407,7 @@ class ControllerRef:
             pred_error, self.theta, self.P = self.rls_step(self.theta, self.P, self.d, y_meas - self.offset,
                                                            updated, self.lam, bound, paper_projection=False)
             if updated:
-                self.theta = self.admissible_project(self.P, self.theta)
+                self.theta, self.P = self.admissible_project(self.P, self.theta)
             if may and not excited and not held:
                 offset = self.offset + self.OFFSET_GAIN * pred_error
         else:

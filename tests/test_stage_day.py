@@ -147,6 +147,33 @@ def test_a_step_after_a_minute_of_a_tone_is_met_by_the_nominal_model():
     assert fresh_worst[-1] == pytest.approx(1.5181, abs=5e-4)
 
 
+def test_an_estimate_that_rounding_leaves_outside_the_set_stays_on_its_edge():
+    """Reference: the same hour with the estimates fixed at the nominal model, and this run before
+    the change (main 3e281d5). The stage's day's random hour of stage 49 with the noise-free sensor,
+    on the native runner's exchange (the FMUs' binaries). At 3192.476 s the estimates sat on the
+    corner of two rows of the admissible set (a2 >= 0 and B's zero at rls.zero_min = 0.75); after
+    the sweeps the radial step towards the nominal model put them back on it, but rounding left them
+    1e-17 outside (s rounded to 1), and the projection then took the nominal model itself, keeping
+    the covariance that the boundary's data had wound up (trace 100, against rls.p0_loop I = 0.01 I
+    after a fallback). Fitting the next corner of the scan with that covariance took b1 to 0.25 of
+    the nominal in 25 ms, and the scan (segment 443) erred 12.68 um where the fixed estimates err
+    6.1 nm. The radial step is now shrunk (by 1e-12 .. 1e-3 of itself) until it ends inside: the
+    estimates stay on the edge, and that scan errs 148 nm (the figure as measured); no segment of
+    the hour errs beyond 6.5 um (its largest move, which the fixed estimates err 6.5 um too), and the
+    estimates stay inside the set at every sample."""
+    task = [t for t in sd.family_tasks(stages=50, sensors=[0], laws=["ours"], parts=[sd.hour_part(49)],
+                                       fmu_stages=0) if t.stage == 49][0]
+    m, _ = sd.run_part(task)
+    assert m.error == ""
+    worst = np.array(m.worst)
+    print(f"\nsegment 443: {worst[442] * 1e3:.1f} nm; the hour's worst {worst.max():.3f} um")
+    assert m.kinds[442] == "scan"
+    assert worst[442] < 0.2
+    assert worst[442] == pytest.approx(0.1483, abs=1e-4)
+    assert worst.max() < 6.5
+    assert m.outside == 0
+
+
 def test_saved_results_load_as_they_were(tmp_path):
     """Reference: the runs themselves (a round trip through JSON): the stage day's and the stage-use
     table's results, saved with --save and read with --load, are equal to what was saved, keys
