@@ -220,19 +220,11 @@ static void rls_gain(const piezo_controller *c, const double *theta_in, const do
  *     theta -= P c (c^T theta - d) / (c^T P c),
  * then, if a sweep limit left a row violated, the step towards the nominal model (inside the
  * set) that ends on the set: theta = n + s (theta - n), s the least of
- * slack / (slack + excess) over the violated rows (slack = d - c^T n). That step ends on the
- * boundary, where rounding may leave it outside (s rounds to 1 when the excess is below an ulp
- * of the slack): s is then shrunk by RADIAL_SHRINK[i] of itself, each in turn, and only if none
- * ends inside does theta become the nominal model, with the covariance a fallback gives
- * (rls.p0_loop I: the boundary's data wound P up along the directions they leave unexcited, and
- * a nominal model learning with that P left the set's edge at the first corner of a scan).
- * Measured on the stage's day (stage 49's random hour, noise-free sensor): an estimate on the
- * row a2 >= 0, 1e-17 outside after the sweeps, went to the nominal model with trace(P) = 100;
- * 25 ms later b1 was 0.149 (0.25 of the nominal) and a scan corner erred 12.7 um, against 6 nm
- * with the estimates fixed. 1 when theta changed.
+ * slack / (slack + excess) over the violated rows (slack = d - c^T n); where rounding leaves that
+ * outside, s shrunk by RADIAL_SHRINK of itself in turn; only then the nominal model, with P as a
+ * fallback's (docs/model.md, item 2: why, measured). 1 when theta changed.
  */
-static const double RADIAL_SHRINK[4] = {1e-12, 1e-9, 1e-6, 1e-3};
-
+static const double RADIAL_SHRINK[5] = {0.0, 1e-12, 1e-9, 1e-6, 1e-3};
 static int admissible_project(const piezo_controller *c, double *P, double *th)
 {
     int sweep, i, j;
@@ -267,15 +259,9 @@ static int admissible_project(const piezo_controller *c, double *P, double *th)
             }
         }
         memcpy(out, th, sizeof out);
-        for (j = 0; j < 4; ++j) th[j] = n[j] + s * (out[j] - n[j]);
-        for (i = 0; i < 4 && admissible_violated(c, th); ++i) {
-            const double shrunk = s - s * RADIAL_SHRINK[i];
-            for (j = 0; j < 4; ++j) th[j] = n[j] + shrunk * (out[j] - n[j]);
-        }
-        if (admissible_violated(c, th)) {
-            memcpy(th, n, 4 * sizeof(double));
-            for (j = 0; j < 16; ++j) P[j] = j % 5 == 0 ? c->p0_loop : 0.0;
-        }
+        for (i = 0; i < 5 && (i == 0 || admissible_violated(c, th)); ++i)
+            for (j = 0; j < 4; ++j) th[j] = n[j] + (s - s * RADIAL_SHRINK[i]) * (out[j] - n[j]);
+        if (admissible_violated(c, th)) piezo_ctl_restart_estimates(c, th, P);
     }
     return 1;
 }
@@ -542,7 +528,7 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
                           piezo_controller_sample *s)
 {
     double rate, faded;
-    int reason = PIEZO_FALLBACK_NONE, j;
+    int reason = PIEZO_FALLBACK_NONE;
     s->fb_adapted = c->fb_adapted;
     s->fb_nominal = c->fb_nominal;
     s->learned_rate = c->learned_rate;
@@ -572,8 +558,7 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
 #undef ADAPTED
     s->out.fallback = reason;
     if (reason != PIEZO_FALLBACK_NONE) {
-        memcpy(s->theta, c->theta_nominal, sizeof s->theta);
-        for (j = 0; j < 16; ++j) s->P[j] = j % 5 == 0 ? c->p0_loop : 0.0;
+        piezo_ctl_restart_estimates(c, s->theta, s->P);
         s->rls_updated = 1;
         s->projected = 0;
         *theta = c->theta_nominal;

@@ -14,6 +14,8 @@
 #ifndef PIEZO_CONTROLLER_INTERNAL_H
 #define PIEZO_CONTROLLER_INTERNAL_H
 
+#include <string.h>
+
 #include "piezo_controller.h"
 
 /* Projection bounds (docs/model.md, controller): b1 stays positive, the zero of B
@@ -39,6 +41,15 @@
 /* samples the measured noise takes to forget the start: a loop's first samples (a tone from t = 0,
  * its transient) start the tracker far above the sensor's noise, and it steps down by NOISE_STEP */
 #define NOISE_SETTLE 100
+
+/* Where the robust update restarts its estimator (a fallback; the projection's last resort): the
+ * nominal model and P = rls.p0_loop I */
+static inline void piezo_ctl_restart_estimates(const piezo_controller *c, double *theta, double *P)
+{
+    int j;
+    memcpy(theta, c->theta_nominal, 4 * sizeof(double));
+    for (j = 0; j < 16; ++j) P[j] = j % 5 == 0 ? c->p0_loop : 0.0;
+}
 
 /* piezo_controller.c */
 double piezo_ctl_rls_error(const piezo_controller *c, const double *theta, int d, double y);
