@@ -8,6 +8,7 @@ import pytest
 from harness.binding import core
 from harness.loop import profiles
 from harness.studies import stage_day_table as sd
+from harness.studies.stage_use_table import draw_stages
 from harness.masters.c_core import simulate_closed_loop_core
 from harness.scenarios import profile_signal
 
@@ -79,7 +80,7 @@ def test_the_native_runner_in_chunks_gives_the_runs_bits():
     from harness.loop import prepare_closed_loop
     from harness.masters import native
     part = sd.raster_part(50.0, 0.1, frames=2)
-    sc = part.scenario(sd.stage_plant(sd.draw_stages(1, sd.SEED)[0], 0, 1), {})
+    sc = part.scenario(sd.stage_plant(draw_stages(1, sd.SEED)[0], 0, 1), {})
     setup = prepare_closed_loop(sc)
     loop = native.native_loop()
     whole = loop.run(setup)
@@ -92,7 +93,7 @@ def test_the_native_runner_in_chunks_gives_the_runs_bits():
 
 
 def _core_run(part, law, stage=3, nm=1):
-    st = sd.draw_stages(stage + 1, sd.SEED)[stage]
+    st = draw_stages(stage + 1, sd.SEED)[stage]
     sc = part.scenario(sd.stage_plant(st, stage, nm), sd._controller(law))
     rows = simulate_closed_loop_core(sc)
     err = np.abs(rows["y_d"] - rows["y"])

@@ -132,7 +132,6 @@ double piezo_ctl_detect_update(const piezo_controller *c, double y, piezo_contro
     s->k_delay = s->detecting ? c->k_delay : c->k;
     s->rls_updated = !s->detecting;
     if (!s->detecting) {
-        memcpy(s->theta, c->robust ? c->theta_nominal : &s->det_theta[4 * best], sizeof s->theta);
         if (c->robust) {
             /* the robust update starts the loop from the nominal model and rls.p0_loop I (after a
              * restart too: estimates fitted under another delay are no start for this one); the
@@ -143,9 +142,9 @@ double piezo_ctl_detect_update(const piezo_controller *c, double y, piezo_contro
              * estimates fixed); and the first large move of a loop that keeps their covariance
              * fits its estimates to that one move (a 50 um S-curve: b1 driven to its floor,
              * errors of 2-12 um) */
-            int j;
-            for (j = 0; j < 16; ++j) s->P[j] = j % 5 == 0 ? c->p0_loop : 0.0;
+            piezo_ctl_restart_estimates(c, s->theta, s->P);
         } else {
+            memcpy(s->theta, &s->det_theta[4 * best], sizeof s->theta);
             memcpy(s->P, &s->det_P[16 * best], sizeof s->P);
         }
     }

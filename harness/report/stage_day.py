@@ -21,6 +21,7 @@ import time as _time
 import numpy as np
 
 from ..studies import stage_day_table as sd
+from ..studies.stage_use_table import draw_stages
 from ..fmu import FMUError
 from ..masters import simulate_closed_loop_fmu_steps
 from ..scenarios import PAPER_LAW_SET, parameter_set
@@ -72,7 +73,7 @@ def _controller(law):
 
 def run_stage_day(*, fmu_dir=None, fmi_version=2, keep_data=True, progress=None):
     """Run the report's day (:data:`REPORT_PARTS` under :data:`DAY_LAWS`): a list of :class:`DayRun`."""
-    stage = sd.draw_stages(REPORT_STAGE + 1, sd.SEED)[REPORT_STAGE]
+    stage = draw_stages(REPORT_STAGE + 1, sd.SEED)[REPORT_STAGE]
     plant = sd.stage_plant(stage, REPORT_STAGE, REPORT_SENSOR_NM)
     C, d = sd.admissible_rows()
     out = []

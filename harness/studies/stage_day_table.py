@@ -59,8 +59,7 @@ import numpy as np
 from ..fmu import FMUError
 from ..loop import prepare_closed_loop
 from . import stage_use_table
-# draw_stages is no longer called here (family_grid draws the stages) but stays importable from this module
-from .stage_use_table import GRID, draw_stages, family_grid, hold_band, profile_scenario, stage_plant  # noqa: F401
+from .stage_use_table import GRID, family_grid, hold_band, profile_scenario, stage_plant
 from ..text_tables import markdown_table
 
 __all__ = ["SEED", "SENSORS_NM", "RASTER_FREQUENCIES", "DWELLS", "FRAMES", "TONE_FREQUENCIES",
