@@ -198,6 +198,7 @@ class ControllerRef:
         self.adm_d = list(c.adm_d)
         self.fb_ratio, self.fb_n_samples, self.fb_lam = c.fallback_ratio, c.fallback_samples, c.fallback_forgetting
         self.fb_a = self.fb_n = self.learned = 0.0
+        self.jump_left = 0
         self.n_fallbacks = 0
 
     def start_detection(self):
@@ -373,6 +374,10 @@ class ControllerRef:
         # before this sample when larger, at most twice monitor.pred_error_max
         bound = min(8.0 * self.noise_y2, 2.0 * self.pe_max) if self.robust and self.k >= self.NOISE_SETTLE else 0.0
         bound = bound if bound > self.pe_max else self.pe_max
+        monitor = bound
+        # a jump of the law's reference (beyond monitor.pred_error_max) is answered for 2 (d + 2) samples
+        self.jump_left = (2 * (self.d + 2) if abs(self.r_last - self.r_last2) > self.pe_max
+                          else (self.jump_left - 1 if self.jump_left > 0 else 0))
         if self.robust:
             r1 = self.r_last
             line = self.anchor + self.velocity
@@ -434,6 +439,8 @@ class ControllerRef:
                 floor = 3.0 * noise_y_before
                 if adapted and fb_a > self.fb_ratio * fb_n + float(self.fb_n_samples) * (floor * floor):
                     reason = 2
+            if self.jump_left == 0 and abs(pred_error) > monitor and adapted:
+                reason = 3
             if adapted and rate > self.pe_max and rate > 5 * self.learned:
                 reason = 1
             if reason:
@@ -568,9 +575,10 @@ def test_closed_loop_equals_scalar_transcription_bitwise(cparams, d):
         assert abs(ctrl.raw.theta[0] - ctrl.raw.theta_nominal[0]) > 1e-4
 
 
-def _run_bitwise(cparams, d, y_d, n, plant_params=MISMATCH, each=None):
+def _run_bitwise(cparams, d, y_d, n, plant_params=MISMATCH, each=None, disturbance=None):
     """The loop of test_closed_loop_equals_scalar_transcription_bitwise: n samples of the
-    core and the transcription side by side, asserting bit identity at every sample."""
+    core and the transcription side by side, asserting bit identity at every sample
+    (disturbance: added to y_meas of each sample before both read it)."""
     plant, ctrl = core.Plant(plant_params), core.Controller(cparams)
     pref, cref = PlantRef(plant, core_normals(plant.raw.sensor_seed)), ControllerRef(ctrl)
     # the loop delay d: the plant's own sample plus d - 1 samples before v is applied
@@ -580,6 +588,8 @@ def _run_bitwise(cparams, d, y_d, n, plant_params=MISMATCH, each=None):
     for j in range(n):
         if each is not None:
             each(ctrl, cref)
+        if disturbance is not None:
+            y_meas, y_meas_ref = y_meas + disturbance[j], y_meas_ref + disturbance[j]
         out = ctrl.step(y_d[j + d], y_meas)
         ctrl.held += not ctrl.raw.out.adapting
         want = cref.step(y_d[j + d], y_meas_ref)
@@ -644,7 +654,7 @@ def test_holds_and_moves_equal_scalar_transcription_bitwise(cparams, d):
         assert ctrl.held <= 50       # the paper's update adapts on every sample (but while detecting)
 
 
-@pytest.mark.parametrize("case", ["tone-then-step", "raster-narrow-set", "steps-prediction"])
+@pytest.mark.parametrize("case", ["tone-then-step", "raster-narrow-set", "steps-prediction", "ringing"])
 def test_guarantees_equal_scalar_transcription_bitwise(case):
     """Reference: ControllerRef and PlantRef as above, on what the robust update's guarantees
     (docs/model.md, "Estimates with guarantees") act on, each case made to exercise its part:
@@ -652,9 +662,12 @@ def test_guarantees_equal_scalar_transcription_bitwise(case):
     fallback: the step is 32 times the tone's largest change a sample); a 10 Hz triangle raster
     with a narrow set (sup.gain_min 0.85, sup.gain_max 1.2, rls.zero_min 0.9: the projection at most samples); a
     square wave of 3 um steps on a stage with 20 % more hysteresis gain, with the prediction test
-    at rls.fallback_ratio 1 over 5 ms (prediction fallbacks). Bit identity at every sample."""
+    at rls.fallback_ratio 1 over 5 ms (prediction fallbacks); the tone then a hold with a ringing
+    added to y_meas (period 6 samples, from 10 nm growing 8 % a sample for 35 ms: the fallback
+    at the first sample whose a-priori error passes the monitor's bound of 1 um). Bit identity at
+    every sample."""
     k = np.arange(6002)
-    plant = MISMATCH
+    plant, ring = MISMATCH, None
     if case == "tone-then-step":
         cparams, y_d = {}, np.where(k < 3000, 4 * np.sin(2 * np.pi * 10 * k * H), 8.0)
     elif case == "raster-narrow-set":
@@ -664,7 +677,13 @@ def test_guarantees_equal_scalar_transcription_bitwise(case):
         cparams = {"rls.fallback_ratio": 1.0, "rls.fallback_window": 0.005}
         y_d = np.where((k // 1000) % 2 == 1, 3.0, 0.0)
         plant = {"pi.w0": 0.40}
-    ctrl, cref = _run_bitwise(cparams, 2, y_d, 6000, plant)
+    if case == "ringing":
+        cparams, y_d = {}, np.where(k < 3000, 4 * np.sin(2 * np.pi * 10 * k * H), 0.0)
+        j = np.maximum(k - 3100, 0)
+        ring = np.where((k >= 3100) & (j < 70), 0.01 * 1.08 ** j * np.sin(2 * np.pi * j / 6 + 1.0), 0.0)
+    pe = []
+    ctrl, cref = _run_bitwise(cparams, 2, y_d, 6000, plant, disturbance=ring,
+                              each=lambda c, r: pe.append(c.raw.out.pred_error))
     raw = ctrl.raw
     assert raw.n_fallbacks == cref.n_fallbacks
     if case == "tone-then-step":
@@ -672,6 +691,10 @@ def test_guarantees_equal_scalar_transcription_bitwise(case):
         assert (raw.first_fallback, raw.k_first_fallback) == (core.lib().PIEZO_FALLBACK_JUMP, 2998)
     elif case == "raster-narrow-set":
         assert raw.n_projections > 1000 and raw.n_fallbacks == 0
+    elif case == "ringing":
+        first = int(np.flatnonzero(np.abs(pe[3101:] + [raw.out.pred_error]) > 1.0)[0]) + 3100
+        assert raw.n_outliers == 0 and raw.n_fallbacks >= 1
+        assert (raw.first_fallback, raw.k_first_fallback) == (core.lib().PIEZO_FALLBACK_RINGING, first)
     else:
         assert raw.n_fallbacks > 10 and raw.first_fallback == core.lib().PIEZO_FALLBACK_PREDICTION
 

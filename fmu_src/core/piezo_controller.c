@@ -508,19 +508,17 @@ static void outlier_sums(const piezo_controller *c, piezo_controller_sample *s)
 
 /*
  * The fallback to the nominal model (robust update, while the loop's estimator runs; docs/model.md,
- * "Estimates with guarantees"), given the law's reference r = y_d(k + d) (without z), the
- * measurement and the loop model's a-priori error e_a of sample k. Two reasons, each judged
+ * "Estimates with guarantees", item 3), given the law's reference r = y_d(k + d) (without z), the
+ * measurement and the loop model's a-priori error e_a of sample k. Three reasons, each judged
  * only while the law's estimates differ from the nominal model:
  * - a jump: |r(k) - r(k-1)| beyond monitor.pred_error_max and beyond PIEZO_FALLBACK_JUMP_RATIO
  *   times the largest change per sample R the estimates learned on (R = max(|r(k) - r(k-1)|,
- *   R (1 - 1/PIEZO_FALLBACK_JUMP_MEMORY)) over the samples they adapted at): a step after a long
- *   tone meets estimates fitted to one frequency (after 60 s of a 1 Hz tone, b1 1.7 times and
- *   the fast pole -0.09 against 0.385: the step erred 4.1 um, 11 times the fresh step); every
- *   change of the reference while the estimates run counts (its answer follows, and the
- *   estimator updates on it), and fades only over the samples it updates at;
- * - a prediction: over the window of rls.fallback_window (lambda = 1 - 1/N),
+ *   R (1 - 1/PIEZO_FALLBACK_JUMP_MEMORY)) over the samples they adapted at);
+ * - a prediction over the window of rls.fallback_window (lambda = 1 - 1/N),
  *     S_a = lambda S_a + e_a^2,  S_n = lambda S_n + e_n^2,  e_n = y - c - phi^T theta_nominal,
- *   S_a > rls.fallback_ratio S_n + N (FALLBACK_NOISE noise_y)^2.
+ *   S_a > rls.fallback_ratio S_n + N (FALLBACK_NOISE noise_y)^2;
+ * - a prediction in one sample: |e_a| beyond the monitor's bound outside a jump's answer
+ *   (jump_left = 0): a loop that rings on its estimates, before the window has seen it.
  * A fallback puts the nominal model and rls.p0_loop I in the estimator and the law of this very
  * sample (*theta), empties the window, and counts the jump as learned.
  */
@@ -550,6 +548,11 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
             s->fallback_other = sqrt(s->fb_nominal / (double)c->fallback_samples);
         }
     }
+    if (s->jump_left == 0 && fabs(e_a) > monitor_bound(c) && ADAPTED) {
+        reason = PIEZO_FALLBACK_RINGING;
+        s->fallback_value = fabs(e_a);
+        s->fallback_other = monitor_bound(c);
+    }
     if (rate > c->pred_error_max && rate > PIEZO_FALLBACK_JUMP_RATIO * c->learned_rate && ADAPTED) {
         reason = PIEZO_FALLBACK_JUMP;
         s->fallback_value = rate;
@@ -575,13 +578,10 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
 
 /* The monitor's bound on |pred_error|: monitor.pred_error_max, or PIEZO_MONITOR_NOISE times the
  * measured noise of y_meas (robust update; from its second differences at rest) when that is
- * larger, up to PIEZO_MONITOR_NOISE_CAP times monitor.pred_error_max. The nominal model's one-step
- * prediction error carries a sensor's noise 1.75 times (sqrt(1 + a1^2 + a2^2) for the paper's
- * model): a 200 nm sensor's passes 1 um in 0.4 % of the samples, each of which restarted the
- * outlier test's quiet run (a dead sensor then went unbridged on 2 of 50 stages, 3.8 um off). The
- * cap: "noise" beyond 250 nm rms is no sensor's but a fault's (y_meas alternating +-10 um measures
- * as 23 um of noise, and uncapped the bound would have let it run). Once the noise has settled
- * (noise_settled), as for the probes' burial. */
+ * larger, up to PIEZO_MONITOR_NOISE_CAP times monitor.pred_error_max, once the noise has settled
+ * (noise_settled). The nominal model's one-step error carries a sensor's noise 1.75 times: a
+ * 200 nm sensor's passed 1 um in 0.4 % of the samples. The cap: "noise" beyond 250 nm rms is a
+ * fault's (y_meas alternating +-10 um measures as 23 um); docs/model.md, "A loop that diverges". */
 static double monitor_bound(const piezo_controller *c)
 {
     double b = PIEZO_MONITOR_NOISE * c->noise_y2, cap = PIEZO_MONITOR_NOISE_CAP * c->pred_error_max;

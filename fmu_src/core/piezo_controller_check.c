@@ -167,7 +167,7 @@ const char *piezo_controller_check(const piezo_controller *c)
              && isfinite(c->learned_rate) && c->learned_rate >= 0.0)
         || c->n_projections > c->k || c->n_fallbacks > c->k
         || (c->n_fallbacks > 0 ? (c->k_first_fallback >= c->k || c->first_fallback < PIEZO_FALLBACK_JUMP
-                                  || c->first_fallback > PIEZO_FALLBACK_PREDICTION)
+                                  || c->first_fallback > PIEZO_FALLBACK_RINGING)
                                : (c->k_first_fallback != 0 || c->first_fallback != PIEZO_FALLBACK_NONE
                                   || c->first_fallback_value != 0.0 || c->first_fallback_other != 0.0))
         || !(isfinite(c->first_fallback_value) && isfinite(c->first_fallback_other))
@@ -179,7 +179,7 @@ const char *piezo_controller_check(const piezo_controller *c)
         return "controller outputs not finite";
     if (o->saturated != 0 && o->saturated != 1) return "saturated output is not 0 or 1";
     if (o->adapting != 0 && o->adapting != 1) return "adapting output is not 0 or 1";
-    if (o->fallback < PIEZO_FALLBACK_NONE || o->fallback > PIEZO_FALLBACK_PREDICTION
+    if (o->fallback < PIEZO_FALLBACK_NONE || o->fallback > PIEZO_FALLBACK_RINGING
         || (o->fallback != PIEZO_FALLBACK_NONE && !c->robust))
         return "fallback output out of range";
     if (!(isfinite(o->noise) && o->noise >= 0.0)) return "noise output not finite or negative";

@@ -534,7 +534,8 @@ a1, a2, b1, b2 used for q, the RLS one-step prediction error [um], saturated (bo
 delay d of the law (int, 0 while it is being detected), preview (bool: the law used a stamped
 preview rather than y_ref), adapting (bool: the estimates were updated; the FMUs' est.adapting)
 the measured noise of y_meas [um] (est.noise) and why the law fell back to the nominal model at
-this sample (0 none, 1 a jump of the reference, 2 a prediction; the FMUs count them in est.fallbacks)."""
+this sample (0 none, 1 a jump of the reference, 2 a prediction over the window, 3 one prediction
+beyond the monitor's bound: a loop that rings; the FMUs count them in est.fallbacks)."""
 
 
 def _ctrl_out(o) -> ControllerOutput:
