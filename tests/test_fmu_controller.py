@@ -746,3 +746,33 @@ def test_the_chosen_delay_and_its_time_are_outputs_and_an_event(controller, piez
                                     logging_on=True)
     assert {(r["loop_delay"], r["loop_delay_time"]) for r in rows} == {(2, 0.0)}
     assert not [text for _, _, text in fixed.messages if "loop delay" in text]
+
+
+def test_a_loop_that_rings_falls_back_in_one_sample_and_says_so(controller, piezo_stage, make_fmu):
+    """The one-sample prediction fallback (docs/model.md, estimates with guarantees, item 3), as an
+    importer sees it: PiezoStage and the controller at their defaults, a 5 um step at 0.3 s (the
+    estimates adapt on it), then, from 0.6 s, a ringing added to y_meas on its way to the
+    controller (period 6 samples, from 10 nm growing 8 % a sample, as a loop that rings on wrong
+    estimates). Reference: the controller's own pred_error output, read after every step. The
+    fallback comes at the first sample of the ringing whose |pred_error| passes the monitor's
+    bound (monitor.pred_error_max = 1 um): that step returns fmi2Warning with one Warning naming
+    the time, the error and the bound, est.fallbacks counts it, and the run goes on (no Error)."""
+    plant, ctrl = make_fmu(piezo_stage), make_fmu(controller)
+    plant.initialize({"sensor.noise_rms": 0.001})
+    ctrl.initialize({})
+    start, first, status_at = 1200, None, {}
+    for k in range(1400):
+        j = k - start
+        ring = 0.01 * 1.08 ** j * math.sin(2 * math.pi * j / 6 + 1.0) if 0 <= j < 70 else 0.0
+        ctrl.set({"y_ref": 5.0 if k + 2 >= 600 else 0.0, "y_meas": plant.get("y_meas") + ring})
+        status_at[k] = ctrl.slave.fmi2DoStep(ctrl.slave.component, ctrl.time, H, 1)
+        ctrl.k += 1
+        if first is None and k >= start and abs(ctrl.get("pred_error")) > 1.0:
+            first = k
+        plant.set({"v": ctrl.get("v")})
+        plant.step()
+    said = [w for w in _warnings(ctrl) if "fell back to the nominal model" in w]
+    assert first is not None and len(said) == 1, (first, said)
+    assert f"at t = {first * H:.9g} s" in said[0] and "in one sample, beyond the monitor's bound of 1 um" in said[0]
+    assert status_at[first] == 1 and all(st in (0, 1) for st in status_at.values())
+    assert ctrl.get("est.fallbacks") >= 1
