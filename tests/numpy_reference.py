@@ -470,9 +470,9 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         fallback: while theta differs from theta0, with fallback = (ratio, N, pred_error_max):
                   S_a = l S_a + e^2, S_n = l S_n + e_n^2 (l = 1 - 1/N, e_n the nominal model's
                   a-priori error with the same c); S_a > ratio S_n + N (3 m_y)^2 (m_y before k),
-                  or |e(k)| beyond the monitor's bound (pred_error_max, or 8 m_2 before k up
-                  to 2 pred_error_max from sample 100 when larger) outside a jump's answer
-                  (2 (d + 2) samples from one |r(k-1) - r(k-2)| > pred_error_max), or
+                  or |e(k)| beyond pred_error_max while the monitor's bound is not raised by
+                  the noise (8 m_2 before k, from sample 100, below pred_error_max), outside a
+                  jump's answer (2 (d + 2) samples from one |r(k-1) - r(k-2)| > pred_error_max), or
                   |r(k) - r(k-1)| beyond pred_error_max and 5 times the largest change
                   learned R (R = max(|r(k) - r(k-1)|, R (1 - 1/2000) when adapting) at every
                   sample): theta = theta0, P = p0_loop I, S_a = S_n = 0, R = the jump
@@ -543,7 +543,7 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         s_a_next, s_n_next = lam_f * s_a + e * e, lam_f * s_n + e_n * e_n
         if ratio > 0.0 and adapted and s_a_next > ratio * s_n_next + window * (FALLBACK_NOISE * m_y_before) ** 2:
             reason = 2
-        if adapted and jump_left == 0 and abs(e) > monitor:
+        if ratio > 0.0 and adapted and jump_left == 0 and monitor == pe_max and abs(e) > pe_max:
             reason = 3
         if adapted and rate > pe_max and rate > FALLBACK_JUMP_RATIO * learned:
             reason = 1

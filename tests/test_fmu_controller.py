@@ -5,6 +5,7 @@ refusals, call sequences, closed loop with PiezoStage.
 Drives the built FMUs through fmpy's FMU2Slave (fixtures in conftest.py).
 """
 import math
+import re
 
 import numpy as np
 import pytest
@@ -750,29 +751,36 @@ def test_the_chosen_delay_and_its_time_are_outputs_and_an_event(controller, piez
 
 def test_a_loop_that_rings_falls_back_in_one_sample_and_says_so(controller, piezo_stage, make_fmu):
     """The one-sample prediction fallback (docs/model.md, estimates with guarantees, item 3), as an
-    importer sees it: PiezoStage and the controller at their defaults, a 5 um step at 0.3 s (the
-    estimates adapt on it), then, from 0.6 s, a ringing added to y_meas on its way to the
-    controller (period 6 samples, from 10 nm growing 8 % a sample, as a loop that rings on wrong
-    estimates). Reference: the controller's own pred_error output, read after every step. The
-    fallback comes at the first sample of the ringing whose |pred_error| passes the monitor's
-    bound (monitor.pred_error_max = 1 um): that step returns fmi2Warning with one Warning naming
-    the time, the error and the bound, est.fallbacks counts it, and the run goes on (no Error)."""
+    importer sees it: PiezoStage and the controller (supervision off, as a sensor gain that
+    changes would otherwise be its verdict), a 10 Hz, 4 um tone for 1.5 s behind a sensor of gain
+    0.3 (the estimates learn b1 about 0.26), 0.1 s at rest with the gain back to 1 from 1.55 s,
+    the tone again: the law drives the stage 2.3 times too hard and rings. Reference: the
+    controller's own pred_error output, read after every step. One Warning says the fallback at
+    a sample after the gain's return and before the tone resumes, with that sample's |pred_error|
+    (beyond monitor.pred_error_max, 1 um) and the nominal model's error, smaller here; that step
+    returns fmi2Warning, est.fallbacks counts it, no Error."""
     plant, ctrl = make_fmu(piezo_stage), make_fmu(controller)
     plant.initialize({"sensor.noise_rms": 0.001})
-    ctrl.initialize({})
-    start, first, status_at = 1200, None, {}
-    for k in range(1400):
-        j = k - start
-        ring = 0.01 * 1.08 ** j * math.sin(2 * math.pi * j / 6 + 1.0) if 0 <= j < 70 else 0.0
-        ctrl.set({"y_ref": 5.0 if k + 2 >= 600 else 0.0, "y_meas": plant.get("y_meas") + ring})
+    ctrl.initialize({"sup.enabled": False})
+    pred, status_at = {}, {}
+    for k in range(3400):
+        gain = 0.3 if k < 3100 else 1.0
+        j = k + 2
+        ctrl.set({"y_ref": 4.0 * math.sin(2 * math.pi * 10 * j * H) if (j < 3000 or j >= 3200) else 0.0,
+                  "y_meas": plant.get("y_meas") * gain})
         status_at[k] = ctrl.slave.fmi2DoStep(ctrl.slave.component, ctrl.time, H, 1)
         ctrl.k += 1
-        if first is None and k >= start and abs(ctrl.get("pred_error")) > 1.0:
-            first = k
+        pred[k] = ctrl.get("pred_error")
         plant.set({"v": ctrl.get("v")})
         plant.step()
     said = [w for w in _warnings(ctrl) if "fell back to the nominal model" in w]
-    assert first is not None and len(said) == 1, (first, said)
-    assert f"at t = {first * H:.9g} s" in said[0] and "in one sample, beyond the monitor's bound of 1 um" in said[0]
-    assert status_at[first] == 1 and all(st in (0, 1) for st in status_at.values())
+    assert len(said) == 1, said
+    m = re.search(r"at t = ([0-9.]+) s: the adapted estimates mispredicted y_meas by ([0-9.e+-]+) um in one "
+                  r"sample, beyond monitor.pred_error_max = 1 um \(the nominal model: ([0-9.e+-]+) um\)", said[0])
+    assert m, said[0]
+    k = round(float(m.group(1)) / H)
+    error, nominal = float(m.group(2)), float(m.group(3))
+    assert 3100 < k < 3200 and error == float(f"{abs(pred[k]):.4g}") and error > 1.0
+    assert nominal < error
+    assert status_at[k] == 1 and all(st in (0, 1) for st in status_at.values())
     assert ctrl.get("est.fallbacks") >= 1

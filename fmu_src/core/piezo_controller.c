@@ -517,8 +517,8 @@ static void outlier_sums(const piezo_controller *c, piezo_controller_sample *s)
  * - a prediction over the window of rls.fallback_window (lambda = 1 - 1/N),
  *     S_a = lambda S_a + e_a^2,  S_n = lambda S_n + e_n^2,  e_n = y - c - phi^T theta_nominal,
  *   S_a > rls.fallback_ratio S_n + N (FALLBACK_NOISE noise_y)^2;
- * - a prediction in one sample: |e_a| beyond the monitor's bound outside a jump's answer
- *   (jump_left = 0): a loop that rings on its estimates, before the window has seen it.
+ * - one prediction: |e_a| beyond monitor.pred_error_max, unless the noise raised the monitor's bound, outside
+ *   a jump's answer (jump_left = 0): a loop that rings on its estimates, before the window sees it.
  * A fallback puts the nominal model and rls.p0_loop I in the estimator and the law of this very
  * sample (*theta), empties the window, and counts the jump as learned.
  */
@@ -547,11 +547,11 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
             s->fallback_value = sqrt(s->fb_adapted / (double)c->fallback_samples);  /* the rms errors */
             s->fallback_other = sqrt(s->fb_nominal / (double)c->fallback_samples);
         }
-    }
-    if (s->jump_left == 0 && fabs(e_a) > monitor_bound(c) && ADAPTED) {
-        reason = PIEZO_FALLBACK_RINGING;
-        s->fallback_value = fabs(e_a);
-        s->fallback_other = monitor_bound(c);
+        if (s->jump_left == 0 && fabs(e_a) > c->pred_error_max && monitor_bound(c) == c->pred_error_max && ADAPTED) {
+            reason = PIEZO_FALLBACK_RINGING;
+            s->fallback_value = fabs(e_a);
+            s->fallback_other = fabs(e_n);
+        }
     }
     if (rate > c->pred_error_max && rate > PIEZO_FALLBACK_JUMP_RATIO * c->learned_rate && ADAPTED) {
         reason = PIEZO_FALLBACK_JUMP;

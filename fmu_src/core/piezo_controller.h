@@ -101,7 +101,7 @@
 #define PIEZO_FALLBACK_NONE 0
 #define PIEZO_FALLBACK_JUMP 1       /* a jump of the reference the estimates never learned on */
 #define PIEZO_FALLBACK_PREDICTION 2 /* the adapted model predicted worse than the nominal one */
-#define PIEZO_FALLBACK_RINGING 3    /* one a-priori error beyond the monitor's bound, outside a jump's answer */
+#define PIEZO_FALLBACK_RINGING 3    /* one a-priori error beyond monitor.pred_error_max: a loop that rings */
 #define PIEZO_FALLBACK_JUMP_RATIO 5 /* a jump beyond this many times the largest learned change */
 #define PIEZO_FALLBACK_JUMP_MEMORY 2000 /* adapted samples over which a learned change fades (1/e) */
 
@@ -352,7 +352,7 @@ typedef struct {
     /* estimates with guarantees: the states of k+1 */
     int projected;               /* the update was projected into the admissible set */
     double fallback_value;       /* a fallback's jump [um], the adapted model's rms a-priori error, or |e_a| */
-    double fallback_other;       /* ... and the largest change learned [um], the nominal model's, or the bound */
+    double fallback_other;       /* ... and the largest change learned [um], or the nominal model's */
 } piezo_controller_sample;
 
 /* doubles in the sample's checked block, noise_y .. learned_rate (a static assertion in
