@@ -438,8 +438,8 @@ def admissible_projection(theta, P, C, d, nominal, sweeps: int = 8, p0_loop: flo
 #: the fallback's constants (piezo_controller.h): a jump beyond 5 times the largest change learned,
 #: which fades over 2000 adapted samples; the prediction test beyond 3 times the measured noise
 FALLBACK_JUMP_RATIO, FALLBACK_JUMP_MEMORY, FALLBACK_NOISE = 5.0, 2000.0, 3.0
-#: the monitor's bound (monitor_bound): at least 8 times the measured noise, up to twice the bound
-MONITOR_NOISE, MONITOR_NOISE_CAP = 8.0, 2.0
+#: the one-sample (ringing) test: beyond 5 times the prediction error's measured noise too
+FALLBACK_RINGING_NOISE = 5.0
 
 
 def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, trace_max: float,
@@ -470,8 +470,8 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         fallback: while theta differs from theta0, with fallback = (ratio, N, pred_error_max):
                   S_a = l S_a + e^2, S_n = l S_n + e_n^2 (l = 1 - 1/N, e_n the nominal model's
                   a-priori error with the same c); S_a > ratio S_n + N (3 m_y)^2 (m_y before k),
-                  or |e(k)| beyond pred_error_max while the monitor's bound is not raised by
-                  the noise (8 m_2 before k, from sample 100, below pred_error_max), outside a
+                  or |e(k)| beyond pred_error_max and 5 m_e (m_e the measured noise of e before
+                  k, from its first differences), outside a
                   jump's answer (2 (d + 2) samples from one |r(k-1) - r(k-2)| > pred_error_max), or
                   |r(k) - r(k-1)| beyond pred_error_max and 5 times the largest change
                   learned R (R = max(|r(k) - r(k-1)|, R (1 - 1/2000) when adapting) at every
@@ -522,7 +522,6 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         m_y_before = m_y
         m_y = track(m_y, Y(k) - Y(k - 1))
         noisy = k >= 100 and 20.0 * m_2 > 2.0 * probe_max * nominal[2]
-        monitor = max(pe_max, min(MONITOR_NOISE * m_2, MONITOR_NOISE_CAP * pe_max)) if k >= 100 else pe_max
         jump_left = 2 * (d + 2) if abs(r1 - r2) > pe_max else max(jump_left - 1, 0)
         if not adapting:                # the sensor's noise, measured while the reference does not excite
             m_2 = track(m_2, (Y(k) - 2.0 * Y(k - 1) + Y(k - 2)) * 0.57735026918962576)
@@ -543,7 +542,7 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
         s_a_next, s_n_next = lam_f * s_a + e * e, lam_f * s_n + e_n * e_n
         if ratio > 0.0 and adapted and s_a_next > ratio * s_n_next + window * (FALLBACK_NOISE * m_y_before) ** 2:
             reason = 2
-        if ratio > 0.0 and adapted and jump_left == 0 and monitor == pe_max and abs(e) > pe_max:
+        if ratio > 0.0 and adapted and jump_left == 0 and abs(e) > max(pe_max, FALLBACK_RINGING_NOISE * m_e):
             reason = 3
         if adapted and rate > pe_max and rate > FALLBACK_JUMP_RATIO * learned:
             reason = 1

@@ -296,11 +296,10 @@ static void rls_update(const piezo_controller *c, double e, piezo_controller_sam
         double b = c->variance_max / (c->noise_e * c->noise_e);
         if (b < bound) bound = b;
     }
-    /* no update while the sensor's noise is twice what buries the delay probes (above 60 nm rms with
-     * the defaults): data that noisy do not identify the model, and the estimates fitted to them
-     * burst where the nominal model tracks (on the stage's day with 200 nm sensors: a 10 um step
-     * after a 5 Hz tone erred 18.5 um against 0.9 um fresh); a 20 nm sensor, whose measured noise
-     * passes 30 nm at times, adapts as before */
+    /* no update while the sensor's noise is twice what buries the delay probes (above 60 nm rms with the
+     * defaults): data that noisy do not identify the model, and the estimates fitted to them burst where the
+     * nominal model tracks (on the stage's day with 200 nm sensors: a 10 um step after a 5 Hz tone erred
+     * 18.5 um against 0.9 um fresh); a 20 nm sensor, whose measured noise passes 30 nm at times, adapts */
     s->rls_updated = may && s->excited
                      && !(noise_settled(c) && PROBE_SNR * c->noise_y2 > 2.0 * c->probe_max * c->theta_nominal[2]);
     if (s->rls_updated) {
@@ -507,20 +506,20 @@ static void outlier_sums(const piezo_controller *c, piezo_controller_sample *s)
 }
 
 /*
- * The fallback to the nominal model (robust update, while the loop's estimator runs; docs/model.md,
- * "Estimates with guarantees", item 3), given the law's reference r = y_d(k + d) (without z), the
- * measurement and the loop model's a-priori error e_a of sample k. Three reasons, each judged
- * only while the law's estimates differ from the nominal model:
- * - a jump: |r(k) - r(k-1)| beyond monitor.pred_error_max and beyond PIEZO_FALLBACK_JUMP_RATIO
- *   times the largest change per sample R the estimates learned on (R = max(|r(k) - r(k-1)|,
- *   R (1 - 1/PIEZO_FALLBACK_JUMP_MEMORY)) over the samples they adapted at);
+ * The fallback to the nominal model (robust update, while the loop's estimator runs; docs/model.md, "Estimates
+ * with guarantees", item 3), given the law's reference r = y_d(k + d) (without z), the measurement and the loop
+ * model's a-priori error e_a of sample k. Three reasons, each judged only while the estimates differ from nominal:
+ * - a jump: |r(k) - r(k-1)| beyond monitor.pred_error_max and beyond PIEZO_FALLBACK_JUMP_RATIO times the largest
+ *   change per sample R the estimates learned on (R = max(|r(k) - r(k-1)|, R (1 - 1/PIEZO_FALLBACK_JUMP_MEMORY))
+ *   over the samples they adapted at);
  * - a prediction over the window of rls.fallback_window (lambda = 1 - 1/N),
  *     S_a = lambda S_a + e_a^2,  S_n = lambda S_n + e_n^2,  e_n = y - c - phi^T theta_nominal,
  *   S_a > rls.fallback_ratio S_n + N (FALLBACK_NOISE noise_y)^2;
- * - one prediction: |e_a| beyond monitor.pred_error_max, unless the noise raised the monitor's bound, outside
- *   a jump's answer (jump_left = 0): a loop that rings on its estimates, before the window sees it.
- * A fallback puts the nominal model and rls.p0_loop I in the estimator and the law of this very
- * sample (*theta), empties the window, and counts the jump as learned.
+ * - one prediction: |e_a| beyond monitor.pred_error_max and PIEZO_FALLBACK_RINGING_NOISE noise_e (a 200 nm sensor's
+ *   20 Hz tone: 203 errors past 1 um in 600 s, 5 past 5 noise_e, whose tracker a ringing outruns), outside a
+ *   jump's answer (jump_left = 0): a loop that rings, before the window sees it. A fallback puts the nominal
+ *   model and rls.p0_loop I in the estimator and the law of this very sample (*theta), empties the window, and
+ *   counts the jump as learned.
  */
 static void fallback_test(const piezo_controller *c, double r, double y_meas, double e_a, const double **theta,
                           piezo_controller_sample *s)
@@ -538,7 +537,7 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
 #define ADAPTED (c->rls_enabled && memcmp(*theta, c->theta_nominal, sizeof c->theta) != 0)
     if (c->fallback_ratio > 0.0) {
         const double e_n = rls_error(c, c->theta_nominal, c->d, y_meas - c->offset);
-        const double lambda = c->fallback_forgetting, floor_rms = FALLBACK_NOISE * c->noise_y;
+        const double lambda = c->fallback_forgetting, floor_rms = FALLBACK_NOISE * c->noise_y, a = fabs(e_a);
         s->fb_adapted = lambda * c->fb_adapted + e_a * e_a;
         s->fb_nominal = lambda * c->fb_nominal + e_n * e_n;
         if (s->fb_adapted > c->fallback_ratio * s->fb_nominal
@@ -547,9 +546,9 @@ static void fallback_test(const piezo_controller *c, double r, double y_meas, do
             s->fallback_value = sqrt(s->fb_adapted / (double)c->fallback_samples);  /* the rms errors */
             s->fallback_other = sqrt(s->fb_nominal / (double)c->fallback_samples);
         }
-        if (s->jump_left == 0 && fabs(e_a) > c->pred_error_max && monitor_bound(c) == c->pred_error_max && ADAPTED) {
+        if (s->jump_left == 0 && a > c->pred_error_max && a > PIEZO_FALLBACK_RINGING_NOISE * c->noise_e && ADAPTED) {
             reason = PIEZO_FALLBACK_RINGING;
-            s->fallback_value = fabs(e_a);
+            s->fallback_value = a;
             s->fallback_other = fabs(e_n);
         }
     }

@@ -50,7 +50,8 @@
  *   PIEZO_FALLBACK_JUMP_RATIO times the largest change per sample the estimates learned on
  *   (a step after a tone: an excitation they never saw), and when the adapted model's
  *   squared a-priori errors exceed rls.fallback_ratio times the nominal model's over
- *   rls.fallback_window (exponential window), beyond the measured noise.
+ *   rls.fallback_window (exponential window), beyond the measured noise, and at one a-priori
+ *   error beyond monitor.pred_error_max and 5 times the errors' measured noise (a loop that rings).
  */
 #ifndef PIEZO_CONTROLLER_H
 #define PIEZO_CONTROLLER_H
@@ -103,6 +104,7 @@
 #define PIEZO_FALLBACK_PREDICTION 2 /* the adapted model predicted worse than the nominal one */
 #define PIEZO_FALLBACK_RINGING 3    /* one a-priori error beyond monitor.pred_error_max: a loop that rings */
 #define PIEZO_FALLBACK_JUMP_RATIO 5 /* a jump beyond this many times the largest learned change */
+#define PIEZO_FALLBACK_RINGING_NOISE 5 /* one error beyond this many times the errors' measured noise */
 #define PIEZO_FALLBACK_JUMP_MEMORY 2000 /* adapted samples over which a learned change fades (1/e) */
 
 typedef struct {

@@ -174,12 +174,13 @@ int fmu_controller_warning(fmu_controller_track *t, const piezo_controller *c, c
                      PIEZO_FALLBACK_JUMP_RATIO, c->first_fallback_other);
         else if (c->first_fallback == PIEZO_FALLBACK_RINGING)
             snprintf(text, size, "the law fell back to the nominal model at t = %.9g s: the adapted estimates "
-                     "mispredicted y_meas by %.4g um in one sample, beyond monitor.pred_error_max = %g um (the nominal "
-                     "model: %.4g um), while no jump of the reference was being answered (a loop that rings on its "
-                     "estimates); the "
-                     "estimator restarts from the nominal model (rls.p0_loop). Further fallbacks are counted "
-                     "(est.fallbacks, and at terminate), not logged", fmu_sample_time(t0, c->k_first_fallback, h),
-                     c->first_fallback_value, c->pred_error_max, c->first_fallback_other);
+                     "mispredicted y_meas by %.4g um in one sample, beyond monitor.pred_error_max = %g um and %d "
+                     "times the measured noise of their predictions (the nominal model: %.4g um), while no jump of "
+                     "the reference was being answered (a loop that rings on its estimates); the estimator "
+                     "restarts from the nominal model (rls.p0_loop). Further fallbacks are counted (est.fallbacks, "
+                     "and at terminate), not logged", fmu_sample_time(t0, c->k_first_fallback, h),
+                     c->first_fallback_value, c->pred_error_max, PIEZO_FALLBACK_RINGING_NOISE,
+                     c->first_fallback_other);
         else
             snprintf(text, size, "the law fell back to the nominal model at t = %.9g s: over the last "
                      "rls.fallback_window = %g s the adapted estimates predicted y_meas worse than the nominal model "
