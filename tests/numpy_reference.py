@@ -471,8 +471,8 @@ def rls_robust_reference(q, y, r, d: int, forgetting: float, p0_loop: float, tra
                   S_a = l S_a + e^2, S_n = l S_n + e_n^2 (l = 1 - 1/N, e_n the nominal model's
                   a-priori error with the same c); S_a > ratio S_n + N (3 m_y)^2 (m_y before k),
                   or |e(k)| beyond pred_error_max and 5 m_e (m_e the measured noise of e before
-                  k, from its first differences), outside a
-                  jump's answer (2 (d + 2) samples from one |r(k-1) - r(k-2)| > pred_error_max), or
+                  k, from its first differences), outside a jump's answer (2 (d + 2) samples
+                  from one |r(k-1) - r(k-2)| > pred_error_max), or
                   |r(k) - r(k-1)| beyond pred_error_max and 5 times the largest change
                   learned R (R = max(|r(k) - r(k-1)|, R (1 - 1/2000) when adapting) at every
                   sample): theta = theta0, P = p0_loop I, S_a = S_n = 0, R = the jump
