@@ -3,6 +3,7 @@
 #include <string.h>
 #include "piezo_controller_internal.h"
 #include "piezo_plant.h"
+#include "piezo_simd.h"
 
 /* The start-up law while the delay is detected: the nominal model, d = 2 and
  * t = 0.9. Its closed loop is stable for a loop delay of 1, 2 or 3 samples,
@@ -414,26 +415,10 @@ int piezo_controller_preview(const piezo_controller *c, uint64_t sample, double 
     return 1;
 }
 
-/* 1 when every x[i] is finite: x * 0 is +-0 for a finite x and NaN for Inf or
- * NaN (IEEE 754; no -ffinite-math-only here), so a sum of those products is 0
- * exactly when all are finite, in whatever order it is added. No branch per
- * element, and four short chains of additions, z[j] over the x[i] with
- * i mod 4 = j, instead of one (the check runs on every sample, some 50 values):
- * the compiler adds them as two pairs in two vector registers; the last n mod 4
- * as a pair and one (not a loop: a 32-bit build's loop optimisation warned of one). */
+/* 1 when every x[i] is finite (piezo_simd.h: AVX where the CPU has it) */
 static int all_finite(const double *x, int n)
 {
-    double z[4] = { 0.0, 0.0, 0.0, 0.0 };
-    int i, j;
-    for (i = 0; i + 4 <= n; i += 4)
-        for (j = 0; j < 4; ++j) z[j] += x[i + j] * 0.0;
-    if (i + 2 <= n) {
-        z[0] += x[i] * 0.0;
-        z[1] += x[i + 1] * 0.0;
-        i += 2;
-    }
-    if (i < n) z[2] += x[i] * 0.0;
-    return (z[0] + z[1]) + (z[2] + z[3]) == 0.0;
+    return piezo_all_finite(x, n);
 }
 
 /* The estimates, the covariance and the supervisor's next statistics and gain (an output:

@@ -8,7 +8,8 @@
  * reachable) and runs them on the same random operators: the creep's SOE sum
  * (gl_soe_sum, gl_soe_sum_avx) and the advance of its states (gl_soe_advance,
  * gl_soe_advance_avx) for every term count 0..PIEZO_GL_MAX_TERMS and ring
- * position, and the PI sum (pi_sum, pi_sum_avx) for every m = 1..16, with
+ * position, the PI sum (pi_sum, pi_sum_avx) for every m = 1..16, and the
+ * controller's finiteness check (piezo_all_finite_sse2, _avx) against isfinite, with
  * values of every magnitude, both signed zeros, subnormals, sums that overflow,
  * infinities and NaNs; out of place and in place. The results, the written
  * states and the untouched slots beyond the terms in use must be identical bit
@@ -148,6 +149,25 @@ static void check_pi(long trials)
     }
 }
 
+/* The finiteness check (piezo_all_finite_sse2, piezo_all_finite_avx): the same answer for every
+ * n = 0..70, on finite values of every magnitude (sums that overflow included: x * 0 does not),
+ * and 0 with one Inf or NaN at each position; the reference is a plain loop of isfinite. */
+static void check_finite(long trials)
+{
+    double x[70];
+    long t;
+    int n, j, bad, fs, fa;
+    for (t = 0; t < trials; ++t) {
+        n = (int)(t % 71);
+        for (j = 0; j < n; ++j) x[j] = any_double(0);
+        if (n > 0 && t % 2) x[next_u64() % (uint64_t)n] = (t / 2) % 3 == 0 ? NAN : ((t / 2) % 3 == 1 ? INFINITY : -INFINITY);
+        for (bad = 0, j = 0; j < n; ++j) bad |= !isfinite(x[j]);
+        fs = piezo_all_finite_sse2(x, n);
+        fa = piezo_all_finite_avx(x, n);
+        if (fs != !bad || fa != !bad) report("finite check (1: all finite) against isfinite", n, t, fs, fa);
+    }
+}
+
 int main(void)
 {
 #if PIEZO_HAVE_AVX_PATH
@@ -158,11 +178,13 @@ int main(void)
     }
     check_creep(trials);
     check_pi(trials);
+    check_finite(trials);
     if (failures) {
         fprintf(stderr, "simd_paths: %d differences\n", failures);
         return 1;
     }
-    printf("simd_paths: SSE2 and AVX sums identical over %ld creep and %ld PI cases\n", trials, trials);
+    printf("simd_paths: SSE2 and AVX sums identical over %ld creep and %ld PI cases, and the finiteness "
+           "check as isfinite over %ld arrays\n", trials, trials, trials);
     return 0;
 #else
     printf("simd_paths: no AVX path on this target (skipped)\n");
