@@ -148,6 +148,46 @@ def test_a_step_after_a_minute_of_a_tone_is_met_by_the_nominal_model():
     assert fresh_worst[-1] == pytest.approx(1.5181, abs=5e-4)
 
 
+def test_a_tone_that_stops_dead_is_no_gain_change_and_a_halved_sensor_still_is():
+    """Reference: the stage's day before this rule (the family's stage 10, noise-free sensor: its
+    20 Hz tones for 60 and 600 s were stopped at the tone's stop, "response gain changed", the
+    response 0.66 times the gain followed over the tone) and the thresholds of piezo_supervisor.h.
+    A 20 Hz, 10 um tone for 5 s stops dead at full speed; the sample that stops it carries most of
+    the window's evidence, and the stage answers it through its own hysteresis' local slope: 0.668
+    times the gain followed (a drop by 1.5, beyond PIEZO_SUP_DROP_PERCENT's 1.3). Evidence one
+    sample carries is judged against the gain of such evidence alone, and by
+    PIEZO_SUP_DROP_FIRST_PERCENT (1.75) while none was followed: the run ends without an Error.
+    The same run with the sensor halved from the tone's stop on (the tone stops at 0 um, and the
+    stage rests there 0.5 s: a halved reading of 0 is 0) is stopped within 10 ms of the step that
+    follows (its response 0.22 times the model's: "no response", below sup.gain_min = 0.25)."""
+    from harness.loop import prepare_closed_loop
+    from harness.masters.c_core import REFERENCE_PREVIEW
+    part, stop, step = sd.tone_part(20.0, 5.0), int(round(5.0 / H)), int(round(0.5 / H))
+    sc = part.scenario(sd.stage_plant(draw_stages(11, sd.SEED)[10], 10, 0), {})
+    setup = prepare_closed_loop(sc)
+
+    def run(scale):
+        """The exchange's loop on the core (as stage_day's replays): the sample an Error stops, or None."""
+        plant, ctrl = core.Plant(setup.plant_params), core.Controller(setup.controller_params)
+        out, published = plant.output, ctrl.output
+        for k in range(setup.n):
+            applied = published[0]
+            y = out.y_meas * (scale if k >= stop else 1.0)
+            try:
+                published = ctrl.step_input(setup.y_ref[k], y, setup.y_preview[k], REFERENCE_PREVIEW if k else 0)
+            except core.CoreFaultError as exc:
+                return k, exc
+            out = plant.step(applied)
+        return None, None
+
+    k, exc = run(1.0)
+    assert exc is None, (k, exc)
+    k, exc = run(0.5)
+    print(f"\nhalved from sample {stop}: stopped at {k}, {exc.fault if exc else None}")
+    assert exc is not None and exc.fault in ("response gain changed", "no response"), exc
+    assert stop + step <= k < stop + step + 20, k
+
+
 def test_an_estimate_that_rounding_leaves_outside_the_set_stays_on_its_edge():
     """Reference: the same hour with the estimates fixed at the nominal model, and this run before
     the change (main 3e281d5). The stage's day's random hour of stage 49 with the noise-free sensor,

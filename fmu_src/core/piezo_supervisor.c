@@ -97,7 +97,8 @@ void piezo_supervisor_reset(piezo_supervisor *s)
     s->ref_head = 0;
     s->weight = s->travel_model = s->travel_meas = 0.0;
     s->followed_gain = s->reversals = s->steps2 = s->dy1 = 0.0;
-    s->followed_n = 0;
+    s->followed_n = s->followed_peak_n = 0;
+    s->followed_peak = s->dw_peak = 0.0;
     s->min_step = s->big_steps = s->repeats = 0.0;
     memset(s->yhat_frozen, 0, sizeof s->yhat_frozen);
     memset(s->yhat_turned, 0, sizeof s->yhat_turned);
@@ -160,6 +161,36 @@ static double quantisation_floor(const piezo_supervisor *s, const piezo_supervis
     return n->weight * s->min_step * s->min_step / 12.0 * (1.0 + c1 * c1 + c2 * c2 + s->a2 * s->a2);
 }
 
+/* A gain that changed from the one followed since the loop was verified (the mean of the verified
+ * judgements' gains), by the factor PIEZO_SUP_DROP_PERCENT / 100 down or PIEZO_SUP_RISE_PERCENT / 100
+ * up. Evidence that one sample carries (its change of B q beyond PIEZO_SUP_PEAK_PERCENT % of Sww_1: a
+ * stop, a start, a reversal, where a stage answers through its own hysteresis' local slope, not the
+ * model's) is judged against the lower of that mean and the mean of such judgements alone (the higher
+ * for a rise), and by PIEZO_SUP_DROP_FIRST_PERCENT while none of them was followed yet. *followed:
+ * the gain judged against. */
+static int peak_evidence(const piezo_supervisor_next *n)
+{
+    return n->dw_peak * 100.0 > PIEZO_SUP_PEAK_PERCENT * n->sww1;
+}
+
+static int gain_changed(const piezo_supervisor *s, const piezo_supervisor_next *n, double g, double *followed)
+{
+    double lo = s->followed_gain, hi = s->followed_gain, drop = PIEZO_SUP_DROP_PERCENT;
+    *followed = s->followed_gain;
+    if (s->followed_n < PIEZO_SUP_CONFIRM) return 0;
+    if (peak_evidence(n)) {
+        if (s->followed_peak_n < PIEZO_SUP_CONFIRM) drop = PIEZO_SUP_DROP_FIRST_PERCENT;
+        else if (s->followed_peak < lo) lo = s->followed_peak;
+        else hi = s->followed_peak;
+    }
+    if (lo * 100.0 > drop * g) {
+        *followed = lo;
+        return 1;
+    }
+    *followed = hi;
+    return g * 100.0 > PIEZO_SUP_RISE_PERCENT * hi;
+}
+
 /* The response verdict of the evaluated statistics: a fault kind, 0 for a
  * verified loop, -1 without strong evidence. *gain, *delay: the best fit. */
 static int response_kind(const piezo_supervisor *s, const piezo_supervisor_input *in,
@@ -203,9 +234,10 @@ static int response_kind(const piezo_supervisor *s, const piezo_supervisor_input
         if (e_law * 100.0 >= PIEZO_SUP_DELAY_PERCENT * explained) return PIEZO_SUP_DELAY;
     }
     /* a gain that changed from the one followed since the loop was verified */
-    if (s->followed_n >= PIEZO_SUP_CONFIRM && (s->followed_gain * 100.0 > PIEZO_SUP_DROP_PERCENT * g
-                                               || g * 100.0 > PIEZO_SUP_RISE_PERCENT * s->followed_gain))
-        return PIEZO_SUP_GAIN_CHANGED;
+    {
+        double followed;
+        if (gain_changed(s, n, g, &followed)) return PIEZO_SUP_GAIN_CHANGED;
+    }
     return 0;
 }
 
@@ -316,6 +348,7 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     n->szz = lam * s->szz + dz * dz;
     n->srr = lam * s->srr + dzr * dzr;
     n->sww1 = lam * s->sww[0] + n->dw * n->dw;
+    n->dw_peak = lam * s->dw_peak > n->dw * n->dw ? lam * s->dw_peak : n->dw * n->dw;
     /* Szw_d uses dw(k - d + 1): the new dw for d = 1, the kept ones (a shift register:
      * contiguous, so the loop vectorises) for d >= 2 */
     n->szw[0] = lam * s->szw[0] + dz * n->dw;
@@ -361,6 +394,8 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     }
     n->followed_gain = s->followed_gain;
     n->followed_n = s->followed_n;
+    n->followed_peak = s->followed_peak;
+    n->followed_peak_n = s->followed_peak_n;
 
     /* the response verdict, confirmed over PIEZO_SUP_CONFIRM samples */
     n->status = s->status;
@@ -392,6 +427,14 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
             if (1.0 / (double)n->followed_n > w)
                 w = 1.0 / (double)n->followed_n;
             n->followed_gain = s->followed_gain + (kind_gain - s->followed_gain) * w;
+            /* ... and the mean of the judgements whose evidence one sample carried, alike */
+            if (peak_evidence(n)) {
+                w = (double)PIEZO_SUP_JUDGE_EVERY / (double)s->window;
+                n->followed_peak_n = s->followed_peak_n + 1;
+                if (1.0 / (double)n->followed_peak_n > w)
+                    w = 1.0 / (double)n->followed_peak_n;
+                n->followed_peak = s->followed_peak + (kind_gain - s->followed_peak) * w;
+            }
         }
     }
     /* the clipping watchdog: mean |y_d - y_meas| over the clipped run */
@@ -475,6 +518,9 @@ void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *
     s->travel_meas = n->travel_meas;
     s->followed_gain = n->followed_gain;
     s->followed_n = n->followed_n;
+    s->followed_peak = n->followed_peak;
+    s->followed_peak_n = n->followed_peak_n;
+    s->dw_peak = n->dw_peak;
     s->reversals = n->reversals;
     s->steps2 = n->steps2;
     s->dy1 = n->dy1;
@@ -536,6 +582,8 @@ void piezo_supervisor_verdict(const piezo_supervisor *s, const piezo_supervisor_
     v->error_bound = s->clip_error;
     v->verified_gain = s->status ? s->verified_gain : 0.0;
     v->followed_gain = s->followed_gain;
+    if (n->fault == PIEZO_SUP_GAIN_CHANGED)
+        gain_changed(s, n, v->gain, &v->followed_gain);
     v->gain_min = s->gain_min;
     if (n->fault == PIEZO_SUP_FROZEN && held_outlier(n))
         v->bridged_error = in->bridged_error != 0.0 ? in->bridged_error : 1e-300;
@@ -582,7 +630,8 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
         || s->delay < 0 || s->delay > PIEZO_MV_MAX_D)
         return "supervisor verdict state out of range";
     if (s->y_same > s->k || (s->status ? s->k_verified >= s->k : s->k_verified != 0) || s->followed_n > s->k
-        || (s->followed_n == 0) != (s->followed_gain == 0.0))
+        || (s->followed_n == 0) != (s->followed_gain == 0.0) || s->followed_peak_n > s->followed_n
+        || (s->followed_peak_n == 0) != (s->followed_peak == 0.0))
         return "supervisor counters exceed the sample count";
     if (!finite_all(s->dw, PIEZO_MV_MAX_D) || !finite_all(s->sww, PIEZO_MV_MAX_D)
         || !finite_all(s->szw, PIEZO_MV_MAX_D) || !finite_all(s->srw, PIEZO_SUP_DEFAULT_DETECTABLE)
@@ -594,13 +643,14 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
                         s->weight, s->travel_model, s->travel_meas, s->followed_gain, s->reversals,
                         s->steps2, s->dy1, s->min_step, s->big_steps, s->repeats, s->yhat_frozen[0],
                         s->yhat_frozen[1], s->yhat_frozen[2], s->yhat_turned[0], s->yhat_turned[1],
-                        s->yhat_turned[2], s->yhat_slow, s->v2 };
+                        s->yhat_turned[2], s->yhat_slow, s->v2, s->followed_peak, s->dw_peak };
         if (!finite_all(sc, (int)(sizeof sc / sizeof sc[0]))) return "supervisor values not finite";
     }
     if (s->szz < 0.0 || s->srr < 0.0 || s->clip_error_sum < 0.0 || s->travel_model < 0.0 || s->travel_meas < 0.0
         || s->weight > (double)s->k || s->followed_gain < 0.0 || s->reversals < 0.0 || s->reversals > s->weight
         || s->steps2 < 0.0 || s->min_step < 0.0 || s->big_steps < 0.0 || s->big_steps > s->weight
-        || s->repeats < 0.0 || s->repeats > s->weight)
+        || s->repeats < 0.0 || s->repeats > s->weight || s->followed_peak < 0.0 || s->dw_peak < 0.0
+        || s->dw_peak > s->sww[0])
         return "supervisor sums negative or beyond their weight";
     for (i = 0; i < PIEZO_MV_MAX_D; ++i)
         if (s->sww[i] < 0.0) return "supervisor sums negative";

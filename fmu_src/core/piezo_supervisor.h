@@ -54,7 +54,13 @@
  * PIEZO_SUP_DROP_PERCENT / 100 or above it by PIEZO_SUP_RISE_PERCENT / 100 is a
  * fault kind (confirmed as the others): a sensor or an amplifier whose gain
  * changed during the run, which the adaptive law would follow, the stage then
- * tracking y_d scaled by the change.
+ * tracking y_d scaled by the change. Evidence that one sample carries (its
+ * dw^2 more than PIEZO_SUP_PEAK_PERCENT % of Sww_1, the largest term kept as
+ * max(lambda M, dw^2): a stop, a start, a reversal, where a stage answers
+ * through its own hysteresis' local slope, not the model's) is judged against
+ * the lower of that gain and the mean of such judgements alone (the higher for
+ * a rise), followed alike, and, while none of them was followed yet, by the
+ * factor PIEZO_SUP_DROP_FIRST_PERCENT / 100 down.
  *
  * Watchdogs: v clipped for sup.clip_time without a pause while the mean
  * |y_d - y_meas| over that time exceeds sup.clip_error; a loop delay still not
@@ -122,6 +128,10 @@
 #define PIEZO_SUP_DEFAULT_DETECTABLE 3   /* delays the controller detects: 1..3 */
 #define PIEZO_SUP_DROP_PERCENT 130   /* the gain followed over the gain now: beyond it, the gain fell */
 #define PIEZO_SUP_RISE_PERCENT 200   /* the gain now over the gain followed: beyond it, the gain rose */
+#define PIEZO_SUP_PEAK_PERCENT 50    /* evidence carried by one sample: its change of B q is beyond this share
+                                        of the window's Sww_1 (a stop, a start, a reversal) */
+#define PIEZO_SUP_DROP_FIRST_PERCENT 175 /* DROP_PERCENT for such evidence while none of its kind was
+                                        followed yet */
 #define PIEZO_SUP_FROZEN_PERCENT 30  /* share of reversals of y_meas before a frozen stretch */
 #define PIEZO_SUP_BIG_STEP_PERCENT 150   /* a step of y_meas beyond this share of its smallest is noise's */
 #define PIEZO_SUP_FROZEN_BIG_PERMILLE 400 /* share of such steps before a frozen stretch [per mille] */
@@ -311,6 +321,9 @@ typedef struct {
     /* a gain that changes, a measurement that freezes */
     double followed_gain;        /* the strongly evidenced gains followed since verified (0: none yet) */
     uint64_t followed_n;         /* judged samples it holds (the weights 1/n while they are larger) */
+    double followed_peak;        /* the same, of the judged samples whose evidence one sample carried */
+    uint64_t followed_peak_n;    /* judged samples it holds */
+    double dw_peak;              /* the largest term of Sww_1 as it weighs now: max_j lambda^(k-j) dw(j)^2 */
     double reversals;            /* sum of lambda^(k-j) [y_meas reversed its direction at j] */
     double steps2;               /* sum of lambda^(k-j) (y_meas(j) - y_meas(j-1))^2 */
     double dy1;                  /* y_meas(k-1) - y_meas(k-2) (0 when equal: the last change kept) */
@@ -333,7 +346,7 @@ typedef struct {
     double szw[PIEZO_MV_MAX_D];
     double srw[PIEZO_SUP_DEFAULT_DETECTABLE];
     double weight, travel_model, travel_meas;
-    double followed_gain, reversals, steps2, dy1, min_step, big_steps, repeats;
+    double followed_gain, reversals, steps2, dy1, min_step, big_steps, repeats, followed_peak, dw_peak;
     double yhat_frozen[3], yhat_turned[3], yhat_slow;
     double stuck_move;           /* FROZEN against the model: the move since y_meas froze, by the model [um] */
     double clip_error_sum;       /* the last double: z .. clip_error_sum are the doubles checked finite */
@@ -342,7 +355,7 @@ typedef struct {
     int v_dir;
     int candidate, candidate_run, status, delay;
     double gain;
-    uint64_t followed_n;
+    uint64_t followed_n, followed_peak_n;
     int fault;                   /* piezo_sup_fault: the verdict of this sample */
 } piezo_supervisor_next;
 
