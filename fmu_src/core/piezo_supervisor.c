@@ -173,6 +173,16 @@ static int peak_evidence(const piezo_supervisor_next *n)
     return n->dw_peak * 100.0 > PIEZO_SUP_PEAK_PERCENT * n->sww1;
 }
 
+/* A followed mean moved toward a verified gain g by its n-th judgement: weight 1/n while that is
+ * above JUDGE_EVERY / window, that from then on */
+static double follow(const piezo_supervisor *s, double mean, uint64_t n, double g)
+{
+    double w = (double)PIEZO_SUP_JUDGE_EVERY / (double)s->window;
+    if (1.0 / (double)n > w)
+        w = 1.0 / (double)n;
+    return mean + (g - mean) * w;
+}
+
 static int gain_changed(const piezo_supervisor *s, const piezo_supervisor_next *n, double g, double *followed)
 {
     double lo = s->followed_gain, hi = s->followed_gain, drop = PIEZO_SUP_DROP_PERCENT;
@@ -419,21 +429,14 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         n->candidate = 0;
         n->candidate_run = 0;
         if (kind == 0) {
-            /* verified: the gain followed moves toward it, weight 1/n for its n-th judgement while
-             * that is above JUDGE_EVERY / window, that from then on */
-            double w = (double)PIEZO_SUP_JUDGE_EVERY / (double)s->window;
+            /* verified: the gain followed moves toward it, and so does the mean of the judgements
+             * whose evidence one sample carried when this one's did */
             n->status = 1;
             n->followed_n = s->followed_n + 1;
-            if (1.0 / (double)n->followed_n > w)
-                w = 1.0 / (double)n->followed_n;
-            n->followed_gain = s->followed_gain + (kind_gain - s->followed_gain) * w;
-            /* ... and the mean of the judgements whose evidence one sample carried, alike */
+            n->followed_gain = follow(s, s->followed_gain, n->followed_n, kind_gain);
             if (peak_evidence(n)) {
-                w = (double)PIEZO_SUP_JUDGE_EVERY / (double)s->window;
                 n->followed_peak_n = s->followed_peak_n + 1;
-                if (1.0 / (double)n->followed_peak_n > w)
-                    w = 1.0 / (double)n->followed_peak_n;
-                n->followed_peak = s->followed_peak + (kind_gain - s->followed_peak) * w;
+                n->followed_peak = follow(s, s->followed_peak, n->followed_peak_n, kind_gain);
             }
         }
     }
