@@ -159,8 +159,10 @@ class ControllerRef:
     law on T r with the integral action, inverse creep, inverse PI, saturation with
     back-calculation, monitor counts, and the guarantees of the robust update (its projection
     into the admissible set in the metric of P^-1 with the radial step, the fallback to the
-    nominal model at a jump or a worse prediction), the integral action and the offset held on a
-    reading unchanged for PIEZO_SUP_STUCK_SAME samples. Written from the header's and the docs'
+    nominal model at a jump or a worse prediction), the offset held on a reading unchanged for
+    PIEZO_SUP_STUCK_SAME samples and the integral action on it once sup.gain_min times the
+    supervision's model's move since the reading last changed reaches its smallest step (that
+    model, yhat = B q - (A - 1) yhat, transcribed with the supervision's nominal A, B). Written from the header's and the docs'
     description, operation by operation in the C order; the admissible set's rows are constants
     the core derives at init."""
 
@@ -177,6 +179,9 @@ class ControllerRef:
         self.variance_max, self.p0_loop, self.gamma = c.variance_max, c.p0_loop, c.integral_gain
         self.noise_y = self.noise_y2 = self.noise_e = self.anchor = self.offset = self.z = 0.0
         self.probe_max, self.sup_enabled, self.same = c.probe_max, bool(c.sup.enabled), 0
+        # the supervision's model of the stage (delay 1) and the reading's smallest step
+        self.sup_model, self.gain_min = (c.sup.a1, c.sup.a2, c.sup.b1, c.sup.b2), c.sup.gain_min
+        self.yhat1 = self.yhat2 = self.yhat_frozen = self.min_step = 0.0
         self.left, self.prev_pred_error = 0, 0.0
         self.r_last = self.r_last2 = self.velocity = 0.0   # the law's reference without z at k-1, k-2
         self.yd = {}                            # y_d by sample: the law's r(j) is y_d(j + d)
@@ -392,6 +397,16 @@ class ControllerRef:
         # a reading unchanged for STUCK_SAME samples (the supervision's count): integral and offset hold
         same = self.same + 1 if self.k > 0 and y_meas == self.y_prev[0] else 0
         held = self.sup_enabled and same >= self.STUCK_SAME
+        # the integral holds on it once a live reading would have changed: gain_min |yhat - yhat(f)| >= q
+        sa1, sa2, sb1, sb2 = self.sup_model
+        yhat = sb1 * self.q_past[0] + sb2 * self.q_past[1] - sa1 * self.yhat1 - sa2 * self.yhat2
+        yhat_frozen = yhat if same == 0 else self.yhat_frozen
+        step = abs(y_meas - self.y_prev[0]) if self.k > 0 else 0.0
+        integral_held = held and not self.gain_min * abs(yhat - yhat_frozen) < self.min_step
+        if self.sup_enabled:
+            self.yhat2, self.yhat1, self.yhat_frozen = self.yhat1, yhat, yhat_frozen
+            if step > 0.0 and (self.min_step == 0.0 or step < self.min_step):
+                self.min_step = step
         live = not self.buried() or (self.robust and excited)
         if was_detecting:
             offset = 0.0
@@ -456,7 +471,7 @@ class ControllerRef:
         a1, a2, b1, b2 = self.nominal if self.detecting else self.theta
         t = self.START_T if self.detecting else self.observer
         z = self.z
-        if self.gamma > 0.0 and not self.detecting and self.sat_hold == 0 and self.k in self.yd and not held:
+        if self.gamma > 0.0 and not self.detecting and self.sat_hold == 0 and self.k in self.yd and not integral_held:
             z = self.z + self.gamma * (self.yd[self.k] - y_meas)
         r = r_plain + z if self.gamma > 0.0 else r_plain
         e = []

@@ -84,11 +84,13 @@ def test_a_noisy_sensor_stuck_in_a_hold_is_named_within_10_ms(nm):
 
 def test_a_quiet_sensor_stuck_at_the_set_point_costs_the_stages_drift():
     """The case nothing can see: a 1 nm sensor stuck where the stage holds. The integral action
-    holds on the unchanged reading, the law holds v, and the stage drifts by the difference between
-    its creep and the model's: over the 0.5 s after the onset, within 0.17 um (the family's worst,
-    0.16 um), and runs on unnamed on most stages (46 of 50)."""
+    acts on the unchanged reading only until sup.gain_min times the supervision model's move since
+    it last changed reaches its step, the law answers the stale reading through its model, and the
+    stage drifts: over the 0.5 s after the onset, within 0.22 um (the family's worst 0.216 um; 0.187
+    while the integral held at once on 4 equal readings), and runs on unnamed on most stages (45 of
+    50)."""
     runs = [st.run_stuck(case("stuck in a hold"), plant(i, 1)) for i in range(STAGES)]
-    assert all(r["excursion"] < 0.17 for r in runs), [r["excursion"] for r in runs]
+    assert all(r["excursion"] < 0.22 for r in runs), [r["excursion"] for r in runs]
     assert sum(r["fault"] == "" for r in runs) >= 2
 
 
@@ -154,7 +156,7 @@ def hour(stage):
     return profile_signal(sd.hour_part(stage).segments, step=H)
 
 
-@pytest.mark.parametrize("stage,seconds,stopped,held", [(4, 44.48, 44.473, 255), (47, 0.95, 0.888, 461)])
+@pytest.mark.parametrize("stage,seconds,stopped,held", [(4, 44.48, 44.473, 255), (47, 0.95, 0.888, 359)])
 def test_a_quiet_reading_held_after_a_long_move_is_not_taken_for_stuck(stage, seconds, stopped, held):
     """The stage's day's random hours of stages 4 and 47 with the noise-free sensor (0 nm on the
     2 nm grid), their first seconds through the C core in an exchange. After a 30 um move the law
@@ -163,8 +165,10 @@ def test_a_quiet_reading_held_after_a_long_move_is_not_taken_for_stuck(stage, se
     took that for a stuck y_meas ("no response") at 44.473 s and 0.888 s, after 255 and 461 equal
     readings. It now allows the model
     PIEZO_SUP_STUCK_CREEP_PERMILLE per mille of how far its yhat is from where it has been over the
-    last second, and the runs go past those times with no verdict and as long a run of equal
-    readings, the stage still within 2 nm of the hold (the grid's step)."""
+    last second, and the runs go past those times with no verdict and a run of equal readings as
+    long at stage 4 (at stage 47 359: the integral action now acts on a reading a live sensor may
+    still show, where it held at once before), the stage still within 2 nm of the hold (the grid's
+    step)."""
     same = [0]
     p, c, y_d = exchange(hour(stage), plant(stage, 0), seconds,
                          each=lambda c: same.__setitem__(0, max(same[0], c.raw.sup.y_same)))
@@ -180,14 +184,15 @@ def test_a_noise_free_reading_that_stops_chattering_is_not_taken_for_frozen():
     test took that for a sensor whose noise stopped ("y_meas frozen" at 7.53 s, 39 equal readings).
     It now asks that the model's best fit leave of the reading's changes more than
     PIEZO_SUP_FROZEN_FLOOR times the grid's quantisation floor: the run goes on, hundreds of equal
-    readings later (972), with no verdict."""
+    readings later (989, from 7.505 s: 972 from 7.5135 s while the integral action held at once on
+    4 equal readings), with no verdict."""
     from harness.studies import stage_use_table as su
     task = next(t for t in su.family_tasks(sensors=[0], laws=("ours",))
                 if t.stage == 23 and t.profile.name == "triangle scan 1 Hz, 10 s dwell")
     n = int(8.0 / H)
     _, c, _ = exchange(task.profile.scenario(task.plant, task.controller).signal, task.plant, 8.0,
                        task.controller)
-    assert c.raw.sup.y_same == n - 1 - round(7.5135 / H)     # equal since 7.5135 s, as then
+    assert c.raw.sup.y_same == n - 1 - round(7.505 / H)      # equal since 7.505 s
 
 
 def test_the_waiting_detection_stays_finite_on_a_noisy_hour():

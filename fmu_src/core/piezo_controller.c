@@ -584,6 +584,18 @@ static double ramp_reference(const piezo_controller *c, double r)
     return c->y_start + f * (r - c->y_start);
 }
 
+/* A held reading a live sensor may still show: gain_min |yhat(k+1) - yhat(f)| < q, the supervision
+ * model's move since the reading last changed (at f) times sup.gain_min (a working loop's weakest
+ * gain) below its smallest step q (0 before it ever stepped: not live). The integral acts on it: a
+ * noise-free reading that has not crossed its grid carries the error (held at once on 4 equal
+ * samples, noise-free holds stayed 32 nm off y_d for 2 s: docs/stage_use.md). Beyond, it may be
+ * stuck, and the integral would walk the stage: against a stale reading the law answers a change
+ * of its reference tens of times over, through its model's slow pole. */
+static int live_reading(const piezo_controller *c, const piezo_controller_sample *s)
+{
+    return c->sup.gain_min * fabs(s->sup.yhat - s->sup.yhat_frozen[0]) < c->sup.min_step;
+}
+
 /* Evaluate sample k into *s without changing *c (the caller guarantees
  * finite inputs and enough history). Exact mode writes history[2k],
  * history[2k+1]. The inputs are finite, so a non-finite value computed on
@@ -628,8 +640,9 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     s->outlier = (s->jump_left == 0 && is_outlier(c, s->raw_error, !s->clock))
                  || (c->suspect && in->y_meas == c->suspect_y);
     /* a reading equal to the ones before for PIEZO_SUP_STUCK_SAME samples (the supervision's count, so
-     * not while it is off) tells nothing new: the integral action and the estimator's offset hold,
-     * and never walk the stage on a reading that may be stuck */
+     * not while it is off) tells nothing new: the estimator's offset holds, and the integral action
+     * once the model says a live reading would have changed (below): neither walks the stage on a
+     * reading that may be stuck */
     s->held = c->sup.enabled && c->sup.k > 0 && in->y_meas == c->sup.y1
               && c->sup.y_same + 1 >= PIEZO_SUP_STUCK_SAME;
     if (s->outlier)
@@ -695,12 +708,13 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     /* integral action (mv.integral): z(k) = z(k-1) + gamma (y_d(k) - y_meas(k)), y_d(k) the
      * reference the law took for sample k (its r(j) is y_d(j + d), kept by sample, so a
      * change of d while detecting leaves no misaligned sample); held while detecting, while a
-     * clipped sample pauses the adaptation (anti-windup) and when no reference for sample k
-     * was taken */
+     * clipped sample pauses the adaptation (anti-windup), when no reference for sample k
+     * was taken, and on a held reading (unchanged PIEZO_SUP_STUCK_SAME samples) that a live
+     * sensor would have changed (live_reading) */
     s->r_plain = r;
     s->integral = c->integral;
     if (c->integral_gain > 0.0 && !s->detecting && c->sat_hold == 0
-        && c->yd_tag[c->k % PIEZO_MV_Q_RING] == c->k + 1 && !s->held)
+        && c->yd_tag[c->k % PIEZO_MV_Q_RING] == c->k + 1 && !(s->held && !live_reading(c, s)))
         s->integral = c->integral + c->integral_gain * (c->yd_value[c->k % PIEZO_MV_Q_RING] - y_meas);
     if (c->integral_gain > 0.0) r += s->integral;   /* (r + 0 would turn a -0 reference into +0) */
 

@@ -34,7 +34,10 @@
  * update, starts from rls.p0_loop I once d is chosen, and bounds trace(P) by
  * rls.variance_max / sigma_e^2 (sigma_e the measured noise of its prediction
  * error) as well as rls.trace_max. Integral action (mv.integral):
- *     z(k) = z(k-1) + gamma (y_d(k) - y_meas(k)),   the law tracks r(k) + z(k).
+ *     z(k) = z(k-1) + gamma (y_d(k) - y_meas(k)),   the law tracks r(k) + z(k),
+ * held on a reading unchanged for PIEZO_SUP_STUCK_SAME samples once sup.gain_min times the move the
+ * supervision's model gives the stage since the reading last changed reaches one of its steps (a
+ * stuck reading must not walk the stage; one that has not crossed its grid yet carries the error).
  *
  * Guarantees of the robust update (docs/model.md, "Estimates with guarantees"):
  * - the admissible set: after every update the estimates are projected (in the metric of
@@ -346,8 +349,8 @@ typedef struct {
     piezo_supervisor_next sup;
     double next_noise;           /* det_noise of k+1 (new_trial) */
     int outlier;                 /* y_meas was replaced by the model's prediction */
-    int held;                    /* y_meas has not changed for PIEZO_SUP_STUCK_SAME samples: integral and
-                                    offset hold */
+    int held;                    /* y_meas has not changed for PIEZO_SUP_STUCK_SAME samples: the offset
+                                    holds, and the integral once a live reading would have changed */
     double raw_error;            /* the a-priori error of y_meas as received [um] */
     double err_weight, outlier_sum;    /* the outlier test's weights of k+1 (with err_sum) */
     int fault;                   /* the safe state's fault code after this sample (0: none) */
