@@ -394,7 +394,7 @@ class ControllerRef:
             anchor = r1 if event or still else line
             velocity = r1 - self.r_last2 if event or still else self.velocity
             left = self.excitation_samples if event else (self.left - 1 if self.left > 0 else 0)
-        # a reading unchanged for STUCK_SAME samples (the supervision's count): integral and offset hold
+        # a reading unchanged for STUCK_SAME samples (the supervision's count): the offset holds
         same = self.same + 1 if self.k > 0 and y_meas == self.y_prev[0] else 0
         held = self.sup_enabled and same >= self.STUCK_SAME
         # the integral holds on it once a live reading would have changed: gain_min |yhat - yhat(f)| >= q

@@ -584,18 +584,6 @@ static double ramp_reference(const piezo_controller *c, double r)
     return c->y_start + f * (r - c->y_start);
 }
 
-/* A held reading a live sensor may still show: gain_min |yhat(k+1) - yhat(f)| < q, the supervision
- * model's move since the reading last changed (at f) times sup.gain_min (a working loop's weakest
- * gain) below its smallest step q (0 before it ever stepped: not live). The integral acts on it: a
- * noise-free reading that has not crossed its grid carries the error (held at once on 4 equal
- * samples, noise-free holds stayed 32 nm off y_d for 2 s: docs/stage_use.md). Beyond, it may be
- * stuck, and the integral would walk the stage: against a stale reading the law answers a change
- * of its reference tens of times over, through its model's slow pole. */
-static int live_reading(const piezo_controller *c, const piezo_controller_sample *s)
-{
-    return c->sup.gain_min * fabs(s->sup.yhat - s->sup.yhat_frozen[0]) < c->sup.min_step;
-}
-
 /* Evaluate sample k into *s without changing *c (the caller guarantees
  * finite inputs and enough history). Exact mode writes history[2k],
  * history[2k+1]. The inputs are finite, so a non-finite value computed on
@@ -710,11 +698,16 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
      * change of d while detecting leaves no misaligned sample); held while detecting, while a
      * clipped sample pauses the adaptation (anti-windup), when no reference for sample k
      * was taken, and on a held reading (unchanged PIEZO_SUP_STUCK_SAME samples) that a live
-     * sensor would have changed (live_reading) */
+     * sensor would have changed (piezo_supervisor_may_be_live). Before that it acts: a
+     * noise-free reading that has not crossed its grid carries the error (held at once on 4
+     * equal samples, noise-free holds stayed 32 nm off y_d for 2 s: docs/stage_use.md); beyond,
+     * it would walk the stage on a stuck reading, which the law answers tens of times over
+     * through its model's slow pole */
     s->r_plain = r;
     s->integral = c->integral;
     if (c->integral_gain > 0.0 && !s->detecting && c->sat_hold == 0
-        && c->yd_tag[c->k % PIEZO_MV_Q_RING] == c->k + 1 && !(s->held && !live_reading(c, s)))
+        && c->yd_tag[c->k % PIEZO_MV_Q_RING] == c->k + 1
+        && (!s->held || piezo_supervisor_may_be_live(&c->sup, &s->sup)))
         s->integral = c->integral + c->integral_gain * (c->yd_value[c->k % PIEZO_MV_Q_RING] - y_meas);
     if (c->integral_gain > 0.0) r += s->integral;   /* (r + 0 would turn a -0 reference into +0) */
 

@@ -336,6 +336,11 @@ static int stuck(const piezo_supervisor *s, const piezo_supervisor_input *in, co
     return far * s->gain_min > *bound;
 }
 
+int piezo_supervisor_may_be_live(const piezo_supervisor *s, const piezo_supervisor_next *n)
+{
+    return s->gain_min * fabs(n->yhat - n->yhat_frozen[0]) < s->min_step;
+}
+
 void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor_input *in,
                                piezo_supervisor_next *n)
 {

@@ -373,6 +373,12 @@ void piezo_supervisor_restart(piezo_supervisor *sup, double y, double w);
  * next is not set), no verdict. */
 void piezo_supervisor_evaluate(const piezo_supervisor *sup, const piezo_supervisor_input *in,
                                piezo_supervisor_next *next);
+/* Whether a reading unchanged since sample f may still be a live sensor's (evaluated sample, enabled):
+ *     gain_min |yhat(k+1) - yhat(f)| < q,
+ * the model's move since then times sup.gain_min (a working loop's weakest gain) below the
+ * reading's smallest step q (0 before it ever stepped: not live). The stuck test asks the same
+ * with its wider bound; the controller's integral action acts on such a reading. */
+int piezo_supervisor_may_be_live(const piezo_supervisor *sup, const piezo_supervisor_next *next);
 /* Make the evaluated sample the state; r: the reference the law used at k. */
 void piezo_supervisor_commit(piezo_supervisor *sup, const piezo_supervisor_input *in,
                              const piezo_supervisor_next *next, double r);
