@@ -82,16 +82,20 @@ def test_a_noisy_sensor_stuck_in_a_hold_is_named_within_10_ms(nm):
         assert r["excursion"] <= r["before"] + 0.15, (i, r["excursion"], r["before"])
 
 
-def test_a_quiet_sensor_stuck_at_the_set_point_costs_the_stages_drift():
-    """The case nothing can see: a 1 nm sensor stuck where the stage holds. The integral action
-    acts on the unchanged reading only until sup.gain_min times the supervision model's move since
-    it last changed reaches its step, the law answers the stale reading through its model, and the
-    stage drifts: over the 0.5 s after the onset, within 0.22 um (the family's worst 0.216 um; 0.187
-    while the integral held at once on 4 equal readings), and runs on unnamed on most stages (45 of
-    50)."""
-    runs = [st.run_stuck(case("stuck in a hold"), plant(i, 1)) for i in range(STAGES)]
-    assert all(r["excursion"] < 0.22 for r in runs), [r["excursion"] for r in runs]
-    assert sum(r["fault"] == "" for r in runs) >= 2
+@pytest.mark.parametrize("name", ["stuck in a hold", "stuck 2 nm off in a hold"])
+@pytest.mark.parametrize("nm", [0, 1])
+def test_a_quiet_sensor_stuck_at_the_set_point_is_bridged(nm, name):
+    """The case nothing can see: a sensor of 0 or 1 nm stuck where the stage holds (or 2 nm off),
+    on the stage's day's stages 0-2 and 7 (7: the family's worst, 2 nm off, 1 nm, when the stale
+    reading's test used the noise measured while it is held, which decays). Once sup.gain_min times
+    the supervision model's move since it last changed reaches its step the reading is stale: the
+    integral holds and the loop model's prediction stands in, so the stage holds on the model and
+    drifts only by its own mismatch: over the 0.5 s after the onset within 0.05 um (the family's
+    worst 0.042 um; 0.22 um while the law answered the stale reading through its model's slow pole),
+    unnamed."""
+    for i in (0, 1, 2, 7):
+        r = st.run_stuck(case(name), plant(i, nm))
+        assert r["fault"] == "" and r["excursion"] < 0.05, (i, r["excursion"], r["fault"])
 
 
 @pytest.mark.parametrize("nm", [100, 200])
@@ -183,16 +187,18 @@ def test_a_noise_free_reading_that_stops_chattering_is_not_taken_for_frozen():
     down as the stage itself moves (which the model explains), then settles on one step. The noise
     test took that for a sensor whose noise stopped ("y_meas frozen" at 7.53 s, 39 equal readings).
     It now asks that the model's best fit leave of the reading's changes more than
-    PIEZO_SUP_FROZEN_FLOOR times the grid's quantisation floor: the run goes on, hundreds of equal
-    readings later (989, from 7.505 s: 972 from 7.5135 s while the integral action held at once on
-    4 equal readings), with no verdict."""
+    PIEZO_SUP_FROZEN_FLOOR times the grid's quantisation floor: the run goes on, thousands of equal
+    readings later, with no verdict (2457, from 6.771 s, the stage 0.6 nm from y_d: the reading at
+    y_d, stale, no longer chased; 989 from 7.505 s when it was, 972 from 7.5135 s while the
+    integral action held at once on 4 equal readings)."""
     from harness.studies import stage_use_table as su
     task = next(t for t in su.family_tasks(sensors=[0], laws=("ours",))
                 if t.stage == 23 and t.profile.name == "triangle scan 1 Hz, 10 s dwell")
     n = int(8.0 / H)
     _, c, _ = exchange(task.profile.scenario(task.plant, task.controller).signal, task.plant, 8.0,
                        task.controller)
-    assert c.raw.sup.y_same == n - 1 - round(7.505 / H)      # equal since 7.505 s
+    assert c.raw.sup.y_same == n - 1 - round(6.771 / H)      # equal since 6.771 s
+    assert c.raw.fault == 0
 
 
 def test_the_waiting_detection_stays_finite_on_a_noisy_hour():

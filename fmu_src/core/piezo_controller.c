@@ -282,7 +282,7 @@ static int admissible_project(const piezo_controller *c, double *P, double *th)
 static void rls_update(const piezo_controller *c, double e, piezo_controller_sample *s)
 {
     double bound = c->trace_max;
-    int may = c->rls_enabled && !(c->sat_hold > 0) && !s->outlier;
+    int may = c->rls_enabled && !(c->sat_hold > 0) && !s->outlier && !s->stale;
     s->offset = c->offset;
     s->projected = 0;
     if (!c->robust) {
@@ -486,8 +486,8 @@ static void outlier_sums(const piezo_controller *c, piezo_controller_sample *s)
 {
     const double lam = OUTLIER_FORGETTING;
     s->outlier_sum = lam * c->outlier_sum + (s->outlier ? 1.0 : 0.0);
-    s->err_sum = s->outlier ? c->err_sum : lam * c->err_sum + s->raw_error * s->raw_error;
-    s->err_weight = s->outlier ? c->err_weight : lam * c->err_weight + 1.0;
+    s->err_sum = s->outlier || s->stale ? c->err_sum : lam * c->err_sum + s->raw_error * s->raw_error;
+    s->err_weight = s->outlier || s->stale ? c->err_weight : lam * c->err_weight + 1.0;
 }
 
 /*
@@ -597,7 +597,7 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     double pred_error, numerator, q, r, v, t, bound, y_meas = in->y_meas;
     const double *theta;
     piezo_status st;
-    int i, d, stamped, saturated = 0, operators_finite;
+    int i, d, stamped, saturated = 0, operators_finite, live;
 
     /* s->out: each member is set below (its padding is left as it is: the commit copies the
      * members, copy_output) */
@@ -628,12 +628,23 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     s->outlier = (s->jump_left == 0 && is_outlier(c, s->raw_error, !s->clock))
                  || (c->suspect && in->y_meas == c->suspect_y);
     /* a reading equal to the ones before for PIEZO_SUP_STUCK_SAME samples (the supervision's count, so
-     * not while it is off) tells nothing new: the estimator's offset holds, and the integral action
-     * once the model says a live reading would have changed (below): neither walks the stage on a
-     * reading that may be stuck */
+     * not while it is off) tells nothing new: the estimator's offset holds. Once a live sensor would have
+     * changed it (piezo_supervisor_may_be_live) the integral action holds (below); and if it reads the
+     * stage at its reference y_d(k), within the reading's floor, while the reference holds (y_d(k + d) =
+     * y_d(k)), it is stale until either changes: the loop model's prediction stands in for it, as for an outlier
+     * (robust update, d chosen). As it came, a reading stuck in a hold is chased through the model's
+     * slow pole (A(1) small: y_ss - r = G(1) (r - y_s) / (A(1) E(1))): the stage walked 0.22 um in
+     * 0.5 s behind a quiet sensor. A reading beyond the floor is chased (the stage may have stopped
+     * short of the model: a noise-free one 0.9 um short after a 50 um move in 0.1 s), and one while
+     * the reference moves (a live reading answers within d samples) */
     s->held = c->sup.enabled && c->sup.k > 0 && in->y_meas == c->sup.y1
               && c->sup.y_same + 1 >= PIEZO_SUP_STUCK_SAME;
-    if (s->outlier)
+    live = !s->held || piezo_supervisor_may_be_live(&c->sup, q_past(c, 1), q_past(c, 2), c->d);
+    s->stale = !live && c->robust && !c->detecting && c->yd_tag[c->k % PIEZO_MV_Q_RING] == c->k + 1
+               && reference(c, in, c->d, &stamped) == c->yd_value[c->k % PIEZO_MV_Q_RING]
+               && (c->stale || fabs(c->yd_value[c->k % PIEZO_MV_Q_RING] - in->y_meas)
+                               <= piezo_supervisor_reading_floor(&c->sup, c->noise_y2));
+    if (s->outlier || s->stale)
         y_meas -= s->raw_error;
     s->y_meas = y_meas;
     if (c->robust) {
@@ -655,8 +666,8 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     } else {
         /* the loop model's a-priori error is the outlier test's (computed once), unless the
          * model's prediction stood in for y_meas */
-        pred_error = s->outlier ? rls_error(c, c->theta, c->d, y_meas - (c->robust ? c->offset : 0.0))
-                                : s->raw_error;
+        pred_error = s->outlier || s->stale ? rls_error(c, c->theta, c->d, y_meas - (c->robust ? c->offset : 0.0))
+                                            : s->raw_error;
         rls_update(c, pred_error, s);
         detect_carry(c, s);
     }
@@ -697,17 +708,14 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
      * reference the law took for sample k (its r(j) is y_d(j + d), kept by sample, so a
      * change of d while detecting leaves no misaligned sample); held while detecting, while a
      * clipped sample pauses the adaptation (anti-windup), when no reference for sample k
-     * was taken, and on a held reading (unchanged PIEZO_SUP_STUCK_SAME samples) that a live
-     * sensor would have changed (piezo_supervisor_may_be_live). Before that it acts: a
-     * noise-free reading that has not crossed its grid carries the error (held at once on 4
-     * equal samples, noise-free holds stayed 32 nm off y_d for 2 s: docs/stage_use.md); beyond,
-     * it would walk the stage on a stuck reading, which the law answers tens of times over
-     * through its model's slow pole */
+     * was taken, and on a stale reading (above; the paper's law too). A held one that is not
+     * stale yet acts: a noise-free reading that has not crossed its grid carries the error
+     * (held at once on 4 equal samples, noise-free holds stayed 32 nm off y_d for 2 s) */
     s->r_plain = r;
     s->integral = c->integral;
     if (c->integral_gain > 0.0 && !s->detecting && c->sat_hold == 0
         && c->yd_tag[c->k % PIEZO_MV_Q_RING] == c->k + 1
-        && (!s->held || piezo_supervisor_may_be_live(&c->sup, &s->sup)))
+        && live)
         s->integral = c->integral + c->integral_gain * (c->yd_value[c->k % PIEZO_MV_Q_RING] - y_meas);
     if (c->integral_gain > 0.0) r += s->integral;   /* (r + 0 would turn a -0 reference into +0) */
 
@@ -768,7 +776,7 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
      * nominal model's prediction error, A y(k) - B q(k-d), which a working loop
      * keeps small while clipped (at most 0.13 um on the saturation family). */
     bound = monitor_bound(c);
-    s->large_error = fabs(pred_error) > bound;
+    s->large_error = fabs(s->stale ? s->raw_error : pred_error) > bound;   /* a stale reading's as it came */
     if (c->sat_hold > 0 && !s->large_error) {
         /* A y(k) on the controller's own past (the supervisor's z, same operands and order,
          * but computed here: a switched-off supervisor computes nothing) */
@@ -784,7 +792,7 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     s->out.v = v;
     s->out.q = q;
     memcpy(s->out.theta, theta, sizeof s->out.theta);
-    s->out.pred_error = s->outlier ? s->raw_error : pred_error;   /* an outlier's as it came */
+    s->out.pred_error = s->outlier || s->stale ? s->raw_error : pred_error;   /* a bridged one's as it came */
     s->out.saturated = saturated;
     s->out.adapting = s->rls_updated && !s->detecting;
     s->out.noise = s->noise_y;
@@ -981,6 +989,7 @@ static void controller_commit(piezo_controller *c, const piezo_controller_sample
         c->n_outliers += 1;
     }
     c->suspect = s->outlier;
+    c->stale = s->stale;
     c->suspect_y = s->outlier ? s->sup_in.y_meas : 0.0;
     c->suspect_error = s->outlier ? s->raw_error : 0.0;
 
@@ -1098,9 +1107,9 @@ static void safe_commit(piezo_controller *c, const piezo_controller_sample *s)
         c->fault = s->fault;
         c->k_fault = c->k;
         c->v_fault = c->out.v;
-        c->y_fault = isfinite(s->y_meas) ? s->y_meas : 0.0;
+        c->y_fault = isfinite(s->sup_in.y_meas) ? s->sup_in.y_meas : 0.0;   /* as it came, not as bridged */
         c->y_moved = 0;
-    } else if (s->y_meas != c->y_fault) {
+    } else if (s->sup_in.y_meas != c->y_fault) {
         c->y_moved = 1;
     }
     c->k += 1;

@@ -264,6 +264,7 @@ typedef struct {
     double outlier_sum;          /* sum of lambda^(k-j) [j was an outlier] */
     uint64_t quiet;              /* consecutive samples neither outliers nor beyond the monitor's bound */
     int suspect;                 /* the last sample was taken for an outlier, not yet confirmed */
+    int stale;                   /* the last sample's reading was stale: the next is while it holds */
     double suspect_y, suspect_error;    /* its y_meas and a-priori error [um] */
     uint64_t n_outliers;         /* outliers confirmed since reset (the sample after one within the bound) */
     uint64_t k_first_outlier;    /* the first (valid when n_outliers > 0) */
@@ -350,7 +351,9 @@ typedef struct {
     double next_noise;           /* det_noise of k+1 (new_trial) */
     int outlier;                 /* y_meas was replaced by the model's prediction */
     int held;                    /* y_meas has not changed for PIEZO_SUP_STUCK_SAME samples: the offset
-                                    holds, and the integral once a live reading would have changed */
+                                    holds */
+    int stale;                   /* held, and a live reading would have changed by now (robust update, loop
+                                    chosen): the model's prediction stands in, the integral holds */
     double raw_error;            /* the a-priori error of y_meas as received [um] */
     double err_weight, outlier_sum;    /* the outlier test's weights of k+1 (with err_sum) */
     int fault;                   /* the safe state's fault code after this sample (0: none) */

@@ -144,7 +144,8 @@ const char *piezo_controller_check(const piezo_controller *c)
           && c->err_weight >= 0.0 && c->err_weight <= (double)c->k && c->outlier_sum >= 0.0
           && c->outlier_sum <= (double)c->k && isfinite(c->first_outlier) && isfinite(c->first_outlier_error))
         || c->quiet > c->k || c->n_outliers > c->k || (c->suspect != 0 && c->suspect != 1)
-        || (c->suspect && c->k == 0) || !isfinite(c->suspect_y) || !isfinite(c->suspect_error)
+        || (c->suspect && c->k == 0) || (c->stale != 0 && c->stale != 1) || (c->stale && c->k == 0)
+        || !isfinite(c->suspect_y) || !isfinite(c->suspect_error)
         || (!c->suspect && (c->suspect_y != 0.0 || c->suspect_error != 0.0))
         || (c->n_outliers > 0 ? c->k_first_outlier >= c->k
                               : c->k_first_outlier != 0 || c->first_outlier != 0.0 || c->first_outlier_error != 0.0))

@@ -296,7 +296,7 @@ static void loop_start(piezo_controller *c)
     c->det_noise = 0.0;
     c->err_sum = c->err_weight = c->outlier_sum = 0.0;
     c->quiet = 0;
-    c->suspect = 0;
+    c->suspect = c->stale = 0;
     c->suspect_y = c->suspect_error = 0.0;
     c->fault = 0;
     c->k_fault = 0;

@@ -299,6 +299,11 @@ static int held_outlier(const piezo_supervisor_next *n)
     return n->bridged_run >= PIEZO_SUP_STUCK_SAME && n->y_same + 1 >= PIEZO_SUP_STUCK_SAME;
 }
 
+double piezo_supervisor_reading_floor(const piezo_supervisor *s, double noise)
+{
+    return 2.0 * s->min_step + PIEZO_SUP_STUCK_NOISE * noise;
+}
+
 /* y_meas stuck against the model: y_meas has not changed since sample f, and v has moved one way
  * since (y_same >= the loop's
  * delay d, 1..3, chosen) while the model says the stage moved, over the samples the constant
@@ -316,7 +321,7 @@ static int stuck(const piezo_supervisor *s, const piezo_supervisor_input *in, co
     int d = in->loop_delay > 0 ? in->loop_delay : in->law_delay;   /* detecting: the start-up law's 2 (a
                                         loop of 1 or 3 shifts the move by one sample, within the margin of
                                         PIEZO_SUP_STUCK_SPEED samples of the model's speed) */
-    double now, near, far, creep, floor = 2.0 * s->min_step + PIEZO_SUP_STUCK_NOISE * in->noise;
+    double now, near, far, creep, floor = piezo_supervisor_reading_floor(s, in->noise);
     *move = *bound = 0.0;
     if (d < 1 || d > 3 || n->y_same < (uint64_t)d || !(s->min_step > 0.0) || s->open_loop)
         return 0;
@@ -336,9 +341,20 @@ static int stuck(const piezo_supervisor *s, const piezo_supervisor_input *in, co
     return far * s->gain_min > *bound;
 }
 
-int piezo_supervisor_may_be_live(const piezo_supervisor *s, const piezo_supervisor_next *n)
+/* the model's y_meas(k) from q (delay 1): yhat = -a1 yhat(k-1) - a2 yhat(k-2) + w, w = b1 q(k-1) + b2 q(k-2) */
+static double model_next(const piezo_supervisor *s, double q1, double q2, double *w)
 {
-    return s->gain_min * fabs(n->yhat - n->yhat_frozen[0]) < s->min_step;
+    *w = s->b1 * q1 + s->b2 * q2;
+    return *w - s->a1 * s->yhat1 - s->a2 * s->yhat2;
+}
+
+int piezo_supervisor_may_be_live(const piezo_supervisor *s, double q1, double q2, int d)
+{
+    double w, now;
+    if (d < 1 || d > 3)
+        return 1;   /* not judged (as the stuck test) */
+    now = d == 1 ? model_next(s, q1, q2, &w) : (d == 2 ? s->yhat1 : s->yhat2);
+    return s->gain_min * fabs(now - s->yhat_frozen[d - 1]) < s->min_step;
 }
 
 void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor_input *in,
@@ -356,7 +372,7 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     /* dz(k) = Delta[A y](k), dw(k) = Delta[B q](k-1) = w(k) - w(k-1) */
     n->z = in->y_meas + s->a1 * s->y1 + s->a2 * s->y2;
     n->zr = in->y_ref + s->a1 * s->r1 + s->a2 * s->r2;
-    n->w = s->b1 * in->q1 + s->b2 * in->q2;
+    n->yhat = model_next(s, in->q1, in->q2, &n->w);
     dz = n->z - s->z1;
     dzr = n->zr - s->zr1;
     n->dw = n->w - s->w1;
@@ -372,8 +388,6 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     n->srw[0] = lam * s->srw[0] + dzr * n->dw;
     for (d = 2; d <= PIEZO_SUP_DEFAULT_DETECTABLE; ++d)
         n->srw[d - 1] = lam * s->srw[d - 1] + dzr * s->dw[d - 2];
-    /* the model's y_meas(k) from q (delay 1): yhat = -a1 yhat(k-1) - a2 yhat(k-2) + w */
-    n->yhat = n->w - s->a1 * s->yhat1 - s->a2 * s->yhat2;
     n->y_same = s->k > 0 && in->y_meas == s->y1 ? s->y_same + 1 : 0;
     /* the evidence: the distances travelled over the window */
     n->weight = lam * s->weight + 1.0;

@@ -373,12 +373,19 @@ void piezo_supervisor_restart(piezo_supervisor *sup, double y, double w);
  * next is not set), no verdict. */
 void piezo_supervisor_evaluate(const piezo_supervisor *sup, const piezo_supervisor_input *in,
                                piezo_supervisor_next *next);
-/* Whether a reading unchanged since sample f may still be a live sensor's (evaluated sample, enabled):
- *     gain_min |yhat(k+1) - yhat(f)| < q,
- * the model's move since then times sup.gain_min (a working loop's weakest gain) below the
- * reading's smallest step q (0 before it ever stepped: not live). The stuck test asks the same
- * with its wider bound; the controller's integral action acts on such a reading. */
-int piezo_supervisor_may_be_live(const piezo_supervisor *sup, const piezo_supervisor_next *next);
+/* Whether a reading unchanged since sample f may still be a live sensor's (sample k = sup->k, enabled,
+ * the reading the same as at k-1; q1, q2 the past outputs q(k-1), q(k-2) as piezo_supervisor_input takes
+ * them; d the loop's delay):
+ *     gain_min |yhat(k - d + 1) - yhat(f - d + 1)| < q,
+ * the model's move over the samples the readings answer (yhat(k) as piezo_supervisor_evaluate computes
+ * it, the model of a loop of delay 1) times sup.gain_min (a working loop's weakest gain) below the
+ * reading's smallest step q (0 before it ever stepped: not live); live for a d beyond 1..3.
+ * The stuck test asks the same with its wider bound; the controller's law and integral action take such
+ * a reading as it is, and the model's prediction in place of one that is not. */
+int piezo_supervisor_may_be_live(const piezo_supervisor *sup, double q1, double q2, int d);
+/* What a reading cannot tell apart from where it is: two of its smallest steps and PIEZO_SUP_STUCK_NOISE
+ * times its measured noise [um] (the stuck test's floor; noise as piezo_supervisor_input.noise) */
+double piezo_supervisor_reading_floor(const piezo_supervisor *sup, double noise);
 /* Make the evaluated sample the state; r: the reference the law used at k. */
 void piezo_supervisor_commit(piezo_supervisor *sup, const piezo_supervisor_input *in,
                              const piezo_supervisor_next *next, double r);
