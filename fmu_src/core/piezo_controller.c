@@ -1107,9 +1107,9 @@ static void safe_commit(piezo_controller *c, const piezo_controller_sample *s)
         c->fault = s->fault;
         c->k_fault = c->k;
         c->v_fault = c->out.v;
-        c->y_fault = isfinite(s->sup_in.y_meas) ? s->sup_in.y_meas : 0.0;   /* as it came, not as bridged */
+        c->y_fault = isfinite(s->y_meas) ? s->y_meas : 0.0;
         c->y_moved = 0;
-    } else if (s->sup_in.y_meas != c->y_fault) {
+    } else if (s->y_meas != c->y_fault) {
         c->y_moved = 1;
     }
     c->k += 1;
