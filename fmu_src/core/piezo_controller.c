@@ -628,15 +628,15 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     s->outlier = (s->jump_left == 0 && is_outlier(c, s->raw_error, !s->clock))
                  || (c->suspect && in->y_meas == c->suspect_y);
     /* a reading equal to the ones before for PIEZO_SUP_STUCK_SAME samples (the supervision's count, so
-     * not while it is off) tells nothing new: the estimator's offset holds. Once a live sensor would have
-     * changed it (piezo_supervisor_may_be_live) the integral action holds (below); and if it reads the
-     * stage at its reference y_d(k), within the reading's floor, while the reference holds (y_d(k + d) =
-     * y_d(k)), it is stale until either changes: the loop model's prediction stands in for it, as for an outlier
-     * (robust update, d chosen). As it came, a reading stuck in a hold is chased through the model's
-     * slow pole (A(1) small: y_ss - r = G(1) (r - y_s) / (A(1) E(1))): the stage walked 0.22 um in
-     * 0.5 s behind a quiet sensor. A reading beyond the floor is chased (the stage may have stopped
-     * short of the model: a noise-free one 0.9 um short after a 50 um move in 0.1 s), and one while
-     * the reference moves (a live reading answers within d samples) */
+     * not while it is off) tells nothing new: the estimator's offset holds. Once a live sensor would
+     * have changed it (piezo_supervisor_may_be_live) the integral action holds (below); and if it
+     * reads the stage at its reference y_d(k), within the reading's floor, while the reference holds
+     * (y_d(k + d) = y_d(k)), it is stale until either changes: the loop model's prediction stands in
+     * for it, as for an outlier (robust update, d chosen). As it came, a reading stuck in a hold is
+     * chased through the model's slow pole (A(1) small: y_ss - r = G(1) (r - y_s) / (A(1) E(1))): the
+     * stage walked 0.22 um in 0.5 s behind a quiet sensor. A reading beyond the floor is chased (the
+     * stage may have stopped short of the model: a noise-free one 0.9 um short after a 50 um move in
+     * 0.1 s), and one while the reference moves (a live reading answers within d samples) */
     s->held = c->sup.enabled && c->sup.k > 0 && in->y_meas == c->sup.y1
               && c->sup.y_same + 1 >= PIEZO_SUP_STUCK_SAME;
     live = !s->held || piezo_supervisor_may_be_live(&c->sup, q_past(c, 1), q_past(c, 2), c->d);
@@ -708,9 +708,9 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
      * reference the law took for sample k (its r(j) is y_d(j + d), kept by sample, so a
      * change of d while detecting leaves no misaligned sample); held while detecting, while a
      * clipped sample pauses the adaptation (anti-windup), when no reference for sample k
-     * was taken, and on a stale reading (above; the paper's law too). A held one that is not
-     * stale yet acts: a noise-free reading that has not crossed its grid carries the error
-     * (held at once on 4 equal samples, noise-free holds stayed 32 nm off y_d for 2 s) */
+     * was taken, and on a held reading a live sensor would have changed (live, above; the
+     * paper's law too). Before that it acts: a noise-free reading that has not crossed its grid
+     * carries the error (held at once on 4 equal samples, noise-free holds stayed 32 nm off) */
     s->r_plain = r;
     s->integral = c->integral;
     if (c->integral_gain > 0.0 && !s->detecting && c->sat_hold == 0
