@@ -187,17 +187,16 @@ def test_a_noise_free_reading_that_stops_chattering_is_not_taken_for_frozen():
     down as the stage itself moves (which the model explains), then settles on one step. The noise
     test took that for a sensor whose noise stopped ("y_meas frozen" at 7.53 s, 39 equal readings).
     It now asks that the model's best fit leave of the reading's changes more than
-    PIEZO_SUP_FROZEN_FLOOR times the grid's quantisation floor: the run goes on, thousands of equal
-    readings later, with no verdict (2457, from 6.771 s, the stage 0.6 nm from y_d: the reading at
-    y_d, stale, no longer chased; 989 from 7.505 s when it was, 972 from 7.5135 s while the
-    integral action held at once on 4 equal readings)."""
+    PIEZO_SUP_FROZEN_FLOOR times the grid's quantisation floor: the run goes on, hundreds of equal
+    readings later, with no verdict (968, from 7.5155 s; 989 from 7.505 s before the stale reading's
+    bridge, 972 from 7.5135 s while the integral action held at once on 4 equal readings)."""
     from harness.studies import stage_use_table as su
     task = next(t for t in su.family_tasks(sensors=[0], laws=("ours",))
                 if t.stage == 23 and t.profile.name == "triangle scan 1 Hz, 10 s dwell")
     n = int(8.0 / H)
     _, c, _ = exchange(task.profile.scenario(task.plant, task.controller).signal, task.plant, 8.0,
                        task.controller)
-    assert c.raw.sup.y_same == n - 1 - round(6.771 / H)      # equal since 6.771 s
+    assert c.raw.sup.y_same == n - 1 - round(7.5155 / H)     # equal since 7.5155 s
     assert c.raw.fault == 0
 
 

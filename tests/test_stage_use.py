@@ -412,7 +412,7 @@ def test_a_noise_free_sensor_s_hold_is_corrected_though_its_reading_rarely_chang
     acted in 18 % of a stair's samples and the worst hold window was 3.12 times the band (31 nm,
     measured on 2acded2's core). Acting while sup.gain_min times the move the supervision's model
     gives the stage since the reading last changed is below one of its steps, every hold window is
-    within the band (0.35 to 0.917 of it, measured)."""
+    within the band (0.35 to 0.922 of it, measured; 0.917 before the stale reading's bridge)."""
     from harness.studies import stage_use_table as sut
     prof = next(p for p in sut.profiles_of() if p.name == "staircase")
     task = next(t for t in sut.family_tasks(stages=24, sensors=(0,), laws=("ours",), profile_list=[prof],
@@ -424,4 +424,4 @@ def test_a_noise_free_sensor_s_hold_is_corrected_though_its_reading_rarely_chang
     ratios = [w / band for w in run.holds]
     print(f"\nhold windows / band: {[round(r, 3) for r in ratios]}")
     assert len(ratios) == 6 and max(ratios) <= 1.0
-    assert max(ratios) == pytest.approx(0.917, abs=0.005)
+    assert max(ratios) == pytest.approx(0.922, abs=0.002)
