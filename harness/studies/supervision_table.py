@@ -1191,7 +1191,8 @@ def main(argv=None, prog=None):
                       "sensors of 0 to 200 nm rms", STUCK_SENSORS_NM),
             ("reset", "sup.reset: leaving the safe state after a stuck or dead sensor, a reference out of reach and "
                       "an inverted amplifier, on the stage's day's stages with sensors of 5 to 200 nm rms (a "
-                      "quieter sensor stuck in a hold is not seen, so it has no safe state to leave)",
+                      "noise-free sensor stuck in a hold is not seen, so it has no safe state to leave; a 1 nm "
+                      "one is named after 0.1 s, not measured here)",
              RESET_SENSORS_NM)):
         study = sub.add_parser(name, help=text)
         study.add_argument("--stages", type=int, default=50, help="stages of the stage's day's family (default 50)")
