@@ -99,7 +99,7 @@ void piezo_supervisor_reset(piezo_supervisor *s)
     s->followed_gain = s->reversals = s->steps2 = s->dy1 = 0.0;
     s->followed_n = s->followed_peak_n = 0;
     s->followed_peak = s->dw_peak = 0.0;
-    s->min_step = s->big_steps = s->repeats = s->noise_excess = 0.0;
+    s->min_step = s->big_steps = s->repeats = 0.0;
     memset(s->yhat_frozen, 0, sizeof s->yhat_frozen);
     memset(s->yhat_turned, 0, sizeof s->yhat_turned);
     s->yhat_slow = 0.0;
@@ -258,13 +258,7 @@ static int response_kind(const piezo_supervisor *s, const piezo_supervisor_input
  * at least PIEZO_SUP_STUCK_SAME and sup.window or as many as a chance of e^-PIEZO_SUP_STUCK_LOG_ODDS (7e-13)
  * allows, p^m <= e^-L, for the share p of equal samples before (a 20 nm sensor on a 2 nm grid
  * repeats 2 % of its samples: 8 samples; a sensor updated every 20 samples 95 %: 540, so
- * sup.window). A faint sensor, one whose noise is below the grid's step (1 nm rms on a 2 nm grid:
- * its reversals are mostly of one step), is frozen too when its big steps were at least
- * PIEZO_SUP_FAINT_BIG_PERMILLE per mille, its changes carried more than PIEZO_SUP_FAINT_FLOOR
- * times the grid's own quantisation energy (noise_excess) and the stretch is PIEZO_SUP_FAINT_SAME
- * samples long (a quiet sensor stuck in a hold is bridged meanwhile: the stale reading,
- * piezo_controller.c). A loop that dithers on a noise-free reading and settles may make big steps
- * too, but its changes are the grid's. Over the constant stretch of m samples the window's weight grew by
+ * sup.window). Over the constant stretch of m samples the window's weight grew by
  * S_m = sum_{j<m} lambda^j, its repeats by S_m and its reversals by none, so the shares before it
  * are (sum - S_m) / (weight - S_m) (the sums at the stretch's start, all scaled by lambda^m).
  * *share, *step_rms, *repeat_share: the evidence. */
@@ -272,7 +266,7 @@ static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, dou
                   double *repeat_share)
 {
     double lam = s->forgetting, stretch, before, p, m;
-    int b, loud;
+    int b;
     if (n->y_same < PIEZO_SUP_STUCK_SAME)
         return 0;
     stretch = (1.0 - pow(lam, (double)n->y_same)) / (1.0 - lam);
@@ -283,11 +277,7 @@ static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, dou
     *step_rms = sqrt(n->steps2 / before);
     p = (n->repeats - stretch) / before;
     *repeat_share = p > 0.0 ? p : 0.0;
-    if (!(*share * 100.0 >= PIEZO_SUP_FROZEN_PERCENT))
-        return 0;
-    loud = n->big_steps * 1000.0 >= PIEZO_SUP_FROZEN_BIG_PERMILLE * before;
-    if (!loud && !(n->y_same >= PIEZO_SUP_FAINT_SAME && n->big_steps * 1000.0 >= PIEZO_SUP_FAINT_BIG_PERMILLE * before
-                   && n->noise_excess >= PIEZO_SUP_FAINT_FLOOR))
+    if (!(*share * 100.0 >= PIEZO_SUP_FROZEN_PERCENT && n->big_steps * 1000.0 >= PIEZO_SUP_FROZEN_BIG_PERMILLE * before))
         return 0;
     /* m ln p <= -L, p at least 1e-3 (a stretch of PIEZO_SUP_STUCK_SAME does not rest on one share) */
     m = (double)n->y_same;
@@ -295,25 +285,9 @@ static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, dou
         return 0;
     /* ... and the changes were noise: what the model's best fit leaves of dz beyond
      * PIEZO_SUP_FROZEN_FLOOR times the quantisation floor (a loop that chattered on a noise-free
-     * reading, moving the stage itself, leaves no more than the grid's share: then it settles);
-     * a faint sensor's were judged so at the stretch's start (noise_excess) */
-    if (!loud)
-        return 1;
+     * reading, moving the stage itself, leaves no more than the grid's share: then it settles) */
     b = best_delay(s, n);
     return b > 0 && unexplained(s, n, b) > PIEZO_SUP_FROZEN_FLOOR * quantisation_floor(s, n);
-}
-
-/* noise_excess at a stretch's PIEZO_SUP_STUCK_SAME-th equal sample: unexplained dz energy over the
- * quantisation floor, as the frozen test would judge it then (taken later, v moving on while the
- * reading holds shrinks what the fit explains: a noise-free loop that dithered 4 s in a hold and
- * settled came to 2 after 389 samples from 1.02 at the stretch's start). The share of dz's energy
- * the fit explains does not tell a sensor's noise from a dithering loop: 62 % both for the paper's
- * sensor stuck behind a loop whose model is the stage's, and for a noise-free loop that dithered */
-static double noise_excess(const piezo_supervisor *s, const piezo_supervisor_next *n)
-{
-    int b = best_delay(s, n);
-    double floor_q = quantisation_floor(s, n), e = b > 0 ? unexplained(s, n, b) : 0.0;
-    return e > 0.0 && floor_q > 0.0 ? e / floor_q : 0.0;
 }
 
 /* y_meas held on an outlier: the reading jumped away from the model's prediction (an outlier, for
@@ -417,7 +391,6 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
     n->y_same = s->k > 0 && in->y_meas == s->y1 ? s->y_same + 1 : 0;
     /* the evidence: the distances travelled over the window */
     n->weight = lam * s->weight + 1.0;
-    n->noise_excess = n->y_same == PIEZO_SUP_STUCK_SAME ? noise_excess(s, n) : s->noise_excess;
     n->travel_model = lam * s->travel_model + fabs(n->yhat - s->yhat1);
     n->travel_meas = lam * s->travel_meas + fabs(in->y_meas - s->y1);
     n->yhat_slow = s->yhat_slow + (n->yhat - s->yhat_slow) * (1.0 / PIEZO_SUP_CREEP_SAMPLES);
@@ -576,7 +549,6 @@ void piezo_supervisor_commit(piezo_supervisor *s, const piezo_supervisor_input *
     s->min_step = n->min_step;
     s->big_steps = n->big_steps;
     s->repeats = n->repeats;
-    s->noise_excess = n->noise_excess;
     memcpy(s->yhat_frozen, n->yhat_frozen, sizeof s->yhat_frozen);
     memcpy(s->yhat_turned, n->yhat_turned, sizeof s->yhat_turned);
     s->yhat_slow = n->yhat_slow;
@@ -693,14 +665,13 @@ const char *piezo_supervisor_check(const piezo_supervisor *s)
                         s->weight, s->travel_model, s->travel_meas, s->followed_gain, s->reversals,
                         s->steps2, s->dy1, s->min_step, s->big_steps, s->repeats, s->yhat_frozen[0],
                         s->yhat_frozen[1], s->yhat_frozen[2], s->yhat_turned[0], s->yhat_turned[1],
-                        s->yhat_turned[2], s->yhat_slow, s->v2, s->followed_peak, s->dw_peak, s->noise_excess };
+                        s->yhat_turned[2], s->yhat_slow, s->v2, s->followed_peak, s->dw_peak };
         if (!finite_all(sc, (int)(sizeof sc / sizeof sc[0]))) return "supervisor values not finite";
     }
     if (s->szz < 0.0 || s->srr < 0.0 || s->clip_error_sum < 0.0 || s->travel_model < 0.0 || s->travel_meas < 0.0
         || s->weight > (double)s->k || s->followed_gain < 0.0 || s->reversals < 0.0 || s->reversals > s->weight
         || s->steps2 < 0.0 || s->min_step < 0.0 || s->big_steps < 0.0 || s->big_steps > s->weight
         || s->repeats < 0.0 || s->repeats > s->weight || s->followed_peak < 0.0 || s->dw_peak < 0.0
-        || s->noise_excess < 0.0
         || s->dw_peak > s->sww[0])
         return "supervisor sums negative or beyond their weight";
     for (i = 0; i < PIEZO_MV_MAX_D; ++i)

@@ -140,13 +140,6 @@
                                         stage's day: 0.4 and 1.3 times where the loop chattered and then
                                         settled; 20 still names every 5 nm sensor stuck in a hold of the
                                         stuck family, 60 misses 14 of 100) */
-#define PIEZO_SUP_FAINT_BIG_PERMILLE 20 /* a faint sensor's share of big steps before a frozen stretch [per mille]
-                                        (the stuck family's 1 nm sensors: 47 at least, 96 median) */
-#define PIEZO_SUP_FAINT_SAME 200     /* ... and the stretch at least this many samples long (0.1 s at h) */
-#define PIEZO_SUP_FAINT_FLOOR 2      /* ... and noise_excess at least this (a noise of q / sqrt(12) and more on
-                                        a grid of step q: 1 + 12 sigma^2 / q^2; the stuck family's 1 nm
-                                        sensors: 2.6 at least; noise-free loops that dithered in a dwell
-                                        and settled: 1.02 under the robust law, 1.64 under the paper's) */
 #define PIEZO_SUP_STUCK_SAME 4       /* a frozen y_meas: at least this many equal samples (held on an outlier,
                                         or by its noise) */
 #define PIEZO_SUP_STUCK_LOG_ODDS 28  /* ... and as many as its share of equal samples before makes a chance
@@ -337,9 +330,6 @@ typedef struct {
     double min_step;             /* the smallest nonzero |y_meas(j) - y_meas(j-1)| so far (0: none) */
     double big_steps;            /* sum of lambda^(k-j) [|step| > PIEZO_SUP_BIG_STEP_PERCENT % of min_step] */
     double repeats;              /* sum of lambda^(k-j) [y_meas(j) = y_meas(j-1)] */
-    double noise_excess;         /* at the PIEZO_SUP_STUCK_SAME-th equal y_meas of a stretch: what the model's
-                                    best fit left of dz's energy, over the grid's quantisation floor (kept
-                                    over the stretch: a faint noise's evidence, before v moved on) */
     double yhat_frozen[3];       /* the model's yhat at the last sample y_meas changed, and at the one
                                     and two before it (the loop delays 1, 2, 3) */
     double yhat_turned[3];       /* the same at the last sample y_meas changed or v reversed */
@@ -357,7 +347,7 @@ typedef struct {
     double srw[PIEZO_SUP_DEFAULT_DETECTABLE];
     double weight, travel_model, travel_meas;
     double followed_gain, reversals, steps2, dy1, min_step, big_steps, repeats, followed_peak, dw_peak;
-    double yhat_frozen[3], yhat_turned[3], yhat_slow, noise_excess;
+    double yhat_frozen[3], yhat_turned[3], yhat_slow;
     double stuck_move;           /* FROZEN against the model: the move since y_meas froze, by the model [um] */
     double clip_error_sum;       /* the last double: z .. clip_error_sum are the doubles checked finite */
     uint64_t y_same;

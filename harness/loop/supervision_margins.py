@@ -53,8 +53,6 @@ class Thresholds:
     frozen_share: float
     big_step: float
     frozen_big: float
-    faint_big: float
-    faint_same: int
 
 
 def thresholds(controller_params=None):
@@ -72,8 +70,7 @@ def thresholds(controller_params=None):
         detectable=int(lib.PIEZO_SUP_DEFAULT_DETECTABLE), judge_every=int(lib.PIEZO_SUP_JUDGE_EVERY),
         gain_drop=lib.PIEZO_SUP_DROP_PERCENT / 100.0, gain_rise=lib.PIEZO_SUP_RISE_PERCENT / 100.0,
         frozen_share=lib.PIEZO_SUP_FROZEN_PERCENT / 100.0, big_step=lib.PIEZO_SUP_BIG_STEP_PERCENT / 100.0,
-        frozen_big=lib.PIEZO_SUP_FROZEN_BIG_PERMILLE / 1000.0,
-        faint_big=lib.PIEZO_SUP_FAINT_BIG_PERMILLE / 1000.0, faint_same=int(lib.PIEZO_SUP_FAINT_SAME))
+        frozen_big=lib.PIEZO_SUP_FROZEN_BIG_PERMILLE / 1000.0)
 
 
 def _ew(x, lam):
@@ -198,14 +195,13 @@ class Margins:
     frozen_run : int
         The longest run of equal y_meas samples whose reversal share before it reached
         ``PIEZO_SUP_FROZEN_PERCENT`` and whose share of big steps (beyond
-        ``PIEZO_SUP_BIG_STEP_PERCENT`` % of the smallest) reached ``PIEZO_SUP_FAINT_BIG_PERMILLE``
-        per mille (a faint sensor's; ``PIEZO_SUP_FROZEN_BIG_PERMILLE``: a loud one's).
+        ``PIEZO_SUP_BIG_STEP_PERCENT`` % of the smallest) reached ``PIEZO_SUP_FROZEN_BIG_PERMILLE``
+        per mille (threshold ``sup.window``).
     frozen_ratio : float
         The largest such run over the run that makes it a verdict: ``PIEZO_SUP_STUCK_SAME`` at
         least, ``sup.window`` at most, and between them as many samples m as the share p of equal
-        samples before makes improbable, p^m = e^-``PIEZO_SUP_STUCK_LOG_ODDS`` (p at least 1e-3);
-        a faint sensor's ``PIEZO_SUP_FAINT_SAME`` at least. A verdict at 1 (the core also asks that
-        the model leave enough of the changes before unexplained, which this margin leaves out).
+        samples before makes improbable, p^m = e^-``PIEZO_SUP_STUCK_LOG_ODDS`` (p at least 1e-3).
+        A verdict at 1.
     """
 
     gain_low: float | None
@@ -314,9 +310,8 @@ def margins(samples, nominal, controller_params=None):
     stretch = (1.0 - lam ** same) / (1.0 - lam)
     before = st["weight"] - stretch
     with np.errstate(divide="ignore", invalid="ignore"):
-        reversing = (before >= 1.0) & (st["reversals"] >= th.frozen_share * before)
-        loud = reversing & (st["big_steps"] >= th.frozen_big * before)
-        noisy = reversing & (st["big_steps"] >= th.faint_big * before)
+        noisy = (before >= 1.0) & (st["reversals"] >= th.frozen_share * before) \
+            & (st["big_steps"] >= th.frozen_big * before)
     frozen_run = int(same[noisy & (same > 0)].max()) if np.any(noisy & (same > 0)) else 0
     lib = core.lib()
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -324,7 +319,6 @@ def margins(samples, nominal, controller_params=None):
         log_p = np.log(np.minimum(p, 1.0))
         needed = np.where(log_p < 0.0, lib.PIEZO_SUP_STUCK_LOG_ODDS / -log_p, np.inf)
     needed = np.clip(needed, lib.PIEZO_SUP_STUCK_SAME, th.window)
-    needed = np.where(loud, needed, np.maximum(needed, th.faint_same))
     hit = noisy & (same > 0)
     frozen_ratio = float(np.max(same[hit] / needed[hit])) if np.any(hit) else 0.0
     return Margins(

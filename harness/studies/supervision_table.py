@@ -970,7 +970,7 @@ def start_markdown(family):
 # ---------------------------------------------------------------------------------------------
 # sup.reset: leaving the safe state (docs/robustness.md, "Leaving the safe state")
 # ---------------------------------------------------------------------------------------------
-RESET_SENSORS_NM = (1, 5, 20, 100, 200)
+RESET_SENSORS_NM = (5, 20, 100, 200)
 #: y_d: a 5 um hold, the fault at FAULT, a reset raised while the cause persists (EARLY: refused),
 #: the cause gone at CLEARED, a reset (LATE: accepted), a 10 um step at STEP, the end at END [s]
 RESET_TIMES = {"fault": 2.0, "early": 2.6, "cleared": 2.8, "late": 3.0, "step": 3.5, "end": 4.0}
@@ -1190,8 +1190,8 @@ def main(argv=None, prog=None):
             ("start", "noisy sensors at start: the delay detection on the stage's day's stages at rest from t = 0, "
                       "sensors of 0 to 200 nm rms", STUCK_SENSORS_NM),
             ("reset", "sup.reset: leaving the safe state after a stuck or dead sensor, a reference out of reach and "
-                      "an inverted amplifier, on the stage's day's stages with sensors of 1 to 200 nm rms (a "
-                      "noise-free sensor stuck in a hold is not seen, so it has no safe state to leave)",
+                      "an inverted amplifier, on the stage's day's stages with sensors of 5 to 200 nm rms (a "
+                      "quieter sensor stuck in a hold is not seen, so it has no safe state to leave)",
              RESET_SENSORS_NM)):
         study = sub.add_parser(name, help=text)
         study.add_argument("--stages", type=int, default=50, help="stages of the stage's day's family (default 50)")
