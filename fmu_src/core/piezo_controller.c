@@ -595,6 +595,9 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
 {
     double e[PIEZO_MV_MAX_D], g[2] = {0.0, 0.0}, f[PIEZO_MV_MAX_D + 1];
     double pred_error, numerator, q, r, v, t, bound, y_meas = in->y_meas;
+    /* y_d(k), the reference the law took for sample k, and whether it was taken */
+    const double yd_k = c->yd_value[c->k % PIEZO_MV_Q_RING];
+    const int yd_taken = c->yd_tag[c->k % PIEZO_MV_Q_RING] == c->k + 1;
     const double *theta;
     piezo_status st;
     int i, d, stamped, saturated = 0, operators_finite, live;
@@ -640,10 +643,8 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
     s->held = c->sup.enabled && c->sup.k > 0 && in->y_meas == c->sup.y1
               && c->sup.y_same + 1 >= PIEZO_SUP_STUCK_SAME;
     live = !s->held || piezo_supervisor_may_be_live(&c->sup, q_past(c, 1), q_past(c, 2), c->d);
-    s->stale = !live && c->robust && !c->detecting && c->yd_tag[c->k % PIEZO_MV_Q_RING] == c->k + 1
-               && reference(c, in, c->d, &stamped) == c->yd_value[c->k % PIEZO_MV_Q_RING]
-               && (c->stale || fabs(c->yd_value[c->k % PIEZO_MV_Q_RING] - in->y_meas)
-                               <= piezo_supervisor_reading_floor(&c->sup, c->noise_y2));
+    s->stale = !live && c->robust && !c->detecting && yd_taken && reference(c, in, c->d, &stamped) == yd_k
+               && (c->stale || fabs(yd_k - in->y_meas) <= piezo_supervisor_reading_floor(&c->sup, c->noise_y2));
     if (s->outlier || s->stale)
         y_meas -= s->raw_error;
     s->y_meas = y_meas;
@@ -713,10 +714,8 @@ static piezo_status loop_eval(const piezo_controller *c, const piezo_controller_
      * carries the error (held at once on 4 equal samples, noise-free holds stayed 32 nm off) */
     s->r_plain = r;
     s->integral = c->integral;
-    if (c->integral_gain > 0.0 && !s->detecting && c->sat_hold == 0
-        && c->yd_tag[c->k % PIEZO_MV_Q_RING] == c->k + 1
-        && live)
-        s->integral = c->integral + c->integral_gain * (c->yd_value[c->k % PIEZO_MV_Q_RING] - y_meas);
+    if (c->integral_gain > 0.0 && !s->detecting && c->sat_hold == 0 && yd_taken && live)
+        s->integral = c->integral + c->integral_gain * (yd_k - y_meas);
     if (c->integral_gain > 0.0) r += s->integral;   /* (r + 0 would turn a -0 reference into +0) */
 
     /* Diophantine with the current estimate; F = B E: f_n = b1 e_n + b2 e_{n-1}
