@@ -248,12 +248,26 @@ def test_a_measurement_below_the_sensor_s_step_is_no_evidence():
     ("sup.window", 19, "20..1000000"), ("sup.window", 1000001, "20..1000000"),
     ("sup.clip_time", 0.0, "(0, inf) s"), ("sup.detect_time", -1.0, "(0, inf) s"),
     ("sup.detect_time", math.nan, "(0, inf) s"),
+    ("sup.sensor_noise", -1e-3, "[0, inf) um"), ("sup.sensor_noise", math.inf, "[0, inf) um"),
+    ("sup.sensor_noise", math.nan, "[0, inf) um"),
 ])
 def test_bad_parameters_are_refused_naming_the_range(name, value, fragment):
     """Reference: the documented ranges (docs/fmus.md, the parameter table)."""
     with pytest.raises(core.CoreParameterError) as info:
         core.Controller({name: value})
     assert info.value.parameter == name and fragment in info.value.valid_range
+
+
+def test_a_declared_noise_with_held_inputs_is_refused():
+    """mv.hold_inputs = true lets a step of n samples hold y_meas over them, which a declared
+    sensor noise would take for a frozen sensor: the pair is refused naming sup.sensor_noise (with
+    the supervision on); either alone, or both with the supervision off, is accepted."""
+    with pytest.raises(core.CoreParameterError) as info:
+        core.Controller({"sup.sensor_noise": 0.001, "mv.hold_inputs": True})
+    assert info.value.parameter == "sup.sensor_noise" and "mv.hold_inputs = true" in info.value.valid_range
+    core.Controller({"sup.sensor_noise": 0.001})
+    core.Controller({"mv.hold_inputs": True})
+    core.Controller({"sup.sensor_noise": 0.001, "mv.hold_inputs": True, "sup.enabled": False})
 
 
 def test_the_state_check_names_a_tampered_supervisor():

@@ -30,7 +30,7 @@ OPEN_LOOP = {"sup.enabled": False, "mv.integral": 0.0}
 SUPERVISION = {"sup.enabled": ("Boolean", True), "sup.gain_min": ("Real", 0.25), "sup.gain_max": ("Real", 4.0),
                "sup.window": ("Integer", 200), "sup.clip_time": ("Real", 0.5), "sup.detect_time": ("Real", 0.5),
                "sup.reaction": ("Integer", 0), "sup.ramp_time": ("Real", 0.01), "sup.clip_error": ("Real", 1.0),
-               "mv.probe_max": ("Real", 1.0)}
+               "mv.probe_max": ("Real", 1.0), "sup.sensor_noise": ("Real", 0.0)}
 ADAPT_OUTPUTS = ["est.adapting", "est.noise"]
 # the paper's law (tests/numpy_reference.py PAPER_LAW, docs/model.md, adaptation)
 PAPER_LAW = {"rls.robust": False, "rls.forgetting": 0.995, "rls.trace_max": 100.0, "mv.integral": 0.0,
@@ -325,7 +325,7 @@ NON_DEFAULT_PARAMETERS = {
     "sat.v_min": -40.0, "sat.v_max": 60.0, "monitor.pred_error_max": 5.0,
     "monitor.divergence_samples": 0, "sup.enabled": False, "sup.gain_min": 0.1, "sup.gain_max": 8.0,
     "sup.window": 400, "sup.clip_time": 0.25, "sup.detect_time": 1.0, "sup.reaction": 1, "sup.ramp_time": 0.02,
-    "sup.clip_error": 2.0, "mv.probe_max": 0.5,
+    "sup.clip_error": 2.0, "mv.probe_max": 0.5, "sup.sensor_noise": 0.002,
     "rls.zero_min": 0.2, "rls.pole_min": 0.1, "rls.fallback_ratio": 3.0, "rls.fallback_window": 0.25,
 }
 

@@ -118,7 +118,7 @@ def test_a_parameter_declared_once_reaches_every_fmu_and_edition(tmp_path):
     exec(compile(module, "fmu_variables.py", "exec"), names)
     assert names["PARAMETERS"][CONTROLLER]["rls.new_window"] == (("rls_fallback_window",), "float")
     assert names["COMPOSED"][LOOP]["rls.new_window"] == (CONTROLLER, "rls.new_window")
-    expected_vr = {CONTROLLER: 87, LOOP: 147}
+    expected_vr = {CONTROLLER: 88, LOOP: 148}
     expected_field = {CONTROLLER: "params.rls_fallback_window", LOOP: "control.rls_fallback_window"}
     for model, vr in expected_vr.items():
         header = files[root / "fmu_src" / model / "variables.h"]

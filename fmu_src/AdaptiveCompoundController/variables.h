@@ -98,6 +98,7 @@ typedef enum {
     vr_rls_fallback_window,
     vr_est_fallbacks,
     vr_sup_reset,
+    vr_sup_sensor_noise,
     MODEL_N_VARIABLES
 } ValueReference;
 
@@ -189,6 +190,7 @@ typedef enum {
     [vr_rls_fallback_ratio] = { "rls.fallback_ratio", MODEL_REAL, MODEL_PARAMETER, offsetof(ModelData, params.rls_fallback_ratio) }, \
     [vr_rls_fallback_window] = { "rls.fallback_window", MODEL_REAL, MODEL_PARAMETER, offsetof(ModelData, params.rls_fallback_window) }, \
     [vr_est_fallbacks] = { "est.fallbacks", MODEL_INTEGER, MODEL_OUTPUT, offsetof(ModelData, fallbacks) }, \
-    [vr_sup_reset] = { "sup.reset", MODEL_BOOLEAN, MODEL_INPUT, offsetof(ModelData, sup_reset) }
+    [vr_sup_reset] = { "sup.reset", MODEL_BOOLEAN, MODEL_INPUT, offsetof(ModelData, sup_reset) }, \
+    [vr_sup_sensor_noise] = { "sup.sensor_noise", MODEL_REAL, MODEL_PARAMETER, offsetof(ModelData, params.sup.sensor_noise) }
 
 #endif /* ADAPTIVECOMPOUNDCONTROLLER_VARIABLES_H */

@@ -25,6 +25,7 @@
     X(gain_max, "sup.gain_max", 4.0, 1.0, HUGE_VAL, 1, 1, "(1, inf) (times the model's response)") \
     X(ramp_time, "sup.ramp_time", 0.01, 0.0, 1000000.0, 0, 0, "[0, 1e6] s") \
     X(clip_error, "sup.clip_error", 1.0, 0.0, HUGE_VAL, 1, 1, "(0, inf) um") \
+    X(sensor_noise, "sup.sensor_noise", 0.0, 0.0, HUGE_VAL, 0, 1, "[0, inf) um (0: not declared)") \
     /* end */
 
 #define PIEZO_SUPERVISOR_PLAIN_COPIES(X) \
@@ -33,6 +34,7 @@
     X(gain_max, gain_max, "sup.gain_max", 1.0, HUGE_VAL, 1, 1) \
     X(ramp_time, ramp_time, "sup.ramp_time", 0.0, 1000000.0, 0, 0) \
     X(clip_error, clip_error, "sup.clip_error", 0.0, HUGE_VAL, 1, 1) \
+    X(sensor_noise, sensor_noise, "sup.sensor_noise", 0.0, HUGE_VAL, 0, 1) \
     /* end */
 
 #define PIEZO_CONTROLLER_PLAIN_PARAMS(X) \

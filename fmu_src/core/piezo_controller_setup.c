@@ -202,6 +202,11 @@ piezo_status piezo_controller_init(piezo_controller *c, const piezo_controller_p
         return piezo_refuse(diag, "rls.fallback_window", "(0, 3600] s (window of the prediction test, at least "
                             "one sample)", p->rls_fallback_window);
 
+    /* a declared noise takes every sample's y_meas for a fresh reading: inputs held over a step repeat it */
+    if (p->sup.enabled && p->mv_hold_inputs && p->sup.sensor_noise > 0.0)
+        return piezo_refuse(diag, "sup.sensor_noise", "0 while mv.hold_inputs = true (inputs held over a step "
+                            "repeat a reading, which the declared noise would take for a frozen sensor)",
+                            p->sup.sensor_noise);
     memset(c, 0, sizeof *c);
     pi_params = p->pi;
     st = piezo_pi_init(&c->fwd_pi, &pi_params, diag);

@@ -290,6 +290,23 @@ static int frozen(const piezo_supervisor *s, const piezo_supervisor_next *n, dou
     return b > 0 && unexplained(s, n, b) > PIEZO_SUP_FROZEN_FLOOR * quantisation_floor(s, n);
 }
 
+/* y_meas frozen against its declared noise (sup.sensor_noise = sigma > 0). A live reading
+ * quantize(y + n), n white N(0, sigma^2), lands in one cell of its grid (step q) with a chance of
+ * at most
+ *     p = erf(q / (2 sqrt(2) sigma)),
+ * that of the cell centred on y, whatever y the stage is at; so m readings each equal to the one
+ * before have a chance of p^m at most. Frozen when
+ *     m ln p <= -PIEZO_SUP_STUCK_LOG_ODDS,   m = y_same >= PIEZO_SUP_STUCK_SAME,
+ * q the smallest step y_meas ever made (a multiple of the grid's step: p only larger; none yet: no
+ * verdict). 1 nm on a 2 nm grid: p = 0.683, m = 74; 20 nm: p = 0.040, m = 9. *p: the chance. */
+static int frozen_declared(const piezo_supervisor *s, const piezo_supervisor_next *n, double *p)
+{
+    if (!(s->sensor_noise > 0.0) || !(n->min_step > 0.0) || n->y_same < PIEZO_SUP_STUCK_SAME)
+        return 0;
+    *p = erf(n->min_step / (2.8284271247461903 * s->sensor_noise));
+    return *p < 1.0 && (double)n->y_same * log(*p) <= -(double)PIEZO_SUP_STUCK_LOG_ODDS;
+}
+
 /* y_meas held on an outlier: the reading jumped away from the model's prediction (an outlier, for
  * which the prediction stood in) and has held that value to the bit since, PIEZO_SUP_STUCK_SAME
  * samples in all: a sensor that died or stuck on a glitch (a stage bumped that far that reads the same
@@ -486,8 +503,8 @@ void piezo_supervisor_evaluate(const piezo_supervisor *s, const piezo_supervisor
         /* each of these needs y_meas unchanged since the sample before at least (held_outlier 3
          * samples, frozen PIEZO_SUP_STUCK_SAME, stuck the loop's delay): a reading that changed
          * skips their calls, n->stuck_move staying 0 */
-        double share, step_rms, repeat_share, bound;
-        if (held_outlier(n) || frozen(s, n, &share, &step_rms, &repeat_share))
+        double share, step_rms, repeat_share, bound, chance;
+        if (held_outlier(n) || frozen_declared(s, n, &chance) || frozen(s, n, &share, &step_rms, &repeat_share))
             n->fault = PIEZO_SUP_FROZEN;
         else if (stuck(s, in, n, &n->stuck_move, &bound))
             n->fault = PIEZO_SUP_NO_RESPONSE;   /* y_meas stuck, or v not reaching the stage: a quiet
@@ -609,7 +626,10 @@ void piezo_supervisor_verdict(const piezo_supervisor *s, const piezo_supervisor_
     v->gain_min = s->gain_min;
     if (n->fault == PIEZO_SUP_FROZEN && held_outlier(n))
         v->bridged_error = in->bridged_error != 0.0 ? in->bridged_error : 1e-300;
-    else if (n->fault == PIEZO_SUP_FROZEN)
+    else if (n->fault == PIEZO_SUP_FROZEN && frozen_declared(s, n, &v->repeat_chance)) {
+        v->declared_noise = s->sensor_noise;
+        v->grid_step = n->min_step;
+    } else if (n->fault == PIEZO_SUP_FROZEN)
         frozen(s, n, &v->reversal_share, &v->step_rms, &v->repeat_share);
     else if (n->fault == PIEZO_SUP_NO_RESPONSE && !stuck(s, in, n, &v->stuck_move, &v->stuck_bound))
         v->stuck_move = 0.0;

@@ -67,7 +67,7 @@
  * chosen after sup.detect_time (counted over the samples whose probes are not buried
  * in the noise: piezo_controller_probes_buried).
  *
- * A measurement that stops answering (issue 44), three ways (the first and the last are
+ * A measurement that stops answering (issue 44), four ways (all but the second are
  * y_meas frozen; the second "no response", since a quiet reading that does not change while
  * the model says the stage moved is a stuck y_meas or a v that does not reach the stage):
  * - held on an outlier: the reading jumped away from the model's prediction (the
@@ -91,7 +91,13 @@
  *   step and settles never reverses by more than one: a move's big steps keep their
  *   direction), m at least PIEZO_SUP_STUCK_SAME and as many as the share p of equal
  *   samples before makes improbable, p^m <= e^-PIEZO_SUP_STUCK_LOG_ODDS (sup.window at
- *   most).
+ *   most);
+ * - against its declared noise (sup.sensor_noise = sigma > 0): y_meas exactly constant for m
+ *   samples, m at least PIEZO_SUP_STUCK_SAME and p^m <= e^-PIEZO_SUP_STUCK_LOG_ODDS for
+ *   p = erf(q / (2 sqrt(2) sigma)), q the smallest step y_meas ever made: the most a live
+ *   reading quantize(y + n), n white N(0, sigma^2) on a grid of step q (or a multiple of it),
+ *   repeats its value with, whatever the stage does. Whether the model says the stage moved or not:
+ *   a faint sensor stuck in a hold, which the other three cannot tell from a noise-free loop at rest.
  * Meanwhile the controller holds its integral action and its estimator's offset on a
  * reading unchanged for PIEZO_SUP_STUCK_SAME samples: they never walk the stage on it.
  *
@@ -196,6 +202,7 @@ typedef struct {
     int reaction;                /* PIEZO_SUP_REACT_ERROR (0, default) or PIEZO_SUP_REACT_SAFE (1) */
     double ramp_time;            /* [s] >= 0: the safe state ramps v to 0 V over this time */
     double clip_error;           /* [um] > 0: the mean |y_d - y_meas| a clipped run must exceed */
+    double sensor_noise;         /* [um] >= 0: the declared rms noise of y_meas (0: not declared) */
 } piezo_supervisor_params;
 
 /* Evidence of the verdict, for its message. */
@@ -228,6 +235,9 @@ typedef struct {
                                     its noise) */
     double stuck_bound;          /* the move y_meas would have shown [um] */
     double repeat_share;         /* FROZEN by its noise: share of equal samples before */
+    double declared_noise;       /* FROZEN against the declared noise: sup.sensor_noise [um] (0: not this case) */
+    double repeat_chance;        /* ... the most a live reading of that noise repeats with, p */
+    double grid_step;            /* ... the reading's smallest step, the grid p is taken on [um] */
     double bridged_error;        /* FROZEN on an outlier: how far the held value is from the model [um]
                                     (0: not this case) */
     double gain_min;             /* sup.gain_min */
@@ -284,6 +294,7 @@ typedef struct {
     uint64_t clip_samples, detect_samples;
     uint64_t window;             /* sup.window [samples] */
     double clip_error;           /* sup.clip_error [um] */
+    double sensor_noise;         /* sup.sensor_noise [um] (0: not declared) */
     int reaction;                /* sup.reaction */
     double ramp_time;            /* sup.ramp_time [s] */
     uint64_t ramp_samples;       /* samples the safe state ramps v over (0: at once) */

@@ -278,6 +278,13 @@ int piezo_supervisor_explain_in(const piezo_sup_verdict *v, const piezo_sup_cont
                 "%llu samples (t = %.9g to %.9g s), while the model's prediction kept standing in: a sensor "
                 "that died or stuck. ", v->y_meas, v->bridged_error, (unsigned long long)(v->y_same + 1),
                 time_of(c, v->k - v->y_same), time_of(c, v->k));
+        else if (v->declared_noise > 0.0)
+            add(t, size, &u, "y_meas has frozen: it has not changed at all for the last %llu samples (t = %.9g to "
+                "%.9g s; it stays at %.6g um). A live sensor with the noise declared, sup.sensor_noise = %.4g um "
+                "rms, on its step of %.4g um repeats a reading with a chance of %.3g at most, so %llu repeats "
+                "in a row with one below e^-%d: ", (unsigned long long)(v->y_same + 1), time_of(c, v->k - v->y_same),
+                time_of(c, v->k), v->y_meas, v->declared_noise, v->grid_step, v->repeat_chance,
+                (unsigned long long)v->y_same, PIEZO_SUP_STUCK_LOG_ODDS);
         else
             add(t, size, &u, "y_meas has frozen: it has not changed at all for the last %llu samples (t = %.9g to "
                 "%.9g s; it stays at %.6g um), although before it reversed its direction from one sample to the "
@@ -290,6 +297,9 @@ int piezo_supervisor_explain_in(const piezo_sup_verdict *v, const piezo_sup_cont
         else
             add(t, size, &u, "the sensor or its connection is stuck (the stage may drift unseen). Check the "
                 "sensor and the connection PiezoStage.y_meas -> y_meas");
+        if (v->declared_noise > 0.0)
+            add(t, size, &u, c->internal ? ", or sup.sensor_noise declares more than sensor.noise_rms"
+                : ", or sup.sensor_noise declares more noise than the sensor has (declare at most its rms at rest)");
         break;
     default:
         add(t, size, &u, "no fault");

@@ -78,6 +78,7 @@ PARAMETERS = {
         'rls.pole_min': (('rls_pole_min',), 'float'),
         'rls.fallback_ratio': (('rls_fallback_ratio',), 'float'),
         'rls.fallback_window': (('rls_fallback_window',), 'float'),
+        'sup.sensor_noise': (('sup', 'sensor_noise'), 'float'),
     },
     'ReferenceSignal': {
         'offset': (('offset',), 'float'),
@@ -253,6 +254,7 @@ COMPOSED = {
         'rls.fallback_window': ('AdaptiveCompoundController', 'rls.fallback_window'),
         'est.fallbacks': ('AdaptiveCompoundController', 'est.fallbacks'),
         'sup.reset': ('AdaptiveCompoundController', 'sup.reset'),
+        'sup.sensor_noise': ('AdaptiveCompoundController', 'sup.sensor_noise'),
     },
 }
 

@@ -848,9 +848,15 @@ def _day_plant(i, nm):
     return stage_plant(draw_stages(i + 1, SEED)[i], i, nm)
 
 
+def _day_controller(nm, declared):
+    """The controller at its defaults; ``declared``: with the sensor's noise declared to it
+    (``sup.sensor_noise`` = nm rms, for a sensor with noise)."""
+    return {"sup.sensor_noise": nm * 1e-3} if declared and nm > 0 else {}
+
+
 def _run_stuck_spec(spec):
-    i, nm, case_index = spec
-    return spec, run_stuck(STUCK_CASES[case_index], _day_plant(i, nm))
+    i, nm, case_index, declared = spec
+    return spec, run_stuck(STUCK_CASES[case_index], _day_plant(i, nm), _day_controller(nm, declared))
 
 
 def _per_key_and_sensor(specs, run, jobs, progress):
@@ -861,11 +867,12 @@ def _per_key_and_sensor(specs, run, jobs, progress):
     return out
 
 
-def stuck_family(stages=50, sensors=STUCK_SENSORS_NM, cases=None, jobs=2, progress=None):
+def stuck_family(stages=50, sensors=STUCK_SENSORS_NM, cases=None, jobs=2, progress=None, declared=False):
     """Every :data:`STUCK_CASES` case on the stage's day's stages (seed 2026, the controller at its
-    defaults: the nominal model) with each sensor: ``{(case, nm): [result, ...]}``."""
+    defaults: the nominal model) with each sensor: ``{(case, nm): [result, ...]}``. ``declared``: each
+    sensor's noise declared to the controller (``sup.sensor_noise``)."""
     cases = range(len(STUCK_CASES)) if cases is None else cases
-    specs = [(i, nm, c) for c in cases for nm in sensors for i in range(stages)]
+    specs = [(i, nm, c, declared) for c in cases for nm in sensors for i in range(stages)]
     return _per_key_and_sensor(specs, _run_stuck_spec, jobs, progress)
 
 
@@ -942,13 +949,14 @@ def run_start(part, plant, controller=None):
 
 
 def _run_start_spec(spec):
-    i, nm, part = spec
-    return spec, run_start(part, _day_plant(i, nm))
+    i, nm, part, declared = spec
+    return spec, run_start(part, _day_plant(i, nm), _day_controller(nm, declared))
 
 
-def start_family(stages=50, sensors=STUCK_SENSORS_NM, parts=START_PARTS, jobs=2, progress=None):
-    """Every start-up part on the stage's day's stages with each sensor: ``{(part, nm): [result]}``."""
-    specs = [(i, nm, part) for part in parts for nm in sensors for i in range(stages)]
+def start_family(stages=50, sensors=STUCK_SENSORS_NM, parts=START_PARTS, jobs=2, progress=None, declared=False):
+    """Every start-up part on the stage's day's stages with each sensor: ``{(part, nm): [result]}``.
+    ``declared``: each sensor's noise declared to the controller (``sup.sensor_noise``)."""
+    specs = [(i, nm, part, declared) for part in parts for nm in sensors for i in range(stages)]
     return _per_key_and_sensor(specs, _run_start_spec, jobs, progress)
 
 
@@ -1084,18 +1092,19 @@ RESET_BASELINE = ResetCase("no fault", "none", (), None)
 
 
 def _run_reset_spec(spec):
-    i, nm, case_index = spec
-    plant = _day_plant(i, nm)
-    res = run_reset(RESET_CASES[case_index], plant)
-    res["step_ratio"] = res["step"] / run_reset(RESET_BASELINE, plant)["step"]
+    i, nm, case_index, declared = spec
+    plant, controller = _day_plant(i, nm), _day_controller(nm, declared)
+    res = run_reset(RESET_CASES[case_index], plant, controller)
+    res["step_ratio"] = res["step"] / run_reset(RESET_BASELINE, plant, controller)["step"]
     return spec, res
 
 
-def reset_family(stages=50, sensors=RESET_SENSORS_NM, cases=None, jobs=2, progress=None):
+def reset_family(stages=50, sensors=RESET_SENSORS_NM, cases=None, jobs=2, progress=None, declared=False):
     """Every :data:`RESET_CASES` case on the stage's day's stages with each sensor:
-    ``{(case, nm): [result, ...]}``."""
+    ``{(case, nm): [result, ...]}``. ``declared``: each sensor's noise declared to the controller
+    (``sup.sensor_noise``)."""
     cases = range(len(RESET_CASES)) if cases is None else cases
-    specs = [(i, nm, c) for c in cases for nm in sensors for i in range(stages)]
+    specs = [(i, nm, c, declared) for c in cases for nm in sensors for i in range(stages)]
     return _per_key_and_sensor(specs, _run_reset_spec, jobs, progress)
 
 
@@ -1156,7 +1165,8 @@ def _exit_code(bad, what):
 def _sensor_family(args, family_of, markdown_of, progress):
     """Run one of the sensor studies (stuck, reset, start) with its options, print its table and
     return its results."""
-    family = family_of(args.stages, tuple(args.sensors), jobs=args.jobs, progress=progress)
+    family = family_of(args.stages, tuple(args.sensors), jobs=args.jobs, progress=progress,
+                       declared=args.declared)
     print(markdown_of(family))
     return family
 
@@ -1199,6 +1209,9 @@ def main(argv=None, prog=None):
                            help="sensor noise [nm rms] on the 2 nm grid (default "
                                 + " ".join(f"{s:g}" for s in sensors) + ")")
         study.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+        study.add_argument("--declared", action="store_true",
+                           help="declare each sensor's noise to the controller (sup.sensor_noise = its rms; "
+                                "default: not declared)")
     fa_ = sub.add_parser("false-alarms", help="the no-false-alarm check of any family: a function "
                          "returning RunSpecs, as module:function (e.g. harness.studies.supervision_table:family_specs)")
     fa_.add_argument("--specs", required=True, help="module:function; called without arguments")
