@@ -131,7 +131,7 @@ def test_a_quiet_sensor_stuck_in_a_hold_is_named_once_its_noise_is_declared(nm, 
         before = next(j for j in range(k0) if y_meas[k0 - 1 - j] != y_meas[k0])
         assert r["time"] == pytest.approx((m - before) * H, abs=1e-12), (i, r["time"], before)
         assert f"sup.sensor_noise = {nm * 1e-3:g} um rms" in r["error"], r["error"]
-        assert f"so {m} repeats in a row with one below e^-28" in r["error"], r["error"]
+        assert f"and {m} repeats in a row with a chance below e^-28" in r["error"], r["error"]
         assert r["excursion"] < 0.02, (i, r["excursion"])
 
 
@@ -153,7 +153,7 @@ def test_a_declaration_above_the_sensor_s_noise_is_said():
     r = st.run_stuck(case("none, hold"), plant(0, 1), {"sup.sensor_noise": 0.01})
     assert r["fault"] == "y_meas frozen"
     assert "or sup.sensor_noise declares more noise than the sensor has" in r["error"], r["error"]
-    assert "so 12 repeats in a row" in r["error"]
+    assert "and 12 repeats in a row" in r["error"]
 
 
 @pytest.mark.parametrize("nm", [100, 200])

@@ -281,8 +281,8 @@ int piezo_supervisor_explain_in(const piezo_sup_verdict *v, const piezo_sup_cont
         else if (v->declared_noise > 0.0)
             add(t, size, &u, "y_meas has frozen: it has not changed at all for the last %llu samples (t = %.9g to "
                 "%.9g s; it stays at %.6g um). A live sensor with the noise declared, sup.sensor_noise = %.4g um "
-                "rms, on its step of %.4g um repeats a reading with a chance of %.3g at most, so %llu repeats "
-                "in a row with one below e^-%d: ", (unsigned long long)(v->y_same + 1), time_of(c, v->k - v->y_same),
+                "rms, on its step of %.4g um repeats a reading with a chance of %.3g at most, and %llu repeats "
+                "in a row with a chance below e^-%d: ", (unsigned long long)(v->y_same + 1), time_of(c, v->k - v->y_same),
                 time_of(c, v->k), v->y_meas, v->declared_noise, v->grid_step, v->repeat_chance,
                 (unsigned long long)v->y_same, PIEZO_SUP_STUCK_LOG_ODDS);
         else

@@ -294,14 +294,16 @@ def _controller(law):
 
 
 def family_tasks(stages=50, seed=SEED, sensors=SENSORS_NM, laws=LAWS, parts=None, fmu_stages=2,
-                 fmu_sensors=(1,)):
-    """Every :class:`Task` of the family (see the module docstring)."""
+                 fmu_sensors=(1,), declared=False):
+    """Every :class:`Task` of the family (see the module docstring). ``declared``: each sensor's noise
+    declared to the controller (``sup.sensor_noise`` = its rms, for a sensor with noise)."""
     parts = day_parts() if parts is None else parts
     tasks = []
     for i, stage, nm, law, part in family_grid(stages, seed, sensors, laws, parts):
         if part.kind == "hour":
             part = hour_part(i)
-        tasks.append(Task(i, nm, law, part, stage_plant(stage, i, nm), _controller(law),
+        controller = {**_controller(law), **({"sup.sensor_noise": nm * 1e-3} if declared and nm > 0 else {})}
+        tasks.append(Task(i, nm, law, part, stage_plant(stage, i, nm), controller,
                           fmu=i < fmu_stages and nm in fmu_sensors and law == "ours"))
     return tasks
 
@@ -663,6 +665,10 @@ def main(argv=None, prog=None):
                     help="a slice: 20 frames, 60 s tones, no random hour")
     ap.add_argument("--fmu-stages", type=int, default=2,
                     help="stages whose 1 nm parts also run on the closed-loop FMU (default 2)")
+    ap.add_argument("--laws", nargs="+", default=list(LAWS), choices=list(LAWS),
+                    help="the controller's defaults (ours) and the estimates fixed (fixed); default both")
+    ap.add_argument("--declared", action="store_true",
+                    help="declare each sensor's noise to the controller (sup.sensor_noise = its rms)")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--save", help="write every run's metrics to this JSON file")
     ap.add_argument("--load", help="read the runs' metrics from this JSON file instead of running")
@@ -675,7 +681,8 @@ def main(argv=None, prog=None):
     else:
         parts = day_parts(frames=20 if args.quick else args.frames, tone_times=(60.0,) if args.quick else TONE_TIMES,
                           hour=not args.quick)
-        tasks = family_tasks(args.stages, sensors=tuple(args.sensors), parts=parts, fmu_stages=args.fmu_stages)
+        tasks = family_tasks(args.stages, sensors=tuple(args.sensors), laws=tuple(args.laws), parts=parts,
+                             fmu_stages=args.fmu_stages, declared=args.declared)
         print(f"{len(tasks)} tasks on {args.jobs} processes", file=sys.stderr)
         results = run_family(tasks, args.jobs, progress=lambda s: print(s, file=sys.stderr))
         seconds = _time.perf_counter() - t0
